@@ -1,0 +1,58 @@
+"""The ``markovmotion`` command line: a thin Typer layer over the library.
+
+Expected errors (bad files, missing data, wrong models) print one line on
+stderr and exit with code 2; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+
+from markovmotion.errors import MarkovMotionError
+from markovmotion.progress import err_console
+
+app = typer.Typer(
+    name="markovmotion",
+    help="Learn statistical models of human motion; synthesize, predict and interact.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _register() -> None:
+    from markovmotion.cli import data, demo, motion
+
+    motion.register(app)
+    app.add_typer(data.app, name="data")
+    demo.register(app)
+
+
+def fail(message: str) -> None:
+    """Print one error line and exit with code 2."""
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    raise SystemExit(2)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the console script."""
+    _register()
+    try:
+        app(args=argv, standalone_mode=False)
+    except MarkovMotionError as exc:
+        fail(str(exc))
+    except click.exceptions.Exit as exc:
+        raise SystemExit(exc.exit_code) from None
+    except click.ClickException as exc:
+        exc.show()
+        raise SystemExit(exc.exit_code) from None
+    except click.exceptions.Abort:
+        raise SystemExit(130) from None
+    except KeyboardInterrupt:
+        raise SystemExit(130) from None
+    except OSError as exc:
+        fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "))
+    sys.stdout.flush()

@@ -1,0 +1,21 @@
+"""``demo``: the main job, from real data to motion, animation and plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def demo(
+    out: Path = typer.Option(Path("demo-out"), help="Folder for the outputs."),
+    data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
+) -> None:
+    """Train on the CMU data and write motion (BVH), an animation (GIF) and plots (PNG)."""
+    from markovmotion.demo import run_demo
+
+    run_demo(out, data)
+
+
+def register(app: typer.Typer) -> None:
+    app.command()(demo)

@@ -1,0 +1,60 @@
+"""``info`` and ``convert``: look at a motion file, turn one into BVH."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from markovmotion.io import read_motion, write_motion
+from markovmotion.io.files import base_suffix
+
+
+def info(
+    file: Path = typer.Argument(..., help="BVH, ASF/AMC or C3D file."),
+    fps: float = typer.Option(None, help="True frame rate, overriding the file's."),
+) -> None:
+    """Describe a motion file: skeleton, frames, frame rate, extent."""
+    console = Console()
+    if base_suffix(file) == ".c3d":
+        from markovmotion.io.c3d import read_c3d
+
+        markers = read_c3d(file)
+        console.print(markers.summary())
+        return
+    motion = read_motion(file, fps=fps)
+    sk = motion.skeleton
+    pos = motion.positions()
+    extent = pos.reshape(-1, 3).max(0) - pos.reshape(-1, 3).min(0)
+    table = Table(title=str(file), show_header=False)
+    table.add_row("frames", str(motion.n_frames))
+    table.add_row("frame rate", f"{motion.fps:g} fps")
+    table.add_row("duration", f"{motion.duration:.2f} s")
+    table.add_row("joints", f"{sk.n_joints} ({int(sk.end_site.sum())} end sites)")
+    table.add_row("channels", str(sk.n_channels))
+    table.add_row("pelvis", sk.names[sk.body_root])
+    table.add_row("extent (mm)", " x ".join(f"{v:.0f}" for v in extent))
+    table.add_row("height (mm)", f"{np.ptp(pos[0, :, 1]):.0f} in frame 0")
+    console.print(table)
+
+
+def convert(
+    src: Path = typer.Argument(..., help="Input motion (BVH or ASF/AMC)."),
+    dst: Path = typer.Argument(..., help="Output .bvh or .bvh.gz."),
+    fps: float = typer.Option(None, help="True frame rate of the input, overriding the file's."),
+    resample: float = typer.Option(None, help="Resample to this frame rate before writing."),
+) -> None:
+    """Convert a motion to BVH (optionally at another frame rate)."""
+    motion = read_motion(src, fps=fps)
+    if resample:
+        motion = motion.resample(resample)
+    write_motion(motion, dst)
+    Console(stderr=True).print(f"wrote {dst} ({motion.n_frames} frames at {motion.fps:g} fps)")
+
+
+def register(app: typer.Typer) -> None:
+    app.command()(info)
+    app.command()(convert)

@@ -1,0 +1,230 @@
+"""Motion: a skeleton animated over frames, with forward kinematics and basic edits.
+
+Rotations are unit quaternions in SciPy's scalar-last order ``(x, y, z, w)``;
+translations are each joint's local translation from its parent in mm (the rest
+offset, unless the file animates that joint's position channels).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from markovmotion.core.skeleton import Skeleton
+
+UP = np.array([0.0, 1.0, 0.0])
+
+
+@dataclass(eq=False)
+class Motion:
+    """Per-frame local rotations and translations of a :class:`Skeleton`.
+
+    Attributes:
+        skeleton: the kinematic tree.
+        rotations: (F, J, 4) local unit quaternions, scalar last.
+        translations: (F, J, 3) local translations in mm; joint 0 holds the
+            global root position.
+        fps: frames per second.
+        name: where it came from (file name), for messages.
+    """
+
+    skeleton: Skeleton
+    rotations: np.ndarray
+    translations: np.ndarray
+    fps: float
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        self.rotations = np.asarray(self.rotations, dtype=float)
+        self.translations = np.asarray(self.translations, dtype=float)
+        f, j = self.rotations.shape[:2]
+        if self.rotations.shape != (f, j, 4) or self.translations.shape != (f, j, 3):
+            raise ValueError("rotations must be (F, J, 4) and translations (F, J, 3)")
+        if j != self.skeleton.n_joints:
+            raise ValueError(f"{j} joints in the data but {self.skeleton.n_joints} in the skeleton")
+        if not self.fps > 0:
+            raise ValueError(f"frame rate must be positive, got {self.fps}")
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def from_rotations(
+        cls,
+        skeleton: Skeleton,
+        rotations: np.ndarray,
+        root_positions: np.ndarray | None = None,
+        fps: float = 30.0,
+        name: str = "",
+    ) -> Motion:
+        """A motion whose joints sit at their rest offsets, driven by ``rotations``.
+
+        ``root_positions`` (F, 3) in mm goes to joint 0; omitted, the root stays
+        at its rest offset.
+        """
+        rotations = np.asarray(rotations, dtype=float)
+        translations = np.broadcast_to(
+            skeleton.offsets, (len(rotations), skeleton.n_joints, 3)
+        ).copy()
+        if root_positions is not None:
+            translations[:, 0] = root_positions
+        return cls(skeleton, rotations, translations, fps, name)
+
+    # --------------------------------------------------------------- queries
+    @property
+    def n_frames(self) -> int:
+        return self.rotations.shape[0]
+
+    @property
+    def duration(self) -> float:
+        """Length in seconds."""
+        return self.n_frames / self.fps
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def copy(self) -> Motion:
+        return Motion(
+            self.skeleton, self.rotations.copy(), self.translations.copy(), self.fps, self.name
+        )
+
+    def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
+        """Forward kinematics: global rotation matrices (F, J, 3, 3) and positions (F, J, 3) mm."""
+        sk = self.skeleton
+        f = self.n_frames
+        local = Rotation.from_quat(self.rotations.reshape(-1, 4)).as_matrix().reshape(f, -1, 3, 3)
+        rot = np.empty_like(local)
+        pos = np.empty((f, sk.n_joints, 3))
+        rot[:, 0] = local[:, 0]
+        pos[:, 0] = self.translations[:, 0]
+        for j in range(1, sk.n_joints):
+            p = sk.parents[j]
+            rot[:, j] = rot[:, p] @ local[:, j]
+            pos[:, j] = pos[:, p] + np.einsum("fab,fb->fa", rot[:, p], self.translations[:, j])
+        return rot, pos
+
+    def positions(self) -> np.ndarray:
+        """Global joint positions (F, J, 3) in mm."""
+        return self.global_transforms()[1]
+
+    def hip_joints(self) -> tuple[int, int] | None:
+        """The (left, right) hip joints under the pelvis, if their names tell them apart.
+
+        The legs are the two children of the pelvis whose subtrees reach lowest in
+        the first frame; left and right are told by the first character at which
+        the two names differ being ``l``/``L`` against ``r``/``R``
+        (``lhipjoint``/``rhipjoint``, ``UpperLeg_L``/``UpperLeg_R``).
+        """
+        sk = self.skeleton
+        pelvis = sk.body_root
+        kids = sk.children(pelvis)
+        if len(kids) < 2:
+            return None
+        height = self.positions_at(0)[:, 1]
+        lowest = {}
+        for k in kids:
+            sub = _subtree(sk, k)
+            lowest[k] = height[sub].min()
+        a, b = sorted(kids, key=lowest.get)[:2]
+        na, nb = sk.names[a], sk.names[b]
+        for ca, cb in zip(na, nb, strict=False):
+            if ca != cb:
+                pair = (ca.lower(), cb.lower())
+                if pair == ("l", "r"):
+                    return a, b
+                if pair == ("r", "l"):
+                    return b, a
+                return None
+        return None
+
+    def positions_at(self, frame: int) -> np.ndarray:
+        """Global joint positions (J, 3) of one frame."""
+        return Motion(
+            self.skeleton,
+            self.rotations[frame : frame + 1],
+            self.translations[frame : frame + 1],
+            self.fps,
+        ).positions()[0]
+
+    def heading(self, positions: np.ndarray | None = None) -> np.ndarray:
+        """Facing direction per frame as a yaw angle about +Y (radians, 0 = facing +Z).
+
+        Forward is ``(left hip - right hip) x up``; when the hips cannot be told
+        apart, the pelvis's global rotation applied to +Z.
+        """
+        hips = self.hip_joints()
+        if hips is not None:
+            pos = self.positions() if positions is None else positions
+            lateral = pos[:, hips[0]] - pos[:, hips[1]]
+            forward = np.cross(lateral, UP)
+        else:
+            rot, _ = self.global_transforms()
+            forward = rot[:, self.skeleton.body_root, :, 2]
+        return np.arctan2(forward[:, 0], forward[:, 2])
+
+    # ----------------------------------------------------------------- edits
+    def trim(self, start: int = 0, stop: int | None = None) -> Motion:
+        """Frames ``start:stop`` as a new motion."""
+        sl = slice(start, stop)
+        return Motion(
+            self.skeleton,
+            self.rotations[sl].copy(),
+            self.translations[sl].copy(),
+            self.fps,
+            self.name,
+        )
+
+    def resample(self, fps: float) -> Motion:
+        """The same motion sampled at ``fps``: slerp for rotations, linear for translations."""
+        if fps <= 0:
+            raise ValueError(f"frame rate must be positive, got {fps}")
+        if self.n_frames < 2 or np.isclose(fps, self.fps):
+            return Motion(self.skeleton, self.rotations, self.translations, fps, self.name)
+        t_old = np.arange(self.n_frames) / self.fps
+        n_new = int(np.floor(t_old[-1] * fps + 1e-9)) + 1
+        t_new = np.arange(n_new) / fps
+        rot = np.empty((n_new, self.skeleton.n_joints, 4))
+        for j in range(self.skeleton.n_joints):
+            rot[:, j] = Slerp(t_old, Rotation.from_quat(self.rotations[:, j]))(t_new).as_quat()
+        flat = self.translations.reshape(self.n_frames, -1)
+        trans = np.stack([np.interp(t_new, t_old, c) for c in flat.T], axis=1)
+        return Motion(self.skeleton, rot, trans.reshape(n_new, -1, 3), fps, self.name)
+
+    def align_heading(self, yaw: float = 0.0, to_origin: bool = True) -> Motion:
+        """Rotate the whole motion about +Y so that frame 0 faces ``yaw``.
+
+        With ``to_origin``, the pelvis of frame 0 is also moved above the origin
+        (its height is kept).
+        """
+        pos = self.positions()
+        turn = Rotation.from_rotvec([0.0, yaw - self.heading(pos[:1])[0], 0.0])
+        out = self.copy()
+        out.rotations[:, 0] = (turn * Rotation.from_quat(self.rotations[:, 0])).as_quat()
+        out.translations[:, 0] = turn.apply(self.translations[:, 0])
+        if to_origin:
+            pelvis0 = turn.apply(pos[0, self.skeleton.body_root])
+            out.translations[:, 0, [0, 2]] -= pelvis0[[0, 2]]
+        return out
+
+    def body_centred_positions(self) -> np.ndarray:
+        """Joint positions (F, J, 3) in mm relative to the pelvis, with each frame's yaw removed.
+
+        The body faces +Z in every frame; height stays relative to the pelvis.
+        """
+        pos = self.positions()
+        yaw = self.heading(pos)
+        centred = pos - pos[:, self.skeleton.body_root : self.skeleton.body_root + 1]
+        c, s = np.cos(-yaw), np.sin(-yaw)
+        x, z = centred[..., 0], centred[..., 2]
+        out = centred.copy()
+        out[..., 0] = c[:, None] * x + s[:, None] * z
+        out[..., 2] = -s[:, None] * x + c[:, None] * z
+        return out
+
+
+def _subtree(sk: Skeleton, root: int) -> list[int]:
+    out = [root]
+    for j in range(root + 1, sk.n_joints):
+        if sk.parents[j] in out:
+            out.append(j)
+    return out

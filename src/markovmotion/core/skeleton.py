@@ -1,0 +1,135 @@
+"""The skeleton: joint names, parent links, rest offsets and channel layout.
+
+Lengths are held in millimetres whatever the file unit; each reader states its
+conversion. The world is Y-up (BVH and Acclaim conventions); readers of Z-up
+formats rotate into it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from markovmotion.errors import SkeletonMismatchError
+
+POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
+ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+VALID_CHANNELS = POSITION_CHANNELS + ROTATION_CHANNELS
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """A kinematic tree in depth-first order (every parent precedes its children).
+
+    Attributes:
+        names: joint names; end sites are joints named ``<parent>_end``.
+        parents: index of each joint's parent, -1 for the root.
+        offsets: (J, 3) rest translation of each joint from its parent, in mm.
+        channels: per joint, the animated channels in file order (BVH names:
+            ``Xposition`` ... ``Zrotation``); empty for end sites.
+        end_site: per joint, whether it is a BVH ``End Site`` (a leaf with no channels).
+    """
+
+    names: tuple[str, ...]
+    parents: np.ndarray
+    offsets: np.ndarray
+    channels: tuple[tuple[str, ...], ...]
+    end_site: np.ndarray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        parents = np.asarray(self.parents, dtype=np.intp)
+        offsets = np.asarray(self.offsets, dtype=float).reshape(-1, 3)
+        end_site = (
+            np.zeros(len(self.names), dtype=bool)
+            if self.end_site is None
+            else np.asarray(self.end_site, dtype=bool)
+        )
+        object.__setattr__(self, "names", tuple(self.names))
+        object.__setattr__(self, "channels", tuple(tuple(c) for c in self.channels))
+        object.__setattr__(self, "parents", parents)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "end_site", end_site)
+        n = len(self.names)
+        if not (len(parents) == len(offsets) == len(self.channels) == len(end_site) == n):
+            raise ValueError("skeleton arrays disagree on the number of joints")
+        if n == 0:
+            raise ValueError("a skeleton needs at least one joint")
+        if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
+            raise ValueError("joints must be in depth-first order with the root first")
+        for chans in self.channels:
+            for c in chans:
+                if c not in VALID_CHANNELS:
+                    raise ValueError(f"unknown channel {c!r}")
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_channels(self) -> int:
+        return sum(len(c) for c in self.channels)
+
+    def index(self, name: str) -> int:
+        """Index of the joint called ``name``."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no joint named {name!r}") from None
+
+    def children(self, j: int) -> list[int]:
+        return [int(k) for k in np.flatnonzero(self.parents == j)]
+
+    @property
+    def body_root(self) -> int:
+        """The pelvis: the first joint with two or more children.
+
+        Some files put a static joint above the pelvis (Bandai's ``joint_Root``);
+        heading and body-centred coordinates are taken at this joint instead.
+        """
+        counts = np.bincount(self.parents[1:], minlength=self.n_joints)
+        branching = np.flatnonzero(counts >= 2)
+        return int(branching[0]) if len(branching) else 0
+
+    def rotation_order(self, j: int) -> str:
+        """Intrinsic Euler order of joint ``j`` as SciPy spells it (``'ZXY'``), or ``''``."""
+        return "".join(c[0] for c in self.channels[j] if c in ROTATION_CHANNELS)
+
+    def bone_lengths(self) -> np.ndarray:
+        return np.linalg.norm(self.offsets, axis=1)
+
+    def same_topology(self, other: Skeleton) -> bool:
+        return self.names == other.names and np.array_equal(self.parents, other.parents)
+
+    def check_compatible(self, other: Skeleton, what: str = "motion") -> None:
+        """Raise :class:`SkeletonMismatchError` unless ``other`` has the same joints."""
+        if not self.same_topology(other):
+            missing = sorted(set(self.names) ^ set(other.names))
+            detail = (
+                f"joints differ: {', '.join(missing[:5])}" if missing else "joint order differs"
+            )
+            raise SkeletonMismatchError(
+                f"the {what}'s skeleton does not match ({self.n_joints} vs "
+                f"{other.n_joints} joints; {detail})"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready description (saved in model headers)."""
+        return {
+            "names": list(self.names),
+            "parents": self.parents.tolist(),
+            "offsets": self.offsets.tolist(),
+            "channels": [list(c) for c in self.channels],
+            "end_site": self.end_site.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Skeleton:
+        return cls(
+            names=tuple(d["names"]),
+            parents=np.asarray(d["parents"]),
+            offsets=np.asarray(d["offsets"], dtype=float),
+            channels=tuple(tuple(c) for c in d["channels"]),
+            end_site=np.asarray(d["end_site"], dtype=bool),
+        )

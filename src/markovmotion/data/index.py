@@ -1,0 +1,210 @@
+"""The motion-capture collection: where it is, what INDEX.csv says, loading by query.
+
+Root resolution order: an explicit path, then ``$MARKOVMOTION_DATA``, then
+``../shared/data/mocap`` beside the project root (the folder holding
+``pyproject.toml``, found from the working directory or from this package).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.io import read_motion
+from markovmotion.io.files import base_suffix
+
+ENV_VAR = "MARKOVMOTION_DATA"
+INDEX_NAME = "INDEX.csv"
+COLUMNS = (
+    "file",
+    "source",
+    "subject",
+    "trial",
+    "category",
+    "label",
+    "partner_file",
+    "fps",
+    "frames",
+    "description",
+)
+HOW_TO_GET = (
+    "get the data with 'markovmotion data fetch --dest DIR' (CMU and Bandai Namco) "
+    f"and point {ENV_VAR} or --data at DIR"
+)
+
+
+def _project_roots() -> Iterable[Path]:
+    here = Path.cwd().resolve()
+    for p in (here, *here.parents):
+        if (p / "pyproject.toml").is_file():
+            yield p
+    pkg = Path(__file__).resolve()
+    for p in pkg.parents:
+        if (p / "pyproject.toml").is_file():
+            yield p
+
+
+def candidate_roots(path: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Every folder looked at for the data, in order."""
+    if path is not None:
+        return [Path(path)]
+    if os.environ.get(ENV_VAR):
+        return [Path(os.environ[ENV_VAR])]
+    seen: list[Path] = []
+    for root in _project_roots():
+        cand = (root.parent / "shared" / "data" / "mocap").resolve()
+        if cand not in seen:
+            seen.append(cand)
+    return seen
+
+
+def data_root(path: str | os.PathLike[str] | None = None) -> Path:
+    """The folder holding ``INDEX.csv``; a clear error says where it looked."""
+    looked = candidate_roots(path)
+    for cand in looked:
+        if cand.is_file() and cand.name == INDEX_NAME:
+            return cand.parent
+        if (cand / INDEX_NAME).is_file():
+            return cand
+    where = ", ".join(str(p) for p in looked) or "(nowhere: no project root found)"
+    raise DataNotFoundError(
+        f"no motion-capture {INDEX_NAME} found (looked in {where}); {HOW_TO_GET}"
+    )
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One row of INDEX.csv."""
+
+    file: str
+    source: str
+    subject: str
+    trial: str
+    category: str
+    label: str
+    partner_file: str
+    fps: float
+    frames: int
+    description: str
+    root: Path
+
+    @property
+    def path(self) -> Path:
+        return self.root / self.file
+
+    @property
+    def name(self) -> str:
+        return Path(self.file).name.split(".")[0]
+
+    @property
+    def has_reference_frame(self) -> bool:
+        """CMU's BVH conversions start with a reference pose in frame 0 (see the data README)."""
+        return self.source == "cmu" and base_suffix(self.file) == ".bvh"
+
+
+class MocapIndex:
+    """The entries of an INDEX.csv, with queries and loading."""
+
+    def __init__(self, root: Path, entries: list[Entry]):
+        self.root = root
+        self.entries = entries
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str] | None = None) -> MocapIndex:
+        """Read ``INDEX.csv`` from ``path`` (a folder or the CSV itself) or the default root."""
+        root = data_root(path)
+        csv_path = root / INDEX_NAME
+        with open(csv_path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            missing = [
+                c
+                for c in ("file", "category", "label", "fps")
+                if c not in (reader.fieldnames or [])
+            ]
+            if missing:
+                raise MotionFormatError(csv_path, f"missing columns: {', '.join(missing)}", 1)
+            entries = []
+            for line, row in enumerate(reader, start=2):
+                try:
+                    entries.append(
+                        Entry(
+                            **{
+                                f.name: row.get(f.name) or ""
+                                for f in fields(Entry)
+                                if f.name not in ("fps", "frames", "root")
+                            },
+                            fps=float(row["fps"]),
+                            frames=int(row.get("frames") or 0),
+                            root=root,
+                        )
+                    )
+                except ValueError as exc:
+                    raise MotionFormatError(csv_path, f"bad row ({exc})", line) from None
+        return cls(root, entries)
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __iter__(self):
+        return iter(self.entries)
+
+    def query(
+        self,
+        category: str | Iterable[str] | None = None,
+        label: str | Iterable[str] | None = None,
+        source: str | None = None,
+        subject: str | None = None,
+    ) -> list[Entry]:
+        """Entries matching every criterion given (a criterion may be a list of values)."""
+
+        def ok(value: str, want: str | Iterable[str] | None) -> bool:
+            if want is None:
+                return True
+            return value == want if isinstance(want, str) else value in set(want)
+
+        return [
+            e
+            for e in self.entries
+            if ok(e.category, category)
+            and ok(e.label, label)
+            and ok(e.source, source)
+            and ok(e.subject, subject)
+        ]
+
+    def find(self, file: str) -> Entry:
+        for e in self.entries:
+            if e.file == file:
+                return e
+        raise DataNotFoundError(f"{file} is not in {self.root / INDEX_NAME}")
+
+    def load_motion(self, entry: Entry) -> Motion:
+        """Read an entry at its true frame rate, without CMU's reference frame."""
+        motion = read_motion(entry.path, fps=entry.fps)
+        if entry.has_reference_frame and motion.n_frames > 1:
+            motion = motion.trim(1)
+        return motion
+
+    def pairs(self, label: str | Iterable[str] | None = None) -> list[tuple[Entry, Entry]]:
+        """Two-person takes as (A, B) entries, each take once (A is the file listed first)."""
+        out = []
+        seen: set[str] = set()
+        for e in self.query(category="interaction", label=label):
+            if not e.partner_file or e.file in seen:
+                continue
+            partner = self.find(e.partner_file)
+            seen.update({e.file, partner.file})
+            out.append((e, partner))
+        return out
+
+    def load_pair(self, a: Entry, b: Entry) -> tuple[Motion, Motion]:
+        """Both people of a take, at the same frame rate and cut to the same frames."""
+        ma, mb = self.load_motion(a), self.load_motion(b)
+        if not ma.fps == mb.fps:
+            mb = mb.resample(ma.fps)
+        n = min(ma.n_frames, mb.n_frames)
+        return ma.trim(0, n), mb.trim(0, n)

@@ -1,0 +1,41 @@
+"""Exceptions for the errors a user can cause: bad files, missing data, wrong models.
+
+The command line prints these as one line and exits with code 2; anything else
+is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+from os import PathLike
+
+
+class MarkovMotionError(Exception):
+    """Base class of every expected error (bad input, not a bug)."""
+
+
+class MotionFormatError(MarkovMotionError):
+    """A motion file that cannot be read: names the file, the line and the problem."""
+
+    def __init__(self, path: str | PathLike[str], problem: str, line: int | None = None):
+        self.path = str(path)
+        self.problem = problem
+        self.line = line
+        where = self.path if line is None else f"{self.path}:{line}"
+        super().__init__(f"{where}: {problem}")
+
+
+class ModelFormatError(MarkovMotionError):
+    """A model file that is not ours, is damaged, or comes from another format version."""
+
+    def __init__(self, path: str | PathLike[str], problem: str):
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class DataNotFoundError(MarkovMotionError):
+    """The motion-capture folder (or a file in it) could not be found."""
+
+
+class SkeletonMismatchError(MarkovMotionError):
+    """Two motions, or a motion and a model, do not share a skeleton."""

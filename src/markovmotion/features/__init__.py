@@ -1,0 +1,23 @@
+"""Features: motion to model observations and back, as composable saved steps."""
+
+from markovmotion.features.augmented import AugmentedConfiguration
+from markovmotion.features.base import FeaturePipeline, FeatureStep
+from markovmotion.features.deltas import Deltas, add_deltas, delta_matrix
+from markovmotion.features.expmap import ExpMaps, continuous_rotvec
+from markovmotion.features.pca import PCA
+from markovmotion.features.positions import JointPositions
+from markovmotion.features.smoothing import TemporalSmoothing
+
+__all__ = [
+    "PCA",
+    "AugmentedConfiguration",
+    "Deltas",
+    "ExpMaps",
+    "FeaturePipeline",
+    "FeatureStep",
+    "JointPositions",
+    "TemporalSmoothing",
+    "add_deltas",
+    "continuous_rotvec",
+    "delta_matrix",
+]

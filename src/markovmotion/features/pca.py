@@ -1,0 +1,43 @@
+"""Principal component analysis keeping a fraction of the energy (dual-HMM paper, §2)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from sklearn.decomposition import PCA as _SkPCA
+
+from markovmotion.features.base import FeatureStep
+from markovmotion.state import register
+
+
+@register
+class PCA(FeatureStep):
+    """(F, D) -> (F, K), with K the fewest components holding ``energy`` of the variance.
+
+    Fitted with scikit-learn's PCA on all frames of all sequences; the learnt
+    mean, components and explained-variance ratios are kept as plain arrays so
+    the step saves without pickle.
+    """
+
+    def __init__(self, energy: float = 0.95, n_components: int | None = None):
+        self.energy = energy
+        self.n_components = n_components
+
+    def fit(self, sequences: Sequence[np.ndarray]) -> PCA:
+        x = np.vstack([np.asarray(s, dtype=float) for s in sequences])
+        full = _SkPCA(svd_solver="full").fit(x)
+        ratio = full.explained_variance_ratio_
+        k = self.n_components or int(np.searchsorted(np.cumsum(ratio), self.energy - 1e-12) + 1)
+        k = min(k, len(ratio))
+        self.mean_ = full.mean_
+        self.components_ = full.components_[:k]
+        self.explained_variance_ratio_ = ratio
+        self.n_components_ = k
+        return self
+
+    def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        return [(np.asarray(s) - self.mean_) @ self.components_.T for s in sequences]
+
+    def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        return [np.asarray(s) @ self.components_ + self.mean_ for s in sequences]

@@ -1,0 +1,51 @@
+"""Joint positions as features: body-centred 3-D positions in mm."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.features.base import FeatureStep
+from markovmotion.state import register
+
+
+@register
+class JointPositions(FeatureStep):
+    """Motion -> (F, 3J) joint positions in mm.
+
+    Args:
+        body_centred: positions relative to the pelvis with each frame's heading
+            removed (:meth:`Motion.body_centred_positions`); otherwise global.
+        joints: names of the joints to keep (default: all, end sites included).
+
+    ``inverse_transform`` gives (F, J, 3) positions: turning positions back into
+    joint rotations needs inverse kinematics, which the position-based models
+    do on their own skeleton.
+    """
+
+    def __init__(self, body_centred: bool = True, joints: list[str] | None = None):
+        self.body_centred = body_centred
+        self.joints = joints
+
+    def fit(self, sequences: Sequence[Motion]) -> JointPositions:
+        sk = sequences[0].skeleton
+        for m in sequences[1:]:
+            sk.check_compatible(m.skeleton)
+        self.skeleton_ = sk
+        self.joint_index_ = np.array(
+            [sk.index(n) for n in self.joints] if self.joints else np.arange(sk.n_joints)
+        )
+        return self
+
+    def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
+        out = []
+        for m in sequences:
+            self.skeleton_.check_compatible(m.skeleton)
+            pos = m.body_centred_positions() if self.body_centred else m.positions()
+            out.append(pos[:, self.joint_index_].reshape(len(pos), -1))
+        return out
+
+    def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        return [np.asarray(x).reshape(len(x), -1, 3) for x in sequences]

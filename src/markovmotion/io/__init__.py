@@ -1,0 +1,54 @@
+"""Reading and writing motion files; the format is chosen by the file suffix.
+
+| suffix | reader | unit conversion to mm |
+|---|---|---|
+| ``.bvh``, ``.bvh.gz`` | :func:`read_bvh` | file lengths x 10 (centimetres; ``length_unit`` to change) |
+| ``.amc``, ``.amc.gz`` (+ ``.asf``) | :func:`read_amc` | ASF lengths / ``:units length`` x 25.4 (inches) |
+| ``.c3d`` | :func:`read_c3d` (markers, not a skeleton) | the file's ``POINT:UNITS`` |
+"""
+
+from __future__ import annotations
+
+import os
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import MotionFormatError
+from markovmotion.io.bvh import read_bvh, write_bvh
+from markovmotion.io.files import base_suffix
+
+MOTION_SUFFIXES = (".bvh", ".amc")
+ALL_SUFFIXES = (".bvh", ".amc", ".c3d")
+
+
+def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motion:
+    """Read a skeletal motion (BVH or ASF/AMC) from ``path``.
+
+    ``fps`` overrides the file's frame rate (BVH header; AMC files carry none
+    and default to CMU's 120 fps).
+    """
+    suffix = base_suffix(path)
+    if suffix == ".bvh":
+        return read_bvh(path, fps=fps)
+    if suffix == ".amc":
+        from markovmotion.io.asfamc import read_amc
+
+        return read_amc(path, fps=fps)
+    if suffix == ".c3d":
+        raise MotionFormatError(
+            path, "C3D holds markers, not a skeleton: read it with markovmotion.io.read_c3d"
+        )
+    raise MotionFormatError(
+        path,
+        f"unknown motion format {suffix or '(no suffix)'!r}; "
+        f"expected one of {', '.join(ALL_SUFFIXES)}",
+    )
+
+
+def write_motion(motion: Motion, path: str | os.PathLike[str]) -> None:
+    """Write ``motion`` to ``path`` (BVH, optionally ``.bvh.gz``), atomically."""
+    if base_suffix(path) != ".bvh":
+        raise MotionFormatError(path, "motions are written as BVH: use a .bvh or .bvh.gz name")
+    write_bvh(motion, path)
+
+
+__all__ = ["read_bvh", "read_motion", "write_bvh", "write_motion"]

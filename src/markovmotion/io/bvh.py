@@ -1,0 +1,404 @@
+"""Biovision Hierarchy (BVH) reading and writing.
+
+Units: BVH carries no unit. ``length_unit`` names the file's (``"cm"`` by
+default, the unit of both the CMU conversion and the Bandai Namco data;
+``"mm"``, ``"m"`` and ``"inch"`` are accepted) and lengths are multiplied into
+millimetres on reading and divided back on writing.
+
+Rotation channels are intrinsic Euler angles in degrees applied in the order
+they are listed (``Zrotation Xrotation Yrotation`` is R = Rz Rx Ry), which is
+SciPy's upper-case sequence convention. Any order and any subset of the six
+channels is accepted per joint.
+
+Our own reader rather than bvhio or pymo: those build per-joint Python objects
+frame by frame (slow on long takes), do not report the line of a malformed
+file, and pymo is unmaintained; the motion block here is parsed as one NumPy
+array (see ``benchmarks/io_bench.py``).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections import defaultdict
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from markovmotion.core.motion import Motion
+from markovmotion.core.rotations import euler_to_quat
+from markovmotion.core.skeleton import POSITION_CHANNELS, VALID_CHANNELS, Skeleton
+from markovmotion.errors import MotionFormatError
+from markovmotion.io.files import atomic_write, read_text
+
+UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "inch": 25.4}
+
+
+def _unit_scale(length_unit: str) -> float:
+    try:
+        return UNIT_TO_MM[length_unit]
+    except KeyError:
+        raise ValueError(
+            f"unknown length unit {length_unit!r}; use one of {list(UNIT_TO_MM)}"
+        ) from None
+
+
+class _Tokens:
+    """Header tokens with their line numbers, for error messages."""
+
+    def __init__(self, path: str, lines: list[str]):
+        self.path = path
+        self.items: list[tuple[str, int]] = []
+        for n, line in enumerate(lines, start=1):
+            for tok in line.replace("{", " { ").replace("}", " } ").split():
+                self.items.append((tok, n))
+        self.i = 0
+        self.last_line = len(lines)
+
+    def error(self, problem: str, line: int | None = None) -> MotionFormatError:
+        if line is None:
+            line = self.items[self.i][1] if self.i < len(self.items) else self.last_line
+        return MotionFormatError(self.path, problem, line)
+
+    def peek(self) -> str | None:
+        return self.items[self.i][0] if self.i < len(self.items) else None
+
+    def next(self, what: str) -> str:
+        if self.i >= len(self.items):
+            raise self.error(f"file ends early, expected {what} (missing hierarchy or brace?)")
+        tok = self.items[self.i][0]
+        self.i += 1
+        return tok
+
+    def expect(self, word: str) -> None:
+        tok = self.next(repr(word))
+        if tok.upper() != word.upper():
+            self.i -= 1
+            raise self.error(f"expected {word!r}, found {tok!r}")
+
+    def number(self, what: str) -> float:
+        tok = self.next(what)
+        try:
+            value = float(tok)
+        except ValueError:
+            self.i -= 1
+            raise self.error(f"expected a number for {what}, found {tok!r}") from None
+        if not np.isfinite(value):
+            self.i -= 1
+            raise self.error(f"{what} is not finite ({tok})")
+        return value
+
+
+def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[tuple[float, float, float]] = []
+    channels: list[tuple[str, ...]] = []
+    end_site: list[bool] = []
+
+    tok.expect("HIERARCHY")
+    if (tok.peek() or "").upper() != "ROOT":
+        raise tok.error("expected ROOT after HIERARCHY")
+
+    def offset() -> tuple[float, float, float]:
+        tok.expect("OFFSET")
+        return tuple(tok.number("OFFSET") * scale for _ in range(3))  # type: ignore[return-value]
+
+    def joint(parent: int) -> None:
+        tok.next("ROOT or JOINT")
+        name = tok.next("joint name")
+        if name in ("{", "}"):
+            tok.i -= 1
+            raise tok.error("joint without a name")
+        if name in names:
+            tok.i -= 1
+            raise tok.error(f"joint name {name!r} used twice")
+        tok.expect("{")
+        index = len(names)
+        names.append(name)
+        parents.append(parent)
+        offsets.append(offset())
+        end_site.append(False)
+        tok.expect("CHANNELS")
+        count_line = tok.items[tok.i][1] if tok.i < len(tok.items) else tok.last_line
+        count = tok.number("channel count")
+        if count != int(count) or not 0 <= count <= 6:
+            raise tok.error(f"channel count must be 0 to 6, found {count:g}", count_line)
+        chans = []
+        for _ in range(int(count)):
+            c = tok.next("channel name")
+            if c not in VALID_CHANNELS:
+                tok.i -= 1
+                raise tok.error(f"unknown channel {c!r} on joint {name!r}")
+            if c in chans:
+                tok.i -= 1
+                raise tok.error(f"channel {c!r} repeated on joint {name!r}")
+            chans.append(c)
+        channels.append(tuple(chans))
+        while True:
+            word = tok.peek()
+            if word is None:
+                raise tok.error(f"file ends inside joint {name!r}: unbalanced braces")
+            upper = word.upper()
+            if upper == "JOINT":
+                joint(index)
+            elif upper == "END":
+                tok.next("End Site")
+                tok.expect("Site")
+                tok.expect("{")
+                names.append(f"{name}_end")
+                parents.append(index)
+                offsets.append(offset())
+                channels.append(())
+                end_site.append(True)
+                tok.expect("}")
+            elif word == "}":
+                tok.next("}")
+                return
+            else:
+                raise tok.error(f"unexpected {word!r} in joint {name!r}")
+
+    joint(-1)
+    if (tok.peek() or "").upper() == "ROOT":
+        raise tok.error("more than one ROOT: only one skeleton per file is supported")
+    if tok.peek() is not None:
+        raise tok.error(f"unexpected {tok.peek()!r} after the hierarchy (unbalanced braces?)")
+    return Skeleton(
+        names=tuple(names),
+        parents=np.array(parents),
+        offsets=np.array(offsets),
+        channels=tuple(channels),
+        end_site=np.array(end_site),
+    )
+
+
+def _parse_motion_block(path: str, lines: list[str], first_line: int, n_channels: int):
+    """Frames and frame time from the lines after ``MOTION``; returns (values, frame_time)."""
+
+    def header(idx: int, key: str) -> float:
+        if idx >= len(lines):
+            raise MotionFormatError(path, f"file ends before '{key}'", first_line + idx)
+        line = lines[idx].strip()
+        if not line.lower().startswith(key.lower()):
+            raise MotionFormatError(
+                path, f"expected '{key}', found {line[:40]!r}", first_line + idx
+            )
+        text = line[len(key) :].strip()
+        try:
+            return float(text)
+        except ValueError:
+            raise MotionFormatError(
+                path, f"'{key}' needs a number, found {text[:40]!r}", first_line + idx
+            ) from None
+
+    n_frames = header(0, "Frames:")
+    frame_time = header(1, "Frame Time:")
+    if n_frames != int(n_frames) or n_frames < 0:
+        raise MotionFormatError(
+            path, f"frame count must be a whole number, found {n_frames:g}", first_line
+        )
+    n_frames = int(n_frames)
+    if n_frames == 0:
+        raise MotionFormatError(path, "the file has zero frames", first_line)
+    if not (np.isfinite(frame_time) and frame_time > 0):
+        raise MotionFormatError(
+            path, f"frame time must be positive, found {frame_time:g}", first_line + 1
+        )
+    body = lines[2:]
+    while body and not body[-1].strip():
+        body.pop()
+    if len(body) < n_frames:
+        raise MotionFormatError(
+            path,
+            f"truncated: header says {n_frames} frames but {len(body)} follow",
+            first_line + 2 + len(body),
+        )
+    if len(body) > n_frames:
+        raise MotionFormatError(
+            path,
+            f"header says {n_frames} frames but {len(body)} lines follow",
+            first_line + 2 + n_frames,
+        )
+    try:
+        values = np.loadtxt(body, dtype=float, ndmin=2, comments=None)
+    except ValueError:
+        raise _locate_bad_row(path, body, n_channels, first_line + 2) from None
+    if values.shape[1] != n_channels:
+        raise MotionFormatError(
+            path,
+            f"frames have {values.shape[1]} values, the hierarchy has {n_channels} channels",
+            first_line + 2,
+        )
+    bad = ~np.isfinite(values)
+    if bad.any():
+        i = int(np.argwhere(bad)[0, 0])
+        raise MotionFormatError(path, f"NaN or infinite value in frame {i}", first_line + 2 + i)
+    return values, frame_time
+
+
+def _locate_bad_row(path: str, body: list[str], n_channels: int, first: int) -> MotionFormatError:
+    """The error for the first frame line that is not ``n_channels`` numbers."""
+    for i, line in enumerate(body):
+        row = line.split()
+        if len(row) != n_channels:
+            return MotionFormatError(
+                path,
+                f"frame {i} has {len(row)} values, the hierarchy has {n_channels} channels",
+                first + i,
+            )
+        for v in row:
+            try:
+                float(v)
+            except ValueError:
+                return MotionFormatError(
+                    path, f"non-numeric value {v[:20]!r} in frame {i}", first + i
+                )
+    return MotionFormatError(path, "unreadable motion data", first)  # pragma: no cover
+
+
+def _channels_to_motion(
+    sk: Skeleton, values: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Channel values (F, C) -> local quaternions (F, J, 4) and translations (F, J, 3) mm."""
+    f = len(values)
+    trans = np.broadcast_to(sk.offsets, (f, sk.n_joints, 3)).copy()
+    quats = np.zeros((f, sk.n_joints, 4))
+    quats[..., 3] = 1.0
+    groups: dict[str, list[tuple[int, list[int]]]] = defaultdict(list)
+    col = 0
+    for j, chans in enumerate(sk.channels):
+        rot_cols = []
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                trans[:, j, "XYZ".index(c[0])] = values[:, col] * scale
+            else:
+                rot_cols.append(col)
+            col += 1
+        if rot_cols:
+            groups[sk.rotation_order(j)].append((j, rot_cols))
+    for order, members in groups.items():
+        joints = [j for j, _ in members]
+        cols = [c for _, cs in members for c in cs]
+        angles = values[:, cols].reshape(f, len(joints), len(order))
+        quats[:, joints] = euler_to_quat(order, angles)
+    return quats, trans
+
+
+def read_bvh(
+    path: str | os.PathLike[str], fps: float | None = None, length_unit: str = "cm"
+) -> Motion:
+    """Read a BVH file (``.bvh`` or ``.bvh.gz``) into a :class:`Motion`.
+
+    Args:
+        path: the file.
+        fps: the true frame rate, overriding the header's ``Frame Time`` (some
+            files, such as the CMU salsa conversions, carry a wrong one).
+        length_unit: the file's length unit (see module docstring).
+
+    Raises:
+        MotionFormatError: naming the file, line and problem, for any malformed input.
+    """
+    scale = _unit_scale(length_unit)
+    text = read_text(path)
+    lines = text.splitlines()
+    motion_at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
+    if motion_at is None:
+        if not any(ln.strip() for ln in lines):
+            raise MotionFormatError(path, "the file is empty")
+        raise MotionFormatError(path, "no MOTION section (truncated file?)", len(lines))
+    tok = _Tokens(str(path), lines[:motion_at])
+    if not tok.items:
+        raise MotionFormatError(path, "missing HIERARCHY before MOTION", motion_at + 1)
+    try:
+        skeleton = _parse_hierarchy(tok, scale)
+    except ValueError as exc:  # the Skeleton's own checks
+        raise MotionFormatError(path, str(exc)) from None
+    values, frame_time = _parse_motion_block(
+        str(path), lines[motion_at + 1 :], motion_at + 2, skeleton.n_channels
+    )
+    quats, trans = _channels_to_motion(skeleton, values, scale)
+    rate = float(fps) if fps else 1.0 / frame_time
+    return Motion(skeleton, quats, trans, rate, name=os.path.basename(str(path)))
+
+
+def motion_to_channels(motion: Motion, length_unit: str = "cm") -> np.ndarray:
+    """Channel values (F, C) of ``motion`` in its skeleton's BVH channel layout."""
+    sk = motion.skeleton
+    scale = _unit_scale(length_unit)
+    f = motion.n_frames
+    out = np.empty((f, sk.n_channels))
+    groups: dict[str, list[tuple[int, list[int]]]] = defaultdict(list)
+    col = 0
+    for j, chans in enumerate(sk.channels):
+        rot_cols = []
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                out[:, col] = motion.translations[:, j, "XYZ".index(c[0])] / scale
+            else:
+                rot_cols.append(col)
+            col += 1
+        if rot_cols:
+            groups[sk.rotation_order(j)].append((j, rot_cols))
+    for order, members in groups.items():
+        joints = [j for j, _ in members]
+        cols = [c for _, cs in members for c in cs]
+        # complete a partial order (e.g. 'ZX') to three axes and drop the extra ones
+        full = order + "".join(a for a in "XYZ" if a not in order)
+        rot = Rotation.from_quat(motion.rotations[:, joints].reshape(-1, 4))
+        angles = rot.as_euler(full, degrees=True)[:, : len(order)]
+        out[:, cols] = angles.reshape(f, len(joints) * len(order))
+    return out
+
+
+def bvh_text(motion: Motion, length_unit: str = "cm", precision: int = 10) -> str:
+    """The BVH text of ``motion`` (see :func:`write_bvh`)."""
+    sk = motion.skeleton
+    scale = _unit_scale(length_unit)
+    out = io.StringIO()
+    out.write("HIERARCHY\n")
+    depth_close: list[int] = []
+
+    def fmt(v: np.ndarray) -> str:
+        return " ".join(f"{x:.{precision}g}" for x in v)
+
+    for j in range(sk.n_joints):
+        depth = 0
+        p = sk.parents[j]
+        while p != -1:
+            depth += 1
+            p = sk.parents[p]
+        while depth_close and depth_close[-1] >= depth:
+            d = depth_close.pop()
+            out.write("\t" * d + "}\n")
+        ind = "\t" * depth
+        if sk.end_site[j]:
+            out.write(f"{ind}End Site\n{ind}{{\n")
+        else:
+            out.write(f"{ind}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}\n{ind}{{\n")
+        out.write(f"{ind}\tOFFSET {fmt(sk.offsets[j] / scale)}\n")
+        if not sk.end_site[j]:
+            chans = sk.channels[j]
+            out.write(f"{ind}\tCHANNELS {len(chans)}{' ' if chans else ''}{' '.join(chans)}\n")
+        depth_close.append(depth)
+    while depth_close:
+        out.write("\t" * depth_close.pop() + "}\n")
+    out.write(f"MOTION\nFrames: {motion.n_frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
+    values = motion_to_channels(motion, length_unit)
+    np.savetxt(out, values, fmt=f"%.{precision}g", delimiter=" ")
+    return out.getvalue()
+
+
+def write_bvh(
+    motion: Motion, path: str | os.PathLike[str], length_unit: str = "cm", precision: int = 10
+) -> None:
+    """Write ``motion`` as BVH (gzip-compressed if ``path`` ends in ``.gz``), atomically.
+
+    Joints without rotation or position channels in the skeleton (as read from
+    ASF/AMC) are written with the channels they have; the file reads back into
+    the same motion to ``10**-precision`` relative.
+    """
+    if motion.n_frames == 0:
+        raise ValueError("cannot write a motion with zero frames")
+    text = bvh_text(motion, length_unit, precision)
+    with atomic_write(path) as fh:
+        fh.write(text)

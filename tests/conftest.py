@@ -1,0 +1,49 @@
+"""Shared fixtures: the real motion-capture collection beside the project, small synthetic motions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
+from markovmotion.data import MocapIndex
+
+
+@pytest.fixture(scope="session")
+def mocap() -> MocapIndex:
+    """The shared motion capture (../shared/data/mocap); the tests need it."""
+    return MocapIndex.load()
+
+
+def make_skeleton() -> Skeleton:
+    """A small five-joint skeleton with mixed channel orders and an end site (offsets in mm)."""
+    return Skeleton(
+        names=("hips", "lleg", "rleg", "spine", "spine_end"),
+        parents=np.array([-1, 0, 0, 0, 3]),
+        offsets=np.array([[0, 0, 0], [100, -50, 0], [-100, -50, 0], [0, 200, 0], [0, 150, 0]]),
+        channels=(
+            ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"),
+            ("Zrotation", "Xrotation", "Yrotation"),
+            ("Xrotation", "Yrotation", "Zrotation"),
+            ("Yrotation", "Xrotation"),
+            (),
+        ),
+        end_site=np.array([False, False, False, False, True]),
+    )
+
+
+def make_motion(n_frames: int = 40, seed: int = 0, fps: float = 30.0) -> Motion:
+    """A smooth random motion of :func:`make_skeleton`."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    sk = make_skeleton()
+    t = np.arange(n_frames)[:, None]
+    angles = np.sin(t / 7.0 + rng.uniform(0, 6, (1, sk.n_joints * 3))) * rng.uniform(5, 60)
+    quats = Rotation.from_euler("ZXY", angles.reshape(-1, 3), degrees=True).as_quat()
+    quats = quats.reshape(n_frames, sk.n_joints, 4)
+    quats[:, 3] = Rotation.from_euler("YX", angles[:, 9:11], degrees=True).as_quat()
+    quats[:, 4] = [0, 0, 0, 1]
+    root = np.column_stack([10 * t[:, 0], 900 + 5 * np.sin(t[:, 0] / 3), 20 * t[:, 0]])
+    return Motion.from_rotations(sk, quats, root, fps=fps, name="synthetic")

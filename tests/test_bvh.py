@@ -1,0 +1,109 @@
+"""BVH reading and writing: round trips, real files, malformed input."""
+
+from __future__ import annotations
+
+import gzip
+
+import numpy as np
+import pytest
+from conftest import make_motion
+
+from markovmotion import MotionFormatError, read_motion, write_motion
+from markovmotion.io.bvh import bvh_text
+
+
+def same_rotations(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest angle (rad) between quaternion arrays, sign-insensitive."""
+    dot = np.abs(np.sum(a * b, axis=-1)).clip(0, 1)
+    return float(np.max(2 * np.arccos(dot)))
+
+
+@pytest.mark.parametrize("suffix", [".bvh", ".bvh.gz"])
+def test_round_trip_synthetic(tmp_path, suffix):
+    m = make_motion()
+    path = tmp_path / f"m{suffix}"
+    write_motion(m, path)
+    back = read_motion(path)
+    assert back.skeleton.names == m.skeleton.names
+    assert back.skeleton.channels == m.skeleton.channels
+    np.testing.assert_allclose(back.skeleton.offsets, m.skeleton.offsets, atol=1e-6)
+    np.testing.assert_allclose(back.translations, m.translations, atol=1e-6)
+    assert same_rotations(back.rotations, m.rotations) < 1e-6
+    assert back.fps == pytest.approx(m.fps)
+    np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
+
+
+def test_round_trip_real_files(mocap, tmp_path):
+    for entry in (mocap.query(label="salsa")[0], mocap.query(source="bandai")[0]):
+        m = read_motion(entry.path, fps=entry.fps)
+        write_motion(m, tmp_path / "x.bvh")
+        back = read_motion(tmp_path / "x.bvh")
+        assert back.n_frames == m.n_frames
+        assert same_rotations(back.rotations, m.rotations) < 1e-6
+        np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
+
+
+def test_header_fps_overridden_by_index(mocap):
+    entry = mocap.query(label="salsa")[0]
+    assert read_motion(entry.path).fps == pytest.approx(120, rel=1e-4)  # the header is wrong
+    assert mocap.load_motion(entry).fps == 60
+
+
+def test_forward_kinematics_hand_computed():
+    m = make_motion(n_frames=3)
+    m.rotations[:] = [0, 0, 0, 1]
+    # rotate the hips 90 degrees about +Y: the left leg offset (100, -50, 0) goes to (0, -50, -100)
+    m.rotations[:, 0] = [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]
+    pos = m.positions()
+    np.testing.assert_allclose(pos[:, 1] - pos[:, 0], [[0, -50, -100]] * 3, atol=1e-9)
+    np.testing.assert_allclose(pos[:, 4] - pos[:, 0], [[0, 350, 0]] * 3, atol=1e-9)
+
+
+def _valid_text() -> str:
+    return bvh_text(make_motion(n_frames=4))
+
+
+def _last_line(text: str, edit) -> str:
+    lines = text.rstrip("\n").split("\n")
+    lines[-1] = edit(lines[-1])
+    return "\n".join(lines) + "\n"
+
+
+BROKEN = {
+    "truncated": lambda t: t[: len(t) - 40],
+    "extra value in a frame": lambda t: _last_line(t, lambda ln: ln + " 3.5"),
+    "missing value in a frame": lambda t: _last_line(t, lambda ln: ln.rsplit(" ", 1)[0]),
+    "non-numeric": lambda t: _last_line(t, lambda ln: ln.rsplit(" ", 1)[0] + " abc"),
+    "nan": lambda t: _last_line(t, lambda ln: ln.rsplit(" ", 1)[0] + " nan"),
+    "inf": lambda t: _last_line(t, lambda ln: ln.rsplit(" ", 1)[0] + " inf"),
+    "unknown channel": lambda t: t.replace("Zrotation", "Qrotation", 1),
+    "zero frames": lambda t: t.split("MOTION")[0] + "MOTION\nFrames: 0\nFrame Time: 0.03\n",
+    "missing hierarchy": lambda t: "MOTION" + t.split("MOTION")[1],
+    "unbalanced braces": lambda t: t.replace("}", "", 1),
+    "empty": lambda t: "",
+}
+
+
+@pytest.mark.parametrize("problem", sorted(BROKEN))
+def test_malformed_files_raise_one_error(tmp_path, problem):
+    path = tmp_path / "bad.bvh"
+    path.write_text(BROKEN[problem](_valid_text()))
+    with pytest.raises(MotionFormatError) as info:
+        read_motion(path)
+    assert str(path) in str(info.value)
+
+
+def test_error_names_line(tmp_path):
+    path = tmp_path / "bad.bvh"
+    text = _valid_text().replace("Zrotation", "Qrotation", 1)
+    path.write_text(text)
+    line = next(i for i, ln in enumerate(text.splitlines(), 1) if "Qrotation" in ln)
+    with pytest.raises(MotionFormatError, match=f"bad.bvh:{line}: unknown channel"):
+        read_motion(path)
+
+
+def test_corrupt_gzip(tmp_path):
+    path = tmp_path / "bad.bvh.gz"
+    path.write_bytes(gzip.compress(_valid_text().encode())[:-30])
+    with pytest.raises(MotionFormatError, match="bad.bvh.gz"):
+        read_motion(path)
