@@ -1,0 +1,143 @@
+"""Feature steps and the pipeline: inverses, paper equations, persistence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import make_motion
+from scipy.spatial.transform import Rotation
+
+from markovmotion.errors import ModelFormatError
+from markovmotion.features import (
+    PCA,
+    AugmentedConfiguration,
+    Deltas,
+    ExpMaps,
+    FeaturePipeline,
+    JointPositions,
+    TemporalSmoothing,
+    add_deltas,
+    continuous_rotvec,
+    delta_matrix,
+)
+from markovmotion.persist import FORMAT_VERSION, load_npz, save_npz
+
+
+def test_expmap_round_trip_gives_the_same_motion():
+    m = make_motion(n_frames=50)
+    step = ExpMaps(root_position="full")
+    x = step.fit_transform([m])
+    back = step.inverse_transform(x)[0]
+    np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-8)
+
+
+def test_continuous_rotvec_removes_the_flip_through_pi():
+    angles = np.linspace(2.5, 3.8, 40)  # a turn about Z through pi
+    rv = Rotation.from_rotvec(angles[:, None] * [0, 0, 1]).as_rotvec()
+    assert np.abs(np.diff(rv, axis=0)).max() > 6  # SciPy flips to the short form
+    smooth = continuous_rotvec(rv)
+    np.testing.assert_allclose(smooth[:, 2], angles, atol=1e-9)
+    np.testing.assert_allclose(
+        Rotation.from_rotvec(smooth).as_quat()
+        * np.sign(Rotation.from_rotvec(smooth).as_quat()[:, 3:]),
+        Rotation.from_rotvec(rv).as_quat() * np.sign(Rotation.from_rotvec(rv).as_quat()[:, 3:]),
+        atol=1e-12,
+    )
+
+
+def test_continuous_rotvec_keeps_short_form_near_rest():
+    rv = np.array([[0.1, 0, 0], [-0.05, 0.02, 0], [0.0, -0.1, 0.01]])
+    np.testing.assert_array_equal(continuous_rotvec(rv), rv)
+
+
+def test_pca_keeps_the_energy_fraction():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(500, 6)) * [10, 5, 2, 0.1, 0.1, 0.1]
+    pca = PCA(energy=0.95).fit([x[:200], x[200:]])
+    ratio = np.cumsum(pca.explained_variance_ratio_)
+    k = pca.n_components_
+    assert ratio[k - 1] >= 0.95 > ratio[k - 2]
+    assert k == 2
+    full = PCA(energy=1.0).fit([x])
+    np.testing.assert_allclose(full.inverse_transform(full.transform([x]))[0], x, atol=1e-9)
+
+
+def test_augmented_configuration_eqs_1_to_4():
+    c = np.array([[0.0, 10], [1, 10], [3, 20], [4, 30]])
+    step = AugmentedConfiguration(lam=10).fit([c])
+    f = step.transform([c])[0]
+    scaled = np.array([[0, 0], [0.25, 0], [0.75, 0.5], [1, 1]])
+    np.testing.assert_allclose(f[:, :2], scaled)
+    np.testing.assert_allclose(f[1:, 2:], 10 * np.diff(scaled, axis=0))
+    np.testing.assert_allclose(f[0, 2:], f[1, 2:])
+    assert f[:, :2].min() == 0 and f[:, :2].max() == 1
+    np.testing.assert_allclose(step.inverse_transform([f])[0], c)
+
+
+def test_deltas_match_eqs_2_to_4():
+    rng = np.random.default_rng(1)
+    c = rng.normal(size=(12, 3))
+    o = add_deltas(c)
+    t = 5
+    np.testing.assert_allclose(o[t, 3:6], 0.5 * (c[t + 1] - c[t - 1]))
+    np.testing.assert_allclose(o[t, 6:], 0.25 * (c[t + 2] - 2 * c[t] + c[t - 2]))
+    w = delta_matrix(12).toarray()
+    for d in range(3):
+        np.testing.assert_allclose(w @ c[:, d], o[:, [d, 3 + d, 6 + d]].ravel(), atol=1e-12)
+    assert np.allclose(add_deltas(np.ones((6, 2)))[:, 2:], 0)
+    np.testing.assert_array_equal(Deltas().inverse_transform([o])[0], c)
+
+
+def test_smoothing_is_a_centred_moving_average():
+    x = np.arange(10.0)[:, None] ** 2
+    y = TemporalSmoothing(window=3).transform([x])[0]
+    np.testing.assert_allclose(y[4], (9 + 16 + 25) / 3)
+
+
+def test_pipeline_saves_and_loads_without_pickle(tmp_path):
+    motions = [make_motion(seed=s) for s in range(3)]
+    pipe = FeaturePipeline([JointPositions(), TemporalSmoothing(3), PCA(0.9)])
+    x = pipe.fit_transform(motions)
+    arrays: dict = {}
+    save_npz(tmp_path / "p.npz", "pipeline-test", {"pipeline": pipe.to_state(arrays)}, arrays)
+    header, loaded = load_npz(tmp_path / "p.npz", "pipeline-test")
+    back = FeaturePipeline.from_state(header["pipeline"], loaded)
+    for a, b in zip(back.transform(motions), x, strict=True):
+        np.testing.assert_allclose(a, b)
+    assert back.steps[0].skeleton_.names == motions[0].skeleton.names
+
+
+def test_model_file_errors(tmp_path):
+    save_npz(tmp_path / "m.npz", "kind-a", {}, {"x": np.zeros(3)})
+    with pytest.raises(ModelFormatError, match="expected 'kind-b'"):
+        load_npz(tmp_path / "m.npz", "kind-b")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ModelFormatError, match="junk.npz: not a markovmotion model"):
+        load_npz(tmp_path / "junk.npz")
+    np.savez(tmp_path / "plain.npz", x=np.zeros(2))
+    with pytest.raises(ModelFormatError, match="no header"):
+        load_npz(tmp_path / "plain.npz")
+    with pytest.raises(ModelFormatError, match="no such model file"):
+        load_npz(tmp_path / "missing.npz")
+
+
+def test_model_file_from_another_version(tmp_path, monkeypatch):
+    import markovmotion.persist as persist
+
+    monkeypatch.setattr(persist, "FORMAT_VERSION", FORMAT_VERSION + 1)
+    save_npz(tmp_path / "new.npz", "k", {}, {})
+    monkeypatch.setattr(persist, "FORMAT_VERSION", FORMAT_VERSION)
+    with pytest.raises(ModelFormatError, match="format version 2.*retrain"):
+        load_npz(tmp_path / "new.npz", "k")
+
+
+def test_positions_on_real_data_are_body_centred(mocap):
+    a, b = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    assert a.n_frames == b.n_frames and a.fps == b.fps == 60
+    x = JointPositions().fit_transform([a])[0].reshape(a.n_frames, -1, 3)
+    pelvis = a.skeleton.body_root
+    np.testing.assert_allclose(x[:, pelvis], 0, atol=1e-9)
+    hips = a.hip_joints()
+    lateral = x[:, hips[0]] - x[:, hips[1]]
+    np.testing.assert_allclose(lateral[:, 2], 0, atol=1e-6)  # hips across, facing +Z
+    assert np.all(lateral[:, 0] > 0)
