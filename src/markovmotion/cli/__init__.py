@@ -6,9 +6,6 @@ stderr and exit with code 2; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
-import sys
-
-import click
 import typer
 
 from markovmotion.errors import MarkovMotionError
@@ -29,6 +26,10 @@ def _register() -> None:
     motion.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
+    from markovmotion.cli import evaluation, serve
+
+    serve.register(app)
+    app.add_typer(evaluation.app, name="evaluation")
 
 
 def fail(message: str) -> None:
@@ -41,18 +42,10 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script."""
     _register()
     try:
-        app(args=argv, standalone_mode=False)
+        app(args=argv, prog_name="markovmotion")
     except MarkovMotionError as exc:
         fail(str(exc))
-    except click.exceptions.Exit as exc:
-        raise SystemExit(exc.exit_code) from None
-    except click.ClickException as exc:
-        exc.show()
-        raise SystemExit(exc.exit_code) from None
-    except click.exceptions.Abort:
-        raise SystemExit(130) from None
     except KeyboardInterrupt:
         raise SystemExit(130) from None
     except OSError as exc:
         fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "))
-    sys.stdout.flush()

@@ -1,4 +1,4 @@
-"""``data list``: what motion capture is available."""
+"""``data list`` and ``data fetch``: what motion capture is available, and getting it."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.fetch import BANDAI_BASE_URL, CMU_BASE_URL, INTERACTION_SUBJECTS, fetch
+from markovmotion.progress import err_console
 
 app = typer.Typer(help="The motion-capture collection: list it, fetch it.", no_args_is_help=True)
 
@@ -29,3 +31,56 @@ def list_(
     for e in rows:
         table.add_row(e.file, e.source, e.category, e.label, f"{e.fps:g}", str(e.frames))
     Console().print(table)
+
+
+def _subject_numbers(value: str) -> list[int]:
+    try:
+        numbers = [int(v) for v in value.replace(" ", "").split(",") if v]
+    except ValueError:
+        raise typer.BadParameter(f"{value!r} is not a comma-separated list of numbers") from None
+    if any(n < 1 for n in numbers):
+        raise typer.BadParameter(f"{value!r}: CMU subject numbers start at 1")
+    return numbers
+
+
+@app.command("fetch")
+def fetch_(
+    dest: Path = typer.Option(..., help="Folder to download into (created if needed)."),
+    subjects: str = typer.Option(
+        ",".join(str(s) for s in INTERACTION_SUBJECTS),
+        help="CMU subjects, comma-separated ('' for none); 18-23 are the two-person takes.",
+    ),
+    bandai: bool = typer.Option(True, "--bandai/--no-bandai", help="Fetch the Bandai Namco walks."),
+    base_url_cmu: str = typer.Option(CMU_BASE_URL, help="Where CMU's NN/NN_TT.amc files are."),
+    base_url_bandai: str = typer.Option(
+        BANDAI_BASE_URL, help="Where the Bandai Namco repository's dataset/ folder is."
+    ),
+    max_missing: int = typer.Option(
+        3, min=1, help="Stop probing a subject or style after this many missing files in a row."
+    ),
+    retries: int = typer.Option(4, min=0, help="Retries of a failing download before giving up."),
+) -> None:
+    """Download CMU (ASF/AMC) and Bandai Namco (BVH) motion capture and index it in DEST/INDEX.csv.
+
+    Re-running resumes partial downloads and adds only what is new. CMU asks
+    users not to crawl its site: fetch the subjects you need.
+    """
+    report = fetch(
+        dest,
+        _subject_numbers(subjects),
+        bandai,
+        cmu_base_url=base_url_cmu,
+        bandai_base_url=base_url_bandai,
+        max_missing=max_missing,
+        retries=retries,
+    )
+    for line in report.missing:
+        err_console.print(f"[yellow]not found:[/] {line}", highlight=False, soft_wrap=True)
+    for _, problem in report.rejected:
+        err_console.print(f"[bold red]rejected:[/] {problem}", highlight=False, soft_wrap=True)
+    err_console.print(
+        f"{len(report.indexed)} new and {len(report.kept)} already present motions, "
+        f"{len(report.rejected)} rejected; {report.dest / 'INDEX.csv'} lists {report.total}",
+        highlight=False,
+        soft_wrap=True,
+    )

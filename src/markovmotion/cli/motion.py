@@ -29,7 +29,8 @@ def info(
     sk = motion.skeleton
     pos = motion.positions()
     extent = pos.reshape(-1, 3).max(0) - pos.reshape(-1, 3).min(0)
-    table = Table(title=str(file), show_header=False)
+    console.print(f"[bold]{file}[/]", highlight=False)
+    table = Table(show_header=False)
     table.add_row("frames", str(motion.n_frames))
     table.add_row("frame rate", f"{motion.fps:g} fps")
     table.add_row("duration", f"{motion.duration:.2f} s")
