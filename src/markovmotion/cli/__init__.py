@@ -21,9 +21,10 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    from markovmotion.cli import data, demo, motion
+    from markovmotion.cli import data, demo, motion, render
 
     motion.register(app)
+    render.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
     from markovmotion.cli import evaluation, serve
@@ -43,6 +44,9 @@ def main(argv: list[str] | None = None) -> None:
     _register()
     try:
         app(args=argv, prog_name="markovmotion")
+    except SystemExit as exc:  # Typer exits even on success; return normally then
+        if exc.code not in (0, None):
+            raise
     except MarkovMotionError as exc:
         fail(str(exc))
     except KeyboardInterrupt:

@@ -13,7 +13,9 @@ import os
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError
+from markovmotion.io.asfamc import read_amc, read_asf
 from markovmotion.io.bvh import read_bvh, write_bvh
+from markovmotion.io.c3d import read_c3d
 from markovmotion.io.files import base_suffix
 
 MOTION_SUFFIXES = (".bvh", ".amc")
@@ -30,8 +32,6 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
     if suffix == ".bvh":
         return read_bvh(path, fps=fps)
     if suffix == ".amc":
-        from markovmotion.io.asfamc import read_amc
-
         return read_amc(path, fps=fps)
     if suffix == ".c3d":
         raise MotionFormatError(
@@ -51,4 +51,12 @@ def write_motion(motion: Motion, path: str | os.PathLike[str]) -> None:
     write_bvh(motion, path)
 
 
-__all__ = ["read_bvh", "read_motion", "write_bvh", "write_motion"]
+__all__ = [
+    "read_amc",
+    "read_asf",
+    "read_bvh",
+    "read_c3d",
+    "read_motion",
+    "write_bvh",
+    "write_motion",
+]

@@ -185,11 +185,14 @@ def _parse_motion_block(path: str, lines: list[str], first_line: int, n_channels
             )
         text = line[len(key) :].strip()
         try:
-            return float(text)
+            value = float(text)
         except ValueError:
+            value = np.nan
+        if not np.isfinite(value):
             raise MotionFormatError(
-                path, f"'{key}' needs a number, found {text[:40]!r}", first_line + idx
-            ) from None
+                path, f"'{key}' needs a finite number, found {text[:40]!r}", first_line + idx
+            )
+        return value
 
     n_frames = header(0, "Frames:")
     frame_time = header(1, "Frame Time:")
