@@ -1,0 +1,49 @@
+"""``render``: stick-figure animation (GIF, MP4) or frame strip (PNG) of motion files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.console import Console
+
+from markovmotion.io import read_motion
+from markovmotion.io.files import base_suffix
+
+
+def render(
+    inputs: list[Path] = typer.Argument(
+        ..., help="Motion files (BVH, ASF/AMC) or C3D marker files.", metavar="IN..."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="Output .gif, .mp4 or .png (frame strip)."),
+    side_by_side: bool = typer.Option(
+        False, "--side-by-side", help="One panel per input instead of one shared scene."
+    ),
+    fps: float = typer.Option(15.0, min=0.1, help="Frames per second of the animation."),
+    max_seconds: float = typer.Option(None, min=0.01, help="Render at most this many seconds."),
+    data_fps: float = typer.Option(
+        None, min=0.01, help="True frame rate of the inputs, overriding the files'."
+    ),
+    title: str = typer.Option(None, help="Text above the picture."),
+) -> None:
+    """Draw motions as stick figures, in one scene (two partners) or side by side."""
+    from markovmotion.viz import check_output, render
+
+    check_output(out)
+    items = []
+    for path in inputs:
+        if base_suffix(path) == ".c3d":
+            from markovmotion.io.c3d import read_c3d
+
+            markers = read_c3d(path)
+            if data_fps:
+                markers.fps = data_fps
+            items.append(markers)
+        else:
+            items.append(read_motion(path, fps=data_fps))
+    render(items, out, side_by_side=side_by_side, fps=fps, max_seconds=max_seconds, title=title)
+    Console(stderr=True).print(f"wrote {out}")
+
+
+def register(app: typer.Typer) -> None:
+    app.command()(render)

@@ -1,0 +1,563 @@
+"""Stick-figure animations (GIF, MP4) and frame strips (PNG) of motions and marker clouds.
+
+Every frame of a clip is seen through one fixed camera chosen from all frames
+of all items: an orthographic view from 18 degrees above the ground, from the
+right of the main direction of travel turned 20 degrees towards the front (or,
+when nobody travels, 40 degrees from the average facing direction), so that a
+walk is seen nearly in profile, going left to right, and a dance from the
+front. Lengths keep their proportions on screen (equal aspect); the floor is a
+grid at the lowest point ever reached, with each person's shadow on it. Bones are lines from each joint
+to its parent, end sites (head, hand and foot tips) included; joints above the
+pelvis (Bandai's ``joint_Root``) are not drawn. Marker clouds (any object with
+``positions`` (F, M, 3) in mm and ``fps``) are drawn as points.
+
+Frames are drawn by updating line data over a cached background (blitting)
+and encoded directly: GIF with Pillow on one shared palette, MP4 (H.264) with
+the ffmpeg binary of ``imageio-ffmpeg``. This is the work matplotlib's
+``PillowWriter`` / ``FFMpegWriter`` do, without redrawing the whole figure for
+each frame (about ten times faster).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import MarkovMotionError
+from markovmotion.io.files import atomic_path, atomic_write
+from markovmotion.progress import track
+
+OUTPUT_SUFFIXES = (".gif", ".mp4", ".png")
+COLOURS = (
+    "#1f77b4",
+    "#d62728",
+    "#2ca02c",
+    "#ff7f0e",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#17becf",
+)
+UP = np.array([0.0, 1.0, 0.0])
+ELEVATION = np.radians(18.0)
+QUARTER_TRAVEL = np.radians(20.0)
+QUARTER_STILL = np.radians(40.0)
+MAX_ASPECT = 3.2
+TRAVEL_MM = 250.0  # horizontal spread (std) above which a clip "travels"
+DPI = 100
+PANEL_HEIGHT = 4.5  # inches
+TITLE_BAND = 0.45  # inches
+MAX_WIDTH = 19.2  # inches
+MAX_HEIGHT = 10.8
+STACK_ASPECT = 1.6
+
+
+class PointCloud(Protocol):
+    """What the renderer needs from marker data (``core.markers.Markers``)."""
+
+    positions: np.ndarray
+    fps: float
+
+
+Drawable = Motion | PointCloud
+
+
+def check_output(path: str | os.PathLike[str]) -> str:
+    """The output suffix of ``path``, or a :class:`MarkovMotionError` naming the ones accepted."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise MarkovMotionError(
+            f"{path}: unknown output format {suffix or '(no suffix)'!r}; "
+            f"use one of {', '.join(OUTPUT_SUFFIXES)}"
+        )
+    return suffix
+
+
+# ------------------------------------------------------------------- tracks
+@dataclass(frozen=True)
+class _Track:
+    """One person (or marker cloud): positions in mm, bones as (child, parent) rows."""
+
+    name: str
+    positions: np.ndarray  # (F, N, 3)
+    fps: float
+    bones: np.ndarray  # (B, 2), empty for markers
+    facing: np.ndarray | None  # (F, 3) horizontal unit vectors
+
+    @property
+    def last_time(self) -> float:
+        return (len(self.positions) - 1) / self.fps
+
+    def frame_at(self, times: np.ndarray) -> np.ndarray:
+        """Index of the frame shown at each time (the last one once the clip is over)."""
+        idx = np.rint(np.asarray(times) * self.fps).astype(int)
+        return np.clip(idx, 0, len(self.positions) - 1)
+
+    def until(self, time: float) -> _Track:
+        """The frames shown up to ``time`` (the camera is fitted to those)."""
+        n = int(self.frame_at(np.array([time]))[0]) + 1
+        facing = None if self.facing is None else self.facing[:n]
+        return _Track(self.name, self.positions[:n], self.fps, self.bones, facing)
+
+
+def _to_track(item: Any, number: int, name: str | None) -> _Track:
+    label = name or getattr(item, "name", "") or f"person {number + 1}"
+    if isinstance(item, Motion):
+        sk = item.skeleton
+        pos = item.positions()
+        yaw = item.heading(pos)
+        facing = np.stack([np.sin(yaw), np.zeros_like(yaw), np.cos(yaw)], axis=1)
+        keep = sk.body_root  # joints before it form a static chain above the pelvis
+        bones = np.array(
+            [(j - keep, sk.parents[j] - keep) for j in range(keep + 1, sk.n_joints)], dtype=int
+        ).reshape(-1, 2)
+        return _Track(label, pos[:, keep:], float(item.fps), bones, facing)
+    positions = getattr(item, "positions", None)
+    if isinstance(positions, np.ndarray) and positions.ndim == 3 and hasattr(item, "fps"):
+        return _Track(label, positions.astype(float), float(item.fps), np.zeros((0, 2), int), None)
+    raise TypeError(f"cannot draw {type(item).__name__}: expected a Motion or marker positions")
+
+
+def _tracks(items: Drawable | Sequence[Drawable], names: Sequence[str] | None) -> list[_Track]:
+    seq = [items] if isinstance(items, Motion) or hasattr(items, "positions") else list(items)
+    if not seq:
+        raise ValueError("nothing to draw")
+    if names is not None and len(names) != len(seq):
+        raise ValueError(f"{len(names)} names for {len(seq)} motions")
+    return [_to_track(m, i, names[i] if names else None) for i, m in enumerate(seq)]
+
+
+# ------------------------------------------------------------------- camera
+@dataclass(frozen=True)
+class _Camera:
+    """Orthographic camera: screen axes ``right``, ``up`` and the direction ``toward`` it."""
+
+    right: np.ndarray
+    up: np.ndarray
+    toward: np.ndarray
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        return np.stack([p @ self.right, p @ self.up], axis=-1)
+
+    def depth(self, p: np.ndarray) -> np.ndarray:
+        return p @ self.toward
+
+
+def _finite_mean(a: np.ndarray, axis: int) -> np.ndarray:
+    """Mean over ``axis`` ignoring NaN (occluded markers); NaN where nothing is left."""
+    ok = np.isfinite(a)
+    count = ok.sum(axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ok, a, 0.0).sum(axis) / np.where(count, count, np.nan)
+
+
+def _centre_track(t: _Track) -> np.ndarray:
+    """Per-frame horizontal position (F, 2) of the pelvis (of the centroid for markers)."""
+    p = t.positions[:, 0] if len(t.bones) else _finite_mean(t.positions, axis=1)
+    return p[:, [0, 2]]
+
+
+def _camera(tracks: list[_Track]) -> _Camera:
+    """The view of the module docstring, from all frames of all tracks."""
+    facings = [t.facing for t in tracks if t.facing is not None]
+    mean_facing = np.mean(np.vstack(facings), axis=0)[[0, 2]] if facings else np.zeros(2)
+    centres = [c[np.isfinite(c).all(axis=1)] for c in map(_centre_track, tracks)]
+    centred = np.vstack([c - c.mean(axis=0) for c in centres if len(c)])
+    axis = mean_facing / np.linalg.norm(mean_facing) if np.linalg.norm(mean_facing) > 0.3 else None
+    quarter = QUARTER_STILL
+    if len(centred) > 1:
+        evals, evecs = np.linalg.eigh(np.cov(centred.T))
+        if np.sqrt(evals[-1]) > TRAVEL_MM:
+            travel = evecs[:, -1]
+            axis = travel if axis is None or travel @ axis >= 0 else -travel
+            quarter = QUARTER_TRAVEL
+    if axis is None:
+        axis = np.array([0.0, 1.0])  # facing +Z
+    forward = np.array([axis[0], 0.0, axis[1]])
+    side = np.cross(forward, UP)  # the right of a person facing ``forward``
+    horizontal = np.cos(quarter) * side + np.sin(quarter) * forward
+    toward = np.cos(ELEVATION) * horizontal + np.sin(ELEVATION) * UP
+    right = np.cross(-toward, UP)
+    right /= np.linalg.norm(right)
+    return _Camera(right, np.cross(right, -toward), toward)
+
+
+def _grid_step(span: float) -> float:
+    """A round grid spacing giving at most 12 lines over ``span`` mm."""
+    for step in (100.0, 200.0, 250.0, 500.0, 1000.0, 2000.0, 5000.0):
+        if span / step <= 12:
+            return step
+    return 10000.0
+
+
+def _label_step(step: float) -> str:
+    return f"{step / 1000:g} m" if step >= 1000 else f"{step / 10:g} cm"
+
+
+# ------------------------------------------------------------------- panels
+@dataclass
+class _Panel:
+    """One axes: its tracks, floor grid and projected window (centre, half size) in mm.
+
+    The window holds every pose and shadow of its tracks; the grid reaches a
+    little beyond the tracks on the floor and is cut at the window's edges.
+    """
+
+    tracks: list[int]
+    grid: np.ndarray  # (L, 2, 2) projected floor lines
+    step: float
+    centre: np.ndarray
+    half: np.ndarray
+
+
+def _panels(
+    tracks: list[_Track], groups: list[list[int]], cam: _Camera, ground: float
+) -> list[_Panel]:
+    clouds = []
+    for group in groups:
+        pts = np.concatenate([tracks[i].positions.reshape(-1, 3) for i in group])
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if not len(pts):
+            raise ValueError("nothing visible to draw: every position is NaN")
+        clouds.append(pts)
+    spans = [np.ptp(pts[:, [0, 2]], axis=0).max() for pts in clouds]
+    step = _grid_step(float(max(spans)) + 600.0)  # one grid for all panels, like the scale
+    panels = []
+    for group, pts in zip(groups, clouds, strict=True):
+        lo, hi = pts[:, [0, 2]].min(0), pts[:, [0, 2]].max(0)
+        g0 = np.floor((lo - 0.25 * step) / step) * step
+        g1 = np.ceil((hi + 0.25 * step) / step) * step
+        xs = np.arange(g0[0], g1[0] + step / 2, step)
+        zs = np.arange(g0[1], g1[1] + step / 2, step)
+        lines = [[(x, ground, g0[1]), (x, ground, g1[1])] for x in xs]
+        lines += [[(g0[0], ground, z), (g1[0], ground, z)] for z in zs]
+        floor = pts.copy()
+        floor[:, 1] = ground
+        screen = np.vstack([cam.project(pts), cam.project(floor)])
+        smin, smax = screen.min(0), screen.max(0)
+        centre, half = (smin + smax) / 2, (smax - smin) * 0.54 + 50.0
+        centre[1] += 0.07 * (smax[1] - smin[1])  # room for the captions at the top
+        half[1] += 0.07 * (smax[1] - smin[1])
+        panels.append(_Panel(group, cam.project(np.array(lines)), step, centre, half))
+    # every panel gets the same window size, so that all are at one scale
+    half = np.max([p.half for p in panels], axis=0)
+    ratio = np.clip(half[0] / half[1], 0.75, MAX_ASPECT)
+    half = np.maximum(half, [half[1] * ratio, half[0] / ratio])
+    for p in panels:
+        p.half = half
+    return panels
+
+
+def _figure(
+    n_rows: int,
+    n_cols: int,
+    aspect: float,
+    title: str | None,
+    height: float,
+    max_height: float = np.inf,
+):
+    """A figure of equal panels (``aspect`` = width / height) and its axes, row by row.
+
+    Panels are ``height`` inches high unless the figure would exceed
+    ``MAX_WIDTH`` or ``max_height``, in which case all shrink alike.
+    """
+    band = TITLE_BAND if title else 0.0
+    panel_h = min(height, MAX_WIDTH / n_cols / aspect, (max_height - band) / n_rows)
+    width = panel_h * aspect * n_cols
+    fig_h = panel_h * n_rows + band
+    # even pixel sizes for H.264
+    w_px, h_px = 2 * round(width * DPI / 2), 2 * round(fig_h * DPI / 2)
+    fig = Figure(figsize=(w_px / DPI, h_px / DPI), dpi=DPI, facecolor="white")
+    FigureCanvasAgg(fig)
+    axes = []
+    for r in range(n_rows):
+        for c in range(n_cols):
+            ax = fig.add_axes(
+                (c / n_cols, 1 - (band + (r + 1) * panel_h) / fig_h, 1 / n_cols, panel_h / fig_h)
+            )
+            ax.set_axis_off()
+            axes.append(ax)
+    if title:
+        fig.text(0.5, 1 - band / 2 / fig_h, title, ha="center", va="center", fontsize=13)
+    return fig, axes
+
+
+def _draw_floor(ax, panel: _Panel, caption: str) -> None:
+    ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
+    ax.set_xlim(panel.centre[0] - panel.half[0], panel.centre[0] + panel.half[0])
+    ax.set_ylim(panel.centre[1] - panel.half[1], panel.centre[1] + panel.half[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.text(0.01, 0.01, f"grid {_label_step(panel.step)}", transform=ax.transAxes, fontsize=8)
+    if caption:
+        ax.text(0.01, 0.985, caption, transform=ax.transAxes, va="top", fontsize=10)
+
+
+class _Actor:
+    """Per-track artists (bones, joints, shadow) that move from frame to frame."""
+
+    def __init__(self, ax, colour: str, has_bones: bool, animated: bool, label: str):
+        self.shadow = Line2D([], [], color="0.6", lw=3.0, alpha=0.35, solid_capstyle="round")
+        self.bones = Line2D([], [], color=colour, lw=2.4, solid_capstyle="round", label=label)
+        self.joints = Line2D(
+            [], [], color=colour, ls="none", marker="o", ms=3.2 if has_bones else 4.5, label=label
+        )
+        for a in (self.shadow, self.bones, self.joints):
+            a.set_animated(animated)
+            ax.add_line(a)
+
+    def set_pose(self, screen: np.ndarray, floor: np.ndarray, bones: np.ndarray) -> None:
+        if len(bones):
+            seg = np.full((len(bones), 3, 2), np.nan)
+            seg[:, :2] = screen[bones]
+            self.bones.set_data(*seg.reshape(-1, 2).T)
+            seg[:, :2] = floor[bones]
+            self.shadow.set_data(*seg.reshape(-1, 2).T)
+        else:
+            self.shadow.set_data(*floor.T)
+            self.shadow.set_marker("o")
+            self.shadow.set_linestyle("none")
+        self.joints.set_data(*screen.T)
+
+
+@dataclass
+class _Stage:
+    """Everything needed to draw any time of the clip."""
+
+    tracks: list[_Track]
+    panels: list[_Panel]
+    camera: _Camera
+    ground: float
+
+    @classmethod
+    def build(cls, tracks: list[_Track], side_by_side: bool, end: float) -> _Stage:
+        """The stage of ``tracks`` from time 0 to ``end`` seconds."""
+        tracks = [t.until(end) for t in tracks]
+        heights = np.concatenate([t.positions[..., 1].ravel() for t in tracks])
+        ground = float(np.nanmin(heights))
+        cam = _camera(tracks)
+        groups = [[i] for i in range(len(tracks))] if side_by_side else [list(range(len(tracks)))]
+        return cls(tracks, _panels(tracks, groups, cam, ground), cam, ground)
+
+    @property
+    def aspect(self) -> float:
+        half = self.panels[0].half
+        return float(half[0] / half[1])
+
+    def caption(self, panel: _Panel) -> str:
+        return self.tracks[panel.tracks[0]].name if len(panel.tracks) == 1 else ""
+
+    def populate(
+        self, ax, panel: _Panel, animated: bool, caption: bool = True, legend: bool = True
+    ) -> list[tuple[int, _Actor]]:
+        """Floor and per-track artists of ``panel`` on ``ax``, optionally with names."""
+        _draw_floor(ax, panel, self.caption(panel) if caption else "")
+        figs = [
+            (
+                i,
+                _Actor(
+                    ax,
+                    COLOURS[i % len(COLOURS)],
+                    len(self.tracks[i].bones) > 0,
+                    animated,
+                    self.tracks[i].name,
+                ),
+            )
+            for i in panel.tracks
+        ]
+        if legend and len(panel.tracks) > 1:
+            ax.legend(
+                handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
+                loc="lower right",
+                fontsize=9,
+                framealpha=0.85,
+                edgecolor="none",
+            )
+        return figs
+
+    def pose(self, i: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Projected joints (T, N, 2), their shadows on the floor and depths (T,) at ``times``."""
+        p = self.tracks[i].positions[self.tracks[i].frame_at(times)]
+        floor = p.copy()
+        floor[..., 1] = self.ground
+        depth = np.nan_to_num(_finite_mean(self.camera.depth(p), axis=1))
+        return self.camera.project(p), self.camera.project(floor), depth
+
+
+# ---------------------------------------------------------------- rendering
+def _sample_times(tracks: list[_Track], fps: float, max_seconds: float | None) -> np.ndarray:
+    if fps <= 0:
+        raise ValueError(f"frame rate must be positive, got {fps}")
+    end = max(t.last_time for t in tracks)
+    n = int(np.floor(end * fps + 1e-9)) + 1
+    if max_seconds is not None:
+        if max_seconds <= 0:
+            raise ValueError(f"max_seconds must be positive, got {max_seconds}")
+        n = min(n, max(1, round(max_seconds * fps)))
+    return np.arange(n) / fps
+
+
+def _frames(stage: _Stage, times: np.ndarray, title: str | None, label: str) -> Iterator:
+    """RGBA frames (H, W, 4) of ``stage`` at ``times``, drawn by blitting."""
+    n = len(stage.panels)
+    rows, cols = (n, 1) if stage.aspect > STACK_ASPECT else (1, n)  # wide views one above another
+    fig, axes = _figure(rows, cols, stage.aspect, title, PANEL_HEIGHT, MAX_HEIGHT)
+    drawn = []
+    for ax, panel in zip(axes, stage.panels, strict=True):
+        figs = stage.populate(ax, panel, animated=True)
+        clock = ax.text(0.99, 0.985, "", transform=ax.transAxes, ha="right", va="top")
+        clock.set_animated(True)
+        poses = {i: stage.pose(i, times) for i, _ in figs}
+        drawn.append((ax, figs, clock, poses))
+    canvas = fig.canvas
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    for k in track(range(len(times)), label):
+        canvas.restore_region(background)
+        for ax, figs, clock, poses in drawn:
+            for i, f in figs:
+                f.set_pose(poses[i][0][k], poses[i][1][k], stage.tracks[i].bones)
+                ax.draw_artist(f.shadow)
+            for _, f in sorted(figs, key=lambda e: poses[e[0]][2][k]):  # far to near
+                ax.draw_artist(f.bones)
+                ax.draw_artist(f.joints)
+            clock.set_text(f"t = {times[k]:.2f} s")
+            ax.draw_artist(clock)
+        yield np.array(canvas.buffer_rgba())
+
+
+def _write_gif(frames: Iterator[np.ndarray], path: Path, fps: float) -> None:
+    from PIL import Image
+
+    images = []
+    palette = None
+    for f in frames:
+        im = Image.fromarray(f[..., :3])
+        if palette is None:
+            palette = im.quantize(colors=255, method=Image.Quantize.MEDIANCUT)
+        images.append(im.quantize(palette=palette, dither=Image.Dither.NONE))
+    with atomic_write(path, "wb") as fh:
+        images[0].save(
+            fh,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=round(1000 / fps),
+            loop=0,
+        )
+
+
+def _write_mp4(frames: Iterator[np.ndarray], path: Path, fps: float) -> None:
+    import imageio_ffmpeg
+
+    first = next(frames)
+    with atomic_path(path) as tmp:
+        writer = imageio_ffmpeg.write_frames(
+            str(tmp),
+            (first.shape[1], first.shape[0]),
+            fps=fps,
+            codec="libx264",
+            pix_fmt_in="rgba",
+            pix_fmt_out="yuv420p",
+            quality=7,
+            macro_block_size=2,
+            ffmpeg_log_level="error",
+        )
+        writer.send(None)
+        writer.send(first)
+        for f in frames:
+            writer.send(f)
+        writer.close()
+
+
+def render(
+    items: Drawable | Sequence[Drawable],
+    path: str | os.PathLike[str],
+    *,
+    side_by_side: bool = False,
+    fps: float = 15.0,
+    max_seconds: float | None = None,
+    title: str | None = None,
+    names: Sequence[str] | None = None,
+    strip_frames: int = 6,
+) -> Path:
+    """Animate motions (or marker clouds) to ``path``: ``.gif``, ``.mp4`` or a ``.png`` strip.
+
+    Args:
+        items: one motion or several; several share one scene (the partners of
+            a two-person take, in their common coordinate frame) unless
+            ``side_by_side``, which gives one panel each at the same scale.
+        path: the output; ``.png`` draws ``strip_frames`` evenly spaced frames
+            of the clip as in :func:`render_frames`.
+        fps: frames per second of the animation, whatever the motions' rates
+            (each shows its frame nearest in time; a finished one holds its last pose).
+        max_seconds: render at most this much from the start.
+        title: text above the picture.
+        names: one label per item (default: each item's ``name``).
+
+    Returns the path written (atomically).
+    """
+    path = Path(path)
+    suffix = check_output(path)
+    tracks = _tracks(items, names)
+    times = _sample_times(tracks, fps, max_seconds)
+    if suffix == ".png":
+        picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
+        return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title)
+    stage = _Stage.build(tracks, side_by_side, times[-1])
+    frames = _frames(stage, times, title, f"rendering {path.name}")
+    (_write_gif if suffix == ".gif" else _write_mp4)(frames, path, fps)
+    return path
+
+
+def render_frames(
+    items: Drawable | Sequence[Drawable],
+    frames: Sequence[int],
+    path: str | os.PathLike[str],
+    *,
+    side_by_side: bool = False,
+    title: str | None = None,
+    names: Sequence[str] | None = None,
+) -> Path:
+    """A PNG strip of the given frames (numbered at the first item's rate), in reading order.
+
+    Each panel shows every item at that time, or with ``side_by_side`` one
+    panel per item stacked under each other; one camera for all panels. Wide
+    views wrap onto several rows.
+    """
+    tracks = _tracks(items, names)
+    if len(frames) == 0:
+        raise ValueError("no frames to draw")
+    times = np.asarray(frames, dtype=float) / tracks[0].fps
+    return _strip(tracks, times, Path(path), side_by_side, title)
+
+
+def _strip(
+    tracks: list[_Track], times: np.ndarray, path: Path, side_by_side: bool, title: str | None
+) -> Path:
+    stage = _Stage.build(tracks, side_by_side, times.max())
+    height = PANEL_HEIGHT * 0.6
+    most = int(np.clip(MAX_WIDTH // (height * stage.aspect), 1, len(times)))
+    wraps = -(-len(times) // most)
+    cols = -(-len(times) // wraps)  # rows as full as possible
+    n_panels = len(stage.panels)
+    fig, axes = _figure(wraps * n_panels, cols, stage.aspect, title, height)
+    for r, panel in enumerate(stage.panels):
+        for c, t in enumerate(times):
+            ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
+            for i, f in stage.populate(ax, panel, False, caption=c % cols == 0, legend=c == 0):
+                screen, floor, _ = stage.pose(i, np.array([t]))
+                f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
+            ax.text(0.99, 0.985, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="top")
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=DPI)
+    return path

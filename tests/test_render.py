@@ -1,0 +1,203 @@
+"""Rendering: GIF, MP4 and PNG strips of synthetic and real motion, the render command, the demo."""
+
+from __future__ import annotations
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+from conftest import make_motion
+from PIL import Image
+
+from markovmotion import MarkovMotionError, read_motion
+from markovmotion.cli import main
+from markovmotion.core.markers import Markers
+from markovmotion.demo import WALK, run_demo
+from markovmotion.viz import render, render_frames, save_line_plot
+from markovmotion.viz.animation import COLOURS, _Stage, _tracks
+
+REAL = {
+    "cmu_bvh": "cmu/bvh/martial_03.bvh.gz",
+    "bandai_bvh": "bandai/dataset-2/walk_normal_001.bvh.gz",
+    "cmu_amc": WALK,
+}
+
+
+@pytest.fixture(scope="session")
+def real(mocap):
+    """One take of each source and format, read once."""
+    return {key: mocap.load_motion(mocap.find(f)) for key, f in REAL.items()}
+
+
+@pytest.fixture(scope="session")
+def salsa(mocap):
+    """Both partners of a salsa take, in their shared coordinate frame."""
+    return mocap.load_pair(*mocap.pairs(label="salsa")[0])
+
+
+def gif_frames(path) -> list[np.ndarray]:
+    with Image.open(path) as im:
+        out = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            out.append(np.asarray(im.convert("RGB")))
+    return out
+
+
+def mp4_frames(path) -> tuple[tuple[int, int], list[np.ndarray]]:
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    w, h = meta["size"]
+    return (w, h), [np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in reader]
+
+
+def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
+    """Pixels that differ by more than a compression artefact, below the clock (top 10%)."""
+    top = a.shape[0] // 10
+    return int((np.abs(a[top:].astype(int) - b[top:].astype(int)).max(axis=2) > 40).sum())
+
+
+def colour_pixels(image: np.ndarray, colour: str) -> int:
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    return int((np.abs(image[..., :3].astype(int) - rgb).max(axis=2) < 30).sum())
+
+
+def check_animation(motion, tmp_path, n_expected, **kwargs):
+    gif, mp4, png = (tmp_path / f"out.{s}" for s in ("gif", "mp4", "png"))
+    assert render(motion, gif, **kwargs) == gif
+    render(motion, mp4, **kwargs)
+    render(motion, png, **kwargs)
+
+    frames = gif_frames(gif)
+    assert len(frames) == n_expected
+    assert changed_pixels(frames[0], frames[len(frames) // 2]) > 300  # the figure moves
+    assert changed_pixels(frames[len(frames) // 2], frames[-1]) > 300
+    assert colour_pixels(frames[0], COLOURS[0]) > 100  # a figure is drawn
+
+    data = mp4.read_bytes()
+    assert data[4:8] == b"ftyp"
+    size, video = mp4_frames(mp4)
+    assert size == (frames[0].shape[1], frames[0].shape[0])
+    assert len(video) == n_expected
+    assert changed_pixels(video[0], video[len(video) // 2]) > 300
+
+    with Image.open(png) as im:
+        assert im.format == "PNG" and im.size[0] <= 1920
+        strip = np.asarray(im.convert("RGB"))
+    assert colour_pixels(strip, COLOURS[0]) > 600  # six small figures
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.gif", "out.mp4", "out.png"]
+
+
+def test_synthetic_motion_to_gif_mp4_png(tmp_path):
+    motion = make_motion(n_frames=40, fps=30)  # 1.3 s: frames at 0, 1/15, ... 19/15 s
+    check_animation(motion, tmp_path, 20, fps=15)
+
+
+@pytest.mark.parametrize("key", list(REAL))
+def test_real_motion_to_gif_mp4_png(real, key, tmp_path):
+    check_animation(real[key], tmp_path, 24, fps=12, max_seconds=2)
+
+
+def test_frame_rate_is_resampled_and_short_clips_hold(real, tmp_path):
+    walk = real["cmu_amc"]  # 120 fps, 343 frames: 2.85 s
+    render(walk, tmp_path / "w.gif", fps=10)
+    assert len(gif_frames(tmp_path / "w.gif")) == int(2.85 * 10) + 1
+    render([walk, walk.trim(0, 60)], tmp_path / "two.gif", fps=10, side_by_side=True)
+    assert len(gif_frames(tmp_path / "two.gif")) == int(2.85 * 10) + 1
+
+
+def test_two_people_share_a_scene_in_two_colours(salsa, tmp_path):
+    render(list(salsa), tmp_path / "pair.gif", max_seconds=1)
+    frame = gif_frames(tmp_path / "pair.gif")[0]
+    assert colour_pixels(frame, COLOURS[0]) > 100
+    assert colour_pixels(frame, COLOURS[1]) > 100
+    render(list(salsa), tmp_path / "apart.gif", max_seconds=1, side_by_side=True)
+    apart = gif_frames(tmp_path / "apart.gif")[0]
+    assert apart.shape[1] > frame.shape[1]  # two panels side by side
+    # each panel shows one person: the blue one on the left, the red one on the right
+    half = apart.shape[1] // 2
+    assert colour_pixels(apart[:, :half], COLOURS[0]) > 100
+    assert colour_pixels(apart[:, :half], COLOURS[1]) == 0
+    assert colour_pixels(apart[:, half:], COLOURS[1]) > 100
+
+
+def test_render_frames_strip(real, tmp_path):
+    walk = real["bandai_bvh"]
+    path = render_frames(walk, [0, 30, 60, 90], tmp_path / "strip.png", title="walk")
+    with Image.open(path) as im:
+        image = np.asarray(im.convert("RGB"))
+    assert colour_pixels(image, COLOURS[0]) > 400
+    with pytest.raises(ValueError):
+        render_frames(walk, [], tmp_path / "none.png")
+
+
+def test_markers_are_drawn_as_points(tmp_path):
+    motion = make_motion(n_frames=30)
+    pos = motion.positions()
+    pos[5:10, 2] = np.nan  # an occluded marker
+    markers = Markers(tuple(f"m{k}" for k in range(pos.shape[1])), pos, motion.fps, "markers")
+    render([motion, markers], tmp_path / "mix.gif")
+    frames = gif_frames(tmp_path / "mix.gif")
+    assert len(frames) == 15
+    assert colour_pixels(frames[3], COLOURS[1]) > 20  # the marker dots, in the second colour
+
+
+def test_camera_sees_a_walk_upright_from_the_side(real):
+    walk = real["bandai_bvh"]
+    stage = _Stage.build(_tracks(walk, None), side_by_side=False, end=walk.duration)
+    times = np.arange(walk.n_frames) / walk.fps
+    screen, floor, _ = stage.pose(0, times)
+    names = walk.skeleton.names[walk.skeleton.body_root :]
+    head, toe = names.index("Head_end"), names.index("Toes_L_end")
+    assert np.all(screen[:, head, 1] - screen[:, toe, 1] > 1000)  # head well above the feet
+    assert np.all(screen[..., 1] >= floor[..., 1] - 1e-6)  # every joint above its shadow
+    pelvis_x = screen[:, 0, 0]
+    assert pelvis_x[-1] - pelvis_x[0] > 0.8 * 9000  # a 10 m walk crosses the screen left to right
+
+
+def test_unknown_suffix_is_an_error(tmp_path, capsys):
+    with pytest.raises(MarkovMotionError, match="unknown output format"):
+        render(make_motion(), tmp_path / "x.avi")
+    with pytest.raises(SystemExit) as exc:  # checked before any input is read
+        main(["render", str(tmp_path / "walk.bvh"), "--out", str(tmp_path / "x.webm")])
+    assert exc.value.code == 2
+    assert "unknown output format '.webm'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_render_command(mocap, tmp_path):
+    a, b = mocap.pairs(label="salsa")[0]
+    out = tmp_path / "pair.png"
+    main(["render", str(a.path), str(b.path), "--out", str(out), "--data-fps", "60"])
+    assert out.stat().st_size > 0
+    gif = tmp_path / "walk.gif"
+    walk = mocap.find(REAL["bandai_bvh"]).path
+    main(["render", str(walk), "--out", str(gif), "--fps", "10", "--max-seconds", "1.5"])
+    assert len(gif_frames(gif)) == 15
+
+
+def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
+    out = tmp_path / "demo"
+    run_demo(out, mocap.root)
+    for name in ("walk.bvh", "walk.gif", "pca-energy.png"):
+        assert (out / name).stat().st_size > 0
+    back = read_motion(out / "walk.bvh")
+    walk = real["cmu_amc"]
+    assert back.n_frames == walk.n_frames and back.fps == pytest.approx(walk.fps)
+    np.testing.assert_allclose(back.positions(), walk.positions(), atol=1e-3)
+    with Image.open(out / "pca-energy.png") as im:
+        assert im.format == "PNG"
+
+
+def test_line_plot_is_written_atomically(tmp_path):
+    path = save_line_plot(
+        tmp_path / "plots" / "errors.png",
+        np.arange(1, 11),
+        {"VLMM": np.linspace(10, 50, 10), "first-order": np.linspace(12, 90, 10)},
+        xlabel="horizon (frames)",
+        ylabel="error (mm)",
+        logy=True,
+        hlines={"chance": 80.0},
+    )
+    with Image.open(path) as im:
+        assert im.format == "PNG" and im.size[0] > 300
+    assert [p.name for p in path.parent.iterdir()] == ["errors.png"]
