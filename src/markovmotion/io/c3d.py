@@ -1,0 +1,119 @@
+"""C3D reading (marker trajectories) through the maintained ``c3d`` package.
+
+Units: ``POINT:UNITS`` (``mm``, ``cm`` or ``m``; ``mm`` when absent) is
+converted to millimetres.
+
+Axes: C3D stores lab coordinates, usually Z up. ``POINT:X_SCREEN`` and
+``POINT:Y_SCREEN`` name the lab axes that point right and up on a viewer's
+screen; they become our X and Y, and Z is X x Y (right-handed). Without them
+the lab is taken as Z up with X to the right (``+X``, ``+Z``), so a lab point
+(x, y, z) becomes (x, z, -y): a -90 degree turn about X.
+
+Samples the file marks invalid (negative residual, or NaN coordinates) are NaN.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import warnings
+
+import numpy as np
+
+from markovmotion.core.markers import Markers
+from markovmotion.errors import MotionFormatError
+
+UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+DEFAULT_SCREEN = ("+X", "+Z")
+
+
+def _axis(path: str, key: str, text: str) -> np.ndarray:
+    """``'+Z'`` -> (0, 0, 1)."""
+    text = text.strip().upper()
+    if len(text) != 2 or text[0] not in "+-" or text[1] not in "XYZ":
+        raise MotionFormatError(path, f"{key} must be +X, -Y, +Z ..., found {text!r}")
+    out = np.zeros(3)
+    out["XYZ".index(text[1])] = 1.0 if text[0] == "+" else -1.0
+    return out
+
+
+def lab_to_y_up(path: str, x_screen: str, y_screen: str) -> np.ndarray:
+    """The rotation (3, 3) taking lab coordinates to ours (see the module docstring)."""
+    x = _axis(path, "POINT:X_SCREEN", x_screen)
+    y = _axis(path, "POINT:Y_SCREEN", y_screen)
+    if abs(x @ y) > 0:
+        raise MotionFormatError(path, f"POINT:X_SCREEN {x_screen} and Y_SCREEN {y_screen} agree")
+    return np.stack([x, y, np.cross(x, y)])
+
+
+def _string(reader, key: str) -> str | None:
+    param = reader.get(key)
+    return None if param is None else param.string_value.strip()
+
+
+def _labels(reader, n_points: int) -> tuple[str, ...]:
+    """``POINT:LABELS`` (continued in ``LABELS2``, ...), padded with ``marker<k>``."""
+    labels: list[str] = []
+    for k in itertools.count(1):
+        param = reader.get(f"POINT:LABELS{k if k > 1 else ''}")
+        if param is None:
+            break
+        labels.extend(str(s).strip() for s in np.atleast_1d(param.string_array))
+    labels = labels[:n_points]
+    labels += [""] * (n_points - len(labels))
+    return tuple(s or f"marker{k + 1}" for k, s in enumerate(labels))
+
+
+def read_c3d(path: str | os.PathLike[str]) -> Markers:
+    """Read the 3-D points of a C3D file as :class:`Markers` (mm, Y up).
+
+    Raises:
+        MotionFormatError: for a missing, damaged or truncated file, one with
+            no points or frames, or unknown units or axes.
+    """
+    import c3d
+
+    path = str(path)
+    try:
+        handle = open(path, "rb")
+    except FileNotFoundError:
+        raise MotionFormatError(path, "no such file") from None
+    except OSError as exc:
+        raise MotionFormatError(path, f"cannot read file ({exc.strerror or exc})") from None
+    with handle, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the package warns on truncation; counted below
+        if os.fstat(handle.fileno()).st_size == 0:
+            raise MotionFormatError(path, "the file is empty")
+        try:
+            reader = c3d.Reader(handle)
+            n_points, rate, expected = reader.point_used, reader.point_rate, reader.frame_count
+            names = _labels(reader, n_points)
+            unit = (_string(reader, "POINT:UNITS") or "mm").lower()
+            screen = (
+                _string(reader, "POINT:X_SCREEN") or DEFAULT_SCREEN[0],
+                _string(reader, "POINT:Y_SCREEN") or DEFAULT_SCREEN[1],
+            )
+            frames = [
+                points[:, :4].astype(float)
+                for _, points, _ in reader.read_frames(copy=False, analog_transform=False)
+            ]
+        except Exception as exc:  # the package fails in many ways on a damaged file
+            raise MotionFormatError(
+                path, f"not a readable C3D file ({type(exc).__name__}: {exc})"
+            ) from None
+    if n_points == 0:
+        raise MotionFormatError(path, "the file has no 3-D points")
+    if not (np.isfinite(rate) and rate > 0):
+        raise MotionFormatError(path, f"POINT:RATE must be positive, found {rate:g}")
+    if expected <= 0 or not frames:
+        raise MotionFormatError(path, "the file has zero frames")
+    if len(frames) < expected:
+        raise MotionFormatError(
+            path, f"truncated: the header says {expected} frames but {len(frames)} could be read"
+        )
+    if unit not in UNIT_TO_MM:
+        raise MotionFormatError(path, f"unknown POINT:UNITS {unit!r}; expected mm, cm or m")
+    data = np.stack(frames)
+    positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
+    positions[data[..., 3] < 0] = np.nan
+    return Markers(names, positions, float(rate), name=os.path.basename(path))

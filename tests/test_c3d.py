@@ -1,0 +1,125 @@
+"""C3D reading: files written with c3d.Writer read back in mm, Y up, occlusions as NaN."""
+
+from __future__ import annotations
+
+import warnings
+
+import c3d
+import numpy as np
+import pytest
+
+from markovmotion import MotionFormatError
+from markovmotion.core.markers import Markers
+from markovmotion.io import read_c3d
+
+LABELS = ["LFHD", "RFHD", "C7", "LTOE"]
+
+
+def write_c3d(
+    path,
+    positions_mm: np.ndarray,
+    units: str = "mm",
+    scale: float = -1.0,
+    screen: tuple[str, str] | None = None,
+    occluded: tuple[int, int] | None = None,
+    rate: float = 100.0,
+) -> None:
+    """A C3D of lab positions (F, M, 3) given in mm, stored in ``units``."""
+    per_mm = {"mm": 1.0, "cm": 0.1, "m": 0.001}.get(units.strip(), 1.0)
+    writer = c3d.Writer(point_rate=rate, point_scale=scale, point_units=units)
+    for f, frame in enumerate(positions_mm):
+        points = np.zeros((len(frame), 5), np.float32)
+        points[:, :3] = frame * per_mm
+        if occluded is not None and f == occluded[0]:
+            points[occluded[1], 3] = -1
+        writer.add_frames((points, np.zeros((0, 0))))
+    writer.set_point_labels(LABELS[: positions_mm.shape[1]])
+    if screen is not None:
+        writer.set_screen_axis(*screen)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "no analog data"
+        with open(path, "wb") as fh:
+            writer.write(fh)
+
+
+def lab_positions(n_frames: int = 30, seed: int = 0) -> np.ndarray:
+    """Markers wandering around a Z-up lab, 0.5-1.8 m high (mm)."""
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-1000, 1000, (n_frames, len(LABELS), 3))
+    pos[..., 2] = rng.uniform(500, 1800, (n_frames, len(LABELS)))
+    return pos
+
+
+@pytest.mark.parametrize("units", ["mm", "cm", "m"])
+def test_units_and_z_up_to_y_up(tmp_path, units):
+    lab = lab_positions()
+    path = tmp_path / f"walk_{units}.c3d"
+    write_c3d(path, lab, units=units.ljust(4), occluded=(5, 2))
+    markers = read_c3d(path)
+    assert isinstance(markers, Markers)
+    assert markers.names == tuple(LABELS)
+    assert markers.fps == 100 and markers.n_frames == 30 and markers.name == path.name
+    # lab (x, y, z) with Z up is (x, z, -y) with Y up
+    expected = np.stack([lab[..., 0], lab[..., 2], -lab[..., 1]], axis=-1)
+    expected[5, 2] = np.nan
+    np.testing.assert_allclose(markers.positions, expected, atol=1e-3)  # float32
+    assert markers.visible().sum() == markers.positions.shape[0] * 4 - 1
+    assert (markers.positions[..., 1][markers.visible()] >= 500 - 1e-3).all()  # up is +Y
+
+
+def test_integer_storage_and_screen_axes(tmp_path):
+    lab = np.round(lab_positions(n_frames=10, seed=1))
+    path = tmp_path / "y_up.c3d"
+    # stored as int16 * 0.1 mm, already Y up (X right, Y up on screen)
+    write_c3d(path, lab / 2, scale=0.1, screen=("+X", "+Y"))
+    np.testing.assert_allclose(read_c3d(path).positions, lab / 2, atol=0.051)
+
+
+def test_summary_names_the_essentials(tmp_path):
+    path = tmp_path / "s.c3d"
+    write_c3d(path, lab_positions(), occluded=(0, 0))
+    text = read_c3d(path).summary()
+    for expected in ("s.c3d", "30", "100 fps", "LFHD", "occluded"):
+        assert expected in text
+
+
+def _damaged(tmp_path, name: str, edit) -> str:
+    good = tmp_path / "good.c3d"
+    write_c3d(good, lab_positions(n_frames=200))
+    bad = tmp_path / name
+    bad.write_bytes(edit(good.read_bytes()))
+    return str(bad)
+
+
+BAD = {
+    "not a c3d": lambda b: b"hello, world\n" * 10,
+    "empty": lambda b: b"",
+    "truncated data": lambda b: b[: len(b) - 3000],
+    "truncated parameters": lambda b: b[:700],
+}
+
+
+@pytest.mark.parametrize("problem", sorted(BAD))
+def test_malformed_c3d(tmp_path, problem):
+    path = _damaged(tmp_path, "bad.c3d", BAD[problem])
+    with pytest.raises(MotionFormatError) as info:
+        read_c3d(path)
+    assert info.value.path == path
+
+
+def test_unknown_units(tmp_path):
+    write_c3d(tmp_path / "ft.c3d", lab_positions(), units="ft")
+    with pytest.raises(MotionFormatError, match="unknown POINT:UNITS 'ft'"):
+        read_c3d(tmp_path / "ft.c3d")
+
+
+def test_missing_c3d(tmp_path):
+    with pytest.raises(MotionFormatError, match="no such file"):
+        read_c3d(tmp_path / "none.c3d")
+
+
+def test_markers_validate_shapes():
+    with pytest.raises(ValueError):
+        Markers(("a",), np.zeros((3, 2, 3)), 100.0)
+    with pytest.raises(ValueError):
+        Markers(("a",), np.full((3, 1, 3), np.inf), 100.0)

@@ -1,0 +1,64 @@
+"""The command line on bad input: exit code 2, one line on stderr naming the file, no traceback."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from conftest import make_motion
+
+from markovmotion.cli import main
+from markovmotion.io.bvh import bvh_text
+
+BAD_FILES = {
+    "missing.bvh": None,
+    "truncated.bvh": lambda: bvh_text(make_motion(n_frames=5))[:-60],
+    "garbage.bvh.gz": lambda: "not gzip at all",
+    "empty.bvh": lambda: "",
+    "07_01.amc": lambda: ":FULLY-SPECIFIED\n1\nroot 0 0 0 0 0 0\n",  # no 07.asf beside it
+    "damaged.c3d": lambda: "C3D? no.\n" * 20,
+    "walk.fbx": lambda: "Kaydara FBX Binary",
+}
+
+
+def _make(tmp_path, name: str):
+    path = tmp_path / name
+    text = BAD_FILES[name]
+    if text is not None:
+        path.write_bytes(text().encode())
+    return path
+
+
+def _one_error_line(stderr: str, path) -> None:
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, stderr
+    assert str(path) in lines[0]
+    assert "Traceback" not in stderr
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+def test_info_on_bad_file_exits_2_with_one_line(tmp_path, capsys, name):
+    path = _make(tmp_path, name)
+    with pytest.raises(SystemExit) as info:
+        main(["info", str(path)])
+    assert info.value.code == 2
+    captured = capsys.readouterr()
+    _one_error_line(captured.err, path)
+    assert captured.out == ""
+
+
+@pytest.mark.parametrize("command", ["info", "convert"])
+def test_console_script_on_bad_file(tmp_path, command):
+    """The real process: exit status and stderr as a user sees them."""
+    path = _make(tmp_path, "truncated.bvh")
+    args = [str(path)] + ([str(tmp_path / "out.bvh")] if command == "convert" else [])
+    run = subprocess.run(
+        [sys.executable, "-c", "from markovmotion.cli import main; main()", command, *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    _one_error_line(run.stderr, path)
+    assert not (tmp_path / "out.bvh").exists()
