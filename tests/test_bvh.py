@@ -107,3 +107,10 @@ def test_corrupt_gzip(tmp_path):
     path.write_bytes(gzip.compress(_valid_text().encode())[:-30])
     with pytest.raises(MotionFormatError, match="bad.bvh.gz"):
         read_motion(path)
+
+
+def test_huge_values_that_overflow_in_mm(tmp_path):
+    path = tmp_path / "huge.bvh"
+    path.write_text(_valid_text().replace("OFFSET 0 0 0", "OFFSET 1e308 0 0", 1))
+    with pytest.raises(MotionFormatError, match="too large"):
+        read_motion(path)

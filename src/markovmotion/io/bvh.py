@@ -320,7 +320,11 @@ def read_bvh(
         str(path), lines[motion_at + 1 :], motion_at + 2, skeleton.n_channels
     )
     quats, trans = _channels_to_motion(skeleton, values, scale)
+    if not (np.isfinite(trans).all() and np.isfinite(skeleton.offsets).all()):
+        raise MotionFormatError(path, f"values too large to convert from {length_unit} to mm")
     rate = float(fps) if fps else 1.0 / frame_time
+    if not np.isfinite(rate):
+        raise MotionFormatError(path, f"frame time {frame_time:g} gives no usable frame rate")
     return Motion(skeleton, quats, trans, rate, name=os.path.basename(str(path)))
 
 
