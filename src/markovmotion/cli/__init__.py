@@ -27,10 +27,6 @@ def _register() -> None:
     render.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
-    from markovmotion.cli import evaluation, serve
-
-    serve.register(app)
-    app.add_typer(evaluation.app, name="evaluation")
 
 
 def fail(message: str) -> None:
