@@ -7,6 +7,7 @@ offset, unless the file animates that joint's position channels).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,8 +114,15 @@ class Motion:
         The legs are the two children of the pelvis whose subtrees reach lowest in
         the first frame; left and right are told by the first character at which
         the two names differ being ``l``/``L`` against ``r``/``R``
-        (``lhipjoint``/``rhipjoint``, ``UpperLeg_L``/``UpperLeg_R``).
+        (``lfemur``/``rfemur``, ``UpperLeg_L``/``UpperLeg_R``). Found once per
+        skeleton (the first motion seen decides) and remembered.
         """
+        sk = self.skeleton
+        if sk not in _HIPS:
+            _HIPS[sk] = self._find_hip_joints()
+        return _HIPS[sk]
+
+    def _find_hip_joints(self) -> tuple[int, int] | None:
         sk = self.skeleton
         pelvis = sk.body_root
         kids = sk.children(pelvis)
@@ -220,6 +228,9 @@ class Motion:
         out[..., 0] = c[:, None] * x + s[:, None] * z
         out[..., 2] = -s[:, None] * x + c[:, None] * z
         return out
+
+
+_HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int] | None] = weakref.WeakKeyDictionary()
 
 
 def _subtree(sk: Skeleton, root: int) -> list[int]:
