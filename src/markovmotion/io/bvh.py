@@ -259,6 +259,31 @@ def _locate_bad_row(path: str, body: list[str], n_channels: int, first: int) -> 
     return MotionFormatError(path, "unreadable motion data", first)  # pragma: no cover
 
 
+def _channel_layout(
+    sk: Skeleton,
+) -> tuple[list[tuple[int, int, int]], list[tuple[str, list[int], list[int]]]]:
+    """Where each channel goes: position channels as (column, joint, axis) and rotation
+    channels grouped by Euler order as (order, joints, columns), for vectorised conversion."""
+    positions = []
+    groups: dict[str, list[tuple[int, list[int]]]] = defaultdict(list)
+    col = 0
+    for j, chans in enumerate(sk.channels):
+        rot_cols = []
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                positions.append((col, j, "XYZ".index(c[0])))
+            else:
+                rot_cols.append(col)
+            col += 1
+        if rot_cols:
+            groups[sk.rotation_order(j)].append((j, rot_cols))
+    rotations = [
+        (order, [j for j, _ in members], [c for _, cs in members for c in cs])
+        for order, members in groups.items()
+    ]
+    return positions, rotations
+
+
 def _channels_to_motion(
     sk: Skeleton, values: np.ndarray, scale: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -267,21 +292,10 @@ def _channels_to_motion(
     trans = np.broadcast_to(sk.offsets, (f, sk.n_joints, 3)).copy()
     quats = np.zeros((f, sk.n_joints, 4))
     quats[..., 3] = 1.0
-    groups: dict[str, list[tuple[int, list[int]]]] = defaultdict(list)
-    col = 0
-    for j, chans in enumerate(sk.channels):
-        rot_cols = []
-        for c in chans:
-            if c in POSITION_CHANNELS:
-                trans[:, j, "XYZ".index(c[0])] = values[:, col] * scale
-            else:
-                rot_cols.append(col)
-            col += 1
-        if rot_cols:
-            groups[sk.rotation_order(j)].append((j, rot_cols))
-    for order, members in groups.items():
-        joints = [j for j, _ in members]
-        cols = [c for _, cs in members for c in cs]
+    positions, rotations = _channel_layout(sk)
+    for col, j, axis in positions:
+        trans[:, j, axis] = values[:, col] * scale
+    for order, joints, cols in rotations:
         angles = values[:, cols].reshape(f, len(joints), len(order))
         quats[:, joints] = euler_to_quat(order, angles)
     return quats, trans
@@ -334,21 +348,10 @@ def motion_to_channels(motion: Motion, length_unit: str = "cm") -> np.ndarray:
     scale = _unit_scale(length_unit)
     f = motion.n_frames
     out = np.empty((f, sk.n_channels))
-    groups: dict[str, list[tuple[int, list[int]]]] = defaultdict(list)
-    col = 0
-    for j, chans in enumerate(sk.channels):
-        rot_cols = []
-        for c in chans:
-            if c in POSITION_CHANNELS:
-                out[:, col] = motion.translations[:, j, "XYZ".index(c[0])] / scale
-            else:
-                rot_cols.append(col)
-            col += 1
-        if rot_cols:
-            groups[sk.rotation_order(j)].append((j, rot_cols))
-    for order, members in groups.items():
-        joints = [j for j, _ in members]
-        cols = [c for _, cs in members for c in cs]
+    positions, rotations = _channel_layout(sk)
+    for col, j, axis in positions:
+        out[:, col] = motion.translations[:, j, axis] / scale
+    for order, joints, cols in rotations:
         # complete a partial order (e.g. 'ZX') to three axes and drop the extra ones
         full = order + "".join(a for a in "XYZ" if a not in order)
         rot = Rotation.from_quat(motion.rotations[:, joints].reshape(-1, 4))
