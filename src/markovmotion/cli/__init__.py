@@ -27,6 +27,23 @@ def _register() -> None:
     render.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
+    from markovmotion.cli import evaluation, serve
+
+    serve.register(app)
+    app.add_typer(evaluation.app, name="evaluation")
+    from markovmotion.cli import gait
+
+    app.add_typer(gait.app, name="gait")
+    from markovmotion.cli import vlmm
+
+    app.add_typer(vlmm.app, name="vlmm")
+    from markovmotion.cli import chain, silhouette
+
+    app.add_typer(chain.app, name="chain")
+    app.add_typer(silhouette.app, name="silhouette")
+    from markovmotion.cli import dualhmm
+
+    app.add_typer(dualhmm.app, name="dualhmm")
 
 
 def fail(message: str) -> None:

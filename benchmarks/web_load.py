@@ -1,0 +1,149 @@
+"""Load test of ``markovmotion serve`` on loopback: evaluators and live-partner sessions.
+
+Builds a temporary library from real Bandai Namco walks (three styles, an
+original and another take labelled "synthetic" per style, plus a normal walk as
+the average model; each with and without root displacement, as in the gait
+paper §6.1), starts the app with uvicorn on 127.0.0.1 in this process and the
+simulated clients in another, then:
+
+1. ``--evaluators`` (50) simulated evaluators answer at random, concurrently,
+   for ``--seconds`` (30): each registers, answers its 30 items one request at a
+   time, and registers again. Every accepted answer must be in the SQLite
+   database (count equal); answer latency p50/p99 is reported.
+2. ``--sessions`` (20) concurrent live-partner WebSocket sessions stream
+   person A in a loop for ``--seconds``: frames received against the frame
+   rate, stalls (no frame for 250 ms), partner latency p99, gap between frames
+   p99. Twice: with a stand-in partner (A mirrored, 3 frames late; a real walk
+   at 30 fps), which measures the streaming alone, then with the dual HMM's
+   windowed-Viterbi partner (``--partner MODEL``, or a small one trained here
+   on two CMU salsa takes) answering a third salsa take's A, resampled to 30 fps.
+
+    python3 benchmarks/web_load.py [--seconds S] [--evaluators N] [--sessions N] [--partner M]
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import shutil
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from markovmotion.data import MocapIndex
+from markovmotion.evaluate.stimuli import write_stimuli
+from markovmotion.evaluate.store import open_results
+from markovmotion.io import write_motion
+from markovmotion.models.dual_hmm import DualHMM
+from markovmotion.web import create_app
+from markovmotion.web.live import dual_hmm_partner
+from markovmotion.web.loadtest import (
+    STALL_SECONDS,
+    MirrorPartner,
+    simulate_evaluators,
+    simulate_live,
+)
+from markovmotion.web.server import running
+
+
+def build_library(folder: Path, index: MocapIndex) -> str:
+    """Real walks and stimuli in ``folder``; returns the walk the stand-in sessions stream."""
+    walks = {}
+    for style in ("active", "elderly", "exhausted", "normal"):
+        entries = [e for e in index.query(label=style, source="bandai") if "dataset-2" in e.file]
+        walks[style] = [entries[0].path, entries[1].path]
+    shutil.copy(walks["active"][0], folder / "walk.bvh.gz")
+    write_stimuli(
+        folder / "stimuli",
+        {s: w[0] for s, w in walks.items() if s != "normal"},
+        {**{s: w[1] for s, w in walks.items() if s != "normal"}, "average": walks["normal"][0]},
+    )
+    return "walk.bvh.gz"
+
+
+def dual_hmm(folder: Path, index: MocapIndex, model: Path | None) -> tuple[Path, str]:
+    """The dual HMM (trained on two salsa takes if no file is given) and a third take's A."""
+    pairs = index.pairs(label="salsa")
+    if model is None:
+        train = [index.load_pair(*p) for p in pairs[:2]]
+        model = folder / "dual.npz"
+        DualHMM(n_states=16, n_iter=10).fit(
+            [(a.trim(0, 1200), b.trim(0, 1200)) for a, b in train]
+        ).save(model)
+    write_motion(index.load_motion(pairs[2][0]), folder / "lib" / "salsa_a.bvh")
+    return model, "salsa_a.bvh"
+
+
+def live_table(live, sessions: int, seconds: float, what: str) -> Table:
+    t = Table(title=f"{sessions} live sessions, {what}, {live.fps:.0f} fps, {seconds:g} s each")
+    t.add_column("measure")
+    t.add_column("value", justify="right")
+    t.add_row("sessions ended cleanly", f"{live.sessions - len(live.errors)} / {sessions}")
+    t.add_row("frames per session (min / mean)", f"{min(live.frames)} / {np.mean(live.frames):.0f}")
+    t.add_row("frames expected at the frame rate", f"{live.fps * seconds:.0f}")
+    t.add_row(
+        "real-time factor (received / expected)", f"{min(live.frames) / (live.fps * seconds):.2f}"
+    )
+    t.add_row(f"stalls (no frame for {1000 * STALL_SECONDS:.0f} ms)", str(live.stalls))
+    t.add_row("partner latency p50 (ms)", f"{np.quantile(live.latency_ms, 0.5):.2f}")
+    t.add_row("partner latency p99 (ms)", f"{np.quantile(live.latency_ms, 0.99):.2f}")
+    t.add_row("gap between frames p99 (ms)", f"{np.quantile(live.gap_ms, 0.99):.1f}")
+    t.add_row("gap between frames max (ms)", f"{max(live.gap_ms):.1f}")
+    return t
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--evaluators", type=int, default=50)
+    parser.add_argument("--sessions", type=int, default=20)
+    parser.add_argument("--data", type=Path, default=None, help="Folder with INDEX.csv.")
+    parser.add_argument("--partner", type=Path, default=None, help="A dual HMM model (.npz).")
+    args = parser.parse_args()
+    console = Console()
+    with tempfile.TemporaryDirectory(prefix="markovmotion-load-") as tmp:
+        lib = Path(tmp) / "lib"
+        lib.mkdir()
+        index = MocapIndex.load(args.data)
+        walk = build_library(lib, index)
+        model, salsa = dual_hmm(Path(tmp), index, args.partner)
+        db = Path(tmp) / "results.sqlite"
+        # the simulated clients run in another process, so that they do not
+        # share the servers' interpreter lock
+        spawn = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(1, mp_context=spawn) as pool:
+            with running(create_app(lib, db, partner=MirrorPartner)) as url:
+                console.print(f"{args.evaluators} evaluators for {args.seconds:g} s ...")
+                ev = pool.submit(simulate_evaluators, url, args.evaluators, args.seconds).result()
+                stored = open_results(db).count_answers()
+                console.print(f"{args.sessions} stand-in live sessions for {args.seconds:g} s ...")
+                live = pool.submit(simulate_live, url, walk, args.sessions, args.seconds).result()
+            app = create_app(lib, Path(tmp) / "dual.sqlite", partner=dual_hmm_partner(model))
+            with running(app) as url:
+                console.print(f"{args.sessions} dual-HMM live sessions for {args.seconds:g} s ...")
+                dual = pool.submit(simulate_live, url, salsa, args.sessions, args.seconds).result()
+
+    t = Table(title=f"{args.evaluators} simulated evaluators, {ev.seconds:.1f} s, loopback")
+    t.add_column("measure")
+    t.add_column("value", justify="right")
+    t.add_row("evaluators registered", str(ev.evaluators))
+    t.add_row("answers accepted (HTTP 200)", str(ev.answers))
+    t.add_row("answers in the database", str(stored))
+    t.add_row("count equal", "yes" if stored == ev.answers else "NO")
+    t.add_row("errors", str(len(ev.errors)))
+    t.add_row("answers per second", f"{ev.answers / ev.seconds:.0f}")
+    t.add_row("answer latency p50 (ms)", f"{np.quantile(ev.latency_ms, 0.5):.1f}")
+    t.add_row("answer latency p99 (ms)", f"{np.quantile(ev.latency_ms, 0.99):.1f}")
+    console.print(t)
+    console.print(live_table(live, args.sessions, args.seconds, "stand-in partner"))
+    console.print(live_table(dual, args.sessions, args.seconds, "dual HMM partner"))
+    for e in (ev.errors + live.errors + dual.errors)[:10]:
+        console.print(f"[red]error:[/] {e}")
+
+
+if __name__ == "__main__":
+    main()

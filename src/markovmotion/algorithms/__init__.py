@@ -1,0 +1,6 @@
+"""Shared algorithms, written once as pure functions and used by every model that needs them.
+
+``hermite`` (cubic Hermite interpolation), ``vector_quantisation`` (prototypes,
+tokens), ``dtw`` (dynamic time warping, open-end alignment) and
+``kinematics`` (batched forward kinematics from rotation vectors).
+"""

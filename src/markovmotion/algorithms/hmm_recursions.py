@@ -1,0 +1,179 @@
+"""Hidden Markov model recursions as pure compiled functions: forward, backward, Viterbi.
+
+Rabiner (1989) in log space. Every function takes the model as explicit
+arrays (``log_startprob`` (N,), ``transmat`` or ``log_transmat`` (N, N),
+``log_frameprob`` (T, N) = log b_j(o_t)) and one sequence; nothing is hidden
+in objects, so the same code serves the Gaussian HMM, the dual HMM and the
+windowed (fixed-lag) Viterbi decoder.
+
+The sums over predecessor states are log-sum-exps computed with the usual
+max shift: ``log sum_i exp(a_i) T_ij = m + log sum_i exp(a_i - m) T_ij``,
+``m = max_i a_i`` -- one exponential per state rather than one per
+transition, and no underflow whatever the sequence length (every frame is
+renormalised by its own maximum).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _shifted_exp(v, out):  # pragma: no cover - numba
+    m = -np.inf
+    for i in range(v.shape[0]):
+        if v[i] > m:
+            m = v[i]
+    if m == -np.inf:
+        out[:] = 0.0
+        return m
+    for i in range(v.shape[0]):
+        out[i] = np.exp(v[i] - m)
+    return m
+
+
+@numba.njit(cache=True)
+def _forward(log_startprob, transmat, log_frameprob):  # pragma: no cover - numba
+    n_t, n = log_frameprob.shape
+    log_alpha = np.empty((n_t, n))
+    p = np.empty(n)
+    for j in range(n):
+        log_alpha[0, j] = log_startprob[j] + log_frameprob[0, j]
+    for t in range(1, n_t):
+        m = _shifted_exp(log_alpha[t - 1], p)
+        acc = np.dot(p, transmat)
+        for j in range(n):
+            log_alpha[t, j] = np.log(acc[j]) + m + log_frameprob[t, j]
+    m = _shifted_exp(log_alpha[n_t - 1], p)
+    if m == -np.inf:
+        return log_alpha, m
+    return log_alpha, m + np.log(np.sum(p))
+
+
+@numba.njit(cache=True)
+def _backward(transmat, log_frameprob):  # pragma: no cover - numba
+    n_t, n = log_frameprob.shape
+    log_beta = np.empty((n_t, n))
+    log_beta[n_t - 1] = 0.0
+    v = np.empty(n)
+    p = np.empty(n)
+    for t in range(n_t - 2, -1, -1):
+        for j in range(n):
+            v[j] = log_frameprob[t + 1, j] + log_beta[t + 1, j]
+        m = _shifted_exp(v, p)
+        acc = np.dot(transmat, p)
+        for i in range(n):
+            log_beta[t, i] = np.log(acc[i]) + m
+    return log_beta
+
+
+@numba.njit(cache=True)
+def _transition_counts(
+    log_alpha, log_beta, transmat, log_frameprob, log_likelihood
+):  # pragma: no cover
+    n_t, n = log_frameprob.shape
+    counts = np.zeros((n, n))
+    u = np.empty(n)
+    v = np.empty(n)
+    w = np.empty(n)
+    for t in range(n_t - 1):
+        mu = _shifted_exp(log_alpha[t], u)
+        for j in range(n):
+            w[j] = log_frameprob[t + 1, j] + log_beta[t + 1, j]
+        mv = _shifted_exp(w, v)
+        if mu == -np.inf or mv == -np.inf:
+            continue
+        scale = np.exp(mu + mv - log_likelihood)
+        for i in range(n):
+            ui = u[i] * scale
+            for j in range(n):
+                counts[i, j] += ui * transmat[i, j] * v[j]
+    return counts
+
+
+@numba.njit(cache=True)
+def viterbi_kernel(log_startprob, log_transmat_t, log_frameprob):  # pragma: no cover - numba
+    """Compiled Viterbi without checks, for hot loops: the log transition matrix comes
+    transposed (C-contiguous, predecessors along rows); returns (path, log probability)."""
+    n_t, n = log_frameprob.shape
+    delta = np.empty(n)
+    new = np.empty(n)
+    back = np.empty((n_t, n), dtype=np.int64)
+    for j in range(n):
+        delta[j] = log_startprob[j] + log_frameprob[0, j]
+    for t in range(1, n_t):
+        for j in range(n):
+            best = -np.inf
+            arg = 0
+            for i in range(n):
+                s = delta[i] + log_transmat_t[j, i]
+                if s > best:
+                    best = s
+                    arg = i
+            back[t, j] = arg
+            new[j] = best + log_frameprob[t, j]
+        delta[:] = new
+    path = np.empty(n_t, dtype=np.int64)
+    path[n_t - 1] = np.argmax(delta)
+    for t in range(n_t - 1, 0, -1):
+        path[t - 1] = back[t, path[t]]
+    return path, delta[path[n_t - 1]]
+
+
+def _check(log_frameprob: np.ndarray, n: int) -> np.ndarray:
+    log_frameprob = np.ascontiguousarray(log_frameprob, dtype=float)
+    if log_frameprob.ndim != 2 or log_frameprob.shape[1] != n or len(log_frameprob) == 0:
+        raise ValueError(f"log_frameprob must be (T >= 1, {n}), got {log_frameprob.shape}")
+    return log_frameprob
+
+
+def forward(
+    log_startprob: np.ndarray, transmat: np.ndarray, log_frameprob: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """Forward pass: log alpha_t(j) = log P(o_1..o_t, q_t = j) (T, N) and log P(O)."""
+    log_startprob = np.ascontiguousarray(log_startprob, dtype=float)
+    log_frameprob = _check(log_frameprob, len(log_startprob))
+    log_alpha, ll = _forward(log_startprob, np.ascontiguousarray(transmat, float), log_frameprob)
+    return log_alpha, float(ll)
+
+
+def backward(transmat: np.ndarray, log_frameprob: np.ndarray) -> np.ndarray:
+    """Backward pass: log beta_t(i) = log P(o_t+1..o_T | q_t = i), (T, N)."""
+    transmat = np.ascontiguousarray(transmat, dtype=float)
+    return _backward(transmat, _check(log_frameprob, len(transmat)))
+
+
+def forward_backward(
+    log_startprob: np.ndarray, transmat: np.ndarray, log_frameprob: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """E-step statistics of one sequence (Rabiner eqs. 27, 37-38).
+
+    Returns:
+        log P(O); the state posteriors gamma (T, N); the expected transition
+        counts sum_t xi_t(i, j) (N, N).
+    """
+    log_alpha, ll = forward(log_startprob, transmat, log_frameprob)
+    log_frameprob = np.ascontiguousarray(log_frameprob, dtype=float)
+    transmat = np.ascontiguousarray(transmat, dtype=float)
+    log_beta = _backward(transmat, log_frameprob)
+    log_gamma = log_alpha + log_beta
+    log_gamma -= log_gamma.max(axis=1, keepdims=True)
+    gamma = np.exp(log_gamma)
+    gamma /= gamma.sum(axis=1, keepdims=True)
+    xi = _transition_counts(log_alpha, log_beta, transmat, log_frameprob, ll)
+    return ll, gamma, xi
+
+
+def viterbi(
+    log_startprob: np.ndarray, log_transmat: np.ndarray, log_frameprob: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """The single best state sequence (Rabiner eqs. 32-35): path (T,) and its log probability.
+
+    Ties go to the lowest state index.
+    """
+    log_startprob = np.ascontiguousarray(log_startprob, dtype=float)
+    log_frameprob = _check(log_frameprob, len(log_startprob))
+    log_transmat_t = np.ascontiguousarray(np.asarray(log_transmat, dtype=float).T)
+    path, lp = viterbi_kernel(log_startprob, log_transmat_t, log_frameprob)
+    return path, float(lp)

@@ -1,0 +1,113 @@
+"""``evaluation``: build the stimuli of the perceptual tests and analyse their answers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, answers_csv, summarise
+from markovmotion.evaluate.store import open_results
+from markovmotion.io.files import atomic_write
+
+app = typer.Typer(
+    help="Perceptual evaluation of synthesized walks (gait paper §6).", no_args_is_help=True
+)
+
+
+def _pct(v: float) -> str:
+    return "–" if v != v else f"{v:.1f}"
+
+
+def _pairs(values: list[str], what: str) -> dict[str, Path]:
+    out = {}
+    for v in values:
+        style, sep, file = v.partition("=")
+        if not sep or not style or not file:
+            raise typer.BadParameter(f"{v!r}: expected STYLE=FILE", param_hint=what)
+        out[style] = Path(file)
+    return out
+
+
+@app.command()
+def stimuli(
+    out: Path = typer.Argument(..., help="Folder to write the stimuli and manifest.csv into."),
+    real: list[str] = typer.Option([], help="STYLE=FILE of an original walk (repeat)."),
+    synthetic: list[str] = typer.Option(
+        [], help="STYLE=FILE of a synthesized walk (repeat; style 'average' for the average model)."
+    ),
+) -> None:
+    """Write each walk with and without root displacement, anonymised, with a manifest (§6.1)."""
+    from markovmotion.evaluate.stimuli import write_stimuli
+
+    written = write_stimuli(out, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))
+    Console(stderr=True).print(f"wrote {len(written)} stimuli and {out / 'manifest.csv'}")
+
+
+@app.command()
+def report(
+    db: Path = typer.Argument(..., help="The results.sqlite of 'markovmotion serve'."),
+    csv: Path = typer.Option(None, help="Also write every answer to this CSV file."),
+    json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
+) -> None:
+    """Recompute the figures of the paper's §6 from the answers in DB."""
+    store = open_results(db)
+    items = store.answered()
+    rep = summarise(items, store.styles)
+    console = Console()
+    console.print(
+        f"{store.count_evaluators()} evaluators registered, {rep.evaluators} answered; "
+        f"answers: {rep.answers['naturalness']} naturalness, {rep.answers['recognition']} style, "
+        f"{rep.answers['resemblance']} resemblance",
+        highlight=False,
+    )
+    t = Table(title="Naturalness (Fig. 5), % of answers")
+    for col in ("", "real", "synthetic", "I don't know", "n"):
+        t.add_column(col, justify="right")
+    for kind, name in (("real", "original"), ("synthetic", "synthesized")):
+        row = rep.naturalness[kind]
+        t.add_row(name, *(_pct(row[c]) for c in ("real", "synthetic", "dont_know")), str(row["n"]))
+    console.print(t)
+
+    t = Table(title="Style recognition (Table 3), % correct")
+    for col in ("", "original", "synthesized"):
+        t.add_column(col, justify="right")
+    for cond in ("static", "displacement", "all"):
+        t.add_row(
+            cond, _pct(rep.recognition["real"][cond]), _pct(rep.recognition["synthetic"][cond])
+        )
+    t.add_row(
+        "efficiency η (eq. 16)",
+        f"{rep.efficiency['real']:.2f}",
+        f"{rep.efficiency['synthetic']:.2f}",
+    )
+    console.print(t)
+    console.print(
+        f"chance {rep.chance:.2f} %; Pearson correlation of per-style recognition, "
+        f"original vs synthesized: {rep.correlation:.4f}",
+        highlight=False,
+    )
+    for kind, name in (("real", "original"), ("synthetic", "synthesized")):
+        c = rep.confusion[kind]
+        t = Table(title=f"Confusion matrix (Table 2), {name}, % of the videos of each style")
+        t.add_column("actual")
+        for col in c.columns:
+            t.add_column(LABELS.get(col, col), justify="right")
+        for style, row in zip(c.rows, c.percent, strict=True):
+            t.add_row(LABELS.get(style, style), *(_pct(v) for v in row))
+        console.print(t)
+    t = Table(title=f"Resemblance (Fig. 8): mean score {rep.resemblance_score:.2f} of 4")
+    t.add_column("level")
+    t.add_column("answers", justify="right")
+    for level in range(len(RESEMBLANCE) - 1, -1, -1):
+        t.add_row(f"{level} {RESEMBLANCE[level]}", str(rep.resemblance_histogram[level]))
+    console.print(t)
+    if csv:
+        with atomic_write(csv) as fh:
+            fh.write(answers_csv(items))
+    if json_out:
+        with atomic_write(json_out) as fh:
+            fh.write(json.dumps(rep.to_dict(), indent=1))

@@ -1,0 +1,444 @@
+"""``gait``: stylistic walk synthesis with HSMMs (train, adapt, synthesize, evaluate, steps)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from markovmotion.core.motion import Motion
+from markovmotion.data import MocapIndex
+from markovmotion.errors import DataNotFoundError
+from markovmotion.io import read_motion, write_motion
+from markovmotion.progress import err_console, track
+
+app = typer.Typer(
+    help="Stylistic walks with hidden semi-Markov models (gait paper): train an average walk, "
+    "adapt it to a style, synthesize, evaluate.",
+    no_args_is_help=True,
+)
+
+SPLITS = ("train", "test", "all")
+
+
+def _is_index(paths: list[Path]) -> bool:
+    return len(paths) == 1 and (paths[0].is_dir() or paths[0].name.lower().endswith(".csv"))
+
+
+def load_walks(
+    paths: list[Path] | None,
+    labels: list[str] | str | None,
+    split: str = "train",
+    subset: str = "",
+    folders: list[str] | None = None,
+) -> list[Motion]:
+    """Walks from motion files, or from an INDEX.csv (or its folder) by label and split.
+
+    From an index, the walks are those of ``subset`` (Bandai dataset-2 by
+    default) with the labels asked for; ``split`` keeps the training takes,
+    the held-out takes (every fourth of each style) or all. The folder of
+    each walk (its dataset) is appended to ``folders`` if given.
+    """
+    from markovmotion.models.gait import DEFAULT_SUBSET, gait_entries, split_walks
+
+    if paths and not _is_index(paths):
+        if folders is not None:
+            folders.extend(p.resolve().parent.name for p in paths)
+        return [read_motion(p) for p in track(paths, "reading walks")]
+    if split not in SPLITS:
+        raise typer.BadParameter(f"split must be one of {', '.join(SPLITS)}")
+    index = MocapIndex.load(paths[0] if paths else None)
+    entries = gait_entries(index, labels, subset or DEFAULT_SUBSET)
+    train, test = split_walks(entries)
+    chosen = {"train": train, "test": test, "all": entries}[split]
+    if not chosen:
+        raise DataNotFoundError(
+            f"no walks labelled {labels} under {subset or DEFAULT_SUBSET} in {index.root}"
+        )
+    if folders is not None:
+        folders.extend(Path(e.file).parent.name for e in chosen)
+    return [index.load_motion(e) for e in track(chosen, "reading walks")]
+
+
+@app.command()
+def train(
+    data: list[Path] = typer.Option(
+        None, help="INDEX.csv (or its folder), or BVH files of neutral walks; repeatable."
+    ),
+    out: Path = typer.Option(..., help="Average model to write (.npz)."),
+    label: str = typer.Option("normal", help="Label of the walks to train on, from an index."),
+    subset: str = typer.Option(
+        "", help="Index files starting with this (default Bandai dataset-2)."
+    ),
+    split: str = typer.Option("train", help="Takes from an index: train, test or all."),
+    n_iter: int = typer.Option(10, min=1, help="EM iterations."),
+    mdl_factor: float = typer.Option(1.0, min=0.0, help="MDL weight of context clustering."),
+    wat: str = typer.Option(
+        "none", help="Walker-adaptive training unit: none, take, or dataset (the file's folder)."
+    ),
+) -> None:
+    """Train an average walk HSMM on neutral walks (gait paper §5.1.2)."""
+    from markovmotion.models.gait import GaitSynthesizer
+
+    if wat not in ("none", "take", "dataset"):
+        raise typer.BadParameter("--wat must be none, take or dataset")
+    folders: list[str] = []
+    motions = load_walks(data, label, split, subset, folders)
+    model = GaitSynthesizer(
+        n_iter=n_iter, mdl_factor=mdl_factor, wat="unit" if wat == "dataset" else wat
+    ).fit(motions, style=label, units=folders)
+    model.save(out)
+    h = model.hsmm_
+    err_console.print(
+        f"wrote {out}: {len(motions)} walks, {model.n_steps_} steps, "
+        f"{len(h.means_)} output and {len(h.dur_means_)} duration densities, "
+        f"log-likelihood {h.log_likelihood_[-1]:.1f} per frame"
+    )
+
+
+@app.command()
+def adapt(
+    model: Path = typer.Option(..., help="Average model (.npz) from 'gait train'."),
+    style_data: list[Path] = typer.Option(
+        None, help="INDEX.csv (or its folder), or BVH files of the style's walks; repeatable."
+    ),
+    label: str = typer.Option(..., help="The style (its label in an index)."),
+    out: Path = typer.Option(..., help="Style model to write (.npz)."),
+    steps: int = typer.Option(None, min=1, help="Adapt on the first K steps only (default all)."),
+    method: str = typer.Option("csmaplr", help="csmaplr (tree + structural MAP prior) or cmllr."),
+    structure: str = typer.Option("stream", help="stream (full per block) or diagonal transforms."),
+    tau: float = typer.Option(20.0, min=0.0, help="CSMAPLR prior weight (frames)."),
+    tau_map: float = typer.Option(5.0, min=0.0, help="MAP prior weight of the means (frames)."),
+    no_map: bool = typer.Option(False, "--no-map", help="Transforms only, no MAP step."),
+    scratch: bool = typer.Option(
+        False, "--scratch", help="Train a style model from scratch on the same steps instead."
+    ),
+    subset: str = typer.Option(
+        "", help="Index files starting with this (default Bandai dataset-2)."
+    ),
+    split: str = typer.Option("train", help="Takes from an index: train, test or all."),
+) -> None:
+    """Adapt the average model to a style from a few steps (CSMAPLR/CMLLR + MAP, §5.1.3)."""
+    from markovmotion.models.adaptation import METHODS, STRUCTURES
+    from markovmotion.models.gait import GaitSynthesizer
+
+    if method not in METHODS:
+        raise typer.BadParameter(f"--method must be one of {', '.join(METHODS)}")
+    if structure not in STRUCTURES:
+        raise typer.BadParameter(f"--structure must be one of {', '.join(STRUCTURES)}")
+    average = GaitSynthesizer.load(model)
+    motions = load_walks(style_data, label, split, subset)
+    if scratch:
+        result = average.scratch(motions, label, steps)
+    else:
+        result = average.adapt(
+            motions,
+            label,
+            steps,
+            method=method,
+            structure=structure,
+            tau=tau,
+            tau_map=tau_map,
+            map_step=not no_map,
+        )
+    result.save(out)
+    err_console.print(
+        f"wrote {out}: {result.role_} {label} model from {result.n_steps_} steps "
+        f"of {len(result.files_)} walks"
+    )
+
+
+@app.command()
+def synthesize(
+    model: Path = typer.Option(..., help="Gait model (.npz) from 'gait train' or 'gait adapt'."),
+    out: Path = typer.Option(..., help="Walk to write (.bvh or .bvh.gz)."),
+    steps: int = typer.Option(12, min=1, help="Number of steps."),
+    speed: float = typer.Option(1.0, min=0.05, help="Pace relative to the model's mean durations."),
+    gv: bool = typer.Option(True, "--gv/--no-gv", help="Global-variance generation (eqs. 12-15)."),
+    first_side: str = typer.Option("R", help="Foot that lands at the end of the first step (L/R)."),
+    seed: int = typer.Option(
+        None,
+        help="Draw state durations from the duration densities with this seed "
+        "(default: the most likely durations).",
+    ),
+) -> None:
+    """Synthesize a walk of any length from a gait model and write it as BVH (§5.1.4)."""
+    from markovmotion.models.gait import GaitSynthesizer
+
+    if first_side not in ("L", "R"):
+        raise typer.BadParameter("--first-side must be L or R")
+    synth = GaitSynthesizer.load(model)
+    rng = None if seed is None else np.random.default_rng(seed)
+    motion = synth.synthesize(steps, speed=speed, gv=gv, first_side=first_side, rng=rng)
+    write_motion(motion, out)
+    err_console.print(
+        f"wrote {out}: {synth.style_} walk, {steps} steps, {motion.n_frames} frames "
+        f"at {motion.fps:g} fps"
+    )
+
+
+def _load_models(folder: Path) -> dict[str, dict[str, object]]:
+    """Gait models of a folder by role and style (other model kinds are skipped)."""
+    from markovmotion.errors import ModelFormatError
+    from markovmotion.models.gait import ROLES, GaitSynthesizer
+    from markovmotion.persist import load_npz
+
+    if not folder.is_dir():
+        raise DataNotFoundError(f"{folder}: no such folder of models")
+    found: dict[str, dict[str, object]] = {r: {} for r in ROLES}
+    for path in sorted(folder.glob("*.npz")):
+        try:
+            header, _ = load_npz(path)
+        except ModelFormatError:
+            continue
+        if header.get("kind") != "gait-hsmm":
+            continue
+        model = GaitSynthesizer.load(path)
+        found[model.role_][model.style_] = model
+    return found
+
+
+def _rate(value: float, ci: list[float] | None = None) -> str:
+    return f"{value:.2f}" + (f" [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else "")
+
+
+#: Rows of the evaluation table: (label, key in the results, format).
+METRICS = (
+    ("eta (eq. 16) of the column's steps", "eta_synthesized", "{:.2f}"),
+    ("walk recognition, synthesized", "synthesized_walk_rate", "{:.2f}"),
+    ("full classifier: real / synthesized steps", "full", "{}"),
+    ("DTW exp-map RMSE (rad)", "dtw_expmap_rmse", "{:.3f}"),
+    ("DTW joint error (mm)", "dtw_joint_mm", "{:.1f}"),
+    ("foot slide (mm/step)", "foot_slide_mm", "{:.1f}"),
+    ("GV ratio synthesized/real", "gv_ratio", "{:.2f}"),
+    ("held-out log-likelihood/frame", "test_log_likelihood", "{:.0f}"),
+)
+
+
+def _table(title: str, columns: dict[str, dict]) -> Table:
+    table = Table(title=title)
+    table.add_column("measure")
+    for name in columns:
+        table.add_column(name, justify="right")
+    for key in ("real_rate", "synthesized_rate"):
+        cells = [_rate(c[key], c.get(f"{key}_ci")) if key in c else "-" for c in columns.values()]
+        table.add_row(f"step recognition, {key.split('_')[0]} (95% CI)", *cells)
+    for label, key, fmt in METRICS:
+        cells = []
+        for c in columns.values():
+            if key == "full":
+                synth = c.get("synthesized_rate_full")
+                cells.append(
+                    f"{c['real_rate_full']:.2f} / " + ("-" if synth is None else f"{synth:.2f}")
+                )
+            else:
+                cells.append(fmt.format(c[key]) if c.get(key) is not None else "-")
+        if any(c != "-" for c in cells):
+            table.add_row(label, *cells)
+    return table
+
+
+def _sweep_table(sweep: dict[str, dict], average: dict | None) -> Table:
+    table = Table(title="synthesized step recognition vs adaptation steps (95% CI)")
+    columns = ("steps", "adapted", "scratch", "adapted - scratch", "average")
+    for col in (*columns, "DTW mm a/s", "log-lik/frame a/s"):
+        table.add_column(col, justify="right")
+    for k, roles in sweep.items():
+        a, s, d = roles["adapted"], roles["scratch"], roles["adapted_minus_scratch"]
+        table.add_row(
+            k,
+            _rate(a["synthesized_rate"], a["synthesized_rate_ci"]),
+            _rate(s["synthesized_rate"], s["synthesized_rate_ci"]),
+            f"{d['synthesized_rate']:+.2f} [{d['synthesized_rate_ci'][0]:+.2f}, "
+            f"{d['synthesized_rate_ci'][1]:+.2f}]",
+            _rate(average["synthesized_rate"], average["synthesized_rate_ci"]) if average else "-",
+            f"{a['dtw_joint_mm']:.1f} / {s['dtw_joint_mm']:.1f}",
+            f"{a['test_log_likelihood']:.0f} / {s['test_log_likelihood']:.0f}",
+        )
+    return table
+
+
+def _components(value: str) -> int | str | None:
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        raise typer.BadParameter(f"--components {value!r}: 'auto' or a number") from None
+    if n < 0:
+        raise typer.BadParameter("--components must be 'auto', 0 (all) or positive")
+    return n or None
+
+
+@app.command()
+def evaluate(
+    models: Path = typer.Option(
+        ..., help="Folder with the average model and adapted/scratch models."
+    ),
+    test: Path = typer.Option(
+        None, help="INDEX.csv (or its folder) of the walks (default: see README)."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
+    sweep: str = typer.Option(
+        "",
+        help="Also adapt and train from scratch on K steps, e.g. '3,6,12,24' (needs the average).",
+    ),
+    walks: int = typer.Option(8, min=1, help="Synthesized walks per model and style."),
+    replicates: int = typer.Option(
+        3, min=1, help="Sweep: models per style and K, each adapted on other training takes."
+    ),
+    walk_steps: int = typer.Option(12, min=3, help="Steps per synthesized walk."),
+    components: str = typer.Option(
+        "auto",
+        help="Principal components the style classifier keeps: 'auto' (fewest reaching 90% "
+        "cross-validated on training takes), or N (0: all statistics).",
+    ),
+    seed: int = typer.Option(0, help="Seed of the synthesized durations and the bootstrap."),
+    bootstrap: int = typer.Option(2000, min=100, help="Bootstrap replicates of the intervals."),
+    subset: str = typer.Option(
+        "", help="Index files starting with this (default Bandai dataset-2)."
+    ),
+) -> None:
+    """Objective evaluation (§6 replacement): per-step style recognition, DTW distance, foot slide, GV.
+
+    A style classifier is trained on the steps of the training takes of every
+    style; every fourth take is held out. Models in MODELS must not have seen
+    held-out takes. The style of the average model (its training walks) is
+    a class of the classifier but not a target of the models.
+    """
+    import json
+
+    from markovmotion.evaluate.gait import ROLES, Evaluation, StyleClassifier
+    from markovmotion.models.gait import DEFAULT_SUBSET, gait_entries, split_walks
+    from markovmotion.progress import progress_bar
+
+    try:
+        ks = [int(k) for k in sweep.replace(" ", "").split(",") if k]
+    except ValueError:
+        raise typer.BadParameter(
+            f"--sweep {sweep!r} is not a comma-separated list of numbers"
+        ) from None
+    classifier = StyleClassifier(n_components=_components(components))
+    found = _load_models(models)
+    if not any(found.values()):
+        raise DataNotFoundError(f"{models}: no gait models (.npz) in this folder")
+    if ks and not found["average"]:
+        raise DataNotFoundError(f"{models}: the sweep needs an average model in the folder")
+    index = MocapIndex.load(test)
+    train, held_out = split_walks(gait_entries(index, None, subset or DEFAULT_SUBSET))
+    seen = {f for role in found.values() for m in role.values() for f in m.files_}
+    leaked = sorted(seen & {e.name for e in held_out})
+    if leaked:
+        raise DataNotFoundError(
+            f"models in {models} were trained on held-out takes ({', '.join(leaked[:3])}); "
+            "train them on the training split"
+        )
+    by_style: dict[str, dict[str, list[Motion]]] = {"train": {}, "test": {}}
+    for part, rows in (("train", train), ("test", held_out)):
+        for e in track(rows, f"reading {part} walks"):
+            by_style[part].setdefault(e.label, []).append(index.load_motion(e))
+    with err_console.status("style classifier: choosing its components on the training takes"):
+        ev = Evaluation.prepare(
+            by_style["train"],
+            by_style["test"],
+            classifier,
+            n_walks=walks,
+            walk_steps=walk_steps,
+            replicates=replicates,
+            seed=seed,
+            n_boot=bootstrap,
+        )
+    average = next(iter(found["average"].values()), None)
+    targets = [s for s in ev.styles if average is None or s != average.style_]
+    chosen = {
+        role: {s: [m] for s, m in found[role].items() if s in targets}
+        for role in ("adapted", "scratch")
+    }
+    if average is not None:
+        chosen["average"] = {s: [average] for s in targets}
+    work = sum(map(len, chosen.values())) + 3 * len(ks) * len(targets)
+    result: dict[str, object] = {"styles": ev.styles, "targets": targets, "real": ev.real()}
+    with progress_bar() as bar:
+        task = bar.add_task("synthesizing and classifying", total=work)
+
+        def advance(what: str) -> None:
+            bar.update(task, advance=1, description=what)
+
+        for role in ROLES:
+            if chosen.get(role):
+                result[role], _ = ev.models(chosen[role], advance, f"{role} ")
+        if ks:
+            result["sweep"] = ev.sweep(average, targets, ks, progress=advance)
+    if as_json:
+        print(json.dumps(_finite(result), indent=1))
+        return
+    real = result["real"]
+    columns = {
+        "real (all styles)": {
+            "real_rate": real["rate"],
+            "real_rate_ci": real["rate_ci"],
+            "real_rate_full": real["rate_full"],
+            "eta_synthesized": real["eta"],
+            "dtw_expmap_rmse": real["dtw_expmap_rmse"],
+            "dtw_joint_mm": real["dtw_joint_mm"],
+            "foot_slide_mm": real["foot_slide_mm"],
+        },
+        **{role: result[role] for role in ROLES if role in result},
+    }
+    console = Console()
+    console.print(
+        _table(
+            f"gait models in {models}: {real['walks']} held-out walks, {real['steps']} steps; "
+            f"classifier on {real['classifier']['components'] or 'all'} components",
+            columns,
+        )
+    )
+    if "sweep" in result:
+        console.print(_sweep_table(result["sweep"], result.get("average")))
+
+
+def _finite(value: object) -> object:
+    """NaN and infinities as JSON null."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+@app.command("steps")
+def steps_(
+    data: list[Path] = typer.Option(None, help="INDEX.csv (or its folder) or walk files."),
+    label: list[str] = typer.Option(None, help="Labels to list from an index (default all)."),
+    subset: str = typer.Option(
+        "", help="Index files starting with this (default Bandai dataset-2)."
+    ),
+) -> None:
+    """Heel strikes and steps found in each walk (gait paper §4)."""
+    from markovmotion.features.gait import align_walk, detect_steps
+
+    motions = load_walks(data, label or None, "all", subset)
+    table = Table(title="steps cut at heel strikes")
+    for col in ("walk", "frames", "steps", "left", "right", "mean frames/step", "dropped"):
+        table.add_column(col)
+    total = 0
+    for m in motions:
+        s = detect_steps(align_walk(m))
+        total += s.n_steps
+        mean = f"{(s.boundaries[-1] - s.boundaries[0]) / s.n_steps:.1f}" if s.n_steps else "-"
+        table.add_row(
+            m.name,
+            str(m.n_frames),
+            str(s.n_steps),
+            str(s.sides.count("L")),
+            str(s.sides.count("R")),
+            mean,
+            str(s.dropped),
+        )
+    table.caption = f"{total} steps in {len(motions)} walks"
+    Console().print(table)

@@ -1,0 +1,1 @@
+"""Evaluation of synthesized and predicted motion (perceptual tests: :mod:`.perceptual`)."""

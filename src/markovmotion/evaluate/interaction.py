@@ -1,0 +1,205 @@
+"""Accuracy of a virtual partner against the real one (dual-HMM paper §4.1, Figs. 6-8).
+
+For every two-person take of a test set, B is generated from A by standard
+and by windowed Viterbi, and each frame's error is the Euclidean distance
+between generated and real joint positions, in mm, averaged over B's joints
+after forward kinematics -- world positions, B being placed through A's
+real ground frame, so the error counts both B's pose and where B stands
+relative to A. Two baselines: B's mean pose (the mean of B's training joint
+positions in A's ground frame) and nearest-neighbour retrieval (the B frame
+whose A frame is nearest in A's feature space). The same four are also given
+for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares
+the windowed output with the real B ``lag`` frames later, as a live viewer
+sees it. Step latency is the time of one online partner step (emission
+probabilities, windowed Viterbi, trellis) on A's features.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from sklearn.base import clone
+from sklearn.neighbors import NearestNeighbors
+
+from markovmotion.core.motion import UP, Motion
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.evaluate.horizon import trial_errors
+from markovmotion.models.dual_hmm import DualHMM, ground_frame
+from markovmotion.progress import track
+from markovmotion.viz.plots import new_figure, save_figure
+
+METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour")
+
+
+@dataclass
+class PairResult:
+    """Per-frame errors (mm) of one take, world (``errors``) and body-centred (``pose_errors``)."""
+
+    name: str
+    label: str
+    fps: float
+    errors: dict[str, np.ndarray] = field(default_factory=dict)
+    pose_errors: dict[str, np.ndarray] = field(default_factory=dict)
+    latencies_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class _Baselines:
+    """What the two baselines need from a model, computed once."""
+
+    def __init__(self, model: DualHMM):
+        self.model = model
+        train_b = model.expmaps_b_.inverse_transform([model.frames_b_.astype(float)])[0]
+        self.mean_rel = train_b.positions().mean(axis=0)
+        self.mean_pose = train_b.body_centred_positions().mean(axis=0)
+        self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
+
+    def mean_world(self, origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+        turn = Rotation.from_rotvec(np.outer(yaw, UP))
+        return np.stack([turn.apply(p) for p in self.mean_rel], axis=1) + origin[:, None]
+
+    def nearest(self, xa: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
+        idx = self.nn.kneighbors(xa, return_distance=False)[:, 0]
+        return self.model.frames_to_motion(idx, origin, yaw)
+
+
+def step_latencies(model: DualHMM, xa: np.ndarray) -> np.ndarray:
+    """Microseconds of each online partner step over A's feature rows ``xa``."""
+    partner = model.partner()
+    place = (np.zeros(3), 0.0)
+    out = np.empty(len(xa))
+    for t, x in enumerate(xa):
+        start = time.perf_counter_ns()
+        partner.step_features(x, place)
+        out[t] = (time.perf_counter_ns() - start) / 1e3
+    return out
+
+
+def evaluate_pair(
+    model: DualHMM,
+    a: Motion,
+    b: Motion,
+    name: str,
+    label: str,
+    baselines: _Baselines | None = None,
+) -> PairResult:
+    """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take."""
+    baselines = baselines or _Baselines(model)
+    a, b = model._rate(a), model._rate(b)
+    origin, yaw = ground_frame(a)
+    xa, _ = model.features_a(a)
+    generated = {
+        "standard": model.generate(a, "standard"),
+        "windowed": model.generate(a, "windowed"),
+        "nearest_neighbour": baselines.nearest(xa, origin, yaw),
+    }
+    truth, truth_pose = b.positions(), b.body_centred_positions()
+    res = PairResult(name, label, model.fps)
+    for k, m in generated.items():
+        res.errors[k] = trial_errors(m.positions(), truth)
+        res.pose_errors[k] = trial_errors(m.body_centred_positions(), truth_pose)
+    res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
+    res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    lag = model.window - 1
+    shown = generated["windowed"].positions()[: len(truth) - lag]
+    res.errors["windowed_as_shown"] = trial_errors(shown, truth[lag:])
+    res.latencies_us = step_latencies(model, xa)
+    return res
+
+
+def plot_pair(result: PairResult, path: str | os.PathLike[str]) -> Path:
+    """Per-frame error of standard (solid) and windowed (dashed) Viterbi, as the paper's Figs. 6-8."""
+    fig, ax = new_figure(8.0, 3.6)
+    frames = np.arange(len(result.errors["standard"]))
+    ax.plot(frames, result.errors["standard"], "-", lw=1.3, label="standard Viterbi")
+    ax.plot(frames, result.errors["windowed"], "--", lw=1.3, label="windowed Viterbi")
+    ax.plot(frames, result.errors["mean_pose"], ":", lw=1.0, color="grey", label="mean pose")
+    ax.set_xlabel(f"frame ({result.fps:g} fps)")
+    ax.set_ylabel("Euclidean distance (mm)")
+    ax.set_title(f"Error of the generated behaviour: {result.name} ({result.label})")
+    ax.set_ylim(bottom=0)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    return save_figure(fig, path)
+
+
+def _summary(results: Sequence[PairResult]) -> dict:
+    def mean(key: str, attr: str = "errors") -> float:
+        return round(float(np.concatenate([getattr(r, attr)[key] for r in results]).mean()), 1)
+
+    lat = np.concatenate([r.latencies_us for r in results])
+    out = {f"{k}_mm": mean(k) for k in METHODS}
+    out["windowed_as_shown_mm"] = mean("windowed_as_shown")
+    out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in METHODS}
+    out["latency_us"] = {
+        "median": round(float(np.median(lat)), 1),
+        "p99": round(float(np.percentile(lat, 99)), 1),
+    }
+    out["frames"] = int(sum(len(r.errors["standard"]) for r in results))
+    out["pairs"] = len(results)
+    return out
+
+
+def describe(model: DualHMM) -> dict:
+    """The settings of ``model`` reported with its results (and its PCA sizes once fitted)."""
+    out = {
+        "mode": model.mode,
+        "n_states": model.n_states,
+        "fps": model.fps,
+        "window": model.window,
+        "lag_frames": model.window - 1,
+    }
+    if hasattr(model, "train_a_"):
+        out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
+    return out
+
+
+def summarise(results: Sequence[PairResult], model: DualHMM) -> dict:
+    """The evaluation JSON: ``model``, ``overall``, ``per_label.<label>``, ``per_pair.<name>``."""
+    labels = sorted({r.label for r in results})
+    return {
+        "model": describe(model),
+        "overall": _summary(results),
+        "per_label": {lab: _summary([r for r in results if r.label == lab]) for lab in labels},
+        "per_pair": {r.name: _summary([r]) for r in results},
+    }
+
+
+def evaluate_index(
+    model: DualHMM,
+    index: MocapIndex,
+    pairs: Sequence[tuple[Entry, Entry]],
+    plot_dir: str | os.PathLike[str] | None = None,
+) -> tuple[dict, list[Path]]:
+    """Evaluate ``model`` on the two-person takes ``pairs``; returns the JSON dict and plots written."""
+    baselines = _Baselines(model)
+    results, plots = [], []
+    for ea, eb in track(pairs, "evaluating pairs"):
+        a, b = index.load_pair(ea, eb)
+        model.check_input(a, ea.path)
+        res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
+        results.append(res)
+        if plot_dir is not None:
+            plots.append(plot_pair(res, Path(plot_dir) / f"{res.name}_error.png"))
+    return summarise(results, model), plots
+
+
+def cross_validate(
+    takes: Sequence[tuple[str, str, Motion, Motion]],
+    model: DualHMM,
+    plot_dir: str | os.PathLike[str] | None = None,
+) -> tuple[list[PairResult], list[Path]]:
+    """Leave-one-take-out: each take ``(name, label, A, B)`` is evaluated by a copy of
+    ``model`` (same hyper-parameters) trained on all the other takes."""
+    results, plots = [], []
+    for i, (name, label, a, b) in enumerate(track(takes, "leave-one-take-out")):
+        fold = clone(model).fit([(ta, tb) for j, (_, _, ta, tb) in enumerate(takes) if j != i])
+        results.append(evaluate_pair(fold, a, b, name, label))
+        if plot_dir is not None:
+            plots.append(plot_pair(results[-1], Path(plot_dir) / f"{name}_error.png"))
+    return results, plots

@@ -1,0 +1,1 @@
+"""Generation of motion parameters from statistical models (MLPG with global variance: :mod:`.mlpg`)."""

@@ -1,0 +1,399 @@
+"""Behaviour models over prototypes: a VLMM of prototype sequences (VLMM paper §2, §3.2).
+
+Motion becomes augmented configuration vectors F = [C, lambda dC] in [0, 1]
+(eqs. 1-4), each replaced by its nearest prototype with repeats collapsed
+(eq. 3); a :class:`~markovmotion.models.vlmm.VLMM` learns the prototype
+sequences. Generation traverses the automaton and joins the emitted
+prototypes' configurations by cubic Hermite interpolation with the time
+intervals of eq. 8, sampled at the frame rate; prediction first recognises
+the state from the observed prototypes (§3.2.2).
+
+Configuration C is either the joint rotations (exponential maps of the
+moving joints plus the pelvis height, with each frame's heading removed) or
+body-centred joint positions; either way generated motion goes back to a
+:class:`Motion` (rotations directly, positions through an inverse-kinematics
+fit to the training skeleton).
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from collections.abc import Sequence
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from markovmotion.algorithms.hermite import constant_acceleration_intervals, hermite_sample
+from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
+from markovmotion.algorithms.vector_quantisation import (
+    collapse_repeats,
+    competitive_learning,
+    kmeans_prototypes,
+    nearest_prototype,
+)
+from markovmotion.core.motion import Motion
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
+from markovmotion.features.heading import RemoveHeading
+from markovmotion.features.select import DropStaticColumns
+from markovmotion.models.vlmm import VLMM
+from markovmotion.persist import load_npz, save_npz
+from markovmotion.state import estimator_state, register, restore_estimator
+
+CONFIGURATIONS = ("rotations", "positions")
+QUANTISERS = ("kmeans", "competitive")
+MODEL_KIND = "vlmm"
+
+
+# ------------------------------------------------------------------- data
+def held_out_split(entries: Sequence[Entry]) -> tuple[list[Entry], list[Entry]]:
+    """Hold out the last trial (in INDEX.csv order) of every label that has two or more.
+
+    Returns ``(train, test)``; a label with a single trial stays in training.
+    """
+    last: dict[str, Entry] = {}
+    counts: dict[str, int] = {}
+    for e in entries:
+        last[e.label] = e
+        counts[e.label] = counts.get(e.label, 0) + 1
+    test = [e for e in entries if counts[e.label] > 1 and last[e.label] is e]
+    return [e for e in entries if e not in test], test
+
+
+def load_motions(
+    index: MocapIndex, entries: Sequence[Entry], fps: float
+) -> tuple[list[Motion], list[Entry]]:
+    """The entries' motions at ``fps``, keeping the largest group sharing one skeleton.
+
+    Returns the motions and the entries left out for having another skeleton.
+    """
+    motions = [index.load_motion(e).resample(fps) for e in entries]
+    groups: list[list[int]] = []
+    for i, m in enumerate(motions):
+        for g in groups:
+            if motions[g[0]].skeleton.same_topology(m.skeleton):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    best = max(groups, key=len) if groups else []
+    return [motions[i] for i in best], [e for i, e in enumerate(entries) if i not in best]
+
+
+def evaluation_joints(motions: Sequence[Motion], tol: float = 1e-3) -> np.ndarray:
+    """The joints at which prediction errors are measured.
+
+    These are the joints whose local rotation moves by more than ``tol``
+    radians in the data, plus, where none of such a joint's children moves,
+    its child with the longest bone (the tip of a hand, foot or head): a
+    joint's rotation shows only in where its children are. CMU's figure has
+    fixed fingers and eyes that would otherwise dilute the mean.
+    """
+    from scipy.spatial.transform import Rotation
+
+    sk = motions[0].skeleton
+    moving = np.zeros(sk.n_joints, dtype=bool)
+    for m in motions:
+        q = m.rotations
+        rel = (
+            Rotation.from_quat(q.reshape(-1, 4))
+            * Rotation.from_quat(np.repeat(q[:1], len(q), axis=0).reshape(-1, 4)).inv()
+        )
+        moving |= rel.magnitude().reshape(len(q), -1).max(axis=0) > tol
+    keep = moving.copy()
+    for j in np.flatnonzero(moving):
+        kids = sk.children(j)
+        if kids and not moving[kids].any():
+            keep[max(kids, key=lambda c: np.linalg.norm(sk.offsets[c]))] = True
+    return np.flatnonzero(keep)
+
+
+# ------------------------------------------------------------------ model
+@register
+class BehaviourModel(BaseEstimator):
+    """Prototypes in augmented configuration space and a VLMM over them (§2, §3.2).
+
+    Args:
+        n_prototypes: number of prototypes (alphabet size).
+        max_memory: N of the VLMM.
+        epsilon: KL threshold of the VLMM (eq. 5).
+        lam: weight of the derivative in F = [C, lam dC] (eq. 2).
+        configuration: ``"rotations"`` (exponential maps + pelvis height) or
+            ``"positions"`` (body-centred joint positions in mm).
+        fps: frame rate the motion is resampled to for modelling.
+        quantiser: ``"kmeans"`` or ``"competitive"`` (robust competitive learning).
+        time_scale: factor on the eq. 8 intervals (1: the paper's).
+        max_interval: longest interval between two prototypes, in seconds.
+        seed: seed of the vector quantisation.
+
+    Learnt attributes: ``pipeline_`` (motion -> F), ``prototypes_`` (K, 2d),
+    ``vlmm_``, ``train_tokens_`` / ``train_lengths_`` (the collapsed training
+    token sequences, concatenated), ``eval_joints_``,
+    ``skeleton_``.
+    """
+
+    def __init__(
+        self,
+        n_prototypes: int = 100,
+        max_memory: int = 5,
+        epsilon: float = 1e-4,
+        lam: float = 10.0,
+        configuration: str = "rotations",
+        fps: float = 30.0,
+        quantiser: str = "kmeans",
+        time_scale: float = 1.0,
+        max_interval: float = 1.0,
+        seed: int = 0,
+    ):
+        self.n_prototypes = n_prototypes
+        self.max_memory = max_memory
+        self.epsilon = epsilon
+        self.lam = lam
+        self.configuration = configuration
+        self.fps = fps
+        self.quantiser = quantiser
+        self.time_scale = time_scale
+        self.max_interval = max_interval
+        self.seed = seed
+
+    # ---------------------------------------------------------------- fitting
+    def _make_pipeline(self) -> FeaturePipeline:
+        if self.configuration == "rotations":
+            first = [RemoveHeading(), ExpMaps(root_position="height")]
+        elif self.configuration == "positions":
+            first = [JointPositions(body_centred=True)]
+        else:
+            raise ValueError(f"configuration must be one of {CONFIGURATIONS}")
+        return FeaturePipeline([*first, DropStaticColumns(), AugmentedConfiguration(self.lam)])
+
+    def fit(self, motions: Sequence[Motion]) -> BehaviourModel:
+        """Learn prototypes and the VLMM from motions (resampled to ``fps``); returns self."""
+        if self.quantiser not in QUANTISERS:
+            raise ValueError(f"quantiser must be one of {QUANTISERS}")
+        motions = [m.resample(self.fps) for m in motions]
+        self.skeleton_ = motions[0].skeleton
+        self.pipeline_ = self._make_pipeline()
+        feats = self.pipeline_.fit_transform(motions)
+        x = np.vstack(feats)
+        if self.quantiser == "kmeans":
+            self.prototypes_ = kmeans_prototypes(x, self.n_prototypes, seed=self.seed)
+        else:
+            self.prototypes_ = competitive_learning(x, self.n_prototypes, seed=self.seed)
+        runs = [collapse_repeats(nearest_prototype(f, self.prototypes_)) for f in feats]
+        self.train_tokens_ = np.concatenate([r[0] for r in runs])
+        self.train_lengths_ = np.array([len(r[0]) for r in runs])
+        self.eval_joints_ = evaluation_joints(motions)
+        self.vlmm_ = VLMM(self.max_memory, self.epsilon).fit(
+            self.token_sequences(), n_symbols=self.n_prototypes
+        )
+        return self
+
+    def token_sequences(self) -> list[np.ndarray]:
+        """The collapsed prototype sequences of the training motions."""
+        return np.split(self.train_tokens_, np.cumsum(self.train_lengths_)[:-1])
+
+    def with_vlmm(self, max_memory: int, epsilon: float) -> BehaviourModel:
+        """The same prototypes with another VLMM trained on the same tokens
+        (``max_memory=1, epsilon=0`` is the first-order Markov model)."""
+        other = copy.copy(self)
+        other.max_memory, other.epsilon = max_memory, epsilon
+        other.vlmm_ = VLMM(max_memory, epsilon).fit(
+            self.token_sequences(), n_symbols=self.n_prototypes
+        )
+        return other
+
+    # ------------------------------------------------------------- features
+    @property
+    def n_dims(self) -> int:
+        """d, the dimension of the configuration C (prototypes are 2d long)."""
+        return self.prototypes_.shape[1] // 2
+
+    def observe(self, motions: Sequence[Motion]) -> list[np.ndarray]:
+        """Augmented configuration vectors (F, 2d) of motions, at the model's frame rate."""
+        return self.pipeline_.transform([m.resample(self.fps) for m in motions])
+
+    def knots(self, tokens: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Configurations C and their per-frame derivatives dC of prototypes (eq. 2)."""
+        p = self.prototypes_[np.asarray(tokens)]
+        return p[..., : self.n_dims], p[..., self.n_dims :] / self.lam
+
+    def intervals(self, c: np.ndarray, dc: np.ndarray) -> np.ndarray:
+        """Frames between successive knots: eq. 8 times ``time_scale``, at least one frame."""
+        tau = constant_acceleration_intervals(c, dc) * self.time_scale
+        return np.clip(tau, 1.0, self.max_interval * self.fps)
+
+    def synthesise(
+        self, tokens: np.ndarray, start: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """Configurations (F, d) at the frame rate through the prototypes ``tokens``.
+
+        Cubic Hermite interpolation with the prototypes' derivatives as tangents
+        and eq. 8 intervals (§3.2.1); ``start`` = (C, dC) puts a first knot
+        before the prototypes (the current observed configuration).
+        """
+        c, dc = self.knots(tokens)
+        if start is not None:
+            c, dc = np.vstack([start[0], c]), np.vstack([start[1], dc])
+        if len(c) == 1:
+            return c.copy()
+        times = np.r_[0.0, np.cumsum(self.intervals(c, dc))]
+        return hermite_sample(c, dc, times, np.arange(int(np.floor(times[-1])) + 1))
+
+    def to_motion(self, configs: np.ndarray) -> Motion:
+        """Scaled configurations (F, d) back to a motion on the training skeleton."""
+        out = self.pipeline_.inverse_transform([configs])[0]
+        if isinstance(out, Motion):
+            return out
+        # positions: fit rotations to the skeleton, feet on the floor
+        pos = out - np.array([0.0, 1.0, 0.0]) * out[..., 1].min(axis=1)[:, None, None]
+        return fit_rotations(self.skeleton_, pos, fps=self.fps)
+
+    def configuration_positions(self, configs: np.ndarray) -> np.ndarray:
+        """Positions (M, J_eval, 3) in mm of the evaluated joints for scaled configurations (M, d)."""
+        raw = self.pipeline_.steps[-1].inverse_transform([configs])[0]
+        raw = self.pipeline_.steps[-2].inverse_transform([raw])[0]
+        if self.configuration == "positions":
+            return raw.reshape(len(raw), -1, 3)[:, self.eval_joints_]
+        expmaps = self.pipeline_.steps[1]
+        sk = expmaps.skeleton_
+        n_rot = 3 * len(expmaps.joint_index_)
+        rotvecs = np.zeros((len(raw), sk.n_joints, 3))
+        rotvecs[:, expmaps.joint_index_] = raw[:, :n_rot].reshape(len(raw), -1, 3)
+        root = np.tile(sk.offsets[sk.body_root], (len(raw), 1))
+        root[:, 1] = raw[:, n_rot]
+        return rotvec_positions(sk, rotvecs, root, self.eval_joints_, root_joint=sk.body_root)
+
+    # ----------------------------------------------------------- generation
+    def generate_tokens(self, seconds: float, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Prototypes from a start state until they span ``seconds`` (§3.2.1)."""
+        n_frames = seconds * self.fps
+        start = self.vlmm_.start_state(rng)
+        state = np.array([start])
+        # the start state's memory ends with the first prototype of the routine
+        memory = self.vlmm_.memories_[start]
+        tokens = [int(memory[-1])] if len(memory) and memory[-1] >= 0 else []
+        prev = tokens[0] if tokens else None
+        total = 0.0
+        while total < n_frames:
+            tok, state = self.vlmm_.step(state, rng)
+            if prev is not None:
+                c, dc = self.knots(np.array([prev, tok[0]]))
+                total += float(self.intervals(c, dc)[0])
+            tokens.append(int(tok[0]))
+            prev = tok[0]
+        return np.array(tokens)
+
+    def generate(self, seconds: float, rng: np.random.Generator | None = None) -> Motion:
+        """A new routine of about ``seconds``: stochastic with ``rng``, else maximum likelihood."""
+        configs = self.synthesise(self.generate_tokens(seconds, rng))
+        return self.to_motion(configs[: int(round(seconds * self.fps)) + 1])
+
+    # ----------------------------------------------------------- prediction
+    def prepare(self, features: np.ndarray) -> np.ndarray:
+        """The automaton state at every frame, recognising the observed prototypes (§3.2.2)."""
+        tokens, starts = collapse_repeats(nearest_prototype(features, self.prototypes_))
+        states = self.vlmm_.recognise(tokens)
+        return np.repeat(states, np.diff(np.r_[starts, len(features)]))
+
+    def predict_configurations(
+        self,
+        features: np.ndarray,
+        prepared: np.ndarray,
+        frames: np.ndarray,
+        horizon: int,
+        n_samples: int,
+        rng: np.random.Generator | None,
+    ) -> np.ndarray:
+        """(len(frames), n_samples, horizon, d) predicted configurations after each frame.
+
+        From the state at frame t, ``n_samples`` traversals (stochastic with
+        ``rng``, else maximum likelihood) emit prototypes until ``horizon``
+        frames are covered; the curve starts at the observed C_t, dC_t.
+        """
+        frames = np.asarray(frames)
+        c0, dc0 = self.start_knots(features, frames, n_samples)
+        states = np.repeat(prepared[frames], n_samples)
+        first = np.zeros(len(states))
+        times = np.zeros(len(states))
+        tokens, prev = [], None
+        while times.min() < horizon:
+            tok, states = self.vlmm_.step(states, rng)
+            if prev is None:
+                c, dc = self.knots(tok)
+                first = self.intervals(np.stack([c0, c], 1), np.stack([dc0, dc], 1))[:, 0]
+                times = first.copy()
+            else:
+                times = times + self.pair_intervals[prev, tok]
+            tokens.append(tok)
+            prev = tok
+        out = self.continuation(np.stack(tokens, axis=1), c0, dc0, horizon)
+        return out.reshape(len(frames), n_samples, horizon, self.n_dims)
+
+    def start_knots(
+        self, features: np.ndarray, frames: np.ndarray, n_samples: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The observed C_t and dC_t at ``frames``, each repeated ``n_samples`` times."""
+        d = self.n_dims
+        c0 = np.repeat(features[frames, :d], n_samples, axis=0)
+        return c0, np.repeat(features[frames, d:] / self.lam, n_samples, axis=0)
+
+    @property
+    def pair_intervals(self) -> np.ndarray:
+        """(K, K) eq. 8 intervals in frames between every two prototypes."""
+        if not hasattr(self, "_pair_intervals"):
+            c, dc = self.knots(np.arange(len(self.prototypes_)))
+            k = len(c)
+            pairs_c = np.stack([np.repeat(c, k, 0), np.tile(c, (k, 1))], axis=1)
+            pairs_dc = np.stack([np.repeat(dc, k, 0), np.tile(dc, (k, 1))], axis=1)
+            self._pair_intervals = self.intervals(pairs_c, pairs_dc)[:, 0].reshape(k, k)
+        return self._pair_intervals
+
+    def continuation(
+        self, tokens: np.ndarray, c0: np.ndarray, dc0: np.ndarray, horizon: int
+    ) -> np.ndarray:
+        """(P, horizon, d) curves from (C0, dC0) through the prototypes ``tokens`` (P, R).
+
+        Frames 1..horizon after the start; the prototypes must span the horizon.
+        """
+        c, dc = self.knots(tokens)
+        c = np.concatenate([c0[:, None], c], axis=1)
+        dc = np.concatenate([dc0[:, None], dc], axis=1)
+        times = np.concatenate(
+            [np.zeros((len(c), 1)), np.cumsum(self.intervals(c, dc), axis=1)], axis=1
+        )
+        return hermite_sample(c, dc, times, np.arange(1, horizon + 1))
+
+    def predict(
+        self, motion: Motion, seconds: float, rng: np.random.Generator | None = None
+    ) -> Motion:
+        """The observed motion followed by ``seconds`` of predicted continuation."""
+        feats = self.observe([motion])[0]
+        states = self.prepare(feats)
+        horizon = int(round(seconds * self.fps))
+        pred = self.predict_configurations(
+            feats, states, np.array([len(feats) - 1]), horizon, 1, rng
+        )[0, 0]
+        return self.to_motion(np.vstack([feats[:, : self.n_dims], pred]))
+
+    # ------------------------------------------------------------- files
+    def save(self, path: str | os.PathLike[str], extra: dict | None = None) -> None:
+        """Write the model (and its feature pipeline) to an ``.npz`` with a JSON header."""
+        save_behaviour_model(self, path, extra)
+
+
+def save_behaviour_model(
+    model: BaseEstimator, path: str | os.PathLike[str], extra: dict | None = None
+) -> None:
+    """Write a behaviour model (its state, arrays and ``extra`` header entries) to ``path``."""
+    arrays: dict[str, np.ndarray] = {}
+    header = {"model": estimator_state(model, "model", arrays), **(extra or {})}
+    save_npz(path, MODEL_KIND, header, arrays)
+
+
+def load_behaviour_model(path: str | os.PathLike[str]) -> tuple[BaseEstimator, dict]:
+    """A model written by :meth:`BehaviourModel.save` (or the structured model) and its header."""
+    from markovmotion.models import structured_vlmm  # noqa: F401 - registers its class
+
+    header, arrays = load_npz(path, MODEL_KIND)
+    return restore_estimator(header["model"], arrays), header

@@ -1,0 +1,457 @@
+"""Dual HMM: the responsive motion of person B from the motion of person A (dual-HMM paper).
+
+The model (§2, eqs. 1-2) is one chain -- initial distribution pi and
+transition matrix T -- with two emission sets: lambda_A = (T, B_A, pi) over
+A's poses and lambda_B = (T, B_B, pi) over B's, each pose reduced by PCA to
+95 % of its energy. Two ways to learn it:
+
+- ``mode="paper"``: EM on A alone; B's state Gaussians are B's frames
+  weighted by A's state posteriors.
+- ``mode="joint"``: EM on the concatenated [A, B] vectors; B_A and B_B are
+  the marginals of each state's Gaussian.
+
+Generation (§3): A's states by standard Viterbi over the whole input, or by
+the windowed Viterbi decoder frame by frame (:mod:`.windowed_viterbi`); then
+B's poses through the trellis of §3.2. Column t of the trellis holds
+``candidates`` training frames of B from state q_t, those whose paired A
+frames are nearest the input A pose; D4 is that Mahalanobis distance (under
+B_A of q_t) and D1..DK the Mahalanobis distances (under B_B of q_t) from a
+candidate to the candidates of column t - 1. A step into candidate j costs
+(D_k) x D4, so the error of a path is a sum of (D1 + D2 + D3)-type terms
+weighted by D4, with E = D4 in the first column; the lowest-error path is
+back-tracked. Online, where nothing can be back-tracked, the candidate with
+the lowest error given the frame already shown is taken.
+
+Features. A is seen as body-centred joint positions (mm) + PCA, as the
+paper's marker positions. B is modelled as joint positions *in A's ground
+frame* (A's pelvis on the floor, A's heading) + PCA, so that B_B and D1..DK
+measure what the evaluation measures: where B's joints are relative to A, in
+mm. The trellis picks real training frames of B, kept as exponential maps
+(with B's root relative to A), so the output is a Motion on B's skeleton
+without inverse kinematics; it is put back into the world through A's own
+ground frame.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from sklearn.base import BaseEstimator
+
+from markovmotion.algorithms.hmm_recursions import viterbi
+from markovmotion.core.motion import UP, Motion
+from markovmotion.errors import SkeletonMismatchError
+from markovmotion.features import PCA, ExpMaps, FeaturePipeline, JointPositions
+from markovmotion.models.hmm import (
+    GaussianHMM,
+    check_sequences,
+    gaussian_log_density,
+    precision_cholesky,
+    safe_log,
+    weighted_gaussians,
+)
+from markovmotion.models.windowed_viterbi import (
+    INITIAL,
+    WindowedViterbi,
+    start_distribution,
+    windowed_viterbi,
+)
+from markovmotion.persist import load_npz, save_npz
+from markovmotion.progress import err_console
+from markovmotion.state import estimator_state, register, restore_estimator
+
+KIND = "dual_hmm"
+MODES = ("paper", "joint")
+METHODS = ("standard", "windowed")
+
+
+# ------------------------------------------------------------------ A's ground frame
+def ground_frame(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """Where a person stands and faces, per frame: pelvis on the floor (F, 3) and heading (F,)."""
+    pos = motion.positions()
+    origin = pos[:, motion.skeleton.body_root].copy()
+    origin[:, 1] = 0.0
+    return origin, motion.heading(pos)
+
+
+def into_frame(motion: Motion, origin: np.ndarray, yaw: np.ndarray) -> Motion:
+    """``motion`` seen from the per-frame ground frame (origin, yaw): a rigid move of its root."""
+    turn = Rotation.from_rotvec(np.outer(-yaw, UP))
+    out = motion.copy()
+    out.rotations[:, 0] = (turn * Rotation.from_quat(motion.rotations[:, 0])).as_quat()
+    out.translations[:, 0] = turn.apply(motion.translations[:, 0] - origin)
+    return out
+
+
+def out_of_frame(motion: Motion, origin: np.ndarray, yaw: np.ndarray) -> Motion:
+    """Inverse of :func:`into_frame`: back to world coordinates."""
+    turn = Rotation.from_rotvec(np.outer(yaw, UP))
+    out = motion.copy()
+    out.rotations[:, 0] = (turn * Rotation.from_quat(motion.rotations[:, 0])).as_quat()
+    out.translations[:, 0] = turn.apply(motion.translations[:, 0]) + origin
+    return out
+
+
+def finite_frames(motion: Motion) -> np.ndarray:
+    """(F,) whether each frame's rotations and translations are all finite numbers."""
+    return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
+        axis=(1, 2)
+    )
+
+
+# ------------------------------------------------------------------ the trellis of §3.2
+@dataclass
+class _Trellis:
+    """Training frames grouped by state, pre-whitened for the Mahalanobis distances of §3.2."""
+
+    members: list[np.ndarray]  # per state: indices of its training frames
+    white_a: list[np.ndarray]  # per state: their A vectors @ P_A[k]
+    prec_a: np.ndarray  # (N, Da, Da)
+    prec_b: np.ndarray  # (N, Db, Db)
+    train_b: np.ndarray  # (frames, Db)
+    size: int
+
+    def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
+        wa = self.white_a[state]
+        k = min(self.size, len(wa))
+        if xa is None:
+            d4 = np.linalg.norm(wa - wa.mean(axis=0), axis=1)
+        else:
+            d4 = np.linalg.norm(wa - xa @ self.prec_a[state], axis=1)
+        pick = np.argpartition(d4, k - 1)[:k] if k < len(wa) else np.arange(len(wa))
+        return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
+
+    def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
+        """(K, K') Mahalanobis distances D1..DK' between B candidates, under B_B of ``state``."""
+        p = self.prec_b[state]
+        return np.linalg.norm(
+            (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
+        )
+
+    def best_path(self, states: np.ndarray, xa: np.ndarray, missing: np.ndarray) -> np.ndarray:
+        """Training-frame index per frame on the lowest-error path (standard generation)."""
+        cols = [
+            self.candidates(q, None if m else x)
+            for q, x, m in zip(states, xa, missing, strict=True)
+        ]
+        cost = cols[0][1]
+        back = []
+        for t in range(1, len(cols)):
+            idx, d4 = cols[t]
+            total = cost[None, :] + self.distances(states[t], idx, cols[t - 1][0]) * d4[:, None]
+            back.append(total.argmin(axis=1))
+            cost = total.min(axis=1)
+        j = int(cost.argmin())
+        path = [cols[-1][0][j]]
+        for t in range(len(cols) - 1, 0, -1):
+            j = int(back[t - 1][j])
+            path.append(cols[t - 1][0][j])
+        return np.array(path[::-1], dtype=int)
+
+    def next_frame(self, state: int, xa: np.ndarray | None, previous: int | None) -> int:
+        """Online: the lowest-error candidate given the frame already chosen (E = D x D4)."""
+        idx, d4 = self.candidates(state, xa)
+        if previous is not None:
+            d4 = d4 * self.distances(state, idx, np.array([previous]))[:, 0]
+        return int(idx[np.argmin(d4)])
+
+
+# ------------------------------------------------------------------ the model
+@register
+class DualHMM(BaseEstimator):
+    """Dual HMM of two interacting people; generates B from A offline or online.
+
+    Args:
+        n_states: hidden states N.
+        mode: ``"paper"`` or ``"joint"`` (module docstring).
+        energy: PCA energy kept per person (the paper's 95 %).
+        fps: the model's frame rate; motions at other rates are resampled.
+        window: windowed-Viterbi slice length T (the paper's 10).
+        initial: first slice's pi, ``"middle"`` (eq. 3) or ``"prior"`` (learnt pi).
+        candidates: trellis entries per column (the paper's figure has 3).
+        n_iter, tol, var_floor, random_state: EM settings (:class:`GaussianHMM`).
+
+    Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
+    and T), ``pipeline_a_`` / ``pipeline_b_`` (features), ``expmaps_b_`` and
+    ``frames_b_`` (B's training frames), ``train_a_`` / ``train_b_`` (their
+    features), ``train_states_``, ``skeleton_a_`` / ``skeleton_b_``.
+    """
+
+    def __init__(
+        self,
+        n_states: int = 32,
+        mode: str = "paper",
+        energy: float = 0.95,
+        fps: float = 30.0,
+        window: int = 10,
+        initial: str = "middle",
+        candidates: int = 3,
+        n_iter: int = 50,
+        tol: float = 1e-2,
+        var_floor: float = 1e-3,
+        random_state: int | None = 0,
+    ):
+        self.n_states = n_states
+        self.mode = mode
+        self.energy = energy
+        self.fps = fps
+        self.window = window
+        self.initial = initial
+        self.candidates = candidates
+        self.n_iter = n_iter
+        self.tol = tol
+        self.var_floor = var_floor
+        self.random_state = random_state
+
+    # ---------------------------------------------------------------- fitting
+    def fit(self, pairs: Sequence[tuple[Motion, Motion]]) -> DualHMM:
+        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A)."""
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        if self.initial not in INITIAL:
+            raise ValueError(f"initial must be one of {INITIAL}, got {self.initial!r}")
+        if not pairs:
+            raise ValueError("no two-person takes to learn from")
+        a_list, b_rel = [], []
+        for a, b in pairs:
+            if a.n_frames != b.n_frames:
+                raise ValueError(f"{a.name} and {b.name} differ in length")
+            a, b = self._rate(a), self._rate(b)
+            a_list.append(a)
+            b_rel.append(into_frame(b, *ground_frame(a)))
+        self.skeleton_a_ = a_list[0].skeleton
+        self.skeleton_b_ = b_rel[0].skeleton
+        self.pipeline_a_ = FeaturePipeline([JointPositions(), PCA(self.energy)])
+        self.pipeline_b_ = FeaturePipeline([JointPositions(body_centred=False), PCA(self.energy)])
+        self.expmaps_b_ = ExpMaps(root_position="full")
+        xa, lengths = check_sequences(
+            np.vstack(self.pipeline_a_.fit_transform(a_list)), [len(m) for m in a_list]
+        )
+        xb = np.vstack(self.pipeline_b_.fit_transform(b_rel))
+        self.frames_b_ = np.vstack(self.expmaps_b_.fit_transform(b_rel)).astype(np.float32)
+        self.train_a_, self.train_b_ = xa, xb
+        hmm = GaussianHMM(
+            self.n_states, self.n_iter, self.tol, self.var_floor, random_state=self.random_state
+        )
+        da = xa.shape[1]
+        if self.mode == "paper":
+            self.lambda_a_ = hmm.fit(xa, lengths)
+            gamma = hmm.predict_proba(xa, lengths)
+            floor = self.var_floor * np.var(xb, axis=0).mean()
+            means_b, covars_b, _ = weighted_gaussians(xb, gamma, floor)
+            self.lambda_b_ = _sharing_chain(hmm, means_b, covars_b, floor)
+            self.train_states_ = hmm.decode(xa, lengths)[1]
+        else:
+            xab = np.hstack([xa, xb])
+            joint = hmm.fit(xab, lengths)
+            self.train_states_ = joint.decode(xab, lengths)[1]
+            m, c, floor = joint.means_, joint.covars_, joint.covar_floor_
+            self.lambda_a_ = _sharing_chain(joint, m[:, :da], c[:, :da, :da], floor)
+            self.lambda_b_ = _sharing_chain(joint, m[:, da:], c[:, da:, da:], floor)
+        self.history_ = hmm.history_
+        self._trellis_cache = None
+        return self
+
+    def _rate(self, motion: Motion) -> Motion:
+        return motion if np.isclose(motion.fps, self.fps) else motion.resample(self.fps)
+
+    # ---------------------------------------------------------------- generation
+    def check_input(self, motion: Motion, source: str | os.PathLike[str] | None = None) -> None:
+        """Raise :class:`SkeletonMismatchError` (naming ``source``) unless A's skeleton is the model's."""
+        try:
+            self.skeleton_a_.check_compatible(motion.skeleton, "input")
+        except SkeletonMismatchError as exc:
+            where = source or motion.name or "input motion"
+            raise SkeletonMismatchError(
+                f"{where}: person A's skeleton is not the model's ({exc})"
+            ) from None
+
+    def features_a(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+        """A's model features (F, Da) at the model's rate and which frames are missing (NaN)."""
+        missing = ~finite_frames(motion)
+        if missing.any():
+            fixed = motion.copy()
+            fixed.rotations[missing] = [0.0, 0.0, 0.0, 1.0]
+            fixed.translations[missing] = motion.skeleton.offsets
+            motion = fixed
+        return self.pipeline_a_.transform([motion])[0], missing
+
+    def generate(self, motion_a: Motion, method: str = "standard") -> Motion:
+        """B's responsive motion to ``motion_a`` (at the model's rate, in A's world).
+
+        ``method="standard"``: Viterbi over all of A, lowest-error trellis path.
+        ``method="windowed"``: exactly what :meth:`partner` streams, frame by frame.
+        Frames of A with NaN values count as missing observations.
+        """
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        self.check_input(motion_a)
+        motion_a = self._rate(motion_a)
+        xa, missing = self.features_a(motion_a)
+        log_b = self.lambda_a_.log_frameprob(xa)
+        log_b[missing] = 0.0
+        trellis = self._trellis()
+        if method == "standard":
+            states = self.decode(log_b)
+            idx = trellis.best_path(states, xa, missing)
+        else:
+            start = start_distribution(safe_log(self.lambda_a_.startprob_), self.initial)
+            states = windowed_viterbi(start, safe_log(self.lambda_a_.transmat_), log_b, self.window)
+            idx = np.empty(len(states), dtype=int)
+            prev = None
+            for t, q in enumerate(states):
+                prev = idx[t] = trellis.next_frame(q, None if missing[t] else xa[t], prev)
+        return self.frames_to_motion(idx, *ground_frame(_fill_missing(motion_a, missing)))
+
+    def decode(self, log_frameprob: np.ndarray) -> np.ndarray:
+        """Standard Viterbi states of A's frames from their log emission probabilities."""
+        hmm = self.lambda_a_
+        return viterbi(safe_log(hmm.startprob_), safe_log(hmm.transmat_), log_frameprob)[0]
+
+    def frames_to_motion(self, idx: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
+        """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw)."""
+        rel = self.expmaps_b_.inverse_transform([self.frames_b_[idx].astype(float)])[0]
+        out = out_of_frame(rel, origin, yaw)
+        out.fps = self.fps
+        return out
+
+    def partner(self, window: int | None = None) -> Partner:
+        """An online virtual partner (windowed Viterbi; ``window`` defaults to the model's)."""
+        return Partner(self, window or self.window)
+
+    def _trellis(self) -> _Trellis:
+        cache = getattr(self, "_trellis_cache", None)
+        if cache is not None:
+            return cache
+        prec_a, _ = precision_cholesky(self.lambda_a_.covars_)
+        prec_b, _ = precision_cholesky(self.lambda_b_.covars_)
+        members, white = [], []
+        for k in range(self.n_states):
+            idx = np.flatnonzero(self.train_states_ == k)
+            if len(idx) < self.candidates:  # a state no training frame decodes to: nearest frames
+                d = np.linalg.norm((self.train_a_ - self.lambda_a_.means_[k]) @ prec_a[k], axis=1)
+                idx = np.argsort(d)[: self.candidates]
+            members.append(idx)
+            white.append(self.train_a_[idx] @ prec_a[k])
+        self._trellis_cache = _Trellis(
+            members, white, prec_a, prec_b, self.train_b_, self.candidates
+        )
+        return self._trellis_cache
+
+    # ---------------------------------------------------------------- files
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the model (pipelines and skeletons in the header) to an ``.npz``."""
+        arrays: dict[str, np.ndarray] = {}
+        save_npz(path, KIND, {"model": estimator_state(self, "model", arrays)}, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> DualHMM:
+        """Read a model written by :meth:`save` (:class:`ModelFormatError` if it is not one)."""
+        header, arrays = load_npz(path, KIND)
+        return restore_estimator(header["model"], arrays)
+
+
+def _sharing_chain(
+    hmm: GaussianHMM, means: np.ndarray, covars: np.ndarray, floor: float
+) -> GaussianHMM:
+    """lambda = (T, B, pi) with ``hmm``'s pi and T and the Gaussians given (eqs. 1-2)."""
+    out = GaussianHMM(hmm.n_components, hmm.n_iter, hmm.tol, hmm.var_floor)
+    out.startprob_, out.transmat_ = hmm.startprob_, hmm.transmat_
+    out.means_, out.covars_, out.covar_floor_ = means, covars, floor
+    out.history_, out.n_iter_, out.converged_ = hmm.history_, hmm.n_iter_, hmm.converged_
+    return out
+
+
+def _fill_missing(motion: Motion, missing: np.ndarray) -> Motion:
+    """Missing frames replaced by the last finite one (A's place for the B frames shown then)."""
+    if not missing.any():
+        return motion
+    keep = np.maximum.accumulate(np.where(missing, 0, np.arange(len(missing))))
+    if missing[0]:
+        first = int(np.argmin(missing))
+        keep[:first] = first
+    out = motion.copy()
+    out.rotations, out.translations = motion.rotations[keep], motion.translations[keep]
+    return out
+
+
+class Partner:
+    """The virtual partner online: one frame of A in, one frame of B out, ``lag`` frames late.
+
+    ``lag = window - 1`` frames (0.30 s at 30 fps with the paper's window of
+    10): the windowed decoder fixes frame t's state when frame t + window - 2
+    arrives (frame 0 one frame later), and one more frame keeps the output
+    regular. :meth:`step` returns None until the first B frame is due;
+    :meth:`finish` returns the last ``lag`` frames. A frame that is None or
+    holds NaN is a missing observation: a warning, and the partner goes on
+    from the dynamics alone.
+    """
+
+    def __init__(self, model: DualHMM, window: int):
+        self.model = model
+        hmm = model.lambda_a_
+        start = start_distribution(safe_log(hmm.startprob_), model.initial)
+        self.decoder = WindowedViterbi(start, safe_log(hmm.transmat_), window)
+        self.lag = window - 1
+        self._trellis = model._trellis()
+        prec, log_det = precision_cholesky(hmm.covars_)
+        self._emission = (hmm.means_, prec, log_det)
+        self._inputs: deque = deque()  # (features or None, origin, yaw) of undecided frames
+        self._decided: deque = deque()  # (training frame, origin, yaw) not yet returned
+        self._previous: int | None = None
+        self._frames_in = 0
+        self._place = (np.zeros(3), 0.0)
+
+    def step_features(self, xa: np.ndarray | None, place: tuple[np.ndarray, float]) -> int:
+        """Feed A's features (None: missing); returns how many B frames became decided."""
+        if xa is None:
+            log_b = np.zeros(len(self._emission[0]))
+        else:
+            log_b = gaussian_log_density(xa[None], *self._emission)[0]
+        self._inputs.append((xa, place))
+        states = self.decoder.push(log_b)
+        self._decide(states)
+        return len(states)
+
+    def _decide(self, states: list[int]) -> None:
+        for q in states:
+            xa, place = self._inputs.popleft()
+            self._previous = self._trellis.next_frame(q, xa, self._previous)
+            self._decided.append((self._previous, place))
+
+    def step(self, frame: Motion | None) -> Motion | None:
+        """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
+        if frame is None or not finite_frames(frame)[0]:
+            err_console.print(
+                f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
+                highlight=False,
+            )
+            return self.skip()
+        self.model.check_input(frame)
+        origin, yaw = ground_frame(frame)
+        self._place = (origin[0], float(yaw[0]))
+        return self._advance(self.model.features_a(frame)[0][0])
+
+    def skip(self) -> Motion | None:
+        """A frame the caller could not deliver (dropped): no observation, no warning."""
+        return self._advance(None)
+
+    def _advance(self, xa: np.ndarray | None) -> Motion | None:
+        self.step_features(xa, self._place)
+        self._frames_in += 1
+        return None if self._frames_in <= self.lag else self._emit()
+
+    def finish(self) -> list[Motion]:
+        """B's frames still owed at the end of the stream."""
+        self._decide(self.decoder.flush())
+        return [self._emit() for _ in range(len(self._decided))]
+
+    def _emit(self) -> Motion:
+        idx, (origin, yaw) = self._decided.popleft()
+        return self.model.frames_to_motion(np.array([idx]), origin[None], np.array([yaw]))

@@ -1,0 +1,361 @@
+"""Stylistic gait synthesis with HSMMs: train, synthesize, save (gait paper §4-5).
+
+:class:`GaitSynthesizer` turns walks into exponential maps of every rotating
+joint (root translation dropped, each walk turned to travel along +Z, §4;
+rotations taken relative to the mean pose, far from the exponential map's
+singularity: :class:`~markovmotion.features.reference_pose.ReferencePose`),
+appends delta and delta-delta features (eqs. 2-3), cuts the walks into steps
+at heel strikes (:mod:`markovmotion.features.gait`), and trains
+context-dependent five-state HSMMs of left and right steps
+(:class:`~markovmotion.models.hsmm.HSMM`). Synthesis concatenates the step
+models of the walk asked for, takes state durations from the duration
+densities, generates the joint angles by MLPG with global variance
+(:mod:`markovmotion.generate.mlpg`) and computes the root travel from foot
+contact (§5.1.4).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from markovmotion.core.motion import Motion
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.features import ExpMaps, FeaturePipeline, add_deltas
+from markovmotion.features.gait import (
+    CONTEXTS,
+    SIDES,
+    align_walk,
+    context_id,
+    context_questions,
+    detect_steps,
+    foot_joints,
+    root_from_contact,
+    step_positions,
+)
+from markovmotion.features.reference_pose import ReferencePose
+from markovmotion.generate.mlpg import global_variance, mlpg, mlpg_gv
+from markovmotion.models.adaptation import adapt, walker_adaptive_training
+from markovmotion.models.hsmm import HSMM
+from markovmotion.persist import load_npz, save_npz
+from markovmotion.state import estimator_state, register, restore_estimator
+
+KIND = "gait-hsmm"
+WAT_UNITS = ("none", "take", "unit")
+ROLES = ("average", "adapted", "scratch")
+#: The walks of the shared collection used by default: Bandai Namco dataset-2
+#: (about 20 takes of each of 7 styles, one skeleton).
+DEFAULT_SUBSET = "bandai/dataset-2/"
+#: Every TEST_EVERY-th take of each style (sorted by file) is held out for evaluation.
+TEST_EVERY = 4
+
+
+def gait_entries(
+    index: MocapIndex, labels: str | Sequence[str] | None = None, subset: str = DEFAULT_SUBSET
+) -> list[Entry]:
+    """Walk entries (neutral and styled) whose file starts with ``subset``, optionally of some labels."""
+    rows = index.query(category=["walk", "style_walk"], label=labels)
+    return sorted((e for e in rows if e.file.startswith(subset)), key=lambda e: e.file)
+
+
+def split_walks(entries: Sequence[Entry]) -> tuple[list[Entry], list[Entry]]:
+    """(training, held-out) takes: every ``TEST_EVERY``-th take of each label is held out."""
+    train, test = [], []
+    for label in sorted({e.label for e in entries}):
+        rows = sorted((e for e in entries if e.label == label), key=lambda e: e.file)
+        for i, e in enumerate(rows):
+            (test if i % TEST_EVERY == TEST_EVERY - 1 else train).append(e)
+    return train, test
+
+
+@dataclass
+class WalkSet:
+    """Walks as HSMM training data: observations from the first to the last heel strike.
+
+    Attributes:
+        names: one per walk (file names).
+        obs: (T_i, 3D) [static, delta, delta-delta] exponential maps.
+        contexts: (n_i,) context id of each step (:data:`~markovmotion.features.gait.CONTEXTS`).
+        boundaries: (n_i + 1,) first frame of each step in ``obs``, then T_i.
+        floor: height in mm of the lowest foot point when standing (median over frames).
+    """
+
+    names: list[str]
+    obs: list[np.ndarray]
+    contexts: list[np.ndarray]
+    boundaries: list[np.ndarray]
+    floor: float = 0.0
+    units: list[str] = field(default_factory=list)
+
+    @property
+    def n_steps(self) -> int:
+        return int(sum(len(c) for c in self.contexts))
+
+    def first_steps(self, n_steps: int | None) -> WalkSet:
+        """The first ``n_steps`` steps, walk after walk (the last walk cut short; contexts kept).
+
+        Raises:
+            DataNotFoundError: the walks hold fewer than ``n_steps`` steps.
+        """
+        if n_steps is None:
+            return self
+        if n_steps > self.n_steps:
+            raise DataNotFoundError(
+                f"{', '.join(self.names[:3])}{', ...' if len(self.names) > 3 else ''}: "
+                f"{n_steps} steps asked, only {self.n_steps} found in {len(self.names)} walks"
+            )
+        out = WalkSet([], [], [], [], self.floor, [])
+        left = n_steps
+        for i, (name, x, c, b) in enumerate(
+            zip(self.names, self.obs, self.contexts, self.boundaries, strict=True)
+        ):
+            if left <= 0:
+                break
+            k = min(left, len(c))
+            out.names.append(name)
+            out.obs.append(x[: b[k]])
+            out.contexts.append(c[:k])
+            out.boundaries.append(b[: k + 1])
+            out.units.append(self.units[i] if self.units else name)
+            left -= k
+        return out
+
+    def gv(self) -> np.ndarray:
+        """(walks, D) global variance of the static features of each walk (eq. 14)."""
+        return np.array([global_variance(x[:, : x.shape[1] // 3]) for x in self.obs])
+
+
+def walk_set(
+    motions: Sequence[Motion], pipeline: FeaturePipeline, units: Sequence[str] | None = None
+) -> WalkSet:
+    """Align, segment and featurise walks with a fitted ``pipeline`` (Motion -> static features).
+
+    Raises:
+        MotionFormatError: a walk in which fewer than two heel strikes are found.
+    """
+    out = WalkSet([], [], [], [], 0.0, [])
+    floors = []
+    for i, m in enumerate(motions):
+        aligned = align_walk(m)
+        pos = aligned.positions()
+        steps = detect_steps(aligned, pos)
+        if steps.n_steps < 1:
+            raise MotionFormatError(
+                m.name or "walk", "no steps found (fewer than two heel strikes)"
+            )
+        b = steps.boundaries
+        static = pipeline.transform([aligned])[0]
+        out.names.append(m.name)
+        out.obs.append(add_deltas(static)[b[0] : b[-1]])
+        out.contexts.append(steps.contexts())
+        out.boundaries.append(b - b[0])
+        out.units.append(units[i] if units is not None else m.name)
+        feet = [j for pair in foot_joints(aligned).values() for j in pair]
+        floors.append(np.median(pos[:, feet, 1].min(axis=1)))
+    out.floor = float(np.median(floors)) if floors else 0.0
+    return out
+
+
+def walk_contexts(n_steps: int, first_side: str = "R") -> tuple[np.ndarray, tuple[str, ...]]:
+    """Context ids and sides of a walk of ``n_steps`` steps, sides alternating from ``first_side``."""
+    if first_side not in SIDES:
+        raise ValueError(f"first_side must be one of {SIDES}")
+    start = SIDES.index(first_side)
+    sides = tuple(SIDES[(start + k) % 2] for k in range(n_steps))
+    ids = [context_id(s, p) for s, p in zip(sides, step_positions(n_steps), strict=True)]
+    return np.array(ids, dtype=int), sides
+
+
+@register
+class GaitSynthesizer(BaseEstimator):
+    """An HSMM walk model with its feature pipeline and global-variance statistics.
+
+    Args:
+        n_states: HSMM states per step (5 in the paper).
+        n_iter: EM iterations.
+        mdl_factor: MDL weight of context clustering.
+        var_floor: output variance floor as a fraction of the data variance.
+        wat: walker-adaptive training (§5.1.2) with one transform per
+            ``"take"``, per unit given to :meth:`fit` (``"unit"``: a walker, a
+            dataset), or ``"none"``.
+
+    Learnt: ``pipeline_`` (exponential maps), ``hsmm_``, ``gv_mean_``/``gv_var_``
+    (D,) global variance Gaussian, ``floor_`` (mm), ``fps_``, and what it was
+    trained on: ``role_``, ``style_``, ``files_``, ``n_steps_``.
+    """
+
+    def __init__(
+        self,
+        n_states: int = 5,
+        n_iter: int = 10,
+        mdl_factor: float = 1.0,
+        var_floor: float = 0.01,
+        wat: str = "none",
+    ):
+        self.n_states = n_states
+        self.n_iter = n_iter
+        self.mdl_factor = mdl_factor
+        self.var_floor = var_floor
+        self.wat = wat
+
+    def fit(
+        self,
+        motions: Sequence[Motion],
+        n_steps: int | None = None,
+        style: str = "normal",
+        role: str = "average",
+        units: Sequence[str] | None = None,
+    ) -> GaitSynthesizer:
+        """Train on walks (all their steps, or the first ``n_steps``).
+
+        ``units`` names the adaptation unit of each walk for ``wat="unit"``.
+        """
+        if self.wat not in WAT_UNITS:
+            raise ValueError(f"wat must be one of {WAT_UNITS}")
+        if self.wat == "unit" and units is None:
+            raise ValueError("walker-adaptive training by unit needs the unit of each walk")
+        self.pipeline_ = FeaturePipeline([ReferencePose(), ExpMaps(root_position="none")])
+        self.pipeline_.fit([align_walk(m) for m in motions])
+        data = walk_set(motions, self.pipeline_, units).first_steps(n_steps)
+        return self.fit_walks(data, style=style, role=role)
+
+    def fit_walks(self, data: WalkSet, style: str, role: str) -> GaitSynthesizer:
+        """Train the HSMM and GV statistics on prepared walks (``pipeline_`` already fitted)."""
+        self.hsmm_ = HSMM(
+            n_states=self.n_states,
+            n_iter=self.n_iter,
+            var_floor=self.var_floor,
+            mdl_factor=self.mdl_factor,
+        ).fit(data.obs, data.contexts, data.boundaries, len(CONTEXTS), context_questions())
+        self.wat_units_ = []
+        if self.wat != "none" and role == "average":
+            units = data.names if self.wat == "take" else data.units
+            walker_adaptive_training(self.hsmm_, data.obs, data.contexts, units)
+            self.wat_units_ = sorted(set(units))
+        self.set_gv(data.gv())
+        self.floor_ = data.floor
+        self.fps_ = float(self.pipeline_.steps[-1].fps_)
+        self.role_, self.style_ = role, style
+        self.files_ = list(data.names)
+        self.n_steps_ = data.n_steps
+        return self
+
+    def adapt(
+        self,
+        motions: Sequence[Motion],
+        style: str,
+        n_steps: int | None = None,
+        **options: Any,
+    ) -> GaitSynthesizer:
+        """A style model: this (average) model adapted to the first ``n_steps`` steps of the walks (§5.1.3).
+
+        ``options`` go to :func:`markovmotion.models.adaptation.adapt` (method,
+        structure, prior weights). The GV mean comes from the style walks, its
+        variance from this model.
+        """
+        data = self.walk_set(motions).first_steps(n_steps)
+        longest = max(int(np.diff(b).max()) for b in data.boundaries)
+        out = GaitSynthesizer(**self.get_params())
+        out.pipeline_, out.floor_, out.fps_ = self.pipeline_, self.floor_, self.fps_
+        out.hsmm_ = adapt(
+            self.hsmm_,
+            data.obs,
+            data.contexts,
+            max_duration=int(np.ceil(0.6 * longest)),
+            **options,
+        )
+        out.set_gv(data.gv(), var=self.gv_var_)
+        out.role_, out.style_ = "adapted", style
+        out.files_, out.n_steps_ = list(data.names), data.n_steps
+        return out
+
+    def scratch(
+        self, motions: Sequence[Motion], style: str, n_steps: int | None = None
+    ) -> GaitSynthesizer:
+        """A style model trained from scratch on the first ``n_steps`` steps, with this model's features.
+
+        The comparison of §5.1.3: same data as :meth:`adapt`, same feature
+        pipeline (so likelihoods compare), no average model.
+        """
+        out = GaitSynthesizer(**self.get_params())
+        out.pipeline_ = self.pipeline_
+        return out.fit_walks(self.walk_set(motions).first_steps(n_steps), style, "scratch")
+
+    def set_gv(self, gv: np.ndarray, var: np.ndarray | None = None) -> None:
+        """GV Gaussian from per-walk global variances (the variance may be given instead)."""
+        self.gv_mean_ = gv.mean(axis=0)
+        spread = gv.var(axis=0) if var is None else var
+        self.gv_var_ = np.maximum(spread, np.maximum(0.01 * self.gv_mean_**2, 1e-12))
+
+    def walk_set(self, motions: Sequence[Motion], units: Sequence[str] | None = None) -> WalkSet:
+        """Walks prepared with this model's pipeline."""
+        return walk_set(motions, self.pipeline_, units)
+
+    # ------------------------------------------------------------ synthesis
+    def generate_features(
+        self,
+        n_steps: int,
+        speed: float = 1.0,
+        gv: bool = True,
+        first_side: str = "R",
+        rng: np.random.Generator | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+        """Static exponential maps (T, D), step boundaries and sides of a new walk (§5.1.4).
+
+        State durations are the most likely ones at ``speed``, or with ``rng``
+        drawn from the duration densities (:meth:`HSMM.durations`), so that
+        walks differ.
+        """
+        if n_steps < 1:
+            raise ValueError("a walk needs at least one step")
+        if speed <= 0:
+            raise ValueError("speed must be positive")
+        contexts, sides = walk_contexts(n_steps, first_side)
+        durations = self.hsmm_.durations(contexts, speed, rng)
+        means, variances = self.hsmm_.frame_parameters(contexts, durations)
+        if gv:
+            static = mlpg_gv(means, variances, self.gv_mean_, self.gv_var_)
+        else:
+            static = mlpg(means, variances)
+        per_step = durations.reshape(n_steps, self.n_states).sum(axis=1)
+        boundaries = np.concatenate([[0], np.cumsum(per_step)])
+        return static, boundaries, sides
+
+    def synthesize(
+        self,
+        n_steps: int = 12,
+        speed: float = 1.0,
+        gv: bool = True,
+        first_side: str = "R",
+        rng: np.random.Generator | None = None,
+    ) -> Motion:
+        """A new walk of ``n_steps`` steps, with its root travel from foot contact."""
+        static, boundaries, sides = self.generate_features(n_steps, speed, gv, first_side, rng)
+        motion = self.pipeline_.inverse_transform([static])[0]
+        motion = root_from_contact(motion, boundaries, sides, floor=self.floor_)
+        motion.name = f"{self.style_} walk ({self.role_} model, {n_steps} steps)"
+        return motion
+
+    # ------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the model (``.npz`` + JSON header, no pickle)."""
+        arrays: dict[str, np.ndarray] = {}
+        state = estimator_state(self, "model", arrays)
+        header = {
+            "role": self.role_,
+            "style": self.style_,
+            "skeleton": self.pipeline_.steps[-1].skeleton_.to_dict(),
+            "model": state,
+        }
+        save_npz(path, KIND, header, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> GaitSynthesizer:
+        header, arrays = load_npz(path, KIND)
+        return restore_estimator(header["model"], arrays)

@@ -1,0 +1,424 @@
+"""Hidden semi-Markov models of labelled units with explicit Gaussian state durations (gait paper §5.1).
+
+Each unit (a walk step) is a left-to-right model of ``n_states`` states
+without skips; one diagonal Gaussian per state over the observation vector
+(static + delta + delta-delta) and one Gaussian duration density per state,
+discretised over 1..``max_duration`` frames (Yoshimura et al. 1998). A training
+sequence is the concatenation of its units' models, so every state is
+visited exactly once; EM runs the explicit-duration forward-backward over that
+chain (:func:`forward_backward`, log space).
+
+Units carry a context label (an integer); which states of which contexts
+share their output and duration densities is decided by context clustering
+(:mod:`markovmotion.models.context_tree`), so that contexts never seen in
+training still get densities. The recursions are pure functions; the model
+class only gathers statistics and re-estimates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.special import logsumexp
+from sklearn.base import BaseEstimator
+
+from markovmotion.models.context_tree import LOG_2PI, cluster
+from markovmotion.state import register
+
+
+# ------------------------------------------------------------------ pure functions
+def log_gaussian_diag(x: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np.ndarray:
+    """(T, P) log densities of frames x (T, O) under P diagonal Gaussians (P, O)."""
+    prec = 1.0 / variances
+    quad = (x**2) @ prec.T - 2.0 * x @ (means * prec).T + np.sum(means**2 * prec, axis=1)
+    return -0.5 * (quad + np.sum(np.log(variances), axis=1) + x.shape[1] * LOG_2PI)
+
+
+def duration_log_pmf(means: np.ndarray, variances: np.ndarray, max_duration: int) -> np.ndarray:
+    """(Q, max_duration) log P(d) for d = 1..max_duration: Gaussians discretised and normalised."""
+    d = np.arange(1, max_duration + 1)
+    logp = -0.5 * ((d - means[:, None]) ** 2 / variances[:, None] + np.log(variances[:, None]))
+    return logp - logsumexp(logp, axis=1, keepdims=True)
+
+
+def draw_durations(
+    means: np.ndarray, variances: np.ndarray, max_duration: int, rng: np.random.Generator
+) -> np.ndarray:
+    """One duration per state (Q,) drawn from its discretised Gaussian (:func:`duration_log_pmf`)."""
+    cdf = np.cumsum(np.exp(duration_log_pmf(means, variances, max_duration)), axis=1)
+    u = rng.random(len(means)) * cdf[:, -1]
+    return 1 + np.minimum((cdf < u[:, None]).sum(axis=1), max_duration - 1)
+
+
+@numba.njit(cache=True)
+def _lse(values, n):  # pragma: no cover - numba
+    top = -np.inf
+    for i in range(n):
+        if values[i] > top:
+            top = values[i]
+    if top == -np.inf:
+        return top
+    acc = 0.0
+    for i in range(n):
+        acc += np.exp(values[i] - top)
+    return top + np.log(acc)
+
+
+@numba.njit(cache=True)
+def _forward_backward(log_b, log_dur):  # pragma: no cover - numba
+    t_len, n = log_b.shape
+    dmax = log_dur.shape[1]
+    cum = np.zeros((t_len + 1, n))
+    for t in range(t_len):
+        cum[t + 1] = cum[t] + log_b[t]
+    # alpha[e, k]: frames [0, e) from states 0..k-1, state k-1 ending at e (k = 0: none yet)
+    alpha = np.full((t_len + 1, n + 1), -np.inf)
+    alpha[0, 0] = 0.0
+    # beta[e, k]: frames [e, T) from states k..N-1
+    beta = np.full((t_len + 1, n + 1), -np.inf)
+    beta[t_len, n] = 0.0
+    buf = np.empty(dmax)
+    for e in range(1, t_len + 1):
+        for k in range(n):
+            m = min(dmax, e)
+            for i in range(m):
+                d = i + 1
+                buf[i] = alpha[e - d, k] + log_dur[k, i] + cum[e, k] - cum[e - d, k]
+            alpha[e, k + 1] = _lse(buf, m)
+    for e in range(t_len - 1, -1, -1):
+        for k in range(n):
+            m = min(dmax, t_len - e)
+            for i in range(m):
+                d = i + 1
+                buf[i] = beta[e + d, k + 1] + log_dur[k, i] + cum[e + d, k] - cum[e, k]
+            beta[e, k] = _lse(buf, m)
+    log_like = alpha[t_len, n]
+    diff = np.zeros((t_len + 1, n))
+    dur_post = np.zeros((n, dmax))
+    if log_like == -np.inf:
+        return log_like, diff[:t_len], dur_post
+    for e in range(1, t_len + 1):
+        for k in range(n):
+            tail = beta[e, k + 1]
+            if tail == -np.inf:
+                continue
+            for i in range(min(dmax, e)):
+                d = i + 1
+                head = alpha[e - d, k]
+                if head == -np.inf:
+                    continue
+                p = np.exp(head + log_dur[k, i] + cum[e, k] - cum[e - d, k] + tail - log_like)
+                dur_post[k, i] += p
+                diff[e - d, k] += p
+                diff[e, k] -= p
+    gamma = np.empty((t_len, n))
+    run = np.zeros(n)
+    for t in range(t_len):
+        run += diff[t]
+        gamma[t] = run
+    return log_like, gamma, dur_post
+
+
+def forward_backward(
+    log_b: np.ndarray, log_dur: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """Explicit-duration forward-backward over a left-to-right chain without skips, in log space.
+
+    The chain starts in state 0 at frame 0, visits every state once for
+    d >= 1 frames, and leaves state N-1 after frame T-1. With the cumulative
+    sums of log_b, a segment's output probability is one subtraction, so a
+    pass costs O(T N Dmax).
+
+    Args:
+        log_b: (T, N) log output densities of each frame in each chain state.
+        log_dur: (N, Dmax) log duration probabilities, d = 1..Dmax.
+
+    Returns:
+        ``(log P(O), gamma, dur_post)``: gamma (T, N) state occupancies and
+        dur_post (N, Dmax) the posterior of each state's duration. A sequence
+        the chain cannot produce (T < N or T > N Dmax) has log P(O) = -inf
+        and zero posteriors.
+    """
+    log_b = np.ascontiguousarray(log_b, dtype=float)
+    log_dur = np.ascontiguousarray(log_dur, dtype=float)
+    if log_dur.shape[0] != log_b.shape[1]:
+        raise ValueError("log_b and log_dur disagree on the number of states")
+    ll, gamma, dur_post = _forward_backward(log_b, log_dur)
+    return float(ll), gamma, dur_post
+
+
+# ------------------------------------------------------------------ statistics
+@dataclass
+class ContextStats:
+    """Sufficient statistics per (context, state): outputs and durations."""
+
+    occ: np.ndarray  # (C, S) frames
+    sum: np.ndarray  # (C, S, O)
+    sumsq: np.ndarray  # (C, S, O)
+    dur_occ: np.ndarray  # (C, S) state visits
+    dur_sum: np.ndarray  # (C, S)
+    dur_sumsq: np.ndarray  # (C, S)
+    log_like: float = 0.0
+    n_frames: int = 0
+
+    @classmethod
+    def zeros(cls, n_contexts: int, n_states: int, n_dims: int) -> ContextStats:
+        z = np.zeros((n_contexts, n_states))
+        return cls(
+            z.copy(),
+            np.zeros(z.shape + (n_dims,)),
+            np.zeros(z.shape + (n_dims,)),
+            z.copy(),
+            z.copy(),
+            z.copy(),
+        )
+
+    def add(
+        self, contexts: np.ndarray, x: np.ndarray, gamma: np.ndarray, dur_post: np.ndarray
+    ) -> None:
+        """Add one sequence: gamma (T, N) and dur_post (N, Dmax) over its chain of N = units x S states."""
+        s = self.occ.shape[1]
+        g = gamma.reshape(len(x), len(contexts), s)
+        np.add.at(self.occ, contexts, g.sum(axis=0))
+        np.add.at(self.sum, contexts, np.einsum("tus,to->uso", g, x))
+        np.add.at(self.sumsq, contexts, np.einsum("tus,to->uso", g, x**2))
+        d = np.arange(1, dur_post.shape[1] + 1)
+        p = dur_post.reshape(len(contexts), s, -1)
+        np.add.at(self.dur_occ, contexts, p.sum(axis=2))
+        np.add.at(self.dur_sum, contexts, p @ d)
+        np.add.at(self.dur_sumsq, contexts, p @ d**2)
+        self.n_frames += len(x)
+
+
+def hard_posteriors(
+    n_frames: int, boundaries: np.ndarray, n_states: int, max_duration: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """gamma and dur_post of a fixed alignment: each unit split evenly among its states."""
+    n_units = len(boundaries) - 1
+    gamma = np.zeros((n_frames, n_units * n_states))
+    dur_post = np.zeros((n_units * n_states, max_duration))
+    k = 0
+    for u in range(n_units):
+        for part in np.array_split(np.arange(boundaries[u], boundaries[u + 1]), n_states):
+            gamma[part, k] = 1.0
+            dur_post[k, min(max(len(part), 1), max_duration) - 1] = 1.0
+            k += 1
+    return gamma, dur_post
+
+
+# ------------------------------------------------------------------ the model
+@register
+class HSMM(BaseEstimator):
+    """Context-dependent left-to-right HSMMs of units, trained by EM from unit boundaries.
+
+    Args:
+        n_states: states per unit (5 in the paper).
+        n_iter: EM iterations after clustering (``n_iter_untied`` before it).
+        tol: stop when the log-likelihood per frame gains less than this.
+        var_floor: output variances are floored at this fraction of the
+            data's variance per dimension.
+        dur_var_floor: floor of the duration variances, in frames squared.
+        max_duration: longest state duration considered (frames); by default
+            0.6 of the longest unit in the training data.
+        mdl_factor: weight of the MDL penalty of context clustering (0 keeps
+            every context that has data apart).
+
+    Learnt: ``means_``/``variances_`` (P, O) output densities,
+    ``dur_means_``/``dur_variances_`` (Q,) duration densities, ``out_map_``/
+    ``dur_map_`` (C, S) the density of each state of each context.
+    """
+
+    def __init__(
+        self,
+        n_states: int = 5,
+        n_iter: int = 10,
+        n_iter_untied: int = 3,
+        tol: float = 1e-4,
+        var_floor: float = 0.01,
+        dur_var_floor: float = 1.0,
+        max_duration: int | None = None,
+        mdl_factor: float = 1.0,
+    ):
+        self.n_states = n_states
+        self.n_iter = n_iter
+        self.n_iter_untied = n_iter_untied
+        self.tol = tol
+        self.var_floor = var_floor
+        self.dur_var_floor = dur_var_floor
+        self.max_duration = max_duration
+        self.mdl_factor = mdl_factor
+
+    # -------------------------------------------------------------- training
+    def fit(
+        self,
+        sequences: Sequence[np.ndarray],
+        contexts: Sequence[np.ndarray],
+        boundaries: Sequence[np.ndarray],
+        n_contexts: int,
+        questions: Sequence[np.ndarray] = (),
+    ) -> HSMM:
+        """EM from unit boundaries (used only to initialise, §5.1.2).
+
+        Args:
+            sequences: (T_i, O) observations.
+            contexts: (n_i,) context label of each unit of each sequence.
+            boundaries: (n_i + 1,) first frame of each unit, then T_i.
+            n_contexts: number of possible context labels C.
+            questions: boolean masks (C,) of context sets for clustering.
+        """
+        x_all = np.vstack(sequences)
+        self.var_floor_ = np.maximum(self.var_floor * x_all.var(axis=0), 1e-8)
+        lengths = np.concatenate([np.diff(b) for b in boundaries])
+        longest = int(np.ceil(0.6 * lengths.max()))
+        self.max_duration_ = int(self.max_duration or max(longest, 2 * self.n_states))
+        s = self.n_states
+        stats = ContextStats.zeros(n_contexts, s, x_all.shape[1])
+        for x, c, b in zip(sequences, contexts, boundaries, strict=True):
+            stats.add(np.asarray(c), x, *hard_posteriors(len(x), b, s, self.max_duration_))
+        # untied: every seen (context, state) its own density, then EM
+        seen = stats.occ.sum(axis=1) > 0
+        ids = np.cumsum(seen) - 1
+        untied = np.where(seen[:, None], ids[:, None] * s + np.arange(s), 0)
+        self.out_map_ = self.dur_map_ = untied
+        self._m_step(stats)
+        self.log_likelihood_ = []
+        for _ in range(self.n_iter_untied):
+            stats = self._e_step(sequences, contexts)
+            self.log_likelihood_.append(stats.log_like / stats.n_frames)
+            self._m_step(stats)
+        self.out_map_ = cluster(
+            stats.occ, stats.sum, stats.sumsq, questions, self.var_floor_, self.mdl_factor
+        )
+        self.dur_map_ = cluster(
+            stats.dur_occ,
+            stats.dur_sum[..., None],
+            stats.dur_sumsq[..., None],
+            questions,
+            np.array([self.dur_var_floor]),
+            self.mdl_factor,
+        )
+        self._m_step(stats)
+        self.em(sequences, contexts)
+        return self
+
+    def em(self, sequences: Sequence[np.ndarray], contexts: Sequence[np.ndarray]) -> HSMM:
+        """Up to ``n_iter`` EM iterations with the current tying; appends to ``log_likelihood_``."""
+        history = list(getattr(self, "log_likelihood_", []))
+        start = len(history)
+        for _ in range(self.n_iter):
+            stats = self._e_step(sequences, contexts)
+            if stats.n_frames == 0:
+                raise ValueError("no training sequence can be aligned with the model")
+            history.append(stats.log_like / stats.n_frames)
+            if len(history) > start + 1 and abs(history[-1] - history[-2]) < self.tol:
+                break
+            self._m_step(stats)
+        self.log_likelihood_ = np.array(history)
+        return self
+
+    def _e_step(
+        self, sequences: Sequence[np.ndarray], contexts: Sequence[np.ndarray]
+    ) -> ContextStats:
+        stats = ContextStats.zeros(self.out_map_.shape[0], self.n_states, sequences[0].shape[1])
+        for x, c in zip(sequences, contexts, strict=True):
+            ll, gamma, dur_post = self.posteriors(x, np.asarray(c))
+            if np.isfinite(ll):
+                stats.log_like += ll
+                stats.add(np.asarray(c), x, gamma, dur_post)
+        return stats
+
+    def _m_step(self, stats: ContextStats) -> None:
+        occ, mean, var = _pool(stats.occ, stats.sum, stats.sumsq, self.out_map_)
+        self.means_ = mean
+        self.variances_ = np.maximum(var, self.var_floor_)
+        occ, mean, var = _pool(
+            stats.dur_occ, stats.dur_sum[..., None], stats.dur_sumsq[..., None], self.dur_map_
+        )
+        self.dur_means_ = np.maximum(mean[:, 0], 1.0)
+        self.dur_variances_ = np.maximum(var[:, 0], self.dur_var_floor)
+
+    # -------------------------------------------------------------- inference
+    def chain(self, contexts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Output and duration density indices of the chain of units with these contexts."""
+        return self.out_map_[contexts].ravel(), self.dur_map_[contexts].ravel()
+
+    def posteriors(
+        self, x: np.ndarray, contexts: np.ndarray, log_out: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray, np.ndarray]:
+        """log P(x), state occupancies and duration posteriors of one sequence (:func:`forward_backward`).
+
+        ``log_out`` (T, P) replaces the output log densities of the frames
+        (adaptation scores them through feature transforms).
+        """
+        out, dur = self.chain(contexts)
+        if log_out is None:
+            log_out = log_gaussian_diag(x, self.means_, self.variances_)
+        log_d = duration_log_pmf(self.dur_means_, self.dur_variances_, self.max_duration_)[dur]
+        return forward_backward(log_out[:, out], log_d)
+
+    def score(self, sequences: Sequence[np.ndarray], contexts: Sequence[np.ndarray]) -> float:
+        """Total log-likelihood of the sequences."""
+        return float(
+            sum(
+                self.posteriors(x, np.asarray(c))[0]
+                for x, c in zip(sequences, contexts, strict=True)
+            )
+        )
+
+    # -------------------------------------------------------------- generation
+    def durations(
+        self, contexts: np.ndarray, speed: float = 1.0, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
+        """State durations (units x S,) in frames for a chain, at ``speed`` x the mean pace.
+
+        The most likely durations for a total of ``sum(m) / speed`` frames
+        (Yoshimura et al.): ``d = m + rho sigma^2`` with one rho for the chain,
+        rounded, at least one frame. With ``rng``, each duration is drawn
+        instead from its density with the mean moved to ``m + rho sigma^2``
+        (at ``speed`` 1, the model's own densities).
+        """
+        _, dur = self.chain(contexts)
+        m, v = self.dur_means_[dur], self.dur_variances_[dur]
+        rho = (m.sum() / speed - m.sum()) / v.sum()
+        if rng is None:
+            return np.maximum(np.rint(m + rho * v), 1).astype(int)
+        return draw_durations(m + rho * v, v, self.max_duration_, rng)
+
+    def frame_parameters(
+        self, contexts: np.ndarray, durations: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per-frame means and variances (T, O) of the chain held for the given state durations."""
+        out, _ = self.chain(contexts)
+        idx = np.repeat(out, durations)
+        return self.means_[idx], self.variances_[idx]
+
+    def sample(
+        self, contexts: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Observations (T, O) and state durations drawn from the chain of these contexts."""
+        out, dur = self.chain(contexts)
+        d = draw_durations(self.dur_means_[dur], self.dur_variances_[dur], self.max_duration_, rng)
+        idx = np.repeat(out, d)
+        x = self.means_[idx] + np.sqrt(self.variances_[idx]) * rng.standard_normal(
+            (len(idx), self.means_.shape[1])
+        )
+        return x, d
+
+
+def _pool(
+    occ: np.ndarray, sums: np.ndarray, sumsq: np.ndarray, mapping: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Occupancy, mean and variance of each density from (C, S) statistics tied by ``mapping``."""
+    n_pdf = int(mapping.max()) + 1
+    o = np.bincount(mapping.ravel(), occ.ravel(), minlength=n_pdf)
+    dims = sums.shape[-1]
+    s1 = np.zeros((n_pdf, dims))
+    s2 = np.zeros((n_pdf, dims))
+    np.add.at(s1, mapping.ravel(), sums.reshape(-1, dims))
+    np.add.at(s2, mapping.ravel(), sumsq.reshape(-1, dims))
+    safe = np.maximum(o, 1e-10)[:, None]
+    mean = s1 / safe
+    return o, mean, s2 / safe - mean**2

@@ -1,0 +1,309 @@
+"""Video of motion capture: filled body silhouettes seen by a fixed side camera (interaction paper, §2).
+
+There is no video of the shared two-person takes, so it is made from the
+capture: each person is a union of capsules (limbs, torso, neck), a ball for
+the head and one per hand, projected through a pinhole camera standing beside
+the dance floor at a fixed position for the whole take, onto a static
+textured background, with Gaussian sensor noise in every frame. The camera
+looks at the middle of the take, across the main line between the partners,
+so that they are seen side by side as in the paper's Figure 1.
+
+Frames go to an MP4 file (H.264) or a folder of PNG files, at 25 fps as in the
+paper. :func:`read_frames` reads either back.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from markovmotion.errors import MotionFormatError
+from markovmotion.features.joint_shape import MAJOR_JOINTS, Person
+from markovmotion.io.files import atomic_path
+
+#: Capsules of the body between joints of :data:`MAJOR_JOINTS`, radius in mm.
+CAPSULES = (
+    ("hip", "abdomen", 125),
+    ("abdomen", "chest", 130),
+    ("chest", "neck", 110),
+    ("neck", "head", 50),
+    ("chest", "rShldr", 65),
+    ("chest", "lShldr", 65),
+    ("rShldr", "rForeArm", 50),
+    ("lShldr", "lForeArm", 50),
+    ("rForeArm", "rHand", 40),
+    ("lForeArm", "lHand", 40),
+    ("hip", "rThigh", 100),
+    ("hip", "lThigh", 100),
+    ("rThigh", "rShin", 75),
+    ("lThigh", "lShin", 75),
+    ("rShin", "rFoot", 55),
+    ("lShin", "lFoot", 55),
+    ("rFoot", "rFoot_end", 40),
+    ("lFoot", "lFoot_end", 40),
+)
+HEAD_RADIUS = 105.0
+HAND_RADIUS = 45.0
+FRAME_SIZE = (640, 480)
+PEOPLE_COLOURS = ((70, 50, 130), (40, 95, 60))  # RGB
+SHIFT = 4  # sub-pixel bits for OpenCV drawing
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera looking horizontally along ``forward`` (mm, Y up; pixels, y down)."""
+
+    position: np.ndarray
+    forward: np.ndarray
+    focal: float = 700.0
+    width: int = FRAME_SIZE[0]
+    height: int = FRAME_SIZE[1]
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (..., 2) and depths (...) in mm of world points (..., 3)."""
+        right = np.cross(self.forward, [0.0, 1.0, 0.0])
+        rel = np.asarray(points, dtype=float) - self.position
+        z = np.maximum(rel @ self.forward, 1.0)
+        u = self.width / 2 + self.focal * (rel @ right) / z
+        v = self.height / 2 - self.focal * rel[..., 1] / z
+        return np.stack([u, v], axis=-1), z
+
+    def to_dict(self) -> dict:
+        return {
+            "position": self.position.tolist(),
+            "forward": self.forward.tolist(),
+            "focal": self.focal,
+            "width": self.width,
+            "height": self.height,
+        }
+
+
+def side_camera(
+    people: Sequence[Person],
+    distance: float = 6000.0,
+    height: float = 900.0,
+    focal: float = 700.0,
+    size: tuple[int, int] = FRAME_SIZE,
+) -> Camera:
+    """The fixed camera of a take: ``distance`` mm from its middle, across the partners' main axis.
+
+    The main axis is the principal direction of the (horizontal) line from the
+    first person's pelvis to the second's over the take.
+    """
+    refs = np.stack([p.reference for p in people], axis=1)  # (F, P, 3)
+    centre = refs.reshape(-1, 3).mean(axis=0)
+    centre[1] = 0.0
+    axis = np.array([1.0, 0.0, 0.0])
+    if len(people) > 1:
+        sep = refs[:, 1, [0, 2]] - refs[:, 0, [0, 2]]
+        _, _, vt = np.linalg.svd(sep, full_matrices=False)
+        axis = np.array([vt[0, 0], 0.0, vt[0, 1]])
+    forward = np.cross(axis, [0.0, 1.0, 0.0])
+    forward /= np.linalg.norm(forward)
+    position = centre - distance * forward + np.array([0.0, height, 0.0])
+    return Camera(position, forward, focal, *size)
+
+
+def background(size: tuple[int, int] = FRAME_SIZE, seed: int = 0) -> np.ndarray:
+    """A static background (H, W, 3) uint8: a wall and a floor with soft texture."""
+    w, h = size
+    rng = np.random.default_rng(seed)
+    y = np.linspace(0, 1, h)[:, None, None]
+    wall = np.array([190.0, 185.0, 170.0]) - 25 * y
+    img = np.broadcast_to(wall, (h, w, 3)).copy()
+    img[int(0.62 * h) :] = [150.0, 140.0, 125.0]
+    blotches = cv2.GaussianBlur(rng.normal(0, 1, (h, w)), (0, 0), 9)
+    img += 60 * blotches[..., None]
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+class Canvas:
+    """Coverage mask (H, W) drawn at ``scale`` times the resolution and averaged down.
+
+    Pixel centres are at integer coordinates; OpenCV fills at the fine scale
+    without anti-aliasing, and averaging gives each pixel its covered fraction.
+    """
+
+    def __init__(self, width: int, height: int, scale: int = 4):
+        self.width, self.height, self.scale = width, height, scale
+        self.fine = np.zeros((height * scale, width * scale), np.uint8)
+
+    def _fixed(self, p: np.ndarray) -> np.ndarray:
+        return np.round(((np.asarray(p) + 0.5) * self.scale - 0.5) * (1 << SHIFT)).astype(np.int32)
+
+    def polygon(self, points: np.ndarray) -> None:
+        cv2.fillPoly(self.fine, [self._fixed(points)], 255, cv2.LINE_8, SHIFT)
+
+    def disc(self, centre: np.ndarray, radius: float) -> None:
+        r = int(round(radius * self.scale * (1 << SHIFT)))
+        cv2.circle(self.fine, tuple(self._fixed(centre)), r, 255, -1, cv2.LINE_8, SHIFT)
+
+    def capsule(self, a: np.ndarray, b: np.ndarray, ra: float, rb: float) -> None:
+        """The capsule between points a and b with end radii ra, rb (pixels)."""
+        self.disc(a, ra)
+        self.disc(b, rb)
+        d = b - a
+        n = np.linalg.norm(d)
+        if n > 1e-6:
+            normal = np.array([-d[1], d[0]]) / n
+            self.polygon(
+                np.array([a + ra * normal, b + rb * normal, b - rb * normal, a - ra * normal])
+            )
+
+    def coverage(self) -> np.ndarray:
+        """(H, W) uint8 covered fraction of each pixel (0-255)."""
+        return cv2.resize(self.fine, (self.width, self.height), interpolation=cv2.INTER_AREA)
+
+
+def silhouette_mask(joints: np.ndarray, camera: Camera) -> np.ndarray:
+    """(H, W) uint8 coverage of one body with joints (19, 3) in :data:`MAJOR_JOINTS` order."""
+    canvas = Canvas(camera.width, camera.height)
+    idx = {n: i for i, n in enumerate(MAJOR_JOINTS)}
+    neck, head = joints[idx["neck"]], joints[idx["head"]]
+    up = (head - neck) / max(np.linalg.norm(head - neck), 1e-6)
+    balls = [(head + HEAD_RADIUS * up, HEAD_RADIUS)]
+    for side in "rl":
+        hand, fore = joints[idx[f"{side}Hand"]], joints[idx[f"{side}ForeArm"]]
+        along = (hand - fore) / max(np.linalg.norm(hand - fore), 1e-6)
+        balls.append((hand + 0.6 * HAND_RADIUS * along, HAND_RADIUS))
+    pix, depth = camera.project(joints)
+    for a, b, r in CAPSULES:
+        i, j = idx[a], idx[b]
+        canvas.capsule(pix[i], pix[j], camera.focal * r / depth[i], camera.focal * r / depth[j])
+    for centre, r in balls:
+        p, z = camera.project(centre)
+        canvas.disc(p, camera.focal * r / z)
+    return canvas.coverage()
+
+
+def check_body(n_points: int, what: str) -> None:
+    if n_points != len(MAJOR_JOINTS):
+        raise MotionFormatError(
+            what, f"silhouettes need the {len(MAJOR_JOINTS)} joints {', '.join(MAJOR_JOINTS)}"
+        )
+
+
+def render_frames(
+    people: Sequence[Person],
+    camera: Camera,
+    noise: float = 4.0,
+    seed: int = 0,
+    colours: Sequence[tuple[int, int, int]] = PEOPLE_COLOURS,
+) -> Iterator[np.ndarray]:
+    """RGB frames (H, W, 3) uint8 of ``people`` (3-D, :data:`MAJOR_JOINTS`) over the background."""
+    for p in people:
+        check_body(p.points.shape[1], "people")
+    bg = background((camera.width, camera.height), seed).astype(np.float32)
+    noisy = np.empty_like(bg)
+    cv2.setRNGSeed(seed + 1)
+    for t in range(len(people[0].points)):
+        img = bg.copy()
+        order = np.argsort([-camera.project(p.reference[t])[1] for p in people])  # far first
+        for k in order:
+            mask = silhouette_mask(people[k].points[t], camera)
+            x, y, w, h = cv2.boundingRect(mask)
+            if not w:
+                continue
+            alpha = mask[y : y + h, x : x + w, None].astype(np.float32) / 255.0
+            colour = np.asarray(colours[k % len(colours)], np.float32)
+            box = img[y : y + h, x : x + w]
+            box += alpha * (colour - box)
+        cv2.randn(noisy, (0.0, 0.0, 0.0), (noise, noise, noise))
+        img += noisy
+        yield np.clip(img, 0, 255).round().astype(np.uint8)
+
+
+def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps: float) -> Path:
+    """Write RGB frames to ``path``: an ``.mp4`` file, or else a folder of ``NNNNN.png`` files.
+
+    MP4 is H.264 at constant quality (CRF 18) with a fast preset: sensor noise
+    makes every frame expensive to encode at the slower presets.
+    """
+    import imageio_ffmpeg
+
+    path = Path(path)
+    if path.suffix.lower() == ".mp4":
+        frames = iter(frames)
+        first = next(frames)
+        with atomic_path(path) as tmp:
+            writer = imageio_ffmpeg.write_frames(
+                str(tmp),
+                (first.shape[1], first.shape[0]),
+                fps=fps,
+                codec="libx264",
+                pix_fmt_in="rgb24",
+                quality=None,
+                output_params=["-preset", "veryfast", "-crf", "18"],
+                macro_block_size=2,
+                ffmpeg_log_level="error",
+            )
+            writer.send(None)
+            writer.send(first)
+            for f in frames:
+                writer.send(np.ascontiguousarray(f))
+            writer.close()
+        return path
+    path.mkdir(parents=True, exist_ok=True)
+    for i, f in enumerate(frames):
+        with atomic_path(path / f"{i:05d}.png") as tmp:
+            cv2.imwrite(str(tmp), cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+    return path
+
+
+def read_frames(path: str | os.PathLike[str]) -> Iterator[np.ndarray]:
+    """RGB frames of a video file (anything OpenCV/FFmpeg reads) or of a folder of images."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+        if not files:
+            raise MotionFormatError(path, "no PNG or JPEG frames in this folder")
+        for f in files:
+            img = cv2.imread(str(f), cv2.IMREAD_COLOR)
+            if img is None:
+                raise MotionFormatError(f, "not an image")
+            yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        return
+    if not path.is_file():
+        raise MotionFormatError(path, "no such video")
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise MotionFormatError(path, "cannot read this video")
+    try:
+        n = 0
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                break
+            n += 1
+            yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        if n == 0:
+            raise MotionFormatError(path, "no frames in this video")
+    finally:
+        cap.release()
+
+
+def frame_count(path: str | os.PathLike[str]) -> int:
+    """Number of frames of a video file or image folder (counted by decoding if need be)."""
+    path = Path(path)
+    if path.is_dir():
+        return sum(1 for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+    cap = cv2.VideoCapture(str(path))
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+    cap.release()
+    return n if n > 0 else sum(1 for _ in read_frames(path))
+
+
+def video_fps(path: str | os.PathLike[str], default: float = 25.0) -> float:
+    """Frame rate of a video file (``default`` for image folders or when unknown)."""
+    path = Path(path)
+    if path.is_dir():
+        return default
+    cap = cv2.VideoCapture(str(path))
+    fps = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
+    cap.release()
+    return float(fps) if fps and fps > 0 else default

@@ -1,0 +1,224 @@
+"""The web application: viewer, live partner, perceptual evaluation and its results.
+
+``create_app`` builds a FastAPI app over a :class:`MotionLibrary` folder and an
+evaluation database; ``markovmotion serve`` runs it with uvicorn. Pages are
+plain HTML with their own JavaScript (no library, nothing loaded from a
+network): see ``pages/`` and ``static/``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from pathlib import Path
+from typing import Annotated
+
+from fastapi import FastAPI, File, HTTPException, UploadFile, WebSocket
+from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel
+
+from markovmotion.errors import MarkovMotionError
+from markovmotion.evaluate.perceptual import (
+    TESTS,
+    answers_csv,
+    choice_labels,
+    summarise,
+)
+from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
+from markovmotion.evaluate.store import EvaluationError, EvaluationStore
+from markovmotion.web.library import LibraryPathError, MotionLibrary, motion_payload, read_upload
+from markovmotion.web.live import PartnerFactory, live_session
+
+HERE = Path(__file__).parent
+PAGES_DIR = HERE / "pages"
+QUESTIONS = {
+    "naturalness": "Does this walk look real or synthetic?",
+    "recognition": "In which style is this person walking?",
+    "resemblance": "How much do these two walks resemble each other?",
+}
+
+
+class Answer(BaseModel):
+    answer: str
+
+
+NAV = (("/viewer", "Viewer"), ("/live", "Live partner"), ("/evaluation", "Evaluation"))
+PAGES = {
+    "/": ("index", "Home"),
+    "/viewer": ("viewer", "Viewer"),
+    "/live": ("live", "Live partner"),
+    "/evaluation": ("evaluation-start", "Evaluation"),
+}
+"""Pages without parameters: path -> (file in ``pages/``, title)."""
+
+
+def _page(name: str, title: str, here: str = "", status: int = 200) -> HTMLResponse:
+    """``pages/<name>.html`` inside the common layout (head, navigation bar)."""
+    nav = "".join(
+        f'<a href="{href}" class="here">{label}</a>'
+        if href == here
+        else f'<a href="{href}">{label}</a>'
+        for href, label in NAV
+    )
+    html = (PAGES_DIR / "layout.html").read_text(encoding="utf-8")
+    main = (PAGES_DIR / f"{name}.html").read_text(encoding="utf-8")
+    html = html.replace("{{title}}", title).replace("{{nav}}", nav).replace("{{main}}", main)
+    return HTMLResponse(html, status_code=status)
+
+
+def create_app(
+    library: str | os.PathLike[str] | MotionLibrary,
+    db: str | os.PathLike[str] | None = None,
+    *,
+    stimuli: str | os.PathLike[str] | None = None,
+    admin_token: str | None = None,
+    partner: PartnerFactory | None = None,
+) -> FastAPI:
+    """The app serving ``library``; the evaluation runs when a stimuli folder is given
+    (default: ``library/stimuli`` if it holds a manifest) and stores answers in ``db``.
+
+    ``admin_token`` guards the results (a random one if omitted: read it from
+    ``app.state.admin_token``); ``partner`` builds the live partner of a session.
+    """
+    lib = library if isinstance(library, MotionLibrary) else MotionLibrary(library)
+    if stimuli is None and (lib.root / "stimuli" / MANIFEST).is_file():
+        stimuli = lib.root / "stimuli"
+    store = stim_lib = None
+    if stimuli is not None:
+        stim_lib = MotionLibrary(stimuli, anonymous=True)
+        store = EvaluationStore(db or "results.sqlite", read_manifest(stimuli))
+    elif db is not None and Path(db).is_file():
+        store = EvaluationStore(db)
+
+    app = FastAPI(title="markovmotion", docs_url=None, redoc_url=None)
+    app.state.admin_token = admin_token or secrets.token_urlsafe(18)
+    app.state.store = store
+    app.state.library = lib
+    app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
+
+    def need_store() -> EvaluationStore:
+        if store is None or stim_lib is None:
+            raise HTTPException(503, "no evaluation on this server: start it with --stimuli DIR")
+        return store
+
+    def need_evaluator(token: str) -> EvaluationStore:
+        s = need_store()
+        if not s.exists(token):
+            raise HTTPException(404, "unknown evaluator token")
+        return s
+
+    def need_admin(token: str | None) -> EvaluationStore:
+        if not token or not secrets.compare_digest(token, app.state.admin_token):
+            raise HTTPException(403, "the results need the admin token printed at start-up")
+        if store is None:
+            raise HTTPException(503, "no evaluation database on this server")
+        return store
+
+    # ------------------------------------------------------------ pages
+    for path, (name, title) in PAGES.items():
+        app.get(path, response_class=HTMLResponse, name=name)(
+            lambda name=name, title=title, path=path: _page(name, title, path)
+        )
+
+    @app.get("/evaluation/{token}", response_class=HTMLResponse)
+    def evaluation(token: str) -> HTMLResponse:
+        if store is None or not store.exists(token):
+            return _page("not-found", "Unknown link", status=404)
+        return _page("evaluation", "Evaluation", "/evaluation")
+
+    @app.get("/results", response_class=HTMLResponse)
+    def results(token: str | None = None) -> HTMLResponse:
+        try:
+            need_admin(token)
+        except HTTPException as exc:
+            if exc.status_code == 403:
+                return _page("forbidden", "Forbidden", status=403)
+            raise
+        return _page("results", "Results")
+
+    # ------------------------------------------------------------ motions
+    @app.get("/api/motions")
+    def motions() -> dict:
+        return {"files": lib.files(), "partner": partner is not None}
+
+    @app.get("/api/motion")
+    def motion(path: str) -> Response:
+        try:
+            return Response(lib.json(path), media_type="application/json")
+        except LibraryPathError as exc:
+            raise HTTPException(404, str(exc)) from None
+        except MarkovMotionError as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @app.post("/api/upload")
+    def upload(file: Annotated[UploadFile, File()]) -> JSONResponse:
+        try:
+            return JSONResponse(motion_payload(read_upload(file.filename or "", file.file.read())))
+        except MarkovMotionError as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @app.websocket("/ws/live")
+    async def live_ws(ws: WebSocket) -> None:
+        await live_session(ws, lib, partner)
+
+    # ------------------------------------------------------------ evaluation
+    @app.post("/api/evaluation")
+    def new_evaluator() -> dict:
+        return {"token": need_store().create_evaluator()}
+
+    @app.get("/api/evaluation/{token}")
+    def evaluator_state(token: str) -> dict:
+        s = need_evaluator(token)
+        items = s.items(token)
+        return {
+            "tests": [
+                {
+                    "name": test,
+                    "question": QUESTIONS[test],
+                    "choices": choice_labels(test, s.styles),
+                    "items": [
+                        {"position": i.position, "answer": i.answer, "pair": i.file_b is not None}
+                        for i in items
+                        if i.test == test
+                    ],
+                }
+                for test in TESTS
+            ]
+        }
+
+    @app.get("/api/evaluation/{token}/{test}/{position}/{side}")
+    def stimulus(token: str, test: str, position: int, side: int) -> Response:
+        item = need_evaluator(token).item(token, test, position)
+        files = (item.file, item.file_b) if item is not None else ()
+        if side not in range(len(files)) or files[side] is None:
+            raise HTTPException(404, "no such stimulus")
+        return Response(stim_lib.json(files[side]), media_type="application/json")
+
+    @app.post("/api/evaluation/{token}/{test}/{position}")
+    def answer(token: str, test: str, position: int, body: Answer) -> dict:
+        try:
+            need_evaluator(token).answer(token, test, position, body.answer)
+        except EvaluationError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return {"ok": True}
+
+    # ------------------------------------------------------------ results
+    @app.get("/api/results")
+    def results_json(token: str | None = None) -> Response:
+        s = need_admin(token)
+        report = summarise(s.answered(), s.styles).to_dict()
+        report["registered"] = s.count_evaluators()
+        return Response(json.dumps(report), media_type="application/json")
+
+    @app.get("/api/results.csv")
+    def results_csv(token: str | None = None) -> Response:
+        s = need_admin(token)
+        return Response(
+            answers_csv(s.answered()),
+            media_type="text/csv",
+            headers={"Content-Disposition": 'attachment; filename="answers.csv"'},
+        )
+
+    return app

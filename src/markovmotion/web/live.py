@@ -1,0 +1,203 @@
+"""The live virtual partner over a WebSocket: person A streamed at its frame rate, B answered.
+
+Protocol (JSON text messages):
+
+1. the page sends ``{"path": "walk.bvh"}`` (a library file) or
+   ``{"bvh": "<file text>", "name": "mine.bvh"}`` (an upload), optionally
+   with ``"loop": true`` to repeat A until the page stops;
+2. the server answers ``{"type": "start", "fps", "frames", "parents_a",
+   "parents_b", "lag"}`` or ``{"type": "error", "message"}`` and closes;
+3. then, at A's frame rate (or the partner's, A resampled to it),
+   ``{"type": "frame", "i", "a", "b", "latency_ms"}``
+   with A's and B's joint positions (mm, flat) and the time the partner took
+   for that frame; ``b`` is ``null`` while the partner's window fills;
+4. ``{"type": "end", "frames"}`` when A is over. The page may send
+   ``{"type": "stop"}``; anything else, or closing the tab, ends the session.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import time
+from collections.abc import Callable
+from functools import partial
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import MarkovMotionError
+from markovmotion.web.library import MotionLibrary, display_parents, read_upload
+
+if TYPE_CHECKING:
+    from markovmotion.models.dual_hmm import DualHMM
+
+START_TIMEOUT = 30.0
+
+
+class LivePartner(Protocol):
+    """One session's online partner: A's frame in, B's pose out, frame by frame."""
+
+    parents: list[int]
+    """Parent of each of B's joints (-1: no bone), to draw B (see ``display_parents``)."""
+    lag: int
+    """How many frames B's answer trails A's (the fixed lag of windowed Viterbi)."""
+    fps: float | None
+    """The rate A must come at (A is resampled to it), or None for A's own."""
+
+    def step(self, frame_a: Motion) -> np.ndarray | None:
+        """One frame of A (a one-frame Motion) -> B's joint positions (J_B, 3) mm, or None."""
+        ...
+
+
+PartnerFactory = Callable[[Motion], LivePartner]
+"""Builds a fresh partner for a session from person A's motion (raising a
+:class:`MarkovMotionError` if it cannot answer that motion)."""
+
+
+class DualHMMPartner:
+    """The dual HMM's windowed-Viterbi partner (:meth:`DualHMM.partner`) as a LivePartner."""
+
+    def __init__(self, model: DualHMM, motion_a: Motion):
+        model.check_input(motion_a)
+        self._partner = model.partner()
+        self.lag = self._partner.lag
+        self.fps = model.fps
+        self.parents = display_parents(model.skeleton_b_)
+
+    def step(self, frame_a: Motion) -> np.ndarray | None:
+        out = self._partner.step(frame_a)
+        return None if out is None else out.positions()[0]
+
+
+def dual_hmm_partner(path: str | os.PathLike[str]) -> PartnerFactory:
+    """Sessions answered by the dual HMM saved at ``path``."""
+    from markovmotion.models.dual_hmm import DualHMM
+
+    return partial(DualHMMPartner, DualHMM.load(path))
+
+
+class _Garbage(ValueError):
+    """A message that is not part of the protocol."""
+
+
+def _parse(text: str) -> dict:
+    try:
+        msg = json.loads(text)
+    except json.JSONDecodeError:
+        raise _Garbage("the message is not JSON") from None
+    if not isinstance(msg, dict):
+        raise _Garbage("the message is not a JSON object")
+    return msg
+
+
+def _motion_of(msg: dict, library: MotionLibrary) -> Motion:
+    if isinstance(msg.get("path"), str):
+        return library.motion(msg["path"])
+    if isinstance(msg.get("bvh"), str):
+        return read_upload(str(msg.get("name") or "upload.bvh"), msg["bvh"].encode())
+    raise _Garbage('the first message must hold "path" or "bvh"')
+
+
+def _flat(positions: np.ndarray) -> list[float]:
+    return np.round(positions, 1).ravel().tolist()
+
+
+async def _send(ws: WebSocket, msg: dict) -> None:
+    await ws.send_text(json.dumps(msg, separators=(",", ":")))
+
+
+async def _close(ws: WebSocket, code: int = 1000) -> None:
+    if ws.application_state != WebSocketState.DISCONNECTED:
+        try:
+            await ws.close(code)
+        except (RuntimeError, WebSocketDisconnect, OSError):
+            pass
+
+
+async def _listen(ws: WebSocket, stop: asyncio.Event) -> None:
+    """Stop the session on ``{"type": "stop"}``, on garbage or when the page goes away."""
+    try:
+        while True:
+            msg = await ws.receive_text()
+            if _parse(msg).get("type") == "stop":
+                break
+            raise _Garbage("unexpected message during streaming")
+    except (_Garbage, WebSocketDisconnect, RuntimeError, KeyError):
+        pass
+    finally:
+        stop.set()
+
+
+async def live_session(
+    ws: WebSocket, library: MotionLibrary, factory: PartnerFactory | None
+) -> None:
+    """Run one live-partner session on an accepted-to-be WebSocket (see the module protocol)."""
+    await ws.accept()
+    try:
+        msg = _parse(await asyncio.wait_for(ws.receive_text(), START_TIMEOUT))
+        if factory is None:
+            raise _Garbage("this server has no partner model: start it with --partner MODEL")
+        motion = await asyncio.to_thread(_motion_of, msg, library)
+        partner = await asyncio.to_thread(factory, motion)
+        if partner.fps and not np.isclose(partner.fps, motion.fps):
+            motion = await asyncio.to_thread(motion.resample, partner.fps)
+        positions = await asyncio.to_thread(motion.positions)
+    except (_Garbage, MarkovMotionError, TimeoutError) as exc:
+        message = str(exc) or "no request in time"
+        try:
+            await _send(ws, {"type": "error", "message": message})
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            pass
+        await _close(ws, 1008)
+        return
+    except (WebSocketDisconnect, RuntimeError):
+        return
+    stop = asyncio.Event()
+    listener = asyncio.create_task(_listen(ws, stop))
+    loop = bool(msg.get("loop"))
+    sent = 0
+    try:
+        await _send(
+            ws,
+            {
+                "type": "start",
+                "fps": motion.fps,
+                "frames": motion.n_frames,
+                "parents_a": display_parents(motion.skeleton),
+                "parents_b": list(partner.parents),
+                "lag": int(partner.lag),
+            },
+        )
+        start = time.perf_counter()
+        while not stop.is_set() and (loop or sent < motion.n_frames):
+            i = sent % motion.n_frames
+            pose_a = positions[i]
+            t0 = time.perf_counter()
+            pose_b = await asyncio.to_thread(partner.step, motion.trim(i, i + 1))
+            latency = 1000.0 * (time.perf_counter() - t0)
+            frame = {
+                "type": "frame",
+                "i": sent,
+                "a": _flat(pose_a),
+                "b": None if pose_b is None else _flat(np.asarray(pose_b)),
+                "latency_ms": round(latency, 3),
+            }
+            await _send(ws, frame)
+            sent += 1
+            delay = start + sent / motion.fps - time.perf_counter()
+            if delay > 0:
+                try:
+                    await asyncio.wait_for(stop.wait(), delay)
+                except TimeoutError:
+                    pass
+        if not stop.is_set():
+            await _send(ws, {"type": "end", "frames": sent})
+    except (WebSocketDisconnect, RuntimeError, OSError):
+        pass
+    finally:
+        listener.cancel()
+        await _close(ws)

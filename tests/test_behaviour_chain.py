@@ -1,0 +1,253 @@
+"""Interaction paper §2-5: joint shape vectors, decay operator, chain, extrapolation, CONDENSATION."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from markovmotion import read_motion
+from markovmotion.cli import main
+from markovmotion.errors import ModelFormatError
+from markovmotion.evaluate.chain import evaluate_partner
+from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
+from markovmotion.models.behaviour_chain import BehaviourChain, decay_behaviour, proximities
+from markovmotion.models.condensation import (
+    MultipleHypotheses,
+    SingleHypothesis,
+    hypersphere_mode,
+    likelihood_weights,
+)
+from markovmotion.models.virtual_partner import VirtualPartner
+
+
+# --------------------------------------------------------------- joint shape vectors
+def random_people(dims: int, n: int = 30, seed: int = 0) -> TwoPeople:
+    rng = np.random.default_rng(seed)
+    k = 32 if dims == 2 else 5
+    return TwoPeople(
+        points=rng.normal(size=(n, 2, k, dims)) * 50,
+        reference=rng.normal(size=(n, 2, dims)) * 300,
+        height=rng.uniform(150, 200, (n, 2)),
+        heading=rng.uniform(-np.pi, np.pi, (n, 2)) if dims == 3 else np.zeros((n, 2)),
+        fps=25.0,
+    )
+
+
+@pytest.mark.parametrize("dims", [2, 3])
+def test_partner_placed_back_exactly(dims):
+    """Re-arranging eqs. 3-4 puts either person's partner back where it was."""
+    p = random_people(dims)
+    if dims == 3:
+        p.reference[..., 1] = 0.0  # references on the floor
+    js = JointShape().fit([p])
+    c = js.transform([p])[0]
+    assert c.shape == (p.n_frames, 2 * js.shape_size + (1 if dims == 2 else 4) + 1)
+    for person in (0, 1):
+        partner = js.place(c, person, p.person(person))
+        truth = p.person(1 - person)
+        np.testing.assert_allclose(partner.points[..., 0], truth.points[..., 0], atol=1e-9)
+        np.testing.assert_allclose(partner.height, truth.height, rtol=1e-9)
+        if dims == 3:
+            np.testing.assert_allclose(partner.points, truth.points, atol=1e-9)
+
+
+def test_state_vectors_in_unit_range_with_scaled_derivatives():
+    p = random_people(2)
+    pipe = joint_shape_pipeline([p], window=5, lam=10.0)
+    f = pipe.fit_transform([p])[0]
+    d = f.shape[1] // 2
+    assert f[:, :d].min() == pytest.approx(0.0) and f[:, :d].max() == pytest.approx(1.0)
+    # shape coordinates share one range: a shape's geometry is kept
+    raw = pipe.steps[1].transform(pipe.steps[0].transform([p]))[0]
+    shapes = slice(0, 2 * pipe.steps[0].shape_size)
+    ratio = np.ptp(f[:, shapes], axis=0) / np.ptp(raw[:, shapes], axis=0)
+    np.testing.assert_allclose(ratio, ratio[0])
+    np.testing.assert_allclose(f[2:, d:], 10.0 * np.diff(f[1:, :d], axis=0))
+
+
+# -------------------------------------------------------------- behaviour model
+def test_proximity_falls_linearly_to_the_hypercube_diagonal():
+    p = proximities(np.zeros((1, 2)), np.array([[0.0, 0.0], [1.0, 1.0], [0.5, 0.0]]))
+    np.testing.assert_allclose(p, [[1.0, 0.0, 1.0 - 0.5 / np.sqrt(2)]])
+
+
+def test_decay_operator_matches_eq10_by_hand():
+    p = np.array([[0.5, 0.2], [0.3, 0.9], [0.1, 0.1], [0.2, 0.3]])
+    # z0 = 0; z_t = p_t if p_t > gamma z_{t-1} else gamma z_{t-1}, gamma = 0.5
+    expected = [[0.5, 0.2], [0.3, 0.9], [0.15, 0.45], [0.2, 0.3]]
+    np.testing.assert_allclose(decay_behaviour(p, gamma=0.5), expected)
+
+
+def hand_chain(prototypes: np.ndarray, labels: list[list[int]], **params) -> BehaviourChain:
+    """A chain whose behaviour prototypes are the state prototypes themselves."""
+    ch = BehaviourChain(calibrate_intervals=False, **params)
+    ch.state_prototypes_ = np.asarray(prototypes, dtype=float)
+    ch.behaviour_prototypes_ = np.eye(len(prototypes))
+    ch.chain_prototype_ = np.arange(len(prototypes))
+    return ch.fit_chain([np.array(lab) for lab in labels])
+
+
+def test_chain_counts_state_changes_and_ends():
+    ch = hand_chain(np.zeros((3, 4)), [[0, 0, 1, 1, 2], [0, 2, 2]])
+    np.testing.assert_allclose(
+        ch.transmat_,
+        [[0, 0.5, 0.5, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 0, 0, 1]],
+    )
+    np.testing.assert_allclose(ch.startprob_, [1, 0, 0, 0])
+    np.testing.assert_allclose(ch.occupancy_, [3 / 8, 2 / 8, 3 / 8, 0])
+
+
+def test_fitted_chain_rows_sum_to_one():
+    rng = np.random.default_rng(1)
+    seqs = [np.cumsum(rng.normal(0, 0.02, (80, 6)), axis=0) + 0.5 for _ in range(3)]
+    ch = BehaviourChain(n_state_prototypes=12, n_behaviour_prototypes=8, n_epochs=2).fit(seqs)
+    assert ch.transmat_.shape == (9, 9)
+    np.testing.assert_allclose(ch.transmat_.sum(axis=1), 1.0)
+    assert ch.transmat_[ch.end_state, ch.end_state] == 1.0
+    assert ch.startprob_.sum() == pytest.approx(1.0)
+    assert ch.behaviour_vectors(seqs[0]).shape == (80, 12)
+
+
+def line_chain() -> BehaviourChain:
+    """Three prototypes on a line, visited 0 -> 1 -> 2 -> end, moving at 0.1 per frame."""
+    c = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    v = np.tile([0.1, 0.0], (3, 1))
+    return hand_chain(np.hstack([c, 10 * v]), [[0, 1, 2]], lam=10.0)
+
+
+def test_extrapolation_passes_the_prototypes_and_stops_at_the_end():
+    ch = line_chain()
+    out = ch.extrapolate(ch.state_prototypes_[0], 0)
+    # eq. 15: |dC| = 1 at speed 0.1 per frame -> 10 frames per segment; ends still at prototype 2
+    assert len(out) == 21
+    np.testing.assert_allclose(out[[0, 10, 20], :2], ch.state_prototypes_[:, :2], atol=1e-12)
+    np.testing.assert_allclose(out[1:, 2:], np.tile([1.0, 0.0], (20, 1)), atol=1e-9)  # lambda dC
+    only = ch.extrapolate(ch.state_prototypes_[2], ch.end_state)
+    np.testing.assert_allclose(only, ch.state_prototypes_[2:])
+
+
+def test_branch_enumerates_every_successor_at_a_decision_point():
+    c = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [1.0, -1.0]])
+    ch = hand_chain(np.hstack([c, np.zeros_like(c)]), [[0, 1, 2], [0, 1, 3]], max_interval=4)
+    h = ch.at(ch.state_prototypes_[[1]], [1])
+    succ = ch.branch(h)
+    assert sorted(succ.state.tolist()) == [2, 3]
+
+
+# ------------------------------------------------------------------ CONDENSATION
+def test_likelihood_and_hypersphere_mode():
+    w = likelihood_weights(np.array([0.0, 0.05, 1.0]), sigma=0.05)
+    np.testing.assert_allclose(w[:2] / w[0], [1.0, np.exp(-0.5)])
+    assert w.sum() == pytest.approx(1.0) and w[2] < 1e-80
+    pts = np.array([[0.0], [0.1], [0.15], [3.0], [3.05]])
+    assert hypersphere_mode(pts, 0.12) == 1
+    assert hypersphere_mode(pts) in (0, 1, 2)  # median distance: the dense cluster
+
+
+def branching_chain() -> BehaviourChain:
+    """A loop with a decision point: two branches look alike to the real person at first
+    (prototypes 2 and 3) but the partner differs; they part for the real person later (4, 5).
+
+    Columns of C: the real person (2), the partner (2).
+    """
+    c = np.array(
+        [
+            [0.0, 0.0, 0.0, 0.0],
+            [0.5, 0.0, 0.5, 0.0],
+            [1.0, 0.05, 1.0, 1.0],
+            [1.0, -0.05, 1.0, -1.0],
+            [0.5, 0.6, 0.5, 1.0],
+            [0.5, -0.6, 0.5, -1.0],
+        ]
+    )
+    ch = hand_chain(np.hstack([c, np.zeros_like(c)]), [[0, 1, 2, 4, 0, 1, 3, 5]], max_interval=8.0)
+    ch.transmat_[:6] = 0.0  # a loop without end: 0 -> 1 -> (2 -> 4 | 3 -> 5) -> 0
+    for a, b, p in (
+        (0, 1, 1),
+        (1, 2, 0.5),
+        (1, 3, 0.5),
+        (2, 4, 1),
+        (3, 5, 1),
+        (4, 0, 1),
+        (5, 0, 1),
+    ):
+        ch.transmat_[a, b] = p
+    return ch
+
+
+def test_condensation_beats_single_hypothesis_on_noisy_observations():
+    ch = branching_chain()
+    real, partner = slice(0, 2), slice(2, 4)
+    errors = {"single": [], "multiple": []}
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        truth = ch.extrapolate(ch.state_prototypes_[0], 0, max_frames=150, rng=rng)[:, :4]
+        observed = truth[:, real] + rng.normal(0, 0.15, (len(truth), 2))
+        for name, prop in (
+            ("single", SingleHypothesis(ch, [real], seed=seed)),
+            ("multiple", MultipleHypotheses(ch, [real], 200, sigma=0.15, seed=seed)),
+        ):
+            shapes, _, _ = prop.run(observed)
+            errors[name].append(
+                np.linalg.norm(shapes[:, partner] - truth[:, partner], axis=1).mean()
+            )
+    assert np.mean(errors["multiple"]) < 0.5 * np.mean(errors["single"])
+
+
+# ---------------------------------------------------------------------- real data
+@pytest.fixture(scope="session")
+def salsa_take(mocap) -> TwoPeople:
+    a, b = mocap.pairs(label="salsa")[0]
+    return TwoPeople.from_motions(*mocap.load_pair(a, b), fps=25.0)
+
+
+def test_real_take_joint_shapes_and_placement(salsa_take):
+    p = salsa_take
+    assert p.fps == 25.0 and p.points.shape[1:] == (2, 19, 3)
+    js = JointShape().fit([p])
+    c = js.transform([p])[0]
+    partner = js.place(c, 0, p.person(0))
+    np.testing.assert_allclose(partner.points, p.points[:, 1], atol=1e-6)
+
+
+@pytest.fixture(scope="session")
+def small_partner(salsa_take) -> VirtualPartner:
+    train = salsa_take.trim(0, 600)
+    return VirtualPartner(n_state_prototypes=40, n_behaviour_prototypes=30, n_epochs=3).fit([train])
+
+
+def test_real_partner_follows_and_round_trips(small_partner, salsa_take, tmp_path):
+    test = salsa_take.trim(600)
+    real = test.person(0)
+    resp = small_partner.respond(real, 0, n_hypotheses=50)
+    assert resp.partner.points.shape == test.points[:, 1].shape
+    assert np.all(np.isfinite(resp.partner.points))
+    # the partner stands within arm's reach of where it was, its joints within 0.3 m
+    err = np.linalg.norm(resp.partner.points - test.points[:, 1], axis=-1).mean()
+    assert err < 1000.0
+    small_partner.save(tmp_path / "m.npz")
+    back, source = VirtualPartner.load(tmp_path / "m.npz")
+    assert source == "mocap"
+    again = back.respond(real, 0, n_hypotheses=50)
+    np.testing.assert_allclose(again.partner.points, resp.partner.points)
+    with pytest.raises(ModelFormatError):
+        VirtualPartner.load(tmp_path / "missing.npz")
+
+
+def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
+    small_partner, salsa_take, mocap, tmp_path
+):
+    result = evaluate_partner(small_partner, [salsa_take.trim(600, 700)], "mocap", 30)
+    for key in ("single_hypothesis", "multiple_hypotheses", "mean_shape"):
+        assert 0 < result[key] < 1000 and 0 < result["placement_mm"][key] < 5000
+    assert result["unit"] == "mm" and set(result["per_frame_ms"]) >= {
+        "single_hypothesis",
+        "multiple_hypotheses",
+    }
+    small_partner.save(tmp_path / "m.npz")
+    a, _ = mocap.pairs(label="salsa")[0]
+    out = tmp_path / "partner.bvh"
+    argv = ["chain", "respond", "--model", str(tmp_path / "m.npz"), "--input", str(a.path)]
+    main([*argv, "--out", str(out), "--hypotheses", "20"])
+    partner = read_motion(out)
+    assert partner.n_frames == salsa_take.n_frames and partner.skeleton.n_joints == 19

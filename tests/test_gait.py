@@ -1,0 +1,321 @@
+"""Gait synthesis: steps on real walks, exponential maps, root travel, model files, commands."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from markovmotion import read_motion
+from markovmotion.cli import main
+from markovmotion.errors import ModelFormatError
+from markovmotion.features import ExpMaps, FeaturePipeline
+from markovmotion.features.gait import (
+    align_walk,
+    detect_steps,
+    foot_slide,
+    root_from_contact,
+    step_positions,
+    travel_yaw,
+)
+from markovmotion.features.reference_pose import ReferencePose
+from markovmotion.models.gait import GaitSynthesizer, gait_entries, split_walks
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest angle (rad) between quaternion arrays, sign-insensitive."""
+    return float(np.max(2 * np.arccos(np.abs(np.sum(a * b, axis=-1)).clip(0, 1))))
+
+
+@pytest.fixture(scope="session")
+def normal_walks(mocap):
+    """Four neutral Bandai walks (training split), read once."""
+    train, _ = split_walks(gait_entries(mocap, "normal"))
+    return [mocap.load_motion(e) for e in train[:4]]
+
+
+@pytest.fixture(scope="session")
+def small_model(normal_walks):
+    return GaitSynthesizer(n_iter=2).fit(normal_walks[:3])
+
+
+def test_steps_on_a_real_walk(normal_walks):
+    walk = align_walk(normal_walks[0])
+    steps = detect_steps(walk)
+    seconds = walk.n_frames / walk.fps
+    # a ~9 s straight walk: a step every 0.45-0.7 s between the first and last heel strikes
+    assert 10 <= steps.n_steps <= seconds / 0.45
+    durations = np.diff(steps.boundaries) / walk.fps
+    assert durations.min() > 0.4 and durations.max() < 0.75
+    assert all(a != b for a, b in zip(steps.sides, steps.sides[1:], strict=False))
+    assert steps.dropped == 0
+
+
+def test_steps_on_a_cmu_walk(mocap):
+    """Another skeleton, another frame rate: CMU subject 2's walk at 120 fps."""
+    walk = align_walk(mocap.load_motion(mocap.find("cmu/asfamc/02/02_01.amc.gz")))
+    steps = detect_steps(walk)
+    assert 3 <= steps.n_steps <= 6
+    assert 0.4 < np.diff(steps.boundaries).mean() / walk.fps < 0.75
+
+
+def test_step_positions():
+    assert step_positions(6) == ["first", "second", "inside", "inside", "last_but_one", "last"]
+    assert step_positions(2) == ["first", "last"]
+    assert step_positions(1) == ["first"]
+
+
+def test_alignment_turns_the_walk_onto_z(normal_walks):
+    walk = normal_walks[1]
+    aligned = align_walk(walk)
+    assert abs(travel_yaw(aligned)) < 1e-9
+    # a rigid turn: distances between joints are kept
+    p, q = walk.positions()[::40], aligned.positions()[::40]
+    np.testing.assert_allclose(
+        np.linalg.norm(p[:, 5] - p[:, 20], axis=1), np.linalg.norm(q[:, 5] - q[:, 20], axis=1)
+    )
+
+
+def test_expmap_rotation_expmap_round_trip(normal_walks):
+    walks = [align_walk(m) for m in normal_walks[:2]]
+    pipe = FeaturePipeline([ReferencePose(), ExpMaps(root_position="none")]).fit(walks)
+    feats = pipe.transform(walks)
+    back = pipe.inverse_transform(feats)
+    rotating = pipe.steps[-1].joint_index_
+    for m, b, f in zip(walks, back, feats, strict=True):
+        assert angle_between(b.rotations[:, rotating], m.rotations[:, rotating]) < 1e-6
+        np.testing.assert_allclose(pipe.transform([b])[0], f, atol=1e-9)
+    # relative to the mean pose, no rotation vector comes near the singularity at pi
+    assert max(np.abs(f).max() for f in feats) < 2.0
+
+
+def test_root_travel_from_contact_keeps_the_foot_planted(normal_walks):
+    real = align_walk(normal_walks[2])
+    steps = detect_steps(real)
+    still = real.copy()
+    still.translations[:, 1] = real.skeleton.offsets[1]  # drop the pelvis travel
+    rebuilt = root_from_contact(still, steps.boundaries, steps.sides)
+    b = steps.boundaries
+    slide = foot_slide(rebuilt, b, steps.sides)
+    assert slide.max() < 1.0
+    travel = lambda m: np.linalg.norm(np.diff(m.positions()[[b[0], b[-1]], 1, ::2], axis=0))  # noqa: E731
+    assert travel(rebuilt) == pytest.approx(travel(real), rel=0.12)
+
+
+def test_synthesized_walk(small_model, tmp_path):
+    walk = small_model.synthesize(8)
+    assert walk.skeleton.names == small_model.pipeline_.steps[-1].skeleton_.names
+    assert 8 * 12 < walk.n_frames < 8 * 22
+    steps = detect_steps(walk)
+    assert 5 <= steps.n_steps <= 8  # the synthesized walk has steps the detector finds again
+    pelvis = walk.positions()[:, walk.skeleton.body_root]
+    assert np.ptp(pelvis[:, 2]) > 3000  # it travels forwards (mm)
+    assert np.abs(pelvis[:, 0]).max() < 0.2 * np.ptp(pelvis[:, 2])
+    assert 800 < pelvis[:, 1].mean() < 1000  # standing on the floor
+    faster = small_model.synthesize(8, speed=1.5)
+    assert faster.n_frames < walk.n_frames
+    static, _, _ = small_model.generate_features(8, gv=False)
+    with_gv, _, _ = small_model.generate_features(8)
+    assert np.var(with_gv, axis=0).sum() > np.var(static, axis=0).sum()
+
+
+def test_model_file_round_trip(small_model, tmp_path):
+    path = tmp_path / "avg.npz"
+    small_model.save(path)
+    back = GaitSynthesizer.load(path)
+    a, _, _ = small_model.generate_features(6)
+    b, _, _ = back.generate_features(6)
+    np.testing.assert_array_equal(a, b)
+    assert back.files_ == small_model.files_ and back.role_ == "average"
+    with pytest.raises(ModelFormatError, match="gait-hsmm"):
+        from markovmotion.persist import save_npz
+
+        save_npz(tmp_path / "other.npz", "vlmm", {}, {})
+        GaitSynthesizer.load(tmp_path / "other.npz")
+
+
+def test_adapt_and_synthesize_commands(small_model, mocap, tmp_path):
+    model = tmp_path / "avg.npz"
+    small_model.save(model)
+    style = mocap.find("bandai/dataset-2/walk_elderly_001.bvh.gz").path
+    adapted = tmp_path / "elderly.npz"
+    main(
+        ["gait", "adapt", "--model", str(model), "--style-data", str(style)]
+        + ["--label", "elderly", "--steps", "6", "--out", str(adapted)]
+    )
+    assert GaitSynthesizer.load(adapted).role_ == "adapted"
+    out = tmp_path / "walk.bvh"
+    main(
+        ["gait", "synthesize", "--model", str(adapted), "--steps", "6", "--no-gv"]
+        + ["--seed", "1", "--out", str(out)]
+    )
+    walk = read_motion(out)
+    assert walk.n_frames > 60 and walk.fps == pytest.approx(30)
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "synthesize", "--model", str(tmp_path / "none.npz"), "--out", str(out)])
+    assert exc.value.code == 2
+
+
+def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
+    """Adapted to 'elderly' from 12 training steps: its steps recognised as elderly, closer to held-out ones."""
+    from markovmotion.evaluate.gait import Evaluation, StyleClassifier
+
+    train, test = split_walks(gait_entries(mocap, "elderly"))
+    elderly = [mocap.load_motion(e) for e in (*train[:2], test[0])]
+    ev = Evaluation.prepare(
+        {"normal": normal_walks[:2], "elderly": elderly[:2]},
+        {"normal": normal_walks[3:4], "elderly": elderly[2:]},
+        StyleClassifier(n_components=None),
+        n_walks=2,
+        walk_steps=8,
+    )
+    real = ev.real()
+    assert real["rate"] == 1.0 and real["chance"] == 0.5 and real["eta"] == 2.0
+    assert real["confusion"]["elderly"] == {"elderly": 100.0, "normal": 0.0}
+    adapted = small_model.adapt(elderly[:1], "elderly", 12)
+    assert adapted.role_ == "adapted" and adapted.n_steps_ == 12
+    scratch = small_model.scratch(elderly[:1], "elderly", 12)
+    assert scratch.n_steps_ == 12 and scratch.files_ == adapted.files_
+    results = {
+        role: ev.models({"elderly": [model]})[0]
+        for role, model in (("adapted", adapted), ("average", small_model), ("scratch", scratch))
+    }
+    for metrics in results.values():
+        for key in ("real_rate", "synthesized_rate", "chance", "eta_real", "eta_synthesized"):
+            assert 0.0 <= metrics[key] <= 2.0
+        lo, hi = metrics["synthesized_rate_ci"]
+        assert lo <= metrics["synthesized_rate"] <= hi
+        assert metrics["synthesized_steps"] >= 2 * 5  # two walks of 8 steps, ends cut
+        assert metrics["foot_slide_mm"] < 5.0  # the synthesized stance foot barely moves
+    for role in ("adapted", "scratch"):  # the neutral walk swings more than an elderly one
+        assert 0.7 < results[role]["gv_ratio"] < 1.4
+    assert results["adapted"]["synthesized_rate"] == 1.0
+    assert results["average"]["synthesized_rate"] == 0.0  # the neutral walk is not elderly
+    assert results["adapted"]["dtw_joint_mm"] < results["average"]["dtw_joint_mm"]
+    # the adapted model generalises to the held-out walk better than the average model
+    assert results["adapted"]["test_log_likelihood"] > results["average"]["test_log_likelihood"]
+    # the sweep adapts on exactly K steps of the first training takes, scratch on the same
+    sweep = ev.sweep(small_model, ["elderly"], [3])["3"]
+    assert sweep["adapted"]["adaptation_steps"] == {"elderly": [3]}
+    assert sweep["scratch"]["adaptation_steps"] == {"elderly": [3]}
+    assert sweep["adapted"]["adaptation_files"] == {"elderly": [[elderly[0].name]]}
+    diff = sweep["adapted_minus_scratch"]
+    lo, hi = diff["synthesized_rate_ci"]
+    assert lo <= diff["synthesized_rate"] <= hi
+
+
+def test_synthesized_walks_vary_with_the_seed(small_model):
+    """Durations drawn from the densities: walks differ from one another, a seed repeats them."""
+    rng = np.random.default_rng(1)
+    walks = [small_model.generate_features(8, rng=rng) for _ in range(3)]
+    lengths = {len(f) for f, _, _ in walks}
+    assert len(lengths) > 1
+    repeat = small_model.generate_features(8, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(repeat[0], walks[0][0])
+    np.testing.assert_array_equal(repeat[1], walks[0][1])
+
+
+def test_adaptation_steps_come_from_the_first_takes(normal_walks, small_model):
+    from markovmotion.errors import DataNotFoundError
+    from markovmotion.evaluate.gait import adaptation_takes
+
+    takes = adaptation_takes(normal_walks, [11, 12, 13, 14], 12)
+    assert takes == normal_walks[:2]
+    assert adaptation_takes(normal_walks, [11, 12, 13, 14], 11) == normal_walks[:1]
+    # replicates take the next takes, never sharing one
+    assert adaptation_takes(normal_walks, [11, 12, 13, 14], 11, replicate=1) == normal_walks[1:2]
+    assert adaptation_takes(normal_walks, [11, 12, 13, 14], 12, replicate=1) == normal_walks[2:3]
+    with pytest.raises(DataNotFoundError, match="24 adaptation steps asked for replicate 1"):
+        adaptation_takes(normal_walks, [11, 12, 13, 10], 24, replicate=1)
+    with pytest.raises(DataNotFoundError, match="only 35 in the 3 takes left"):
+        adaptation_takes(normal_walks[:3], [11, 12, 12], 36)
+    data = small_model.walk_set(normal_walks[:1])
+    assert data.first_steps(5).n_steps == 5
+    with pytest.raises(DataNotFoundError, match=r"50 steps asked, only \d+ found in 1 walks"):
+        data.first_steps(50)
+
+
+def fake_walks(rng: np.random.Generator, centre: np.ndarray, n_walks: int, n_steps: int = 12):
+    """Walks whose per-step statistics are ``centre`` + a walk offset + step noise."""
+    from markovmotion.evaluate.gait import WalkSteps
+
+    out = []
+    for _ in range(n_walks):
+        stats = centre + rng.normal(scale=0.3, size=len(centre)) + rng.normal(size=(n_steps, 9))
+        sides = tuple("LR"[k % 2] for k in range(n_steps))
+        empty = np.zeros((n_steps + 1, 1))
+        out.append(
+            WalkSteps("fake", empty, empty, np.arange(n_steps + 1), sides, stats, empty, empty)
+        )
+    return out
+
+
+def test_step_classifier_separates_two_styles():
+    """Two styles 2.5 standard deviations apart, shared by four of nine statistics: ~89 % of steps."""
+    from markovmotion.evaluate.gait import Recognition, StyleClassifier, interval
+
+    rng = np.random.default_rng(0)
+    centres = {"a": np.zeros(9), "b": np.r_[np.full(4, 1.25), np.zeros(5)]}
+    train = {s: fake_walks(rng, c, 10) for s, c in centres.items()}
+    test = {s: fake_walks(rng, c, 30) for s, c in centres.items()}
+    walks = [w for ws in train.values() for w in ws]
+    labels = [s for s, ws in train.items() for _ in ws]
+    clf = StyleClassifier(target=0.8).fit(walks, labels)
+    # the statistics that move together with the style make the first principal component
+    assert clf.n_components_ == 1 and clf.cv_rates_[1] >= 0.8
+    rec = Recognition.of(clf, {s: [ws] for s, ws in test.items()})
+    assert 0.83 < rec.rate() < 0.95  # the Bayes rate is Phi(1.25) = 0.89
+    assert rec.walk_rate() > 0.95  # twelve steps of a walk together leave little doubt
+    lo, hi = interval(rec.replicates(n_boot=500))
+    assert lo < rec.rate() < hi and hi - lo < 0.1
+    table = rec.table()
+    assert sum(table["a"].values()) == pytest.approx(100.0)
+    share = 100 * rec.correct["a"].sum() / rec.steps["a"].sum()
+    assert table["a"]["a"] == pytest.approx(share, abs=0.05)  # percent, one decimal
+    # walks of a style the classifier never saw as such are not recognised
+    swapped = Recognition.of(clf, {"a": [test["b"]], "b": [test["a"]]})
+    assert swapped.rate() < 0.2
+    # far apart, every statistic kept: every step recognised
+    far = {"a": np.zeros(9), "b": np.full(9, 4.0)}
+    train = {s: fake_walks(rng, c, 4) for s, c in far.items()}
+    walks = [w for ws in train.values() for w in ws]
+    full = StyleClassifier(n_components=None).fit(walks, ["a"] * 4 + ["b"] * 4)
+    assert full.n_components_ is None
+    test = {s: [fake_walks(rng, c, 5)] for s, c in far.items()}
+    assert Recognition.of(full, test).rate() == 1.0
+
+
+def test_bootstrap_of_a_rate_over_styles():
+    from markovmotion.evaluate.gait import bootstrap_means, interval
+
+    perfect = (np.array([[10, 12]]), np.array([[10, 12]]))
+    half = (np.array([[5, 0, 10]]), np.array([[10, 10, 10]]))
+    reps = bootstrap_means([perfect, half], n_boot=4000, seed=1)
+    assert reps.max() <= 1.0 and reps.min() >= 0.5
+    assert reps.mean() == pytest.approx((1.0 + 0.5) / 2, abs=0.02)
+    lo, hi = interval(reps)
+    assert lo < 0.75 < hi
+    assert interval(bootstrap_means([perfect], 100)) == [1.0, 1.0]
+    # two models of a style, each walk fully right or wrong: models are resampled first
+    models = (np.array([[10, 10], [0, 0]]), np.full((2, 2), 10))
+    reps = bootstrap_means([models], n_boot=4000, seed=2)
+    assert set(np.round(reps, 6)) <= {0.0, 0.25, 0.5, 0.75, 1.0}
+    assert np.mean(reps == 1.0) == pytest.approx(0.25, abs=0.03)  # both draws the good model
+
+
+def test_evaluate_command_errors(tmp_path, small_model):
+    (tmp_path / "empty").mkdir()
+    for args in (
+        ["--models", str(tmp_path / "empty")],  # no gait models
+        ["--models", str(tmp_path / "none")],  # no such folder
+        ["--models", str(tmp_path), "--components", "some"],
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["gait", "evaluate", *args])
+        assert exc.value.code == 2
+    small_model.save(tmp_path / "scratch-only.npz")
+    scratch = GaitSynthesizer.load(tmp_path / "scratch-only.npz")
+    scratch.role_ = "scratch"
+    scratch.save(tmp_path / "scratch-only.npz")
+    with pytest.raises(SystemExit) as exc:  # the sweep needs the average model
+        main(["gait", "evaluate", "--models", str(tmp_path), "--sweep", "3"])
+    assert exc.value.code == 2

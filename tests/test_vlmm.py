@@ -1,0 +1,300 @@
+"""Variable-length Markov models (VLMM paper §3): suffix tree, automaton, behaviour model, E_T."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
+from markovmotion.evaluate.horizon import HorizonCurve, ZeroVelocity, evaluate_horizon
+from markovmotion.models.behaviour import (
+    BehaviourModel,
+    held_out_split,
+    load_behaviour_model,
+    load_motions,
+)
+from markovmotion.models.vlmm import VLMM, prediction_suffix_tree
+
+
+def variable_order_source(n: int, seed: int = 0) -> np.ndarray:
+    """Tokens 0-4 where the next token needs 3 tokens of memory after ``0 1``, 1 elsewhere.
+
+    0 -> 1; 1 -> 3 after ``2 0 1`` or ``4 0 1``, 2 after ``3 0 1``; 2 -> 0 (p .6)
+    or 4 (p .4); 3 -> 0; 4 -> 0.
+    """
+    rng = np.random.default_rng(seed)
+    s = [2, 0, 1]
+    while len(s) < n:
+        a = s[-1]
+        if a == 0:
+            s.append(1)
+        elif a == 1:
+            s.append({2: 3, 3: 2, 4: 3}[s[-3]])
+        elif a == 2:
+            s.append(0 if rng.random() < 0.6 else 4)
+        else:
+            s.append(0)
+    return np.array(s)
+
+
+#: The memories that source needs: every token alone, and the three contexts
+#: of ``0 1`` (with ``0 1`` itself, uninformative but their common suffix).
+TRUE_MEMORIES = {(), (0,), (1,), (2,), (3,), (4,), (0, 1), (2, 0, 1), (3, 0, 1), (4, 0, 1)}
+
+
+def memories(model: VLMM, tree_only: bool = True) -> set[tuple[int, ...]]:
+    out = set()
+    for q in range(model.n_states):
+        if tree_only and not model.in_suffix_tree_[q]:
+            continue
+        n = model.memory_lengths_[q]
+        out.add(
+            tuple(int(v) for v in model.memories_[q, model.memories_.shape[1] - n :]) if n else ()
+        )
+    return out
+
+
+@pytest.fixture(scope="module")
+def source_model() -> VLMM:
+    x = variable_order_source(20000)
+    return VLMM(max_memory=6, epsilon=1e-3).fit([x[:12000], x[12000:]])
+
+
+# ----------------------------------------------------------------- the VLMM
+def test_vlmm_recovers_exactly_the_memories_of_a_variable_order_source(source_model):
+    assert memories(source_model) == TRUE_MEMORIES
+    assert source_model.output_probs(memories_index(source_model, (3, 0, 1)))[2] == 1.0
+    hist = source_model.memory_length_histogram()
+    assert hist.sum() == source_model.n_states and len(hist) == 7
+
+
+def memories_index(model: VLMM, memory: tuple[int, ...]) -> int:
+    for q in range(model.n_states):
+        n = model.memory_lengths_[q]
+        if tuple(model.memories_[q, model.memories_.shape[1] - n :]) == memory and n == len(memory):
+            return q
+    raise KeyError(memory)
+
+
+def test_kl_pruning_removes_a_memory_that_adds_no_information():
+    x = variable_order_source(20000)
+    levels, kept, gains = prediction_suffix_tree([x], 5, 3, 1e-3)
+    # "2 0" is counted in the prefix tree, predicts exactly what "0" predicts (1) ...
+    level2 = levels[2]
+    zero = np.flatnonzero(levels[1].symbol == 0)[0]
+    two_zero = np.flatnonzero((level2.parent == zero) & (level2.symbol == 2))[0]
+    offset = len(levels[1].symbol)
+    assert gains[offset + two_zero] == 0.0
+    # ... so it is pruned, and so are all memories of a first-order chain beyond length 1
+    assert not kept[2][two_zero]
+    rng = np.random.default_rng(3)
+    trans = rng.dirichlet(np.ones(4), size=4)
+    chain = [0]
+    for _ in range(20000):
+        chain.append(rng.choice(4, p=trans[chain[-1]]))
+    pruned = VLMM(max_memory=3, epsilon=1e-3).fit([np.array(chain)])
+    assert pruned.memory_lengths_.max() == 1
+    assert VLMM(max_memory=3, epsilon=0.0).fit([np.array(chain)]).memory_lengths_.max() == 3
+
+
+def test_pfsa_output_distributions_sum_to_one_and_transitions_are_exact(source_model):
+    m = source_model
+    sums = np.add.reduceat(m.out_probs_, m.out_indptr_[:-1])
+    assert np.allclose(sums, 1.0)
+    assert m.start_probs_.sum() == pytest.approx(1.0)
+    # delta(q, a) is the longest suffix of q a among the states (brute force)
+    by_memory = {mem: q for q in range(m.n_states) for mem in [tuple(memories_of(m, q))]}
+    rows = np.repeat(np.arange(m.n_states), np.diff(m.out_indptr_))
+    for q, a, nxt in zip(rows, m.out_symbols_, m.next_state_, strict=True):
+        s = tuple(memories_of(m, q)) + (int(a),)
+        longest = next(s[i:] for i in range(len(s) + 1) if s[i:] in by_memory)
+        assert by_memory[longest] == nxt
+    # recognition predicts with the longest suffix of the whole history in the tree
+    x = variable_order_source(300, seed=5)
+    states = m.recognise(x)
+    tree = memories(m)
+    for t in range(10, 300, 7):
+        hist = tuple(int(v) for v in x[: t + 1])
+        longest = next(hist[i:] for i in range(len(hist) - 7, len(hist) + 1) if hist[i:] in tree)
+        assert np.allclose(m.output_probs(states[t]), m.output_probs(by_memory[longest]))
+
+
+def memories_of(m: VLMM, q: int) -> list[int]:
+    n = m.memory_lengths_[q]
+    return [int(v) for v in m.memories_[q, m.memories_.shape[1] - n :]] if n else []
+
+
+def test_unseen_event_backs_off_to_the_root(source_model):
+    m = source_model
+    q = memories_index(m, (0,))  # "0" is always followed by 1: 3 is unseen here
+    assert m.transition(np.array([q]), np.array([3]))[0] == memories_index(m, (3,))
+
+
+def test_generation_ml_is_deterministic_and_stochastic_follows_the_model(source_model):
+    m = source_model
+    assert np.array_equal(m.generate(50), m.generate(50))
+    sample = m.generate(20000, np.random.default_rng(0))
+    after_2 = sample[1:][sample[:-1] == 2]
+    assert np.mean(after_2 == 0) == pytest.approx(0.6, abs=0.03)
+    # every generated transition is one the source allows
+    allowed = {(0, 1), (1, 2), (1, 3), (2, 0), (2, 4), (3, 0), (4, 0)}
+    assert set(zip(sample[:-1].tolist(), sample[1:].tolist(), strict=True)) <= allowed
+
+
+def test_vlmm_save_load_round_trip(tmp_path, behaviour_model):
+    path = tmp_path / "m.npz"
+    behaviour_model.save(path, {"test_files": ["x"]})
+    loaded, header = load_behaviour_model(path)
+    assert header["test_files"] == ["x"]
+    assert np.array_equal(loaded.prototypes_, behaviour_model.prototypes_)
+    assert np.array_equal(loaded.vlmm_.next_state_, behaviour_model.vlmm_.next_state_)
+    a = behaviour_model.generate(3.0, np.random.default_rng(4))
+    b = loaded.generate(3.0, np.random.default_rng(4))
+    assert np.allclose(a.rotations, b.rotations)
+    assert np.array_equal(
+        loaded.vlmm_.recognise([1, 2, 3]), behaviour_model.vlmm_.recognise([1, 2, 3])
+    )
+
+
+# ------------------------------------------------------------------- E_T
+class _Identity:
+    """A predictor whose configurations are one 3-D point in mm (positions = C)."""
+
+    n_dims = 3
+
+    def __init__(self, offsets: np.ndarray):
+        self.offsets = offsets  # (samples, 3): prediction = C_t + offset at every horizon
+
+    def prepare(self, features):
+        return None
+
+    def predict_configurations(self, features, prepared, frames, horizon, n_samples, rng):
+        c = features[frames, :3]
+        return np.broadcast_to(
+            c[:, None, None, :] + self.offsets[None, :, None, :],
+            (len(frames), len(self.offsets), horizon, 3),
+        )
+
+    def configuration_positions(self, configs):
+        return configs.reshape(-1, 1, 3)
+
+
+def test_e_t_agrees_with_a_hand_computation():
+    c = np.array([[0.0, 0, 0], [3, 4, 0], [3, 4, 0], [6, 8, 0]])
+    feats = np.hstack([c, np.zeros_like(c)])
+    zero = evaluate_horizon(ZeroVelocity(_Identity(np.zeros((1, 3)))), [feats], 2, 1.0, 1)
+    # T = 1: |C_t - C_t+1| for t = 0, 1, 2 -> 5, 0, 5; T = 2: t = 0, 1 -> 5, 5
+    assert zero.mean.tolist() == pytest.approx([10 / 3, 5.0])
+    assert zero.mad.tolist() == pytest.approx([(5 / 3 + 10 / 3 + 5 / 3) / 3, 0.0])
+    assert zero.count.tolist() == [3, 2]
+    # two Monte Carlo samples per frame at +-(0, 0, 1): each trial error is hypot(d, 1)
+    mc = evaluate_horizon(_Identity(np.array([[0, 0, 1.0], [0, 0, -1.0]])), [feats], 1, 1.0, 2)
+    assert mc.mean[0] == pytest.approx((2 * np.hypot(5, 1) + 1) / 3)
+    assert mc.count[0] == 6
+    assert HorizonCurve.from_errors("x", 2.0, np.array([[1.0, np.nan], [3.0, 4.0]])).at(1.0) == 4.0
+
+
+# ------------------------------------------------------- the behaviour model
+@pytest.fixture(scope="module")
+def exercise(mocap):
+    """Three Indian-dance takes for training and one held out, at 15 fps."""
+    entries = mocap.query(category="exercise", label="indian_dance")
+    train, test = held_out_split(entries)
+    assert [e.name for e in test] == ["indian_14"]
+    motions, _ = load_motions(mocap, train[:3] + test, 15.0)
+    return motions[:3], motions[3:]
+
+
+@pytest.fixture(scope="module")
+def behaviour_model(exercise) -> BehaviourModel:
+    train, _ = exercise
+    return BehaviourModel(n_prototypes=40, max_memory=5, fps=15.0, seed=0).fit(train)
+
+
+def test_behaviour_model_generates_ml_deterministically_and_writes_bvh(behaviour_model, tmp_path):
+    from markovmotion.io import read_motion, write_motion
+
+    a, b = behaviour_model.generate(4.0), behaviour_model.generate(4.0)
+    assert np.array_equal(a.rotations, b.rotations)
+    assert a.n_frames == 61 and a.skeleton.same_topology(behaviour_model.skeleton_)
+    write_motion(behaviour_model.generate(4.0, np.random.default_rng(1)), tmp_path / "g.bvh")
+    assert read_motion(tmp_path / "g.bvh").n_frames == 61
+
+
+def test_generated_motion_passes_through_the_prototypes(behaviour_model):
+    m = behaviour_model
+    tokens = m.generate_tokens(3.0, np.random.default_rng(2))
+    configs = m.synthesise(tokens)
+    c, dc = m.knots(tokens)
+    times = np.r_[0, np.cumsum(m.intervals(c, dc))]
+    at_knots = configs[np.round(times).astype(int)[np.isclose(times, np.round(times))]]
+    assert np.allclose(at_knots, c[np.isclose(times, np.round(times))])
+    assert np.allclose(configs[0], c[0])
+
+
+def test_fk_of_configurations_matches_the_motion(behaviour_model, exercise):
+    m = behaviour_model
+    motion = exercise[1][0].trim(0, 40)
+    feats = m.observe([motion])[0]
+    pos = m.configuration_positions(feats[:, : m.n_dims])
+    truth = m.to_motion(feats[:, : m.n_dims]).positions()[:, m.eval_joints_]
+    assert np.allclose(pos, truth, atol=1e-6)
+    rv = Rotation.from_quat(motion.rotations.reshape(-1, 4)).as_rotvec().reshape(40, -1, 3)
+    assert np.allclose(
+        rotvec_positions(motion.skeleton, rv, motion.translations[:, 0]), motion.positions()
+    )
+    assert np.allclose(
+        fit_rotations(motion.skeleton, motion.positions()).positions(), motion.positions()
+    )
+
+
+def test_positions_configuration_goes_back_to_bvh_through_ik(exercise):
+    train, test = exercise
+    model = BehaviourModel(n_prototypes=20, max_memory=3, fps=15.0, configuration="positions")
+    model.fit(train[:1])
+    motion = model.generate(2.0, np.random.default_rng(0))
+    assert motion.skeleton.same_topology(train[0].skeleton)
+    # IK keeps the prototypes' joint directions: the fitted pose matches the
+    # generated positions up to bone lengths
+    feats = model.observe([test[0].trim(0, 10)])[0]
+    target = model.pipeline_.inverse_transform([feats[:, : model.n_dims]])[0]
+    fitted = model.to_motion(feats[:, : model.n_dims]).body_centred_positions()
+    assert np.linalg.norm(fitted - target, axis=-1).mean() < 20.0
+
+
+def test_prediction_beats_nothing_silly_on_held_out_dance(behaviour_model, exercise):
+    """E_T on a held-out take: bounded, and the VLMM no worse than first order at 2 s."""
+    m = behaviour_model
+    feats = m.observe(exercise[1])
+    kw = dict(horizon=30, fps=m.fps, n_samples=10, stride=10)
+    vlmm = evaluate_horizon(m, feats, **kw)
+    first = evaluate_horizon(m.with_vlmm(1, 0.0), feats, **kw)
+    assert 10.0 < vlmm.at(1.0) < 400.0
+    assert vlmm.at(2.0) < first.at(2.0) * 1.1
+    pred = m.predict(exercise[1][0].trim(0, 60), 1.0)
+    assert pred.n_frames == 60 + 15
+
+
+def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
+    from markovmotion.cli import main
+
+    model = tmp_path / "m.npz"
+    main(["vlmm", "train", "--label", "indian_dance", "--prototypes", "30", "--max-memory", "4",
+          "--fps", "10", "--out", str(model)])  # fmt: skip
+    main(["vlmm", "generate", "--model", str(model), "--seconds", "3", "--stochastic",
+          "--out", str(tmp_path / "g.bvh")])  # fmt: skip
+    assert (tmp_path / "g.bvh").is_file()
+    take = mocap.find("cmu/bvh/indian_14.bvh.gz").path
+    main(["vlmm", "predict", "--model", str(model), "--input", str(take), "--horizon", "1",
+          "--out", str(tmp_path / "p.bvh")])  # fmt: skip
+    capsys.readouterr()
+    main(["vlmm", "evaluate", "--model", str(model), "--test", str(mocap.root), "--samples", "3",
+          "--stride", "40", "--json", "--plot", str(tmp_path / "et.png")])  # fmt: skip
+    result = json.loads(capsys.readouterr().out)
+    for name in ("vlmm", "first_order", "zero_velocity"):
+        for s in ("0.5", "1", "2", "3"):
+            assert result[f"E_T_mm.{name}.{s}"] > 0
+    assert (tmp_path / "et.png").stat().st_size > 1000
