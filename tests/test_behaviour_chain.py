@@ -16,6 +16,7 @@ from markovmotion.models.condensation import (
     SingleHypothesis,
     hypersphere_mode,
     likelihood_weights,
+    weighted_mean,
 )
 from markovmotion.models.virtual_partner import VirtualPartner
 
@@ -175,23 +176,66 @@ def branching_chain() -> BehaviourChain:
     return ch
 
 
-def test_condensation_beats_single_hypothesis_on_noisy_observations():
+REAL, PARTNER = slice(0, 2), slice(2, 4)
+
+
+@pytest.fixture(scope="module")
+def noisy_branching() -> list[tuple[np.ndarray, np.ndarray]]:
+    """Six traversals of :func:`branching_chain`: true C (T, 4), real person seen with noise 0.15."""
     ch = branching_chain()
-    real, partner = slice(0, 2), slice(2, 4)
-    errors = {"single": [], "multiple": []}
+    runs = []
     for seed in range(6):
         rng = np.random.default_rng(seed)
         truth = ch.extrapolate(ch.state_prototypes_[0], 0, max_frames=150, rng=rng)[:, :4]
-        observed = truth[:, real] + rng.normal(0, 0.15, (len(truth), 2))
-        for name, prop in (
-            ("single", SingleHypothesis(ch, [real], seed=seed)),
-            ("multiple", MultipleHypotheses(ch, [real], 200, sigma=0.15, seed=seed)),
-        ):
-            shapes, _, _ = prop.run(observed)
-            errors[name].append(
-                np.linalg.norm(shapes[:, partner] - truth[:, partner], axis=1).mean()
+        runs.append((truth, truth[:, REAL] + rng.normal(0, 0.15, (len(truth), 2))))
+    return runs
+
+
+def partner_errors(make, runs) -> np.ndarray:
+    """Per-frame partner errors (all runs) of the propagators ``make(seed)``."""
+    out = []
+    for seed, (truth, observed) in enumerate(runs):
+        shapes, _, _ = make(seed).run(observed)
+        out.append(np.linalg.norm(shapes[:, PARTNER] - truth[:, PARTNER], axis=1))
+    return np.concatenate(out)
+
+
+def test_condensation_beats_single_hypothesis_on_noisy_observations(noisy_branching):
+    ch = branching_chain()
+    single = partner_errors(lambda s: SingleHypothesis(ch, [REAL], seed=s), noisy_branching)
+    multiple = partner_errors(
+        lambda s: MultipleHypotheses(ch, [REAL], 200, sigma=0.15, response="ml", seed=s),
+        noisy_branching,
+    )
+    assert multiple.mean() < 0.5 * single.mean()
+
+
+def test_weighted_mean_response_has_lower_squared_error_where_branches_look_alike(
+    noisy_branching,
+):
+    """Where the real person cannot yet tell the branches apart, the ML hypothesis bets on
+    one partner, the posterior mean (Isard and Blake's estimate) hedges between them."""
+    ch = branching_chain()
+    sq = {
+        r: (
+            partner_errors(
+                lambda s, r=r: MultipleHypotheses(ch, [REAL], 200, 0.15, response=r, seed=s),
+                noisy_branching,
             )
-    assert np.mean(errors["multiple"]) < 0.5 * np.mean(errors["single"])
+            ** 2
+        ).mean()
+        for r in ("ml", "mean")
+    }
+    assert sq["mean"] < 0.8 * sq["ml"]
+
+
+def test_weighted_mean_averages_within_the_heaviest_role():
+    c = np.array([[0.0, 2.0], [2.0, 4.0], [10.0, 10.0]])
+    shape, role = weighted_mean(c, np.array([0, 0, 1]), np.array([0.3, 0.1, 0.6]))
+    # role 0 weighs 0.4 < 0.6: the mean is the lone hypothesis of role 1
+    assert role == 1 and np.allclose(shape, [10.0, 10.0])
+    shape, role = weighted_mean(c, np.array([0, 0, 1]), np.array([0.3, 0.1, 0.2]))
+    assert role == 0 and np.allclose(shape, [0.5, 2.5])
 
 
 # ---------------------------------------------------------------------- real data

@@ -186,6 +186,13 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     np.testing.assert_allclose(back.positions(), walk.positions(), atol=1e-3)
     with Image.open(out / "pca-energy.png") as im:
         assert im.format == "PNG"
+    # the trained models' outputs: motions that read back, animations that move
+    for name in ("partner-virtual.bvh", "vlmm-routine.bvh", "gait-elderly-synthesized.bvh"):
+        motion = read_motion(out / name)
+        assert motion.n_frames > 30 and np.isfinite(motion.positions()).all()
+    for name in ("partner.gif", "vlmm-routine.gif", "gait-elderly.gif"):
+        frames = gif_frames(out / name)
+        assert len(frames) > 10 and not np.array_equal(frames[0], frames[-1])
 
 
 def test_line_plot_is_written_atomically(tmp_path):

@@ -112,9 +112,9 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
     out.mkdir(parents=True, exist_ok=True)
     index = MocapIndex.load(data)
     console.print(f"[bold]markovmotion demo[/]: data {index.root}, outputs in {out}")
-    table = Table(title="written", show_lines=False)
+    table = Table(title=f"written to {out}", show_lines=False)
     table.add_column("step")
-    table.add_column("file")
+    table.add_column("file", no_wrap=True)
     table.add_column("size", justify="right")
     table.add_column("time", justify="right")
     for step in STEPS if steps is None else steps:
@@ -125,6 +125,6 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
         for n, p in enumerate(paths):
             size = f"{p.stat().st_size / 1024:.0f} KiB"
             table.add_row(
-                what if n == 0 else "", str(p), size, f"{seconds:.1f} s" if n == 0 else ""
+                what if n == 0 else "", p.name, size, f"{seconds:.1f} s" if n == 0 else ""
             )
     console.print(table)

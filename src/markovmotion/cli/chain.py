@@ -17,9 +17,16 @@ from rich.table import Table
 from markovmotion.core.motion import Motion
 from markovmotion.data import MocapIndex
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
-from markovmotion.evaluate.chain import SOURCES, evaluate_partner, mocap_takes, salsa_split
+from markovmotion.evaluate.chain import (
+    SOURCES,
+    dual_hmm_partners,
+    evaluate_partner,
+    mocap_takes,
+    salsa_split,
+)
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.files import base_suffix
+from markovmotion.models.condensation import DEFAULT_RESPONSE, RESPONSES
 from markovmotion.models.virtual_partner import VirtualPartner
 from markovmotion.progress import err_console
 
@@ -33,6 +40,11 @@ app = typer.Typer(
 def _check_source(source: str) -> None:
     if source not in SOURCES:
         raise typer.BadParameter(f"source must be one of {', '.join(SOURCES)}")
+
+
+def _check_response(response: str) -> None:
+    if response not in RESPONSES:
+        raise typer.BadParameter(f"response must be one of {', '.join(RESPONSES)}")
 
 
 def _training_takes(data: Path | None, source: str, label: str):
@@ -104,7 +116,11 @@ def respond(
     input: Path = typer.Option(..., help="The real person: BVH (mocap model) or video."),
     out: Path = typer.Option(..., help="Output: .bvh (mocap partner) or .mp4 (video)."),
     hypotheses: int = typer.Option(200, min=1, help="Hypotheses N (1: single hypothesis)."),
-    response: str = typer.Option("ml", help="ml or map (eq. 21) hypothesis as the response."),
+    response: str = typer.Option(
+        DEFAULT_RESPONSE,
+        help="Response of multiple hypotheses: ml (the paper's), map (eq. 21) or mean "
+        "(likelihood-weighted mean, CONDENSATION's estimate).",
+    ),
     person: int = typer.Option(0, min=0, max=1, help="Mocap: the real person's half of the model."),
     fps: float = typer.Option(
         None, help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there)."
@@ -112,6 +128,7 @@ def respond(
     seed: int = typer.Option(0, help="Random seed."),
 ) -> None:
     """Drive a virtual partner from a real person's motion or video."""
+    _check_response(response)
     partner_model, source = VirtualPartner.load(model)
     options = {"n_hypotheses": hypotheses, "response": response, "seed": seed}
     suffix = base_suffix(out)
@@ -143,34 +160,64 @@ def evaluate(
         help="mocap: INDEX.csv or its folder; silhouette: folder written by 'silhouette render'.",
     ),
     hypotheses: int = typer.Option(200, min=2, help="Hypotheses N of the multiple-hypothesis run."),
+    response: str = typer.Option(
+        DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
+    ),
+    dual_hmm: Path = typer.Option(
+        None,
+        help="mocap: also a dual-HMM model ('dualhmm train') answering person A with B, "
+        "measured the same way on the same takes.",
+    ),
     label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
     seed: int = typer.Option(0, help="Random seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON on stdout."),
 ) -> None:
     """Mask one partner of each held-out take, generate it, report the errors."""
+    _check_response(response)
     partner_model, source = VirtualPartner.load(model)
+    others = None
     if source == "mocap":
         index = MocapIndex.load(test)
         _, held_out = salsa_split(index, label)
         takes = mocap_takes(index, held_out, fps=partner_model.fps_)
+        if dual_hmm is not None:
+            from markovmotion.models.dual_hmm import DualHMM
+
+            others = dual_hmm_partners(DualHMM.load(dual_hmm), index, held_out, takes)
     else:
+        if dual_hmm is not None:
+            raise typer.BadParameter("--dual-hmm compares 3-D partners: give a mocap model")
         from markovmotion.video.dataset import silhouette_takes
 
         takes = silhouette_takes(test, split="test")
-    result = evaluate_partner(partner_model, takes, source, hypotheses, seed)
+    result = evaluate_partner(partner_model, takes, source, hypotheses, response, seed, others)
     if as_json:
         typer.echo(json.dumps(result, indent=2))
         return
-    table = Table(title=f"virtual partner on {len(takes)} held-out takes ({result['unit']})")
+    title = f"virtual partner on {len(takes)} held-out takes ({result['unit']})"
+    _print_errors(result, f"{title}, each person masked in turn")
+    if others:
+        for person, part in enumerate(result["by_real_person"]):
+            _print_errors(part, f"{title}, person {'AB'[person]} real")
+
+
+def _print_errors(result: dict, title: str) -> None:
+    table = Table(title=title)
     table.add_column("partner")
     table.add_column("error")
+    placement = result.get("placement_mm")
+    if placement:
+        table.add_column("placement (mm)")
     table.add_column("ms / frame")
-    for key in (
-        "mean_shape",
-        "single_hypothesis",
-        "multiple_hypotheses",
-        "multiple_hypotheses_map",
-    ):
-        ms = result["per_frame_ms"].get(key)
-        table.add_row(key, f"{result[key]:.4g}", "" if ms is None else f"{ms:.2f}")
+    ms = result.get("per_frame_ms", {})
+    chosen = f"multiple_hypotheses_{result.get('multiple_hypotheses_response', '')}"
+    for key, value in result.items():
+        if not isinstance(value, float) or key == "multiple_hypotheses":
+            continue
+        name = f"{key} (= multiple_hypotheses)" if key == chosen else key
+        row = [name, f"{value:.4g}"]
+        if placement:
+            row.append(f"{placement[key]:.4g}")
+        row.append(f"{ms[key]:.2f}" if key in ms else "")
+        table.add_row(*row)
     Console().print(table)

@@ -29,7 +29,12 @@ from markovmotion.features.joint_shape import (
     shape_joints,
 )
 from markovmotion.models.behaviour_chain import BehaviourChain
-from markovmotion.models.condensation import MultipleHypotheses, Propagator, SingleHypothesis
+from markovmotion.models.condensation import (
+    DEFAULT_RESPONSE,
+    MultipleHypotheses,
+    Propagator,
+    SingleHypothesis,
+)
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, register, restore_estimator
 
@@ -109,10 +114,14 @@ class VirtualPartner(BaseEstimator):
     def shape_step(self) -> JointShape:
         return self.pipeline_.steps[0]
 
+    @staticmethod
+    def people(person: int | None) -> tuple[int, ...]:
+        """The halves of the model the real person may be: ``person``, or either if None."""
+        return (0, 1) if person is None else (person,)
+
     def roles(self, person: int | None) -> list[slice]:
         """Columns of C the real person may match: its own half, or either (eq. 18) if None."""
-        people = (0, 1) if person is None else (person,)
-        return [self.shape_step.person_slice(p) for p in people]
+        return [self.shape_step.person_slice(p) for p in self.people(person)]
 
     def observe(self, real: Person) -> np.ndarray:
         """(T, KD) the real person's shape vectors S^H, smoothed and normalised like C."""
@@ -126,11 +135,14 @@ class VirtualPartner(BaseEstimator):
         person: int | None = None,
         n_hypotheses: int = 200,
         sigma: float = 0.05,
-        response: str = "ml",
+        response: str = DEFAULT_RESPONSE,
         map_radius: float | None = None,
         seed: int = 0,
     ) -> Propagator:
-        """Single-hypothesis propagation if ``n_hypotheses`` is 1, else CONDENSATION (§5)."""
+        """Single-hypothesis propagation if ``n_hypotheses`` is 1, else CONDENSATION (§5).
+
+        The propagator's roles index :meth:`people` of ``person``.
+        """
         roles = self.roles(person)
         if n_hypotheses == 1:
             return SingleHypothesis(self.chain_, roles, seed=seed)
@@ -144,7 +156,8 @@ class VirtualPartner(BaseEstimator):
         ``person`` is the real person's half of the model (0 or 1); None lets
         eq. (18) choose it at every frame (silhouettes: left or right).
         """
-        shapes, roles, errors = self.propagator(person, **options).run(self.observe(real))
+        shapes, matched, errors = self.propagator(person, **options).run(self.observe(real))
+        roles = np.asarray(self.people(person))[matched]
         return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
 
     def respond_motion(self, motion: Motion, person: int = 0, **options) -> Motion:

@@ -224,30 +224,11 @@ def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps:
     MP4 is H.264 at constant quality (CRF 18) with a fast preset: sensor noise
     makes every frame expensive to encode at the slower presets.
     """
-    import imageio_ffmpeg
-
     path = Path(path)
     if path.suffix.lower() == ".mp4":
-        frames = iter(frames)
-        first = next(frames)
-        with atomic_path(path) as tmp:
-            writer = imageio_ffmpeg.write_frames(
-                str(tmp),
-                (first.shape[1], first.shape[0]),
-                fps=fps,
-                codec="libx264",
-                pix_fmt_in="rgb24",
-                quality=None,
-                output_params=["-preset", "veryfast", "-crf", "18"],
-                macro_block_size=2,
-                ffmpeg_log_level="error",
-            )
-            writer.send(None)
-            writer.send(first)
-            for f in frames:
-                writer.send(np.ascontiguousarray(f))
-            writer.close()
-        return path
+        from markovmotion.viz.video import write_mp4
+
+        return write_mp4(frames, path, fps, preset="veryfast", crf=18)
     path.mkdir(parents=True, exist_ok=True)
     for i, f in enumerate(frames):
         with atomic_path(path / f"{i:05d}.png") as tmp:

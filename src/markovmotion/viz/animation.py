@@ -34,8 +34,9 @@ from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MarkovMotionError
-from markovmotion.io.files import atomic_path, atomic_write
+from markovmotion.io.files import atomic_write
 from markovmotion.progress import track
+from markovmotion.viz.video import write_mp4
 
 OUTPUT_SUFFIXES = (".gif", ".mp4", ".png")
 COLOURS = (
@@ -456,29 +457,6 @@ def _write_gif(frames: Iterator[np.ndarray], path: Path, fps: float) -> None:
         )
 
 
-def _write_mp4(frames: Iterator[np.ndarray], path: Path, fps: float) -> None:
-    import imageio_ffmpeg
-
-    first = next(frames)
-    with atomic_path(path) as tmp:
-        writer = imageio_ffmpeg.write_frames(
-            str(tmp),
-            (first.shape[1], first.shape[0]),
-            fps=fps,
-            codec="libx264",
-            pix_fmt_in="rgba",
-            pix_fmt_out="yuv420p",
-            quality=7,
-            macro_block_size=2,
-            ffmpeg_log_level="error",
-        )
-        writer.send(None)
-        writer.send(first)
-        for f in frames:
-            writer.send(f)
-        writer.close()
-
-
 def render(
     items: Drawable | Sequence[Drawable],
     path: str | os.PathLike[str],
@@ -515,7 +493,7 @@ def render(
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title)
     stage = _Stage.build(tracks, side_by_side, times[-1])
     frames = _frames(stage, times, title, f"rendering {path.name}")
-    (_write_gif if suffix == ".gif" else _write_mp4)(frames, path, fps)
+    (_write_gif if suffix == ".gif" else write_mp4)(frames, path, fps)
     return path
 
 
