@@ -10,6 +10,7 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -91,18 +92,9 @@ class Motion:
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: global rotation matrices (F, J, 3, 3) and positions (F, J, 3) mm."""
-        sk = self.skeleton
         f = self.n_frames
         local = Rotation.from_quat(self.rotations.reshape(-1, 4)).as_matrix().reshape(f, -1, 3, 3)
-        rot = np.empty_like(local)
-        pos = np.empty((f, sk.n_joints, 3))
-        rot[:, 0] = local[:, 0]
-        pos[:, 0] = self.translations[:, 0]
-        for j in range(1, sk.n_joints):
-            p = sk.parents[j]
-            rot[:, j] = rot[:, p] @ local[:, j]
-            pos[:, j] = pos[:, p] + np.einsum("fab,fb->fa", rot[:, p], self.translations[:, j])
-        return rot, pos
+        return _chain(local, self.translations, self.skeleton.parents)
 
     def positions(self) -> np.ndarray:
         """Global joint positions (F, J, 3) in mm."""
@@ -228,6 +220,32 @@ class Motion:
         out[..., 0] = c[:, None] * x + s[:, None] * z
         out[..., 2] = -s[:, None] * x + c[:, None] * z
         return out
+
+
+@numba.njit(cache=True)
+def _chain(local, trans, parents):  # pragma: no cover - compiled
+    """Compose local rotations (F, J, 3, 3) and translations (F, J, 3) down the tree.
+
+    A compiled loop: the per-joint NumPy version spent most of its time in call
+    overhead, which dominated the one-frame calls of online partners.
+    """
+    f, n = local.shape[0], local.shape[1]
+    rot = np.empty_like(local)
+    pos = np.empty((f, n, 3))
+    for t in range(f):
+        rot[t, 0] = local[t, 0]
+        pos[t, 0] = trans[t, 0]
+        for j in range(1, n):
+            p = parents[j]
+            for a in range(3):
+                pos[t, j, a] = pos[t, p, a]
+                for b in range(3):
+                    pos[t, j, a] += rot[t, p, a, b] * trans[t, j, b]
+                    acc = 0.0
+                    for c in range(3):
+                        acc += rot[t, p, a, c] * local[t, j, c, b]
+                    rot[t, j, a, b] = acc
+    return rot, pos
 
 
 _HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int] | None] = weakref.WeakKeyDictionary()
