@@ -8,7 +8,7 @@ import pytest
 from markovmotion import read_motion
 from markovmotion.cli import main
 from markovmotion.errors import ModelFormatError
-from markovmotion.evaluate.chain import evaluate_partner
+from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
 from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
 from markovmotion.models.behaviour_chain import BehaviourChain, decay_behaviour, proximities
 from markovmotion.models.condensation import (
@@ -278,16 +278,35 @@ def test_real_partner_follows_and_round_trips(small_partner, salsa_take, tmp_pat
         VirtualPartner.load(tmp_path / "missing.npz")
 
 
+def test_partner_of_the_second_person_is_the_first(small_partner, salsa_take):
+    """With person 1 real, the partner is the model's person-0 half, placed from person 1."""
+    seen = salsa_take.trim(0, 200)  # training frames: the chain knows them
+    for person in (0, 1):
+        resp = small_partner.respond(seen.person(person), person, n_hypotheses=50)
+        assert np.all(resp.roles == person)
+        to_partner = pose_error_mm(small_partner, resp.partner, seen.person(1 - person))
+        to_real = pose_error_mm(small_partner, resp.partner, seen.person(person))
+        assert to_partner < 0.8 * to_real
+
+
 def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     small_partner, salsa_take, mocap, tmp_path
 ):
-    result = evaluate_partner(small_partner, [salsa_take.trim(600, 700)], "mocap", 30)
-    for key in ("single_hypothesis", "multiple_hypotheses", "mean_shape"):
+    take = salsa_take.trim(600, 700)
+    copy = (take.person(1), take.person(0))  # a "model" that answers each person with itself
+    result = evaluate_partner(small_partner, [take], "mocap", 30, "map", others={"copy": [copy]})
+    responses = [f"multiple_hypotheses_{r}" for r in ("ml", "map", "mean")]
+    for key in ("single_hypothesis", "mean_shape", *responses):
         assert 0 < result[key] < 1000 and 0 < result["placement_mm"][key] < 5000
-    assert result["unit"] == "mm" and set(result["per_frame_ms"]) >= {
+    assert result["multiple_hypotheses_response"] == "map"
+    assert result["multiple_hypotheses"] == result["multiple_hypotheses_map"]
+    assert result["copy"] == 0.0 and result["placement_mm"]["copy"] == 0.0
+    assert result["unit"] == "mm" and set(result["per_frame_ms"]) == {
         "single_hypothesis",
-        "multiple_hypotheses",
+        *responses,
     }
+    by_person = result["by_real_person"]
+    assert np.mean([p["mean_shape"] for p in by_person]) == pytest.approx(result["mean_shape"])
     small_partner.save(tmp_path / "m.npz")
     a, _ = mocap.pairs(label="salsa")[0]
     out = tmp_path / "partner.bvh"
