@@ -2,5 +2,7 @@
 
 ``hermite`` (cubic Hermite interpolation), ``vector_quantisation`` (prototypes,
 tokens), ``dtw`` (dynamic time warping, open-end alignment) and
-``kinematics`` (batched forward kinematics from rotation vectors).
+``kinematics`` (batched forward kinematics from rotation vectors) and
+``hmm_recursions`` (compiled log-space forward, backward, Viterbi and
+transition counts shared by the HMM variants).
 """
