@@ -303,6 +303,7 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     assert result["copy"] == 0.0 and result["placement_mm"]["copy"] == 0.0
     assert result["unit"] == "mm" and set(result["per_frame_ms"]) == {
         "single_hypothesis",
+        "multiple_hypotheses",
         *responses,
     }
     by_person = result["by_real_person"]

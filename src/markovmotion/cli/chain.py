@@ -195,29 +195,32 @@ def evaluate(
         typer.echo(json.dumps(result, indent=2))
         return
     title = f"virtual partner on {len(takes)} held-out takes ({result['unit']})"
-    _print_errors(result, f"{title}, each person masked in turn")
+    _print_errors(result, f"{title}, each person masked in turn", response)
     if others:
         for person, part in enumerate(result["by_real_person"]):
-            _print_errors(part, f"{title}, person {'AB'[person]} real")
+            _print_errors(part, f"{title}, person {'AB'[person]} real", response)
 
 
-def _print_errors(result: dict, title: str) -> None:
-    table = Table(title=title)
-    table.add_column("partner")
-    table.add_column("error")
+def _print_errors(result: dict, title: str, response: str) -> None:
+    """One table row per partner; ``*`` marks the response reported as multiple_hypotheses."""
+    table = Table(title=title, caption=f"* multiple_hypotheses ({response} response)")
     placement = result.get("placement_mm")
-    if placement:
-        table.add_column("placement (mm)")
-    table.add_column("ms / frame")
-    ms = result.get("per_frame_ms", {})
-    chosen = f"multiple_hypotheses_{result.get('multiple_hypotheses_response', '')}"
+    ms = result.get("per_frame_ms")
+    for col in (
+        "partner",
+        "error",
+        "placement (mm)" if placement else "",
+        "ms / frame" if ms else "",
+    ):
+        if col:
+            table.add_column(col)
     for key, value in result.items():
         if not isinstance(value, float) or key == "multiple_hypotheses":
             continue
-        name = f"{key} (= multiple_hypotheses)" if key == chosen else key
-        row = [name, f"{value:.4g}"]
+        row = [f"{key} *" if key == f"multiple_hypotheses_{response}" else key, f"{value:.4g}"]
         if placement:
             row.append(f"{placement[key]:.4g}")
-        row.append(f"{ms[key]:.2f}" if key in ms else "")
+        if ms:
+            row.append(f"{ms[key]:.2f}" if key in ms else "")
         table.add_row(*row)
     Console().print(table)

@@ -11,7 +11,9 @@ of a take is masked in turn. Errors (lower is better):
   true partner's height.
 
 The baseline holds the partner's mean shape (with the mean separation and
-relative scale) beside the real person.
+relative scale) beside the real person. The dual-HMM partner (dual-HMM paper)
+can be measured alongside, the same way on the same frames: it answers person
+A (the first file of each pair) with B.
 
 The split is fixed: of CMU's salsa takes, trials 12, 13 and 15 (the last three
 pairs) are held out; the other eight train.
@@ -197,11 +199,13 @@ def evaluate_partner(
             out["placement_mm"] = place
         return out
 
+    per_frame_ms = {k: 1000.0 * s / (2 * total) for k, s in seconds.items()}
+    per_frame_ms["multiple_hypotheses"] = per_frame_ms[f"multiple_hypotheses_{response}"]
     return {
         "unit": "mm" if source == "mocap" else "fraction of body height",
         **section((0, 1), both),
         "multiple_hypotheses_response": response,
-        "per_frame_ms": {k: 1000.0 * s / (2 * total) for k, s in seconds.items()},
+        "per_frame_ms": per_frame_ms,
         "by_real_person": [section((p,), [k for k in names if frames[k][p]]) for p in (0, 1)],
         "source": source,
         "hypotheses": n_hypotheses,
