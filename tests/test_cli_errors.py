@@ -62,3 +62,44 @@ def test_console_script_on_bad_file(tmp_path, command):
     assert run.returncode == 2
     _one_error_line(run.stderr, path)
     assert not (tmp_path / "out.bvh").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (["dualhmm", "train", "--out", "{tmp}/partner.txt"], "models are written as .npz"),
+        (["vlmm", "train", "--out", "{tmp}/vlmm.bvh"], "models are written as .npz"),
+        (["gait", "train", "--out", "{tmp}/average.npz.gz"], "models are written as .npz"),
+        (
+            ["dualhmm", "respond", "--model", "m.npz", "--input", "a.bvh", "--out", "{tmp}/b.txt"],
+            "motions are written as BVH",
+        ),
+        (
+            ["vlmm", "predict", "--model", "m.npz", "--input", "a.bvh", "--out", "{tmp}/p.txt"],
+            "motions are written as BVH",
+        ),
+        (["vlmm", "evaluate", "--model", "m.npz", "--plot", "{tmp}/et.txt"], "unknown image"),
+    ],
+)
+def test_wrong_output_suffix_is_refused_before_any_work(tmp_path, capsys, args, problem):
+    args = [a.format(tmp=tmp_path) for a in args]
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    _one_error_line(err, args[args.index("--out" if "--out" in args else "--plot") + 1])
+    assert problem in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_below_a_file_names_the_output(tmp_path, capsys):
+    source = tmp_path / "walk.bvh"
+    source.write_text(bvh_text(make_motion(n_frames=3)))
+    out = source / "copy.bvh"
+    with pytest.raises(SystemExit) as info:
+        main(["convert", str(source), str(out)])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    _one_error_line(err, out)
+    assert "is a file, not a folder" in err
+    assert ".tmp" not in err

@@ -119,6 +119,12 @@ def test_model_file_errors(tmp_path):
         load_npz(tmp_path / "plain.npz")
     with pytest.raises(ModelFormatError, match="no such model file"):
         load_npz(tmp_path / "missing.npz")
+    (tmp_path / "walk.bvh").write_text("HIERARCHY\n")  # a text file is not taken for a pickle
+    with pytest.raises(ModelFormatError, match="walk.bvh: not a markovmotion model file \\(not an"):
+        load_npz(tmp_path / "walk.bvh")
+    with pytest.raises(ModelFormatError, match="m.txt: models are written as .npz"):
+        save_npz(tmp_path / "m.txt", "kind-a", {}, {})
+    assert not (tmp_path / "m.txt").exists()
 
 
 def test_model_file_from_another_version(tmp_path, monkeypatch):

@@ -314,6 +314,10 @@ def test_open_results_refuses_other_files(tmp_path):
     (tmp_path / "junk.sqlite").write_bytes(b"not a database at all" * 100)
     with pytest.raises(EvaluationError, match="not an evaluation database"):
         open_results(tmp_path / "junk.sqlite")
+    (tmp_path / "empty.sqlite").write_bytes(b"")
+    with pytest.raises(EvaluationError, match="empty.sqlite: .*the file is empty"):
+        open_results(tmp_path / "empty.sqlite")
+    assert (tmp_path / "empty.sqlite").stat().st_size == 0  # left as it was
 
 
 def test_report_command(stimuli_dir, tmp_path, capsys):

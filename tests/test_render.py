@@ -164,6 +164,14 @@ def test_unknown_suffix_is_an_error(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_long_title_shrinks_to_fit_a_narrow_figure():
+    from markovmotion.viz.animation import _figure
+
+    fig, _ = _figure(1, 1, 0.7, "a title far too long for one narrow panel of one person", 5.0)
+    fig.canvas.draw()
+    assert fig.texts[0].get_window_extent().width <= fig.bbox.width
+
+
 def test_render_command(mocap, tmp_path):
     a, b = mocap.pairs(label="salsa")[0]
     out = tmp_path / "pair.png"

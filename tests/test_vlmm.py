@@ -298,3 +298,9 @@ def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
         for s in ("0.5", "1", "2", "3"):
             assert result[f"E_T_mm.{name}.{s}"] > 0
     assert (tmp_path / "et.png").stat().st_size > 1000
+    walk = mocap.find(mocap.query(source="bandai")[0].file).path  # another skeleton: named
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "predict", "--model", str(model), "--input", str(walk),
+              "--out", str(tmp_path / "w.bvh")])  # fmt: skip
+    assert info.value.code == 2
+    assert f"{walk}: the input's skeleton does not match" in capsys.readouterr().err

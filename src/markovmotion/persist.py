@@ -23,12 +23,19 @@ FORMAT_VERSION = 1
 _HEADER_KEY = "__header__"
 
 
+def check_model_output(path: str | os.PathLike[str]) -> None:
+    """Raise :class:`ModelFormatError` unless ``path`` names an ``.npz`` model file."""
+    if not str(path).lower().endswith(".npz"):
+        raise ModelFormatError(path, "models are written as .npz: use a .npz name")
+
+
 def save_npz(
     path: str | os.PathLike[str], kind: str, header: dict[str, Any], arrays: dict[str, np.ndarray]
 ) -> None:
     """Write ``arrays`` and a JSON ``header`` to ``path`` atomically (compressed ``.npz``)."""
     from markovmotion import __version__
 
+    check_model_output(path)
     if _HEADER_KEY in arrays:
         raise ValueError(f"array name {_HEADER_KEY!r} is reserved")
     full = {
@@ -52,6 +59,8 @@ def load_npz(
         ModelFormatError: the file is missing, not a model file, damaged, of
             another format version, or of another kind than ``kind``.
     """
+    if os.path.isfile(path) and not zipfile.is_zipfile(path):
+        raise ModelFormatError(path, "not a markovmotion model file (not an .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}

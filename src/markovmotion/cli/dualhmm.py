@@ -13,6 +13,7 @@ import typer
 from rich.console import Console
 
 from markovmotion.errors import DataNotFoundError
+from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console, track
 
 app = typer.Typer(
@@ -69,6 +70,7 @@ def train(
     from markovmotion.data import MocapIndex
     from markovmotion.models.dual_hmm import DualHMM
 
+    check_model_output(out)
     index = MocapIndex.load(data)
     pairs = select_pairs(index, _split(labels), _split(test_trials), held_out=False)
     motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
@@ -175,12 +177,13 @@ def respond(
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
 ) -> None:
     """Generate person B's response to person A's motion."""
-    from markovmotion.io import write_motion
+    from markovmotion.io import check_motion_output, write_motion
     from markovmotion.models.dual_hmm import DualHMM
     from markovmotion.viz import check_output, render
 
     if standard and (realtime or window):
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
+    check_motion_output(out)
     if animation is not None:
         check_output(animation)
     dual = DualHMM.load(model)

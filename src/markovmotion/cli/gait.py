@@ -13,6 +13,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.data import MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.io import read_motion, write_motion
+from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console, track
 
 app = typer.Typer(
@@ -85,6 +86,7 @@ def train(
 
     if wat not in ("none", "take", "dataset"):
         raise typer.BadParameter("--wat must be none, take or dataset")
+    check_model_output(out)
     folders: list[str] = []
     motions = load_walks(data, label, split, subset, folders)
     model = GaitSynthesizer(
@@ -129,6 +131,7 @@ def adapt(
         raise typer.BadParameter(f"--method must be one of {', '.join(METHODS)}")
     if structure not in STRUCTURES:
         raise typer.BadParameter(f"--structure must be one of {', '.join(STRUCTURES)}")
+    check_model_output(out)
     average = GaitSynthesizer.load(model)
     motions = load_walks(style_data, label, split, subset)
     if scratch:
@@ -147,7 +150,7 @@ def adapt(
     result.save(out)
     err_console.print(
         f"wrote {out}: {result.role_} {label} model from {result.n_steps_} steps "
-        f"of {len(result.files_)} walks"
+        f"of {len(result.files_)} walk{'s' if len(result.files_) != 1 else ''}"
     )
 
 

@@ -12,7 +12,8 @@ from rich.table import Table
 
 from markovmotion.data import MocapIndex
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
-from markovmotion.io import read_motion, write_motion
+from markovmotion.io import check_motion_output, read_motion, write_motion
+from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -67,6 +68,7 @@ def train(
     """Learn prototypes and a VLMM (optionally the structured model) from motion capture."""
     from markovmotion.models.behaviour import BehaviourModel, held_out_split, load_motions
 
+    check_model_output(out)
     index = MocapIndex.load(data)
     entries = index.query(category=category, label=label or None)
     if not entries:
@@ -146,9 +148,13 @@ def predict(
     """Recognise the observed motion's state and predict how it continues (§3.2.2, §4.4)."""
     from markovmotion.models.behaviour import load_behaviour_model
 
+    check_motion_output(out)
     behaviour, _ = load_behaviour_model(model)
     motion = read_motion(input, fps=fps)
-    behaviour.skeleton_.check_compatible(motion.skeleton, "input")
+    try:
+        behaviour.skeleton_.check_compatible(motion.skeleton, "input")
+    except SkeletonMismatchError as exc:
+        raise SkeletonMismatchError(f"{input}: {exc}") from None
     result = behaviour.predict(motion, horizon, _rng(stochastic, seed))
     write_motion(result, out)
     observed = result.n_frames - int(round(horizon * behaviour.fps))
@@ -197,16 +203,23 @@ def evaluate(
         plot_horizon_curves,
     )
     from markovmotion.models.behaviour import load_behaviour_model, load_motions
+    from markovmotion.viz.plots import check_figure_output
 
+    if plot:
+        check_figure_output(plot)
     behaviour, header = load_behaviour_model(model)
     structured = hasattr(behaviour, "prototype_model_")
     base = behaviour.prototype_model_ if structured else behaviour
     index = MocapIndex.load(test)
     entries = _test_entries(index, header, category, label)
-    motions, _ = load_motions(index, entries, base.fps)
+    motions, skipped = load_motions(index, entries, base.fps)
+    left_out = [e.file for e in skipped]
+    left_out += [m.name for m in motions if not m.skeleton.same_topology(base.skeleton_)]
     motions = [m for m in motions if m.skeleton.same_topology(base.skeleton_)]
     if not motions:
         raise SkeletonMismatchError("no test take has the model's skeleton")
+    if left_out:
+        err_console.print(f"left out (another skeleton): {', '.join(left_out)}", highlight=False)
     features = base.observe(motions)
     predictors = {
         "vlmm": base,
@@ -235,6 +248,7 @@ def evaluate(
             plot,
             f"E_T on {len(motions)} held-out takes ({sum(len(f) for f in features)} frames)",
         )
+        err_console.print(f"wrote {plot}")
     if as_json:
         typer.echo(json.dumps(result, indent=2))
         return

@@ -110,8 +110,8 @@ class Skeleton:
                 f"joints differ: {', '.join(missing[:5])}" if missing else "joint order differs"
             )
             raise SkeletonMismatchError(
-                f"the {what}'s skeleton does not match ({self.n_joints} vs "
-                f"{other.n_joints} joints; {detail})"
+                f"the {what}'s skeleton does not match ({other.n_joints} joints, expected "
+                f"{self.n_joints}; {detail})"
             )
 
     def to_dict(self) -> dict[str, Any]:

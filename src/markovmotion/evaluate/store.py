@@ -239,6 +239,8 @@ def open_results(path: str | os.PathLike[str]) -> EvaluationStore:
     """An existing evaluation database, for the offline report."""
     if not Path(path).is_file():
         raise EvaluationError(f"{path}: no such evaluation database")
+    if Path(path).stat().st_size == 0:  # SQLite would turn an empty file into a database
+        raise EvaluationError(f"{path}: not an evaluation database (the file is empty)")
     try:
         return EvaluationStore(path)
     except sqlite3.DatabaseError as exc:

@@ -44,14 +44,20 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
     )
 
 
-def write_motion(motion: Motion, path: str | os.PathLike[str]) -> None:
-    """Write ``motion`` to ``path`` (BVH, optionally ``.bvh.gz``), atomically."""
+def check_motion_output(path: str | os.PathLike[str]) -> None:
+    """Raise :class:`MotionFormatError` unless ``path`` names a BVH file (``.bvh``, ``.bvh.gz``)."""
     if base_suffix(path) != ".bvh":
         raise MotionFormatError(path, "motions are written as BVH: use a .bvh or .bvh.gz name")
+
+
+def write_motion(motion: Motion, path: str | os.PathLike[str]) -> None:
+    """Write ``motion`` to ``path`` (BVH, optionally ``.bvh.gz``), atomically."""
+    check_motion_output(path)
     write_bvh(motion, path)
 
 
 __all__ = [
+    "check_motion_output",
     "read_amc",
     "read_asf",
     "read_bvh",

@@ -59,8 +59,15 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO]:
     Paths ending in ``.gz`` are gzip-compressed (text or binary as ``mode`` says).
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:  # name the output, not the folder or temporary file that failed
+        if isinstance(exc, FileExistsError):
+            problem = f"cannot write: {exc.filename} is a file, not a folder"
+        else:
+            problem = f"cannot write into the folder {path.parent} ({exc.strerror})"
+        raise OSError(exc.errno, problem, str(path)) from None
     try:
         with os.fdopen(fd, "wb") as raw:
             if is_gzip(path):

@@ -33,9 +33,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import Motion
-from markovmotion.errors import MarkovMotionError
 from markovmotion.io.files import atomic_write
 from markovmotion.progress import track
+from markovmotion.viz.plots import check_suffix
 from markovmotion.viz.video import write_mp4
 
 OUTPUT_SUFFIXES = (".gif", ".mp4", ".png")
@@ -75,13 +75,7 @@ Drawable = Motion | PointCloud
 
 def check_output(path: str | os.PathLike[str]) -> str:
     """The output suffix of ``path``, or a :class:`MarkovMotionError` naming the ones accepted."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in OUTPUT_SUFFIXES:
-        raise MarkovMotionError(
-            f"{path}: unknown output format {suffix or '(no suffix)'!r}; "
-            f"use one of {', '.join(OUTPUT_SUFFIXES)}"
-        )
-    return suffix
+    return check_suffix(path, OUTPUT_SUFFIXES, "output")
 
 
 # ------------------------------------------------------------------- tracks
@@ -289,7 +283,12 @@ def _figure(
             ax.set_axis_off()
             axes.append(ax)
     if title:
-        fig.text(0.5, 1 - band / 2 / fig_h, title, ha="center", va="center", fontsize=13)
+        text = fig.text(0.5, 1 - band / 2 / fig_h, title, ha="center", va="center", fontsize=13)
+        renderer = fig.canvas.get_renderer()
+        # a title wider than a narrow figure shrinks rather than being cut off (hinting makes
+        # the width not quite proportional to the size: measure again)
+        while (wide := text.get_window_extent(renderer).width / (0.96 * w_px)) > 1:
+            text.set_fontsize(text.get_fontsize() / wide * 0.98)
     return fig, axes
 
 

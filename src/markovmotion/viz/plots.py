@@ -11,7 +11,10 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from markovmotion.errors import MarkovMotionError
 from markovmotion.io.files import atomic_write
+
+FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 
 
 def new_figure(width: float = 6.4, height: float = 4.2) -> tuple[Figure, Axes]:
@@ -21,11 +24,28 @@ def new_figure(width: float = 6.4, height: float = 4.2) -> tuple[Figure, Axes]:
     return fig, fig.add_subplot()
 
 
+def check_suffix(path: str | os.PathLike[str], accepted: tuple[str, ...], what: str) -> str:
+    """The suffix of ``path``, or a :class:`MarkovMotionError` naming the ``accepted`` ones."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in accepted:
+        raise MarkovMotionError(
+            f"{path}: unknown {what} format {suffix or '(no suffix)'!r}; "
+            f"use one of {', '.join(accepted)}"
+        )
+    return suffix
+
+
+def check_figure_output(path: str | os.PathLike[str]) -> str:
+    """The image format of ``path`` (``png``, ``svg``, ``pdf``), else a MarkovMotionError."""
+    return check_suffix(path, FIGURE_SUFFIXES, "image").lstrip(".")
+
+
 def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 120) -> Path:
     """Write ``fig`` atomically; the format follows the suffix (``.png``, ``.svg``, ``.pdf``)."""
+    image_format = check_figure_output(path)
     path = Path(path)
     with atomic_write(path, "wb") as fh:
-        fig.savefig(fh, format=path.suffix.lstrip(".").lower() or "png", dpi=dpi)
+        fig.savefig(fh, format=image_format, dpi=dpi)
     return path
 
 
