@@ -1,4 +1,4 @@
-"""Model files: NumPy arrays in an ``.npz`` with a JSON header, never pickle.
+"""Model files: NumPy arrays in an ``.npz`` with a JSON header; no Python objects are ever unpickled.
 
 The header records the file format version, the library version, the model
 kind, its hyper-parameters and the feature pipeline it was trained with, so a

@@ -17,7 +17,7 @@ class PCA(FeatureStep):
 
     Fitted with scikit-learn's PCA on all frames of all sequences; the learnt
     mean, components and explained-variance ratios are kept as plain arrays so
-    the step saves without pickle.
+    the step saves as plain arrays in a model file.
     """
 
     def __init__(self, energy: float = 0.95, n_components: int | None = None):

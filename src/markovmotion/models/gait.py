@@ -344,7 +344,7 @@ class GaitSynthesizer(BaseEstimator):
 
     # ------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model (``.npz`` + JSON header, no pickle)."""
+        """Write the model (``.npz`` arrays + JSON header)."""
         arrays: dict[str, np.ndarray] = {}
         state = estimator_state(self, "model", arrays)
         header = {

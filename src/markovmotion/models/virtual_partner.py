@@ -204,7 +204,7 @@ class VirtualPartner(BaseEstimator):
 
     # ------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike[str], source: str = "mocap") -> None:
-        """Write the model as ``.npz`` + JSON header (never pickle)."""
+        """Write the model as ``.npz`` arrays + JSON header."""
         arrays: dict[str, np.ndarray] = {}
         header = {"source": source, "model": estimator_state(self, "model", arrays)}
         save_npz(path, KIND, header, arrays)
