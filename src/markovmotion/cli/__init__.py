@@ -21,29 +21,32 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    from markovmotion.cli import data, demo, motion, render
+    """Attach every command group, in the order of the data flow."""
+    from markovmotion.cli import (
+        chain,
+        data,
+        demo,
+        dualhmm,
+        evaluation,
+        gait,
+        motion,
+        render,
+        serve,
+        silhouette,
+        vlmm,
+    )
 
     motion.register(app)
     render.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
-    from markovmotion.cli import evaluation, serve
-
-    serve.register(app)
-    app.add_typer(evaluation.app, name="evaluation")
-    from markovmotion.cli import gait
-
-    app.add_typer(gait.app, name="gait")
-    from markovmotion.cli import vlmm
-
+    app.add_typer(dualhmm.app, name="dualhmm")
     app.add_typer(vlmm.app, name="vlmm")
-    from markovmotion.cli import chain, silhouette
-
+    app.add_typer(gait.app, name="gait")
     app.add_typer(chain.app, name="chain")
     app.add_typer(silhouette.app, name="silhouette")
-    from markovmotion.cli import dualhmm
-
-    app.add_typer(dualhmm.app, name="dualhmm")
+    serve.register(app)
+    app.add_typer(evaluation.app, name="evaluation")
 
 
 def fail(message: str) -> None:
