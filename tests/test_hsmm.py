@@ -9,6 +9,7 @@ import pytest
 from scipy.special import logsumexp
 
 from markovmotion.models.adaptation import (
+    METHODS,
     RegressionTree,
     adapt,
     adaptation_statistics,
@@ -224,6 +225,39 @@ def test_cmllr_recovers_a_known_affine_shift():
     # CSMAPLR and MAP get there too; MAP moves the means further towards the data
     smap = adapt(model, xs, cs, method="csmaplr", tree_depth=1)
     np.testing.assert_allclose(smap.means_, model.means_ @ a.T + c, atol=0.12)
+
+
+def test_adaptation_from_unit_boundaries_recovers_affine_durations():
+    """Durations 1.5 d + 1 of the model's under data the unadapted model misaligns.
+
+    The model's own first alignment puts frames in the wrong units, and the
+    transforms fitted to it keep them there (duration variances of that
+    alignment, not of the data); starting from the units' boundaries recovers
+    the affine durations, variances 2.25 times the model's, and the outputs.
+    """
+    model = six_dim_model()
+    true = six_dim_model()
+    true.dur_means_ = 1.5 * model.dur_means_ + 1.0
+    true.dur_variances_ = 2.25 * model.dur_variances_
+    rng = np.random.default_rng(3)
+    a, c = np.diag(rng.uniform(0.5, 2.0, 6)), rng.normal(0.0, 3.0, 6)
+    xs, cs, bs = [], [], []
+    for _ in range(12):
+        units = np.zeros(4, dtype=int)
+        x, d = true.sample(units, rng)
+        xs.append(x @ a.T + c)
+        cs.append(units)
+        bs.append(np.r_[0, np.cumsum(d.reshape(4, 3).sum(axis=1))])
+    target = model.means_ @ a.T + c
+    for method in METHODS:
+        adapted = adapt(
+            model, xs, cs, method=method, map_step=False, max_duration=20, boundaries=bs
+        )
+        np.testing.assert_allclose(adapted.dur_means_, true.dur_means_, atol=0.6)
+        np.testing.assert_allclose(adapted.dur_variances_, true.dur_variances_, rtol=0.5)
+        np.testing.assert_allclose(adapted.means_, target, atol=0.15)
+    lost = adapt(model, xs, cs, method="cmllr", map_step=False, max_duration=20)
+    assert np.abs(lost.means_ - target).max() > 1.0
 
 
 def test_few_data_stay_near_the_prior():

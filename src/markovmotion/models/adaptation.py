@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.models.hsmm import HSMM, log_gaussian_diag
+from markovmotion.models.hsmm import HSMM, hard_posteriors, log_gaussian_diag
 
 STRUCTURES = ("stream", "diagonal")
 METHODS = ("csmaplr", "cmllr")
@@ -213,13 +213,17 @@ def adaptation_statistics(
     contexts: Sequence[np.ndarray],
     blocks: list[np.ndarray],
     transforms: Transforms | None = None,
+    boundaries: Sequence[np.ndarray] | None = None,
 ) -> tuple[AdaptationStats, AdaptationStats, float]:
     """E-step statistics of outputs and durations, with outputs seen through feature transforms.
 
     With ``transforms``, density m scores ``N(A x + b; mu_m, Sigma_m) |A|`` for
     its class's (A, b): the exact CMLLR likelihood. Statistics are of the
-    untransformed data; durations are one-dimensional observations d.
-    Returns (output stats, duration stats, log-likelihood).
+    untransformed data; durations are one-dimensional observations d. With
+    ``boundaries`` (first frame of each unit, then T, per sequence) the states
+    are not inferred: each unit is split evenly among its states, as HSMM
+    training starts (:func:`~markovmotion.models.hsmm.hard_posteriors`), and
+    the log-likelihood is 0. Returns (output stats, duration stats, log-likelihood).
     """
     n_pdf, dims = hsmm.means_.shape
     n_dur = len(hsmm.dur_means_)
@@ -232,14 +236,19 @@ def adaptation_statistics(
     d = np.arange(1.0, hsmm.max_duration_ + 1)
     xi_d = np.stack([np.outer([v, 1.0], [v, 1.0]) for v in d])  # (Dmax, 2, 2)
     total = 0.0
-    for x, c in zip(sequences, contexts, strict=True):
+    for i, (x, c) in enumerate(zip(sequences, contexts, strict=True)):
         c = np.asarray(c)
-        ll, gamma, dur_post = hsmm.posteriors(
-            x, c, log_out=transformed_log_likelihood(hsmm, x, transforms)
-        )
-        if not np.isfinite(ll):
-            continue
-        total += ll
+        if boundaries is None:
+            ll, gamma, dur_post = hsmm.posteriors(
+                x, c, log_out=transformed_log_likelihood(hsmm, x, transforms)
+            )
+            if not np.isfinite(ll):
+                continue
+            total += ll
+        else:
+            gamma, dur_post = hard_posteriors(
+                len(x), boundaries[i], hsmm.n_states, hsmm.max_duration_
+            )
         pdf_out, pdf_dur = hsmm.chain(c)
         g = np.zeros((n_pdf, len(x)))
         np.add.at(g, pdf_out, gamma.T)
@@ -349,6 +358,7 @@ def adapt(
     min_occupancy: float = 40.0,
     map_step: bool = True,
     max_duration: int | None = None,
+    boundaries: Sequence[np.ndarray] | None = None,
 ) -> HSMM:
     """A copy of ``hsmm`` adapted to the sequences: linear transforms (eqs. 5-6), then MAP.
 
@@ -364,6 +374,11 @@ def adapt(
         map_step: follow the transforms by MAP adaptation of the means (§5.1.3).
         max_duration: longest state duration to consider, if the new data
             need more than the model's.
+        boundaries: first frame of each unit, then T, per sequence. The
+            first transforms are then estimated from these units split evenly
+            among their states (as training starts), before ``n_iter`` rounds
+            of forward-backward; without them, the unadapted model's own
+            alignment of the new data starts, which can misplace units badly.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}")
@@ -380,8 +395,9 @@ def adapt(
     work = _copy(hsmm)
     work.max_duration_ = max(hsmm.max_duration_, max_duration or 0)
     out_t = dur_t = None
-    for _ in range(n_iter):
-        stats, dstats, _ = adaptation_statistics(work, sequences, contexts, blocks, out_t)
+    rounds = [None] * n_iter if boundaries is None else [boundaries] + [None] * n_iter
+    for bounds in rounds:
+        stats, dstats, _ = adaptation_statistics(work, sequences, contexts, blocks, out_t, bounds)
         out_t = estimate_transforms(
             stats,
             hsmm.means_,

@@ -255,6 +255,7 @@ class GaitSynthesizer(BaseEstimator):
     ) -> GaitSynthesizer:
         """A style model: this (average) model adapted to the first ``n_steps`` steps of the walks (§5.1.3).
 
+        Adaptation starts from the steps' boundaries, as training does.
         ``options`` go to :func:`markovmotion.models.adaptation.adapt` (method,
         structure, prior weights). The GV mean comes from the style walks, its
         variance from this model.
@@ -268,6 +269,7 @@ class GaitSynthesizer(BaseEstimator):
             data.obs,
             data.contexts,
             max_duration=int(np.ceil(0.6 * longest)),
+            boundaries=data.boundaries,
             **options,
         )
         out.set_gv(data.gv(), var=self.gv_var_)
