@@ -12,6 +12,7 @@ from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
 from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
 from markovmotion.models.behaviour_chain import BehaviourChain, decay_behaviour, proximities
 from markovmotion.models.condensation import (
+    DEFAULT_SIGMA,
     MultipleHypotheses,
     SingleHypothesis,
     hypersphere_mode,
@@ -298,7 +299,7 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     responses = [f"multiple_hypotheses_{r}" for r in ("ml", "map", "mean")]
     for key in ("single_hypothesis", "mean_shape", *responses):
         assert 0 < result[key] < 1000 and 0 < result["placement_mm"][key] < 5000
-    assert result["multiple_hypotheses_response"] == "map"
+    assert result["multiple_hypotheses_response"] == "map" and result["sigma"] == DEFAULT_SIGMA
     assert result["multiple_hypotheses"] == result["multiple_hypotheses_map"]
     assert result["copy"] == 0.0 and result["placement_mm"]["copy"] == 0.0
     assert result["unit"] == "mm" and set(result["per_frame_ms"]) == {
@@ -312,6 +313,6 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     a, _ = mocap.pairs(label="salsa")[0]
     out = tmp_path / "partner.bvh"
     argv = ["chain", "respond", "--model", str(tmp_path / "m.npz"), "--input", str(a.path)]
-    main([*argv, "--out", str(out), "--hypotheses", "20"])
+    main([*argv, "--out", str(out), "--hypotheses", "20", "--sigma", "0.1"])
     partner = read_motion(out)
     assert partner.n_frames == salsa_take.n_frames and partner.skeleton.n_joints == 19

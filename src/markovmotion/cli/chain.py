@@ -26,7 +26,7 @@ from markovmotion.evaluate.chain import (
 )
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.files import base_suffix
-from markovmotion.models.condensation import DEFAULT_RESPONSE, RESPONSES
+from markovmotion.models.condensation import DEFAULT_RESPONSE, DEFAULT_SIGMA, RESPONSES
 from markovmotion.models.virtual_partner import VirtualPartner
 from markovmotion.progress import err_console
 
@@ -121,6 +121,9 @@ def respond(
         help="Response of multiple hypotheses: ml (the paper's), map (eq. 21) or mean "
         "(likelihood-weighted mean, CONDENSATION's estimate).",
     ),
+    sigma: float = typer.Option(
+        DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05)."
+    ),
     person: int = typer.Option(0, min=0, max=1, help="Mocap: the real person's half of the model."),
     fps: float = typer.Option(
         None, help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there)."
@@ -130,7 +133,7 @@ def respond(
     """Drive a virtual partner from a real person's motion or video."""
     _check_response(response)
     partner_model, source = VirtualPartner.load(model)
-    options = {"n_hypotheses": hypotheses, "response": response, "seed": seed}
+    options = {"n_hypotheses": hypotheses, "response": response, "sigma": sigma, "seed": seed}
     suffix = base_suffix(out)
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
@@ -163,6 +166,9 @@ def evaluate(
     response: str = typer.Option(
         DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
     ),
+    sigma: float = typer.Option(
+        DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05)."
+    ),
     dual_hmm: Path = typer.Option(
         None,
         help="mocap: also a dual-HMM model ('dualhmm train') answering person A with B, "
@@ -190,7 +196,9 @@ def evaluate(
         from markovmotion.video.dataset import silhouette_takes
 
         takes = silhouette_takes(test, split="test")
-    result = evaluate_partner(partner_model, takes, source, hypotheses, response, seed, others)
+    result = evaluate_partner(
+        partner_model, takes, source, hypotheses, response, seed, others, sigma=sigma
+    )
     if as_json:
         typer.echo(json.dumps(result, indent=2))
         return

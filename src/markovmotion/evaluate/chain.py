@@ -30,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
-from markovmotion.models.condensation import DEFAULT_RESPONSE, RESPONSES
+from markovmotion.models.condensation import DEFAULT_RESPONSE, DEFAULT_SIGMA, RESPONSES
 from markovmotion.models.virtual_partner import VirtualPartner
 from markovmotion.progress import track
 
@@ -126,12 +126,14 @@ def evaluate_partner(
     response: str = DEFAULT_RESPONSE,
     seed: int = 0,
     others: Mapping[str, Sequence[tuple[Person | None, Person | None]]] | None = None,
+    sigma: float = DEFAULT_SIGMA,
 ) -> dict:
     """Errors of the single- and multiple-hypothesis partners and of the mean-shape baseline.
 
     Each person of a take is masked in turn. The multiple-hypothesis partner is
     computed with every response (``multiple_hypotheses_ml``, ``_map``,
-    ``_mean``); ``multiple_hypotheses`` repeats the one named by ``response``.
+    ``_mean``), all with likelihood width ``sigma`` (eq. 20);
+    ``multiple_hypotheses`` repeats the one named by ``response``.
     ``others`` adds partners from other models: per take, the partner of
     person 0 and of person 1 (None where the model gives none). Errors are
     means over frames, overall (methods that answer both people) and in
@@ -149,7 +151,11 @@ def evaluate_partner(
     methods = {
         "single_hypothesis": {"n_hypotheses": 1},
         **{
-            f"multiple_hypotheses_{r}": {"n_hypotheses": n_hypotheses, "response": r}
+            f"multiple_hypotheses_{r}": {
+                "n_hypotheses": n_hypotheses,
+                "response": r,
+                "sigma": sigma,
+            }
             for r in RESPONSES
         },
     }
@@ -209,6 +215,7 @@ def evaluate_partner(
         "by_real_person": [section((p,), [k for k in names if frames[k][p]]) for p in (0, 1)],
         "source": source,
         "hypotheses": n_hypotheses,
+        "sigma": sigma,
         "takes": [t.name for t in takes],
         "frames": 2 * total,
     }

@@ -31,6 +31,7 @@ from markovmotion.features.joint_shape import (
 from markovmotion.models.behaviour_chain import BehaviourChain
 from markovmotion.models.condensation import (
     DEFAULT_RESPONSE,
+    DEFAULT_SIGMA,
     MultipleHypotheses,
     Propagator,
     SingleHypothesis,
@@ -134,7 +135,7 @@ class VirtualPartner(BaseEstimator):
         self,
         person: int | None = None,
         n_hypotheses: int = 200,
-        sigma: float = 0.05,
+        sigma: float = DEFAULT_SIGMA,
         response: str = DEFAULT_RESPONSE,
         map_radius: float | None = None,
         seed: int = 0,
