@@ -201,6 +201,7 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
     diff = sweep["adapted_minus_scratch"]
     lo, hi = diff["synthesized_rate_ci"]
     assert lo <= diff["synthesized_rate"] <= hi
+    assert 0.0 <= diff["told_apart"] <= 1.0  # adapted walks against from-scratch ones
 
 
 def test_synthesized_walks_vary_with_the_seed(small_model):
@@ -282,6 +283,18 @@ def test_step_classifier_separates_two_styles():
     assert full.n_components_ is None
     test = {s: [fake_walks(rng, c, 5)] for s, c in far.items()}
     assert Recognition.of(full, test).rate() == 1.0
+
+
+def test_real_and_synthesized_steps_told_apart_only_when_they_differ():
+    from markovmotion.evaluate.gait import real_vs_synthesized
+
+    rng = np.random.default_rng(1)
+    real = fake_walks(rng, np.zeros(9), 10)
+    same = fake_walks(rng, np.zeros(9), 10)
+    shifted = fake_walks(rng, np.r_[np.full(3, 1.5), np.zeros(6)], 10)
+    assert real_vs_synthesized(same, real) < 0.65
+    assert real_vs_synthesized(shifted, real) > 0.9
+    assert np.isnan(real_vs_synthesized(shifted, real[:1]))  # one walk: no fold holds both
 
 
 def test_bootstrap_of_a_rate_over_styles():

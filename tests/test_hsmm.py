@@ -271,6 +271,18 @@ def test_few_data_stay_near_the_prior():
     assert np.abs(weak.means_ - model.means_).mean() > 3.0
 
 
+def test_csmaplr_root_moves_on_fewer_frames_than_the_node_threshold():
+    """One sequence (~9 frames) below min_occupancy: CSMAPLR's identity prior lets the root move, CMLLR stays."""
+    model = six_dim_model()
+    xs, cs = sample_model(model, 1, seed=5)
+    xs = [x + 5.0 for x in xs]
+    frames = sum(len(x) for x in xs)
+    smap = adapt(model, xs, cs, tau=1.0, min_occupancy=10 * frames, map_step=False)
+    cmllr = adapt(model, xs, cs, method="cmllr", min_occupancy=10 * frames, map_step=False)
+    assert np.abs(smap.means_ - model.means_).mean() > 2.0
+    np.testing.assert_allclose(cmllr.means_, model.means_)
+
+
 def test_walker_adaptive_training_moves_unit_differences_into_transforms():
     """Two walkers offset from each other: WAT keeps the model's variances near the true ones."""
     model = six_dim_model()

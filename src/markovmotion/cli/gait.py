@@ -217,6 +217,7 @@ METRICS = (
     ("DTW joint error (mm)", "dtw_joint_mm", "{:.1f}"),
     ("foot slide (mm/step)", "foot_slide_mm", "{:.1f}"),
     ("GV ratio synthesized/real", "gv_ratio", "{:.2f}"),
+    ("told from real held-out steps (0.5: never)", "real_vs_synthesized", "{:.2f}"),
     ("held-out log-likelihood/frame", "test_log_likelihood", "{:.0f}"),
 )
 
@@ -247,7 +248,8 @@ def _table(title: str, columns: dict[str, dict]) -> Table:
 def _sweep_table(sweep: dict[str, dict], average: dict | None) -> Table:
     table = Table(title="synthesized step recognition vs adaptation steps (95% CI)")
     columns = ("steps", "adapted", "scratch", "adapted - scratch", "average")
-    for col in (*columns, "DTW mm a/s", "log-lik/frame a/s"):
+    more = ("DTW mm a/s", "told from real a/s", "a told from s", "log-lik/frame a/s")
+    for col in (*columns, *more):
         table.add_column(col, justify="right")
     for k, roles in sweep.items():
         a, s, d = roles["adapted"], roles["scratch"], roles["adapted_minus_scratch"]
@@ -259,6 +261,8 @@ def _sweep_table(sweep: dict[str, dict], average: dict | None) -> Table:
             f"{d['synthesized_rate_ci'][1]:+.2f}]",
             _rate(average["synthesized_rate"], average["synthesized_rate_ci"]) if average else "-",
             f"{a['dtw_joint_mm']:.1f} / {s['dtw_joint_mm']:.1f}",
+            f"{a['real_vs_synthesized']:.2f} / {s['real_vs_synthesized']:.2f}",
+            f"{d['told_apart']:.2f}",
             f"{a['test_log_likelihood']:.0f} / {s['test_log_likelihood']:.0f}",
         )
     return table
@@ -305,7 +309,7 @@ def evaluate(
         "", help="Index files starting with this (default Bandai dataset-2)."
     ),
 ) -> None:
-    """Objective evaluation (§6 replacement): per-step style recognition, DTW distance, foot slide, GV.
+    """Objective evaluation (§6 replacement): recognition, real vs synthesized, DTW, foot slide, GV.
 
     A style classifier is trained on the steps of the training takes of every
     style; every fourth take is held out. Models in MODELS must not have seen
@@ -372,7 +376,7 @@ def evaluate(
 
         for role in ROLES:
             if chosen.get(role):
-                result[role], _ = ev.models(chosen[role], advance, f"{role} ")
+                result[role], _, _ = ev.models(chosen[role], advance, f"{role} ")
         if ks:
             result["sweep"] = ev.sweep(average, targets, ks, progress=advance)
     if as_json:
@@ -388,6 +392,7 @@ def evaluate(
             "dtw_expmap_rmse": real["dtw_expmap_rmse"],
             "dtw_joint_mm": real["dtw_joint_mm"],
             "foot_slide_mm": real["foot_slide_mm"],
+            "real_vs_synthesized": real["real_vs_synthesized"],
         },
         **{role: result[role] for role in ROLES if role in result},
     }

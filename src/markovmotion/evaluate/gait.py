@@ -26,7 +26,12 @@ of adaptation steps:
   and mean joint-position error (mm, body-centred, joints from the pelvis down);
 - foot sliding: ground-plane travel of the stance foot per step (mm);
 - the global-variance ratio synthesized / real (sum over dimensions);
-- the log-likelihood per frame of the real held-out walks under the model.
+- the log-likelihood per frame of the real held-out walks under the model;
+- how well a machine tells synthesized steps from real held-out steps of
+  the style (the naturalness test of §6.2, :func:`real_vs_synthesized`): the
+  balanced accuracy of a logistic regression on all the step statistics,
+  cross-validated with folds by walk; 0.5 means indistinguishable. Unlike
+  the recognition rate it does not saturate on these well-separated styles.
 
 Every model walks ``n_walks`` walks of ``walk_steps`` steps, starting on
 either foot in turn, with state durations drawn from its duration densities
@@ -37,7 +42,9 @@ models is paired. As a function of the number K of adaptation steps
 (:meth:`Evaluation.sweep`), each style gets ``replicates`` adapted models and
 as many from-scratch ones, replicate r from the first K steps of the
 training takes that follow those of replicate r - 1; the adapted and the
-from-scratch model of a replicate see the same K steps.
+from-scratch model of a replicate see the same K steps. The same
+discriminator that tells synthesized from real steps then says how well
+the adapted models' walks can be told from the from-scratch models'.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.decomposition import PCA
 from sklearn.linear_model import LogisticRegression
+from sklearn.metrics import balanced_accuracy_score
 from sklearn.model_selection import GroupKFold, cross_val_predict
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
@@ -210,6 +218,30 @@ class StyleClassifier(BaseEstimator):
         return self.classes_[int(np.argmax(log_post))]
 
 
+def real_vs_synthesized(
+    synth: Sequence[WalkSteps], real: Sequence[WalkSteps], n_folds: int = 5, C: float = 1.0
+) -> float:
+    """Balanced accuracy of telling ``synth`` steps from ``real`` ones (a stand-in for §6.2).
+
+    Logistic regression on the standardised step statistics, classes
+    weighted equally, predictions cross-validated with folds by walk. 0.5:
+    the two sets of steps cannot be told apart; 1: always. NaN when either
+    set has fewer than two walks (no fold would hold both kinds).
+    """
+    if min(len(synth), len(real)) < 2:
+        return float("nan")
+    walks = [*synth, *real]
+    x = np.vstack([w.step_stats for w in walks])
+    y = np.concatenate([np.full(w.n_steps, i < len(synth)) for i, w in enumerate(walks)])
+    groups = np.concatenate([np.full(w.n_steps, i) for i, w in enumerate(walks)])
+    model = make_pipeline(
+        StandardScaler(), LogisticRegression(C=C, max_iter=5000, class_weight="balanced")
+    )
+    folds = GroupKFold(min(n_folds, len(synth), len(real)))
+    guess = cross_val_predict(model, x, y, groups=groups, cv=folds)
+    return float(balanced_accuracy_score(y, guess))
+
+
 # ------------------------------------------------------------------ rates and intervals
 def bootstrap_means(
     per_style: Sequence[tuple[np.ndarray, np.ndarray]], n_boot: int, seed: int = 0
@@ -336,8 +368,13 @@ def _per_walk(values: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mean_over_styles(per_style: Sequence[tuple[np.ndarray, np.ndarray]]) -> float:
-    parts = [num.sum() / den.sum() for num, den in per_style if den.sum()]
-    return float(np.mean(parts)) if parts else float("nan")
+    return _finite_mean([num.sum() / den.sum() for num, den in per_style if den.sum()])
+
+
+def _finite_mean(values: Sequence[float]) -> float:
+    """Mean of the finite values (NaN if there is none)."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 def _step_duration_sd(walks: Mapping[str, Sequence[WalkSteps]], styles: Sequence[str]) -> float:
@@ -453,6 +490,9 @@ class Evaluation:
                 "cv_step_rates": {str(k): v for k, v in self.classifier.cv_rates_.items()},
             },
             "foot_slide_mm": float(slides.mean()),
+            "real_vs_synthesized": _finite_mean(
+                [real_vs_synthesized(self.train[s], self.test[s]) for s in self.styles]
+            ),
             "dtw_expmap_rmse": _mean_over_styles([_per_walk([d[0] for d in x]) for x in dtw]),
             "dtw_joint_mm": _mean_over_styles([_per_walk([d[1] for d in x]) for x in dtw]),
             "confusion": rec.table(),
@@ -478,12 +518,12 @@ class Evaluation:
         models: Mapping[str, Sequence[GaitSynthesizer]],
         progress: Callable[[str], None] | None = None,
         label: str = "",
-    ) -> tuple[dict[str, Any], np.ndarray]:
+    ) -> tuple[dict[str, Any], np.ndarray, dict[str, list[WalkSteps]]]:
         """Metrics of one kind of model (``models``: style -> the models that should walk it).
 
-        Returns the metrics and the bootstrap replicates of the synthesized
-        step rate (models, then walks resampled). ``progress`` is told
-        ``label`` + each style in turn.
+        Returns the metrics, the bootstrap replicates of the synthesized
+        step rate (models, then walks resampled) and the synthesized walks of
+        each style. ``progress`` is told ``label`` + each style in turn.
         """
         styles = sorted(models)
         synth = {}
@@ -520,6 +560,9 @@ class Evaluation:
                 [_per_walk([w.slide for w in flat[s]]) for s in styles]
             ),
             "gv_ratio": _mean_over_styles(gv),
+            "real_vs_synthesized": _finite_mean(
+                [real_vs_synthesized(flat[s], self.test[s]) for s in styles]
+            ),
             "dtw_expmap_rmse": _mean_over_styles(
                 [_per_walk([d[0] for d in dtw[s]]) for s in styles]
             ),
@@ -534,7 +577,7 @@ class Evaluation:
             "confusion": rec.table(),
             "styles": styles,
         }
-        return out, reps
+        return out, reps, flat
 
     def sweep(
         self,
@@ -562,14 +605,17 @@ class Evaluation:
                     takes = adaptation_takes(self.train_motions[style], counts, k, r)
                     adapted[style].append(average.adapt(takes, style, k, **options))
                     scratch[style].append(average.scratch(takes, style, k))
-            a, a_reps = self.models(adapted, progress, f"{k} steps: adapted ")
-            s, s_reps = self.models(scratch, progress, f"{k} steps: scratch ")
+            a, a_reps, a_walks = self.models(adapted, progress, f"{k} steps: adapted ")
+            s, s_reps, s_walks = self.models(scratch, progress, f"{k} steps: scratch ")
             out[str(k)] = {
                 "adapted": a,
                 "scratch": s,
                 "adapted_minus_scratch": {
                     "synthesized_rate": a["synthesized_rate"] - s["synthesized_rate"],
                     "synthesized_rate_ci": interval(a_reps - s_reps),
+                    "told_apart": _finite_mean(
+                        [real_vs_synthesized(a_walks[st], s_walks[st]) for st in styles]
+                    ),
                 },
             }
         return out

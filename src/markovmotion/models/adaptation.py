@@ -296,7 +296,9 @@ def estimate_transforms(
     identity) with weight ``tau`` frames: the prior precision of row i is
     ``tau`` times the node's per-frame average of diag(G_i). ``tau = 0`` is
     plain CMLLR. A node with fewer than ``min_occupancy`` frames keeps its
-    parent's transform.
+    parent's transform; with a prior (``tau > 0``) the root is estimated
+    from any data, its identity prior standing in for the missing frames
+    (SMAPLR), so that a step or two still moves the model.
     """
     n_nodes = len(tree.parents)
     dims = means.shape[1]
@@ -308,7 +310,7 @@ def estimate_transforms(
         prior = ident if parent < 0 else w_nodes[parent]
         mem = tree.members[node]
         beta = stats.occ[mem].sum()
-        if beta < min_occupancy:
+        if beta <= 0 or (beta < min_occupancy and (parent >= 0 or tau <= 0)):
             w_nodes[node] = prior
             continue
         w = prior.copy() if start is None else start[node].copy()
