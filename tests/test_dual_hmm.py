@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -64,10 +65,13 @@ def model(training) -> DualHMM:
     return DualHMM(n_states=N_POSES, n_iter=20, window=6).fit(training)
 
 
+@pytest.mark.parametrize("observation", ["pose", "motion"])
 @pytest.mark.parametrize("mode", ["paper", "joint"])
-def test_generated_b_recovers_the_known_function_of_a_state(training, mode):
-    dual = DualHMM(n_states=N_POSES, mode=mode, n_iter=20, window=6).fit(training)
-    a, b, _ = synthetic_pair(200, 9)
+def test_generated_b_recovers_the_known_function_of_a_state(training, mode, observation):
+    dual = DualHMM(n_states=N_POSES, mode=mode, observation=observation, n_iter=20, window=6).fit(
+        training
+    )
+    a, b, states = synthetic_pair(200, 9)
     truth = b.positions()
     standard = dual.generate(a, "standard")
     windowed = dual.generate(a, "windowed")
@@ -75,8 +79,12 @@ def test_generated_b_recovers_the_known_function_of_a_state(training, mode):
     assert standard.skeleton.same_topology(b.skeleton)
     err_std = np.linalg.norm(standard.positions() - truth, axis=-1).mean(axis=1)
     err_win = np.linalg.norm(windowed.positions() - truth, axis=-1).mean(axis=1)
-    assert err_std.max() < 1.0  # mm: every frame of B right, pose and place
-    assert err_win[1:].max() < 1.0  # frame 0 starts from the paper's middle state (eq. 3)
+    # Every frame of B right, pose and place (mm); frame 0 of the windowed decoder starts from
+    # the paper's middle state (eq. 3). A's synthetic poses jump from one frame to the next, so
+    # with A's motion in the observation a jump frame may still be answered from the state left.
+    jumps = np.flatnonzero(np.diff(states)) + 1 if observation == "motion" else []
+    assert err_std[np.setdiff1d(np.arange(200), jumps)].max() < 1.0
+    assert err_win[np.setdiff1d(np.arange(1, 200), jumps)].max() < 1.0
 
 
 def test_partner_streams_what_windowed_generation_gives(model, capsys):
@@ -93,6 +101,16 @@ def test_partner_streams_what_windowed_generation_gives(model, capsys):
     np.testing.assert_allclose(np.array(streamed), offline, atol=1e-6)
     assert partner.lag == model.window - 1
     assert capsys.readouterr().err == ""
+
+
+def test_a_window_as_long_as_the_take_gives_standard_generation(model):
+    a, _, _ = synthetic_pair(60, 8)
+    long_window = copy.copy(model).set_params(window=a.n_frames, initial="prior")
+    np.testing.assert_allclose(
+        long_window.generate(a, "windowed").positions(),
+        model.generate(a, "standard").positions(),
+        atol=1e-9,
+    )
 
 
 def test_missing_frames_are_skipped_with_a_warning(model, capsys):
@@ -219,6 +237,6 @@ def test_real_salsa_held_out_pairs_beat_the_mean_pose(salsa):
     dual = DualHMM(n_states=16, n_iter=20).fit(train)
     results = [evaluate_pair(dual, *salsa[t], t, "salsa") for t in HELD_OUT]
     mean = {k: np.concatenate([r.errors[k] for r in results]).mean() for k in results[0].errors}
-    assert mean["windowed"] < 0.97 * mean["mean_pose"]
-    assert mean["standard"] < 0.97 * mean["mean_pose"]
+    assert mean["windowed"] < 0.9 * mean["mean_pose"]
+    assert mean["standard"] < 0.9 * mean["mean_pose"]
     assert abs(mean["windowed"] - mean["standard"]) < 0.1 * mean["standard"]

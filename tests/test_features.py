@@ -20,6 +20,7 @@ from markovmotion.features import (
     continuous_rotvec,
     delta_matrix,
 )
+from markovmotion.features.body_motion import BodyMotion, ground_frame, ground_travel
 from markovmotion.persist import FORMAT_VERSION, load_npz, save_npz
 
 
@@ -147,3 +148,40 @@ def test_positions_on_real_data_are_body_centred(mocap):
     lateral = x[:, hips[0]] - x[:, hips[1]]
     np.testing.assert_allclose(lateral[:, 2], 0, atol=1e-6)  # hips across, facing +Z
     assert np.all(lateral[:, 0] > 0)
+
+
+# ------------------------------------------------------------------ A's pose and motion
+def _moved(motion, yaw: float, shift) -> object:
+    """``motion`` turned by ``yaw`` about the vertical and moved by ``shift`` (a rigid move)."""
+    turn = Rotation.from_rotvec([0.0, yaw, 0.0])
+    out = motion.copy()
+    out.rotations[:, 0] = (turn * Rotation.from_quat(motion.rotations[:, 0])).as_quat()
+    out.translations[:, 0] = turn.apply(motion.translations[:, 0]) + shift
+    return out
+
+
+def test_body_motion_ignores_where_the_body_is_and_uses_no_future_frames():
+    m = make_motion(60, seed=4)
+    step = BodyMotion().fit([m])
+    x = step.transform([m])[0]
+    assert x.shape == (60, 6 * m.skeleton.n_joints + 3)
+    moved = step.transform([_moved(m, 2.1, [3000.0, 0.0, -500.0])])[0]
+    np.testing.assert_allclose(moved, x, atol=1e-6)
+    np.testing.assert_allclose(step.transform([m.trim(0, 25)])[0], x[:25], atol=1e-9)
+    np.testing.assert_allclose(x[0, 3 * m.skeleton.n_joints :], 0.0)
+
+
+def test_body_motion_measures_travel_in_the_bodys_own_frame():
+    m = make_motion(30, seed=5)
+    m.rotations[:, 0] = m.rotations[:1, 0]  # the pelvis keeps its heading h
+    h = m.heading()[0]
+    t = np.arange(30)[:, None]
+    m.translations[:, 0] = [0.0, 900.0, 0.0] + t * 12.0 * np.array([np.sin(h), 0.0, np.cos(h)])
+    step = BodyMotion(horizon=0.5, travel_horizon=1.0).fit([m])
+    travel = step.transform([m])[0][1:, -3:] / (1.0 * m.fps)
+    np.testing.assert_allclose(travel, np.tile([0.0, 12.0, 0.0], (29, 1)), atol=1e-6)
+    np.testing.assert_allclose(
+        ground_travel(*ground_frame(m))[1:], np.tile([0.0, 12.0, 0.0], (29, 1)), atol=1e-9
+    )
+    turned = ground_travel(np.zeros((3, 3)), np.array([3.1, -3.1, -3.0]))[1:, 2]
+    np.testing.assert_allclose(turned, [2 * np.pi - 6.2, 0.1])  # the short way round

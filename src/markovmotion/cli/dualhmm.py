@@ -26,6 +26,10 @@ DATA = typer.Option(None, help="Folder with INDEX.csv (default: see README).")
 LABELS = typer.Option(None, help="Comma-separated labels (default: every interaction).")
 STATES = typer.Option(32, help="Hidden states N.")
 MODE = typer.Option("paper", help="'paper' (EM on A) or 'joint' (EM on [A, B]).")
+OBSERVATION = typer.Option(
+    "motion", help="A as 'pose' (the paper's) or 'motion' (pose, its change and A's travel)."
+)
+CANDIDATES = typer.Option(10, help="Trellis candidates per frame (§3.2).")
 FPS = typer.Option(30.0, help="Model frame rate (takes are resampled).")
 WINDOW = typer.Option(10, help="Windowed-Viterbi slice length.")
 N_ITER = typer.Option(50, help="Most EM iterations.")
@@ -61,6 +65,8 @@ def train(
     ),
     states: int = STATES,
     mode: str = MODE,
+    observation: str = OBSERVATION,
+    candidates: int = CANDIDATES,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -76,7 +82,14 @@ def train(
     motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
     start = time.perf_counter()
     model = DualHMM(
-        n_states=states, mode=mode, fps=fps, window=window, n_iter=n_iter, random_state=seed
+        n_states=states,
+        mode=mode,
+        observation=observation,
+        candidates=candidates,
+        fps=fps,
+        window=window,
+        n_iter=n_iter,
+        random_state=seed,
     )
     with err_console.status(f"EM on {sum(len(a) for a, _ in motions)} frames"):
         model.fit(motions)
@@ -264,6 +277,8 @@ def crossval(
     labels: str = LABELS,
     states: int = STATES,
     mode: str = MODE,
+    observation: str = OBSERVATION,
+    candidates: int = CANDIDATES,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -283,7 +298,14 @@ def crossval(
         for a, b in track(pairs, "loading takes")
     ]
     model = DualHMM(
-        n_states=states, mode=mode, fps=fps, window=window, n_iter=n_iter, random_state=seed
+        n_states=states,
+        mode=mode,
+        observation=observation,
+        candidates=candidates,
+        fps=fps,
+        window=window,
+        n_iter=n_iter,
+        random_state=seed,
     )
     results, written = cross_validate(takes, model, plots)
     _report(summarise(results, model), written, json_out)

@@ -2,6 +2,7 @@
 
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
+from markovmotion.features.body_motion import BodyMotion
 from markovmotion.features.deltas import Deltas, add_deltas, delta_matrix
 from markovmotion.features.expmap import ExpMaps, continuous_rotvec
 from markovmotion.features.pca import PCA
@@ -11,6 +12,7 @@ from markovmotion.features.smoothing import TemporalSmoothing
 __all__ = [
     "PCA",
     "AugmentedConfiguration",
+    "BodyMotion",
     "Deltas",
     "ExpMaps",
     "FeaturePipeline",

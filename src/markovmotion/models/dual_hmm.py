@@ -19,11 +19,14 @@ B_A of q_t) and D1..DK the Mahalanobis distances (under B_B of q_t) from a
 candidate to the candidates of column t - 1. A step into candidate j costs
 (D_k) x D4, so the error of a path is a sum of (D1 + D2 + D3)-type terms
 weighted by D4, with E = D4 in the first column; the lowest-error path is
-back-tracked. Online, where nothing can be back-tracked, the candidate with
-the lowest error given the frame already shown is taken.
+back-tracked. Online, the trellis runs over each slice of the windowed
+decoder, from the B frame already shown, and its first step is taken
+(:class:`Partner`).
 
-Features. A is seen as body-centred joint positions (mm) + PCA, as the
-paper's marker positions. B is modelled as joint positions *in A's ground
+Features. A is seen as body-centred joint positions (mm), as the paper's
+marker positions, by default with their change and A's travel
+(``observation="motion"``: on salsa, where A goes says as much about B as
+A's pose), + PCA. B is modelled as joint positions *in A's ground
 frame* (A's pelvis on the floor, A's heading) + PCA, so that B_B and D1..DK
 measure what the evaluation measures: where B's joints are relative to A, in
 mm. The trellis picks real training frames of B, kept as exponential maps
@@ -46,7 +49,8 @@ from sklearn.base import BaseEstimator
 from markovmotion.algorithms.hmm_recursions import viterbi
 from markovmotion.core.motion import UP, Motion
 from markovmotion.errors import SkeletonMismatchError
-from markovmotion.features import PCA, ExpMaps, FeaturePipeline, JointPositions
+from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
+from markovmotion.features.body_motion import ground_frame
 from markovmotion.models.hmm import (
     GaussianHMM,
     check_sequences,
@@ -59,7 +63,6 @@ from markovmotion.models.windowed_viterbi import (
     INITIAL,
     WindowedViterbi,
     start_distribution,
-    windowed_viterbi,
 )
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.progress import err_console
@@ -67,18 +70,11 @@ from markovmotion.state import estimator_state, register, restore_estimator
 
 KIND = "dual_hmm"
 MODES = ("paper", "joint")
+OBSERVATIONS = ("pose", "motion")
 METHODS = ("standard", "windowed")
 
 
 # ------------------------------------------------------------------ A's ground frame
-def ground_frame(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """Where a person stands and faces, per frame: pelvis on the floor (F, 3) and heading (F,)."""
-    pos = motion.positions()
-    origin = pos[:, motion.skeleton.body_root].copy()
-    origin[:, 1] = 0.0
-    return origin, motion.heading(pos)
-
-
 def into_frame(motion: Motion, origin: np.ndarray, yaw: np.ndarray) -> Motion:
     """``motion`` seen from the per-frame ground frame (origin, yaw): a rigid move of its root."""
     turn = Rotation.from_rotvec(np.outer(-yaw, UP))
@@ -134,13 +130,18 @@ class _Trellis:
             (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
         )
 
-    def best_path(self, states: np.ndarray, xa: np.ndarray, missing: np.ndarray) -> np.ndarray:
-        """Training-frame index per frame on the lowest-error path (standard generation)."""
-        cols = [
-            self.candidates(q, None if m else x)
-            for q, x, m in zip(states, xa, missing, strict=True)
-        ]
-        cost = cols[0][1]
+    def columns(self, states: Sequence[int], xa: Sequence[np.ndarray | None]) -> list[tuple]:
+        """The trellis columns (:meth:`candidates`) of frames in ``states`` seen as ``xa``."""
+        return [self.candidates(q, x) for q, x in zip(states, xa, strict=True)]
+
+    def best_path(
+        self, states: Sequence[int], cols: list[tuple], previous: int | None = None
+    ) -> np.ndarray:
+        """Training frame per column on the lowest-error path; E = D4 in the first column, or
+        D x D4 from the frame ``previous`` already shown."""
+        idx, cost = cols[0]
+        if previous is not None:
+            cost = cost * self.distances(states[0], idx, np.array([previous]))[:, 0]
         back = []
         for t in range(1, len(cols)):
             idx, d4 = cols[t]
@@ -154,13 +155,6 @@ class _Trellis:
             path.append(cols[t - 1][0][j])
         return np.array(path[::-1], dtype=int)
 
-    def next_frame(self, state: int, xa: np.ndarray | None, previous: int | None) -> int:
-        """Online: the lowest-error candidate given the frame already chosen (E = D x D4)."""
-        idx, d4 = self.candidates(state, xa)
-        if previous is not None:
-            d4 = d4 * self.distances(state, idx, np.array([previous]))[:, 0]
-        return int(idx[np.argmin(d4)])
-
 
 # ------------------------------------------------------------------ the model
 @register
@@ -170,11 +164,15 @@ class DualHMM(BaseEstimator):
     Args:
         n_states: hidden states N.
         mode: ``"paper"`` or ``"joint"`` (module docstring).
+        observation: what A's observations hold: ``"pose"``, body-centred joint
+            positions as in the paper, or ``"motion"``, those plus their change
+            and A's travel (:class:`~markovmotion.features.BodyMotion`).
         energy: PCA energy kept per person (the paper's 95 %).
         fps: the model's frame rate; motions at other rates are resampled.
         window: windowed-Viterbi slice length T (the paper's 10).
         initial: first slice's pi, ``"middle"`` (eq. 3) or ``"prior"`` (learnt pi).
-        candidates: trellis entries per column (the paper's figure has 3).
+        candidates: trellis entries per column (the paper's figure has 3; more
+            lets the trellis follow A more closely: README, "Virtual partner").
         n_iter, tol, var_floor, random_state: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -187,11 +185,12 @@ class DualHMM(BaseEstimator):
         self,
         n_states: int = 32,
         mode: str = "paper",
+        observation: str = "motion",
         energy: float = 0.95,
         fps: float = 30.0,
         window: int = 10,
         initial: str = "middle",
-        candidates: int = 3,
+        candidates: int = 10,
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -199,6 +198,7 @@ class DualHMM(BaseEstimator):
     ):
         self.n_states = n_states
         self.mode = mode
+        self.observation = observation
         self.energy = energy
         self.fps = fps
         self.window = window
@@ -214,6 +214,8 @@ class DualHMM(BaseEstimator):
         """Learn from two-person takes ``(A, B)`` (same frames; B responds to A)."""
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        if self.observation not in OBSERVATIONS:
+            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {self.observation!r}")
         if self.initial not in INITIAL:
             raise ValueError(f"initial must be one of {INITIAL}, got {self.initial!r}")
         if not pairs:
@@ -227,7 +229,8 @@ class DualHMM(BaseEstimator):
             b_rel.append(into_frame(b, *ground_frame(a)))
         self.skeleton_a_ = a_list[0].skeleton
         self.skeleton_b_ = b_rel[0].skeleton
-        self.pipeline_a_ = FeaturePipeline([JointPositions(), PCA(self.energy)])
+        first = BodyMotion() if self.observation == "motion" else JointPositions()
+        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
         self.pipeline_b_ = FeaturePipeline([JointPositions(body_centred=False), PCA(self.energy)])
         self.expmaps_b_ = ExpMaps(root_position="full")
         xa, lengths = check_sequences(
@@ -275,12 +278,7 @@ class DualHMM(BaseEstimator):
     def features_a(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
         """A's model features (F, Da) at the model's rate and which frames are missing (NaN)."""
         missing = ~finite_frames(motion)
-        if missing.any():
-            fixed = motion.copy()
-            fixed.rotations[missing] = [0.0, 0.0, 0.0, 1.0]
-            fixed.translations[missing] = motion.skeleton.offsets
-            motion = fixed
-        return self.pipeline_a_.transform([motion])[0], missing
+        return self.pipeline_a_.transform([_fill_missing(motion, missing)])[0], missing
 
     def generate(self, motion_a: Motion, method: str = "standard") -> Motion:
         """B's responsive motion to ``motion_a`` (at the model's rate, in A's world).
@@ -297,16 +295,18 @@ class DualHMM(BaseEstimator):
         log_b = self.lambda_a_.log_frameprob(xa)
         log_b[missing] = 0.0
         trellis = self._trellis()
+        seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
         if method == "standard":
             states = self.decode(log_b)
-            idx = trellis.best_path(states, xa, missing)
+            idx = trellis.best_path(states, trellis.columns(states, seen))
         else:
-            start = start_distribution(safe_log(self.lambda_a_.startprob_), self.initial)
-            states = windowed_viterbi(start, safe_log(self.lambda_a_.transmat_), log_b, self.window)
-            idx = np.empty(len(states), dtype=int)
-            prev = None
-            for t, q in enumerate(states):
-                prev = idx[t] = trellis.next_frame(q, None if missing[t] else xa[t], prev)
+            partner = self.partner()
+            chosen = [
+                partner.step_log_frameprob(row, x) for row, x in zip(log_b, seen, strict=True)
+            ]
+            idx = np.array(
+                [c for c in chosen if c is not None] + partner.finish_frames(), dtype=int
+            )
         return self.frames_to_motion(idx, *ground_frame(_fill_missing(motion_a, missing)))
 
     def decode(self, log_frameprob: np.ndarray) -> np.ndarray:
@@ -369,14 +369,18 @@ def _sharing_chain(
 
 
 def _fill_missing(motion: Motion, missing: np.ndarray) -> Motion:
-    """Missing frames replaced by the last finite one (A's place for the B frames shown then)."""
+    """Missing frames replaced by the last finite one (the first finite one before it; the
+    rest pose if none is finite): A's place for the B frames shown then, and no jump in A's
+    motion features."""
     if not missing.any():
         return motion
-    keep = np.maximum.accumulate(np.where(missing, 0, np.arange(len(missing))))
-    if missing[0]:
-        first = int(np.argmin(missing))
-        keep[:first] = first
     out = motion.copy()
+    if missing.all():
+        out.rotations[:] = [0.0, 0.0, 0.0, 1.0]
+        out.translations[:] = motion.skeleton.offsets
+        return out
+    keep = np.maximum.accumulate(np.where(missing, 0, np.arange(len(missing))))
+    keep[: int(np.argmin(missing))] = int(np.argmin(missing))
     out.rotations, out.translations = motion.rotations[keep], motion.translations[keep]
     return out
 
@@ -385,12 +389,15 @@ class Partner:
     """The virtual partner online: one frame of A in, one frame of B out, ``lag`` frames late.
 
     ``lag = window - 1`` frames (0.30 s at 30 fps with the paper's window of
-    10): the windowed decoder fixes frame t's state when frame t + window - 2
-    arrives (frame 0 one frame later), and one more frame keeps the output
-    regular. :meth:`step` returns None until the first B frame is due;
-    :meth:`finish` returns the last ``lag`` frames. A frame that is None or
-    holds NaN is a missing observation: a warning, and the partner goes on
-    from the dynamics alone.
+    10). When frame t + lag arrives, the windowed decoder's latest slice
+    covers frames t .. t + lag: its q_1 is frame t's state, decided (§3.1),
+    the rest are that slice's best path. B's frame for t is the first step of
+    the lowest-error trellis path (§3.2) over the slice, starting from the B
+    frame shown last: the trellis run the windowed way, as §3.1 runs Viterbi,
+    so it looks as far ahead as the decoder. :meth:`step` returns None until
+    the first B frame is due; :meth:`finish` returns the last ``lag`` frames.
+    A frame that is None or holds NaN is a missing observation: a warning,
+    and the partner goes on from the dynamics alone.
     """
 
     def __init__(self, model: DualHMM, window: int):
@@ -402,28 +409,58 @@ class Partner:
         self._trellis = model._trellis()
         prec, log_det = precision_cholesky(hmm.covars_)
         self._emission = (hmm.means_, prec, log_det)
-        self._inputs: deque = deque()  # (features or None, origin, yaw) of undecided frames
-        self._decided: deque = deque()  # (training frame, origin, yaw) not yet returned
-        self._previous: int | None = None
+        self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
+        self._places: deque = deque(maxlen=window)  # where A stood in the slice's frames
+        self._shown: int | None = None  # B's training frame shown last
         self._frames_in = 0
         self._place = (np.zeros(3), 0.0)
+        self._last: Motion | None = None  # A's last finite frame, for A's motion features
 
-    def step_features(self, xa: np.ndarray | None, place: tuple[np.ndarray, float]) -> int:
-        """Feed A's features (None: missing); returns how many B frames became decided."""
+    def step_features(self, xa: np.ndarray | None, place: tuple[np.ndarray, float]) -> int | None:
+        """Feed A's features (None: missing) and place (origin, yaw); B's training frame for
+        the frame ``lag`` frames ago, once one is due."""
         if xa is None:
             log_b = np.zeros(len(self._emission[0]))
         else:
             log_b = gaussian_log_density(xa[None], *self._emission)[0]
-        self._inputs.append((xa, place))
-        states = self.decoder.push(log_b)
-        self._decide(states)
-        return len(states)
+        self._places.append(place)
+        return self.step_log_frameprob(log_b, xa)
 
-    def _decide(self, states: list[int]) -> None:
-        for q in states:
-            xa, place = self._inputs.popleft()
-            self._previous = self._trellis.next_frame(q, xa, self._previous)
-            self._decided.append((self._previous, place))
+    def step_log_frameprob(self, log_b: np.ndarray, xa: np.ndarray | None) -> int | None:
+        """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
+        self._slice.append((xa, {}))
+        self.decoder.push(log_b)
+        self._frames_in += 1
+        if self._frames_in <= self.lag:
+            return None
+        states = self.decoder.path
+        path = self._trellis.best_path(states, self._columns(states, self._slice), self._shown)
+        self._shown = int(path[0])
+        return self._shown
+
+    def finish_frames(self) -> list[int]:
+        """B's training frames still owed at the end of the stream."""
+        if self._frames_in == 0:
+            return []
+        entries = list(self._slice)
+        if self._frames_in < self.decoder.window:
+            states = self.decoder.flush()
+        else:
+            states, entries = list(self.decoder.path[1:]), entries[1:]
+        if not entries:
+            return []
+        return [
+            int(i)
+            for i in self._trellis.best_path(states, self._columns(states, entries), self._shown)
+        ]
+
+    def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
+        cols = []
+        for q, (xa, cache) in zip(states, entries, strict=True):
+            if q not in cache:
+                cache[q] = self._trellis.candidates(q, xa)
+            cols.append(cache[q])
+        return cols
 
     def step(self, frame: Motion | None) -> Motion | None:
         """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
@@ -436,22 +473,32 @@ class Partner:
         self.model.check_input(frame)
         origin, yaw = ground_frame(frame)
         self._place = (origin[0], float(yaw[0]))
-        return self._advance(self.model.features_a(frame)[0][0])
+        recent = frame
+        if self._last is not None:
+            recent = Motion(
+                frame.skeleton,
+                np.concatenate([self._last.rotations, frame.rotations[:1]]),
+                np.concatenate([self._last.translations, frame.translations[:1]]),
+                frame.fps,
+            )
+        self._last = frame.trim(0, 1)
+        return self._motion(self.step_features(self.model.features_a(recent)[0][-1], self._place))
 
     def skip(self) -> Motion | None:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
-        return self._advance(None)
-
-    def _advance(self, xa: np.ndarray | None) -> Motion | None:
-        self.step_features(xa, self._place)
-        self._frames_in += 1
-        return None if self._frames_in <= self.lag else self._emit()
+        return self._motion(self.step_features(None, self._place))
 
     def finish(self) -> list[Motion]:
         """B's frames still owed at the end of the stream."""
-        self._decide(self.decoder.flush())
-        return [self._emit() for _ in range(len(self._decided))]
+        frames = self.finish_frames()
+        places = list(self._places)[len(self._places) - len(frames) :]
+        return [self._motion(i, p) for i, p in zip(frames, places, strict=True)]
 
-    def _emit(self) -> Motion:
-        idx, (origin, yaw) = self._decided.popleft()
+    def _motion(
+        self, idx: int | None, place: tuple[np.ndarray, float] | None = None
+    ) -> Motion | None:
+        """B's training frame ``idx`` placed by A's place for it (default: the slice's first)."""
+        if idx is None:
+            return None
+        origin, yaw = place or self._places[0]
         return self.model.frames_to_motion(np.array([idx]), origin[None], np.array([yaw]))

@@ -82,6 +82,11 @@ class WindowedViterbi:
         self._path, _ = viterbi_kernel(self._one_hot, self._log_transmat_t, self._buffer)
         return [int(self._path[1])]
 
+    @property
+    def path(self) -> np.ndarray | None:
+        """The latest slice's best path q_1 .. q_T (None before the first full slice)."""
+        return self._path
+
     def flush(self) -> list[int]:
         """The states of the frames still undecided at the end of the stream."""
         if self._count == 0:

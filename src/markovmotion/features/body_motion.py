@@ -1,0 +1,84 @@
+"""A person's pose and how it moves: body-centred joint positions with their causal changes."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.features.base import FeatureStep
+from markovmotion.state import register
+
+
+def ground_frame(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """Where a person stands and faces, per frame: pelvis on the floor (F, 3) and heading (F,)."""
+    pos = motion.positions()
+    origin = pos[:, motion.skeleton.body_root].copy()
+    origin[:, 1] = 0.0
+    return origin, motion.heading(pos)
+
+
+def ground_travel(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """(F, 3) per-frame travel in the body's own frame: sideways and forward step (mm), turn (rad).
+
+    Backward differences: row t is the move from frame t - 1 to t, seen from
+    the heading at t - 1; row 0 is zero.
+    """
+    step = np.diff(origin, axis=0)
+    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+    sideways = c * step[:, 0] - s * step[:, 2]
+    forward = s * step[:, 0] + c * step[:, 2]
+    turn = np.angle(np.exp(1j * np.diff(yaw)))
+    return np.vstack([np.zeros((1, 3)), np.column_stack([sideways, forward, turn])])
+
+
+@register
+class BodyMotion(FeatureStep):
+    """Motion -> (F, 6J + 3): pose, its change and the body's travel, all in mm.
+
+    Row t holds the body-centred joint positions p_t
+    (:meth:`Motion.body_centred_positions`), their change p_t - p_{t-1}
+    scaled to ``horizon`` seconds, and the pelvis's ground travel and turn
+    (:func:`ground_travel`; the turn as arc length at 1 m) scaled to
+    ``travel_horizon`` seconds. A change scaled to h seconds is how far the
+    point would move in h s at its present speed, so the weights do not
+    depend on the frame rate. Only frames up to t are used, so an online
+    partner computes row t as soon as frame t arrives; the first row's
+    changes are zero.
+
+    The dual-HMM paper describes A by its pose alone; on CMU's salsa the
+    partner's response depends on where A is going as much as on A's pose, so
+    the model sees both (README, "Virtual partner").
+    """
+
+    def __init__(self, horizon: float = 1 / 6, travel_horizon: float = 2 / 3):
+        self.horizon = horizon
+        self.travel_horizon = travel_horizon
+
+    def fit(self, sequences: Sequence[Motion]) -> BodyMotion:
+        self.skeleton_ = sequences[0].skeleton
+        for m in sequences[1:]:
+            self.skeleton_.check_compatible(m.skeleton)
+        return self
+
+    def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
+        out = []
+        for m in sequences:
+            self.skeleton_.check_compatible(m.skeleton)
+            pose = m.body_centred_positions().reshape(m.n_frames, -1)
+            change = np.vstack([np.zeros((1, pose.shape[1])), np.diff(pose, axis=0)])
+            travel = ground_travel(*ground_frame(m)) * [1.0, 1.0, 1000.0]
+            out.append(
+                np.hstack(
+                    [pose, change * (self.horizon * m.fps), travel * (self.travel_horizon * m.fps)]
+                )
+            )
+        return out
+
+    def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """(F, J, 3) body-centred positions (the changes are dropped)."""
+        return [
+            np.asarray(x)[:, : self.skeleton_.n_joints * 3].reshape(len(x), -1, 3)
+            for x in sequences
+        ]
