@@ -156,7 +156,7 @@ class Motion:
         if hips is not None:
             pos = self.positions() if positions is None else positions
             lateral = pos[:, hips[0]] - pos[:, hips[1]]
-            forward = np.cross(lateral, UP)
+            forward = np.stack([-lateral[:, 2], np.zeros(len(lateral)), lateral[:, 0]], axis=1)
         else:
             rot, _ = self.global_transforms()
             forward = rot[:, self.skeleton.body_root, :, 2]
@@ -206,12 +206,13 @@ class Motion:
             out.translations[:, 0, [0, 2]] -= pelvis0[[0, 2]]
         return out
 
-    def body_centred_positions(self) -> np.ndarray:
+    def body_centred_positions(self, positions: np.ndarray | None = None) -> np.ndarray:
         """Joint positions (F, J, 3) in mm relative to the pelvis, with each frame's yaw removed.
 
         The body faces +Z in every frame; height stays relative to the pelvis.
+        ``positions``: this motion's :meth:`positions`, if already computed.
         """
-        pos = self.positions()
+        pos = self.positions() if positions is None else positions
         yaw = self.heading(pos)
         centred = pos - pos[:, self.skeleton.body_root : self.skeleton.body_root + 1]
         c, s = np.cos(-yaw), np.sin(-yaw)

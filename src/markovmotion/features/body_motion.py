@@ -11,9 +11,14 @@ from markovmotion.features.base import FeatureStep
 from markovmotion.state import register
 
 
-def ground_frame(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """Where a person stands and faces, per frame: pelvis on the floor (F, 3) and heading (F,)."""
-    pos = motion.positions()
+def ground_frame(
+    motion: Motion, positions: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where a person stands and faces, per frame: pelvis on the floor (F, 3) and heading (F,).
+
+    ``positions``: the motion's :meth:`~Motion.positions`, if already computed.
+    """
+    pos = motion.positions() if positions is None else positions
     origin = pos[:, motion.skeleton.body_root].copy()
     origin[:, 1] = 0.0
     return origin, motion.heading(pos)
@@ -66,9 +71,10 @@ class BodyMotion(FeatureStep):
         out = []
         for m in sequences:
             self.skeleton_.check_compatible(m.skeleton)
-            pose = m.body_centred_positions().reshape(m.n_frames, -1)
+            pos = m.positions()
+            pose = m.body_centred_positions(pos).reshape(m.n_frames, -1)
             change = np.vstack([np.zeros((1, pose.shape[1])), np.diff(pose, axis=0)])
-            travel = ground_travel(*ground_frame(m)) * [1.0, 1.0, 1000.0]
+            travel = ground_travel(*ground_frame(m, pos)) * [1.0, 1.0, 1000.0]
             out.append(
                 np.hstack(
                     [pose, change * (self.horizon * m.fps), travel * (self.travel_horizon * m.fps)]

@@ -111,6 +111,7 @@ class _Trellis:
     prec_b: np.ndarray  # (N, Db, Db)
     train_b: np.ndarray  # (frames, Db)
     size: int
+    motion_b: Motion  # B's training frames relative to A, decoded once
 
     def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
@@ -135,17 +136,23 @@ class _Trellis:
         return [self.candidates(q, x) for q, x in zip(states, xa, strict=True)]
 
     def best_path(
-        self, states: Sequence[int], cols: list[tuple], previous: int | None = None
+        self,
+        states: Sequence[int],
+        cols: list[tuple],
+        previous: int | None = None,
+        steps: list[np.ndarray] | None = None,
     ) -> np.ndarray:
         """Training frame per column on the lowest-error path; E = D4 in the first column, or
-        D x D4 from the frame ``previous`` already shown."""
+        D x D4 from the frame ``previous`` already shown. ``steps[t - 1]``: the
+        :meth:`distances` from column t - 1 to column t, if already computed."""
         idx, cost = cols[0]
         if previous is not None:
             cost = cost * self.distances(states[0], idx, np.array([previous]))[:, 0]
         back = []
         for t in range(1, len(cols)):
             idx, d4 = cols[t]
-            total = cost[None, :] + self.distances(states[t], idx, cols[t - 1][0]) * d4[:, None]
+            d = self.distances(states[t], idx, cols[t - 1][0]) if steps is None else steps[t - 1]
+            total = cost[None, :] + d * d4[:, None]
             back.append(total.argmin(axis=1))
             cost = total.min(axis=1)
         j = int(cost.argmin())
@@ -316,7 +323,8 @@ class DualHMM(BaseEstimator):
 
     def frames_to_motion(self, idx: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
         """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw)."""
-        rel = self.expmaps_b_.inverse_transform([self.frames_b_[idx].astype(float)])[0]
+        frames = self._trellis().motion_b
+        rel = Motion(self.skeleton_b_, frames.rotations[idx], frames.translations[idx], self.fps)
         out = out_of_frame(rel, origin, yaw)
         out.fps = self.fps
         return out
@@ -339,8 +347,9 @@ class DualHMM(BaseEstimator):
                 idx = np.argsort(d)[: self.candidates]
             members.append(idx)
             white.append(self.train_a_[idx] @ prec_a[k])
+        motion_b = self.expmaps_b_.inverse_transform([self.frames_b_.astype(float)])[0]
         self._trellis_cache = _Trellis(
-            members, white, prec_a, prec_b, self.train_b_, self.candidates
+            members, white, prec_a, prec_b, self.train_b_, self.candidates, motion_b
         )
         return self._trellis_cache
 
@@ -434,7 +443,8 @@ class Partner:
         if self._frames_in <= self.lag:
             return None
         states = self.decoder.path
-        path = self._trellis.best_path(states, self._columns(states, self._slice), self._shown)
+        cols = self._columns(states, self._slice)
+        path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         self._shown = int(path[0])
         return self._shown
 
@@ -461,6 +471,18 @@ class Partner:
                 cache[q] = self._trellis.candidates(q, xa)
             cols.append(cache[q])
         return cols
+
+    def _steps(self, states: Sequence[int], cols: list[tuple]) -> list[np.ndarray]:
+        """Distances between consecutive columns of the slice, each computed once per pair of
+        states (a slice shares all but its last column with the one before)."""
+        out = []
+        for t in range(1, len(cols)):
+            cache = self._slice[t][1]
+            key = (states[t], states[t - 1])
+            if key not in cache:
+                cache[key] = self._trellis.distances(states[t], cols[t][0], cols[t - 1][0])
+            out.append(cache[key])
+        return out
 
     def step(self, frame: Motion | None) -> Motion | None:
         """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
