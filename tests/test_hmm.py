@@ -11,7 +11,12 @@ from scipy.special import logsumexp
 
 from markovmotion.algorithms.hmm_recursions import forward, forward_backward, viterbi
 from markovmotion.models.hmm import GaussianHMM, floor_covariances
-from markovmotion.models.windowed_viterbi import WindowedViterbi, windowed_viterbi
+from markovmotion.models.windowed_viterbi import (
+    WindowedViterbi,
+    leavable,
+    one_hot_log,
+    windowed_viterbi,
+)
 
 
 def random_chain(rng: np.random.Generator, n: int, stay: float = 0.0):
@@ -143,3 +148,26 @@ def test_windowed_viterbi_follows_the_paper_slice_by_slice():
         path, _ = viterbi(pi_w, np.log(trans), log_b[w : w + window])
         assert states[w + 1] == path[1]
     assert states[-(window - 2) :] == path[2:].tolist()
+
+
+def test_a_state_seen_only_at_the_ends_is_made_leavable_for_the_windowed_decoder():
+    rng = np.random.default_rng(3)
+    centres = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    seqs = []
+    for _ in range(4):
+        labels = np.r_[np.tile(np.repeat([0, 1], 15), 4), np.full(20, 2)]  # ends in state 2
+        seqs.append(centres[labels] + rng.normal(0, 0.5, (len(labels), 2)))
+    hmm = GaussianHMM(3, n_iter=30, random_state=0).fit(np.vstack(seqs), [140] * 4)
+    end = int(np.argmin(np.linalg.norm(hmm.means_ - centres[2], axis=1)))
+    assert hmm.transmat_[end, end] > 1 - 1e-6  # nothing ever left it
+    absorbing = hmm.transmat_.copy()
+    absorbing[end] = np.eye(3)[end]  # EM's limit
+    log_b = hmm.log_frameprob(seqs[0])
+    with np.errstate(divide="ignore"):
+        stuck = windowed_viterbi(one_hot_log(3, end), np.log(absorbing), log_b, 10)
+    assert (stuck == end).all()
+    fixed = leavable(absorbing)
+    np.testing.assert_allclose(fixed.sum(axis=1), 1.0)
+    states = windowed_viterbi(one_hot_log(3, end), np.log(fixed), log_b, 10)
+    assert (states[1:120] != end).all()
+    assert (states[120:] == end).all()

@@ -62,6 +62,7 @@ from markovmotion.models.hmm import (
 from markovmotion.models.windowed_viterbi import (
     INITIAL,
     WindowedViterbi,
+    leavable,
     start_distribution,
 )
 from markovmotion.persist import load_npz, save_npz
@@ -252,6 +253,7 @@ class DualHMM(BaseEstimator):
         da = xa.shape[1]
         if self.mode == "paper":
             self.lambda_a_ = hmm.fit(xa, lengths)
+            hmm.transmat_ = leavable(hmm.transmat_)
             gamma = hmm.predict_proba(xa, lengths)
             floor = self.var_floor * np.var(xb, axis=0).mean()
             means_b, covars_b, _ = weighted_gaussians(xb, gamma, floor)
@@ -260,6 +262,7 @@ class DualHMM(BaseEstimator):
         else:
             xab = np.hstack([xa, xb])
             joint = hmm.fit(xab, lengths)
+            joint.transmat_ = leavable(joint.transmat_)
             self.train_states_ = joint.decode(xab, lengths)[1]
             m, c, floor = joint.means_, joint.covars_, joint.covar_floor_
             self.lambda_a_ = _sharing_chain(joint, m[:, :da], c[:, :da, :da], floor)

@@ -31,6 +31,20 @@ def start_distribution(log_startprob: np.ndarray, initial: str) -> np.ndarray:
     return one_hot_log(len(log_startprob), len(log_startprob) // 2)
 
 
+def leavable(transmat: np.ndarray, weight: float = 1e-3) -> np.ndarray:
+    """T with every absorbing row (T_kk > 1 - ``weight``) mixed with ``weight`` of the uniform row.
+
+    EM makes a state seen only at the end of training sequences absorbing
+    (T_kk = 1: nothing ever left it). Standard Viterbi is not hurt, but the
+    windowed decoder, started on such a state by eq. 3 or reset to it by
+    eq. 4, would never leave it again. Other rows are kept as learnt.
+    """
+    out = np.array(transmat, dtype=float)
+    stuck = np.diagonal(out) > 1.0 - weight
+    out[stuck] = (1.0 - weight) * out[stuck] + weight / out.shape[1]
+    return out
+
+
 def one_hot_log(n: int, state: int) -> np.ndarray:
     """log of the distribution certain of ``state`` (0 there, -inf elsewhere)."""
     out = np.full(n, -np.inf)
