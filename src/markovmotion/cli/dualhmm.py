@@ -55,6 +55,31 @@ def select_pairs(index, labels: list[str] | None, trials: list[str] | None, held
     return pairs
 
 
+def new_model(
+    states: int,
+    mode: str,
+    observation: str,
+    candidates: int,
+    fps: float,
+    window: int,
+    n_iter: int,
+    seed: int,
+):
+    """An unfitted DualHMM with the settings that ``train`` and ``crossval`` share."""
+    from markovmotion.models.dual_hmm import DualHMM
+
+    return DualHMM(
+        n_states=states,
+        mode=mode,
+        observation=observation,
+        candidates=candidates,
+        fps=fps,
+        window=window,
+        n_iter=n_iter,
+        random_state=seed,
+    )
+
+
 @app.command()
 def train(
     out: Path = typer.Option(..., help="Model file to write (.npz)."),
@@ -74,23 +99,13 @@ def train(
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     from markovmotion.data import MocapIndex
-    from markovmotion.models.dual_hmm import DualHMM
 
     check_model_output(out)
     index = MocapIndex.load(data)
     pairs = select_pairs(index, _split(labels), _split(test_trials), held_out=False)
     motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
     start = time.perf_counter()
-    model = DualHMM(
-        n_states=states,
-        mode=mode,
-        observation=observation,
-        candidates=candidates,
-        fps=fps,
-        window=window,
-        n_iter=n_iter,
-        random_state=seed,
-    )
+    model = new_model(states, mode, observation, candidates, fps, window, n_iter, seed)
     with err_console.status(f"EM on {sum(len(a) for a, _ in motions)} frames"):
         model.fit(motions)
     model.save(out)
@@ -289,7 +304,6 @@ def crossval(
     """Leave-one-take-out evaluation: train on all takes but one, test on it, for every take."""
     from markovmotion.data import MocapIndex
     from markovmotion.evaluate.interaction import cross_validate, summarise
-    from markovmotion.models.dual_hmm import DualHMM
 
     index = MocapIndex.load(data)
     pairs = select_pairs(index, _split(labels), None, held_out=False)
@@ -297,16 +311,7 @@ def crossval(
         (f"{a.name}+{b.name}", a.label, *index.load_pair(a, b))
         for a, b in track(pairs, "loading takes")
     ]
-    model = DualHMM(
-        n_states=states,
-        mode=mode,
-        observation=observation,
-        candidates=candidates,
-        fps=fps,
-        window=window,
-        n_iter=n_iter,
-        random_state=seed,
-    )
+    model = new_model(states, mode, observation, candidates, fps, window, n_iter, seed)
     results, written = cross_validate(takes, model, plots)
     _report(summarise(results, model), written, json_out)
 
