@@ -30,6 +30,8 @@ from markovmotion.models.condensation import DEFAULT_RESPONSE, DEFAULT_SIGMA, RE
 from markovmotion.models.virtual_partner import VirtualPartner
 from markovmotion.progress import err_console
 
+SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
+
 app = typer.Typer(
     help="Interaction behaviour models (interaction paper): behaviour chain over two people's "
     "joint shapes, virtual partner by single- or multiple-hypothesis (CONDENSATION) propagation.",
@@ -121,9 +123,7 @@ def respond(
         help="Response of multiple hypotheses: ml (the paper's), map (eq. 21) or mean "
         "(likelihood-weighted mean, CONDENSATION's estimate).",
     ),
-    sigma: float = typer.Option(
-        DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05)."
-    ),
+    sigma: float = SIGMA,
     person: int = typer.Option(0, min=0, max=1, help="Mocap: the real person's half of the model."),
     fps: float = typer.Option(
         None, help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there)."
@@ -166,9 +166,7 @@ def evaluate(
     response: str = typer.Option(
         DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
     ),
-    sigma: float = typer.Option(
-        DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05)."
-    ),
+    sigma: float = SIGMA,
     dual_hmm: Path = typer.Option(
         None,
         help="mocap: also a dual-HMM model ('dualhmm train') answering person A with B, "
