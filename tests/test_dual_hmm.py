@@ -62,15 +62,20 @@ def training() -> list[tuple[Motion, Motion]]:
 
 @pytest.fixture(scope="module")
 def model(training) -> DualHMM:
-    return DualHMM(n_states=N_POSES, n_iter=20, window=6).fit(training)
+    return DualHMM(n_states=N_POSES, n_iter=20, window=6, placement_window=1).fit(training)
 
 
 @pytest.mark.parametrize("observation", ["pose", "motion"])
 @pytest.mark.parametrize("mode", ["paper", "joint"])
 def test_generated_b_recovers_the_known_function_of_a_state(training, mode, observation):
-    dual = DualHMM(n_states=N_POSES, mode=mode, observation=observation, n_iter=20, window=6).fit(
-        training
-    )
+    dual = DualHMM(
+        n_states=N_POSES,
+        mode=mode,
+        observation=observation,
+        n_iter=20,
+        window=6,
+        placement_window=1,  # B's place jumps with A's state here
+    ).fit(training)
     a, b, states = synthetic_pair(200, 9)
     truth = b.positions()
     standard = dual.generate(a, "standard")
@@ -87,7 +92,9 @@ def test_generated_b_recovers_the_known_function_of_a_state(training, mode, obse
     assert err_win[np.setdiff1d(np.arange(1, 200), jumps)].max() < 1.0
 
 
-def test_partner_streams_what_windowed_generation_gives(model, capsys):
+@pytest.mark.parametrize("placement_window", [1, 7, 15])
+def test_partner_streams_what_windowed_generation_gives(model, placement_window, capsys):
+    model = copy.copy(model).set_params(placement_window=placement_window)
     a, _, _ = synthetic_pair(90, 5)
     offline = model.generate(a, "windowed").positions()
     partner = model.partner()
@@ -103,14 +110,28 @@ def test_partner_streams_what_windowed_generation_gives(model, capsys):
     assert capsys.readouterr().err == ""
 
 
-def test_a_window_as_long_as_the_take_gives_standard_generation(model):
+@pytest.mark.parametrize("placement_window", [1, 9])
+def test_a_window_as_long_as_the_take_gives_standard_generation(model, placement_window):
     a, _, _ = synthetic_pair(60, 8)
+    model = copy.copy(model).set_params(placement_window=placement_window)
     long_window = copy.copy(model).set_params(window=a.n_frames, initial="prior")
     np.testing.assert_allclose(
         long_window.generate(a, "windowed").positions(),
         model.generate(a, "standard").positions(),
         atol=1e-9,
     )
+
+
+def test_b_place_is_the_centred_mean_of_the_path_places(model):
+    a, _, _ = synthetic_pair(80, 4)
+    own = model.generate(a, "standard").translations[:, 0]
+    smooth = copy.copy(model).set_params(placement_window=5).generate(a, "standard")
+    # A stands still facing +Z, so B's place relative to A is its world place; 5 frames
+    # centred, fewer at the ends.
+    csum = np.vstack([np.zeros((1, 3)), np.cumsum(own, axis=0)])
+    lo, hi = np.maximum(np.arange(80) - 2, 0), np.minimum(np.arange(80) + 3, 80)
+    expected = (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+    np.testing.assert_allclose(smooth.translations[:, 0], expected, atol=1e-6)
 
 
 def test_missing_frames_are_skipped_with_a_warning(model, capsys):
@@ -177,7 +198,7 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
     (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
     model = tmp_path / "m.npz"
     args = ["dualhmm", "train", "--data", str(data), "--test-trials", "4"]
-    main([*args, "--states", "4", "--window", "6", "--out", str(model)])
+    main([*args, "--states", "4", "--window", "6", "--placement-window", "1", "--out", str(model)])
     assert model.exists()
 
     # A stream with a broken frame (NaN values) replayed in real time.

@@ -30,6 +30,9 @@ OBSERVATION = typer.Option(
     "motion", help="A as 'pose' (the paper's) or 'motion' (pose, its change and A's travel)."
 )
 CANDIDATES = typer.Option(10, help="Trellis candidates per frame (§3.2).")
+PLACEMENT_WINDOW = typer.Option(
+    15, help="Frames over which B's place relative to A is averaged (1: none)."
+)
 FPS = typer.Option(30.0, help="Model frame rate (takes are resampled).")
 WINDOW = typer.Option(10, help="Windowed-Viterbi slice length.")
 N_ITER = typer.Option(50, help="Most EM iterations.")
@@ -60,6 +63,7 @@ def new_model(
     mode: str,
     observation: str,
     candidates: int,
+    placement_window: int,
     fps: float,
     window: int,
     n_iter: int,
@@ -73,6 +77,7 @@ def new_model(
         mode=mode,
         observation=observation,
         candidates=candidates,
+        placement_window=placement_window,
         fps=fps,
         window=window,
         n_iter=n_iter,
@@ -92,6 +97,7 @@ def train(
     mode: str = MODE,
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
+    placement_window: int = PLACEMENT_WINDOW,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -105,7 +111,9 @@ def train(
     pairs = select_pairs(index, _split(labels), _split(test_trials), held_out=False)
     motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
     start = time.perf_counter()
-    model = new_model(states, mode, observation, candidates, fps, window, n_iter, seed)
+    model = new_model(
+        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+    )
     with err_console.status(f"EM on {sum(len(a) for a, _ in motions)} frames"):
         model.fit(motions)
     model.save(out)
@@ -294,6 +302,7 @@ def crossval(
     mode: str = MODE,
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
+    placement_window: int = PLACEMENT_WINDOW,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -311,7 +320,9 @@ def crossval(
         (f"{a.name}+{b.name}", a.label, *index.load_pair(a, b))
         for a, b in track(pairs, "loading takes")
     ]
-    model = new_model(states, mode, observation, candidates, fps, window, n_iter, seed)
+    model = new_model(
+        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+    )
     results, written = cross_validate(takes, model, plots)
     _report(summarise(results, model), written, json_out)
 

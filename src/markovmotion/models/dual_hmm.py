@@ -21,7 +21,8 @@ candidate to the candidates of column t - 1. A step into candidate j costs
 weighted by D4, with E = D4 in the first column; the lowest-error path is
 back-tracked. Online, the trellis runs over each slice of the windowed
 decoder, from the B frame already shown, and its first step is taken
-(:class:`Partner`).
+(:class:`Partner`). Where B stands relative to A is then averaged over the
+path's neighbouring frames (``placement_window``; our addition, README).
 
 Features. A is seen as body-centred joint positions (mm), as the paper's
 marker positions, by default with their change and A's travel
@@ -163,6 +164,15 @@ class _Trellis:
             path.append(cols[t - 1][0][j])
         return np.array(path[::-1], dtype=int)
 
+    def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
+        """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
+        t + half (those that exist; ``before``: frames shown before the path's first)."""
+        roots = self.motion_b.translations[np.concatenate([before, path]).astype(int), 0]
+        csum = np.vstack([np.zeros((1, 3)), np.cumsum(roots, axis=0)])
+        t = np.arange(len(before), len(roots))
+        lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(roots))
+        return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+
 
 # ------------------------------------------------------------------ the model
 @register
@@ -181,6 +191,10 @@ class DualHMM(BaseEstimator):
         initial: first slice's pi, ``"middle"`` (eq. 3) or ``"prior"`` (learnt pi).
         candidates: trellis entries per column (the paper's figure has 3; more
             lets the trellis follow A more closely: README, "Virtual partner").
+        placement_window: B's place relative to A (its root position in A's
+            ground frame) is the mean over this many frames of the chosen path,
+            centred on the frame (1: each frame's own). Online, at most
+            ``2 * lag + 1`` frames: the slice the decoder looks ahead anyway.
         n_iter, tol, var_floor, random_state: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -199,6 +213,7 @@ class DualHMM(BaseEstimator):
         window: int = 10,
         initial: str = "middle",
         candidates: int = 10,
+        placement_window: int = 15,
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -212,6 +227,7 @@ class DualHMM(BaseEstimator):
         self.window = window
         self.initial = initial
         self.candidates = candidates
+        self.placement_window = placement_window
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -309,25 +325,35 @@ class DualHMM(BaseEstimator):
         if method == "standard":
             states = self.decode(log_b)
             idx = trellis.best_path(states, trellis.columns(states, seen))
+            root = trellis.placement(idx, self.placement_window // 2)
         else:
             partner = self.partner()
             chosen = [
                 partner.step_log_frameprob(row, x) for row, x in zip(log_b, seen, strict=True)
             ]
-            idx = np.array(
-                [c for c in chosen if c is not None] + partner.finish_frames(), dtype=int
-            )
-        return self.frames_to_motion(idx, *ground_frame(_fill_missing(motion_a, missing)))
+            chosen = [c for c in chosen if c is not None] + partner.finish_frames()
+            idx = np.array([i for i, _ in chosen], dtype=int)
+            root = np.array([r for _, r in chosen])
+        return self.frames_to_motion(idx, *ground_frame(_fill_missing(motion_a, missing)), root)
 
     def decode(self, log_frameprob: np.ndarray) -> np.ndarray:
         """Standard Viterbi states of A's frames from their log emission probabilities."""
         hmm = self.lambda_a_
         return viterbi(safe_log(hmm.startprob_), safe_log(hmm.transmat_), log_frameprob)[0]
 
-    def frames_to_motion(self, idx: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
-        """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw)."""
+    def frames_to_motion(
+        self,
+        idx: np.ndarray,
+        origin: np.ndarray,
+        yaw: np.ndarray,
+        root: np.ndarray | None = None,
+    ) -> Motion:
+        """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw);
+        ``root`` (F, 3): B's root positions in A's ground frame instead of the frames' own."""
         frames = self._trellis().motion_b
         rel = Motion(self.skeleton_b_, frames.rotations[idx], frames.translations[idx], self.fps)
+        if root is not None:
+            rel.translations[:, 0] = root
         out = out_of_frame(rel, origin, yaw)
         out.fps = self.fps
         return out
@@ -406,8 +432,10 @@ class Partner:
     the rest are that slice's best path. B's frame for t is the first step of
     the lowest-error trellis path (§3.2) over the slice, starting from the B
     frame shown last: the trellis run the windowed way, as §3.1 runs Viterbi,
-    so it looks as far ahead as the decoder. :meth:`step` returns None until
-    the first B frame is due; :meth:`finish` returns the last ``lag`` frames.
+    so it looks as far ahead as the decoder; B's place relative to A is
+    averaged over the frames shown last and the path ahead
+    (``placement_window``). :meth:`step` returns None until the first B frame
+    is due; :meth:`finish` returns the last ``lag`` frames.
     A frame that is None or holds NaN is a missing observation: a warning,
     and the partner goes on from the dynamics alone.
     """
@@ -423,14 +451,17 @@ class Partner:
         self._emission = (hmm.means_, prec, log_det)
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
         self._places: deque = deque(maxlen=window)  # where A stood in the slice's frames
-        self._shown: int | None = None  # B's training frame shown last
+        self._half = min(model.placement_window // 2, self.lag)
+        self._history: deque = deque(maxlen=max(self._half, 1))  # B's training frames shown
         self._frames_in = 0
         self._place = (np.zeros(3), 0.0)
         self._last: Motion | None = None  # A's last finite frame, for A's motion features
 
-    def step_features(self, xa: np.ndarray | None, place: tuple[np.ndarray, float]) -> int | None:
-        """Feed A's features (None: missing) and place (origin, yaw); B's training frame for
-        the frame ``lag`` frames ago, once one is due."""
+    def step_features(
+        self, xa: np.ndarray | None, place: tuple[np.ndarray, float]
+    ) -> tuple[int, np.ndarray] | None:
+        """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
+        frames ago, once one is due, B's training frame and B's root in A's ground frame."""
         if xa is None:
             log_b = np.zeros(len(self._emission[0]))
         else:
@@ -438,7 +469,9 @@ class Partner:
         self._places.append(place)
         return self.step_log_frameprob(log_b, xa)
 
-    def step_log_frameprob(self, log_b: np.ndarray, xa: np.ndarray | None) -> int | None:
+    def step_log_frameprob(
+        self, log_b: np.ndarray, xa: np.ndarray | None
+    ) -> tuple[int, np.ndarray] | None:
         """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
         self._slice.append((xa, {}))
         self.decoder.push(log_b)
@@ -447,12 +480,19 @@ class Partner:
             return None
         states = self.decoder.path
         cols = self._columns(states, self._slice)
-        path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
-        self._shown = int(path[0])
-        return self._shown
+        shown = self._history[-1] if self._history else None
+        path = self._trellis.best_path(states, cols, shown, self._steps(states, cols))
+        return self._show(path, 1)[0]
 
-    def finish_frames(self) -> list[int]:
-        """B's training frames still owed at the end of the stream."""
+    def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray]]:
+        """Show the first ``count`` B frames of ``path``, each with its averaged place."""
+        before = list(self._history)[len(self._history) - self._half :] if self._half else []
+        roots = self._trellis.placement(path, self._half, before)[:count]
+        self._history.extend(int(i) for i in path[:count])
+        return [(int(i), r) for i, r in zip(path[:count], roots, strict=True)]
+
+    def finish_frames(self) -> list[tuple[int, np.ndarray]]:
+        """B's training frames and places still owed at the end of the stream."""
         if self._frames_in == 0:
             return []
         entries = list(self._slice)
@@ -462,10 +502,9 @@ class Partner:
             states, entries = list(self.decoder.path[1:]), entries[1:]
         if not entries:
             return []
-        return [
-            int(i)
-            for i in self._trellis.best_path(states, self._columns(states, entries), self._shown)
-        ]
+        shown = self._history[-1] if self._history else None
+        path = self._trellis.best_path(states, self._columns(states, entries), shown)
+        return self._show(path, len(path))
 
     def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
         cols = []
@@ -520,10 +559,13 @@ class Partner:
         return [self._motion(i, p) for i, p in zip(frames, places, strict=True)]
 
     def _motion(
-        self, idx: int | None, place: tuple[np.ndarray, float] | None = None
+        self, shown: tuple[int, np.ndarray] | None, place: tuple[np.ndarray, float] | None = None
     ) -> Motion | None:
-        """B's training frame ``idx`` placed by A's place for it (default: the slice's first)."""
-        if idx is None:
+        """B's frame ``shown`` (training frame, root) placed by A's place for it (default: the
+        slice's first)."""
+        if shown is None:
             return None
         origin, yaw = place or self._places[0]
-        return self.model.frames_to_motion(np.array([idx]), origin[None], np.array([yaw]))
+        return self.model.frames_to_motion(
+            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None]
+        )
