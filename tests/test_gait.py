@@ -186,6 +186,9 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
         assert lo <= metrics["synthesized_rate"] <= hi
         assert metrics["synthesized_steps"] >= 2 * 5  # two walks of 8 steps, ends cut
         assert metrics["foot_slide_mm"] < 5.0  # the synthesized stance foot barely moves
+        # drawn durations vary step to step about as much as the real walk's (0.035 s here;
+        # 0.066-0.084 s at the old floor of 1 frame squared per state)
+        assert metrics["step_duration_sd"] < 1.5 * metrics["real_step_duration_sd"]
     for role in ("adapted", "scratch"):  # the neutral walk swings more than an elderly one
         assert 0.7 < results[role]["gv_ratio"] < 1.4
     assert results["adapted"]["synthesized_rate"] == 1.0

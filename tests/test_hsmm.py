@@ -301,3 +301,32 @@ def test_walker_adaptive_training_moves_unit_differences_into_transforms():
     assert wat.variances_[:, static].mean() < 0.45
     shift = transforms["b"][:, -1] - transforms["a"][:, -1]
     np.testing.assert_allclose(shift[static], -offset[static], atol=0.3)
+
+
+def test_duration_variances_keep_their_floor_in_training_and_adaptation():
+    """Units of identical lengths (zero duration variance): training and CMLLR stop at the
+    floor, CSMAPLR (prior towards the model's variances) above it; durations stay >= 1 frame."""
+    true = six_dim_model()
+    true.dur_variances_ = np.full(3, 1e-6)  # every state lasts exactly its mean
+    rng = np.random.default_rng(6)
+    xs, cs, bs = [], [], []
+    for _ in range(10):
+        x, d = true.sample(np.zeros(2, dtype=int), rng)
+        xs.append(x)
+        cs.append(np.zeros(2, dtype=int))
+        bs.append(np.r_[0, np.cumsum(d.reshape(2, 3).sum(axis=1))])
+    assert len({len(x) for x in xs}) == 1
+    trained = HSMM(n_states=3, n_iter=3, dur_var_floor=0.05).fit(xs, cs, bs, 1)
+    np.testing.assert_allclose(trained.dur_variances_, 0.05)
+    model = six_dim_model()  # durations variance 1, floor 0.1 (the default)
+    for method in METHODS:
+        adapted = adapt(model, xs, cs, method=method, boundaries=bs)
+        assert adapted.dur_var_floor == model.dur_var_floor == 0.1
+        if method == "cmllr":
+            np.testing.assert_allclose(adapted.dur_variances_, 0.1)
+        assert np.all(adapted.dur_variances_ >= 0.1) and np.all(adapted.dur_variances_ < 0.8)
+        np.testing.assert_allclose(adapted.dur_means_, true.dur_means_, atol=0.3)
+        draws = adapted.durations(np.zeros(500, dtype=int), speed=2.5, rng=rng)
+        assert draws.min() >= 1
+    with pytest.raises(ValueError, match="dur_var_floor must be positive"):
+        HSMM(n_states=3, dur_var_floor=0.0).fit(xs, cs, bs, 1)

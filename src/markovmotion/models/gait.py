@@ -42,7 +42,7 @@ from markovmotion.features.gait import (
 from markovmotion.features.reference_pose import ReferencePose
 from markovmotion.generate.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.models.adaptation import adapt, walker_adaptive_training
-from markovmotion.models.hsmm import HSMM
+from markovmotion.models.hsmm import DUR_VAR_FLOOR, HSMM
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, register, restore_estimator
 
@@ -181,6 +181,8 @@ class GaitSynthesizer(BaseEstimator):
         n_iter: EM iterations.
         mdl_factor: MDL weight of context clustering.
         var_floor: output variance floor as a fraction of the data variance.
+        dur_var_floor: duration variance floor in frames squared, which
+            adapted and from-scratch models keep.
         wat: walker-adaptive training (§5.1.2) with one transform per
             ``"take"``, per unit given to :meth:`fit` (``"unit"``: a walker, a
             dataset), or ``"none"``.
@@ -196,12 +198,14 @@ class GaitSynthesizer(BaseEstimator):
         n_iter: int = 10,
         mdl_factor: float = 1.0,
         var_floor: float = 0.01,
+        dur_var_floor: float = DUR_VAR_FLOOR,
         wat: str = "none",
     ):
         self.n_states = n_states
         self.n_iter = n_iter
         self.mdl_factor = mdl_factor
         self.var_floor = var_floor
+        self.dur_var_floor = dur_var_floor
         self.wat = wat
 
     def fit(
@@ -231,6 +235,7 @@ class GaitSynthesizer(BaseEstimator):
             n_states=self.n_states,
             n_iter=self.n_iter,
             var_floor=self.var_floor,
+            dur_var_floor=self.dur_var_floor,
             mdl_factor=self.mdl_factor,
         ).fit(data.obs, data.contexts, data.boundaries, len(CONTEXTS), context_questions())
         self.wat_units_ = []

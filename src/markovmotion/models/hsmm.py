@@ -28,6 +28,12 @@ from sklearn.base import BaseEstimator
 from markovmotion.models.context_tree import LOG_2PI, cluster
 from markovmotion.state import register
 
+#: Default floor of the state duration variances, in frames squared: HTS's (0.01 x 10),
+#: and the best floor common to average, adapted and from-scratch gait models by the
+#: likelihood of step durations of other training takes (README, "Stylistic walks").
+#: At 1 frame squared, five states add up to steps far more irregular than real ones.
+DUR_VAR_FLOOR = 0.1
+
 
 # ------------------------------------------------------------------ pure functions
 def log_gaussian_diag(x: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np.ndarray:
@@ -220,7 +226,8 @@ class HSMM(BaseEstimator):
         tol: stop when the log-likelihood per frame gains less than this.
         var_floor: output variances are floored at this fraction of the
             data's variance per dimension.
-        dur_var_floor: floor of the duration variances, in frames squared.
+        dur_var_floor: floor of the duration variances, in frames squared
+            (> 0), for training and adaptation alike (:data:`DUR_VAR_FLOOR`).
         max_duration: longest state duration considered (frames); by default
             0.6 of the longest unit in the training data.
         mdl_factor: weight of the MDL penalty of context clustering (0 keeps
@@ -238,7 +245,7 @@ class HSMM(BaseEstimator):
         n_iter_untied: int = 3,
         tol: float = 1e-4,
         var_floor: float = 0.01,
-        dur_var_floor: float = 1.0,
+        dur_var_floor: float = DUR_VAR_FLOOR,
         max_duration: int | None = None,
         mdl_factor: float = 1.0,
     ):
@@ -269,6 +276,8 @@ class HSMM(BaseEstimator):
             n_contexts: number of possible context labels C.
             questions: boolean masks (C,) of context sets for clustering.
         """
+        if self.dur_var_floor <= 0:
+            raise ValueError("dur_var_floor must be positive")
         x_all = np.vstack(sequences)
         self.var_floor_ = np.maximum(self.var_floor * x_all.var(axis=0), 1e-8)
         lengths = np.concatenate([np.diff(b) for b in boundaries])
