@@ -26,11 +26,22 @@ from markovmotion.evaluate.chain import (
 )
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.files import base_suffix
-from markovmotion.models.condensation import DEFAULT_RESPONSE, DEFAULT_SIGMA, RESPONSES
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.condensation import (
+    DEFAULT_RESPONSE,
+    DEFAULT_RESYNC,
+    DEFAULT_SIGMA,
+    RESPONSES,
+)
+from markovmotion.models.virtual_partner import DEFAULT_PROTOTYPES, VirtualPartner
 from markovmotion.progress import err_console
 
 SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
+RESYNC = typer.Option(
+    DEFAULT_RESYNC,
+    min=0.0,
+    help="Single hypothesis: re-enter the chain afresh when that matches the real person "
+    "better by this margin (eq. 18 error); inf: never (the paper's).",
+)
 
 app = typer.Typer(
     help="Interaction behaviour models (interaction paper): behaviour chain over two people's "
@@ -81,8 +92,12 @@ def train(
     ),
     source: str = typer.Option("mocap", help="mocap (3-D joints) or silhouette (tracked video)."),
     label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
-    prototypes: int = typer.Option(300, min=2, help="State prototypes u (paper: 300)."),
-    behaviours: int = typer.Option(300, min=2, help="Behaviour prototypes v (paper: 300)."),
+    prototypes: int = typer.Option(
+        DEFAULT_PROTOTYPES, min=2, help="State prototypes u (paper: 300)."
+    ),
+    behaviours: int = typer.Option(
+        DEFAULT_PROTOTYPES, min=2, help="Behaviour prototypes v (paper: 300)."
+    ),
     gamma: float = typer.Option(0.995, min=0.0, max=1.0, help="Decay constant of eq. 10."),
     lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10)."),
     epochs: int = typer.Option(5, min=1, help="Passes of each competitive learning."),
@@ -124,6 +139,7 @@ def respond(
         "(likelihood-weighted mean, CONDENSATION's estimate).",
     ),
     sigma: float = SIGMA,
+    resync: float = RESYNC,
     person: int = typer.Option(0, min=0, max=1, help="Mocap: the real person's half of the model."),
     fps: float = typer.Option(
         None, help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there)."
@@ -133,7 +149,13 @@ def respond(
     """Drive a virtual partner from a real person's motion or video."""
     _check_response(response)
     partner_model, source = VirtualPartner.load(model)
-    options = {"n_hypotheses": hypotheses, "response": response, "sigma": sigma, "seed": seed}
+    options = {
+        "n_hypotheses": hypotheses,
+        "response": response,
+        "sigma": sigma,
+        "resync": resync,
+        "seed": seed,
+    }
     suffix = base_suffix(out)
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
@@ -167,6 +189,7 @@ def evaluate(
         DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
     ),
     sigma: float = SIGMA,
+    resync: float = RESYNC,
     dual_hmm: Path = typer.Option(
         None,
         help="mocap: also a dual-HMM model ('dualhmm train') answering person A with B, "
@@ -195,7 +218,7 @@ def evaluate(
 
         takes = silhouette_takes(test, split="test")
     result = evaluate_partner(
-        partner_model, takes, source, hypotheses, response, seed, others, sigma=sigma
+        partner_model, takes, source, hypotheses, response, seed, others, sigma, resync
     )
     if as_json:
         typer.echo(json.dumps(result, indent=2))

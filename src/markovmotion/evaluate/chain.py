@@ -30,7 +30,12 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
-from markovmotion.models.condensation import DEFAULT_RESPONSE, DEFAULT_SIGMA, RESPONSES
+from markovmotion.models.condensation import (
+    DEFAULT_RESPONSE,
+    DEFAULT_RESYNC,
+    DEFAULT_SIGMA,
+    RESPONSES,
+)
 from markovmotion.models.virtual_partner import VirtualPartner
 from markovmotion.progress import track
 
@@ -127,13 +132,15 @@ def evaluate_partner(
     seed: int = 0,
     others: Mapping[str, Sequence[tuple[Person | None, Person | None]]] | None = None,
     sigma: float = DEFAULT_SIGMA,
+    resync: float = DEFAULT_RESYNC,
 ) -> dict:
     """Errors of the single- and multiple-hypothesis partners and of the mean-shape baseline.
 
     Each person of a take is masked in turn. The multiple-hypothesis partner is
     computed with every response (``multiple_hypotheses_ml``, ``_map``,
     ``_mean``), all with likelihood width ``sigma`` (eq. 20);
-    ``multiple_hypotheses`` repeats the one named by ``response``.
+    ``multiple_hypotheses`` repeats the one named by ``response``. The single
+    hypothesis re-synchronises with margin ``resync`` (inf: never).
     ``others`` adds partners from other models: per take, the partner of
     person 0 and of person 1 (None where the model gives none). Errors are
     means over frames, overall (methods that answer both people) and in
@@ -149,7 +156,7 @@ def evaluate_partner(
         raise ValueError(f"response must be one of {RESPONSES}, got {response!r}")
     others = others or {}
     methods = {
-        "single_hypothesis": {"n_hypotheses": 1},
+        "single_hypothesis": {"n_hypotheses": 1, "resync": resync},
         **{
             f"multiple_hypotheses_{r}": {
                 "n_hypotheses": n_hypotheses,
@@ -216,6 +223,7 @@ def evaluate_partner(
         "source": source,
         "hypotheses": n_hypotheses,
         "sigma": sigma,
+        "resync": resync if np.isfinite(resync) else None,
         "takes": [t.name for t in takes],
         "frames": 2 * total,
     }
