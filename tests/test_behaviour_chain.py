@@ -325,3 +325,44 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     main([*argv, "--out", str(out), "--hypotheses", "20", "--sigma", "0.1"])
     partner = read_motion(out)
     assert partner.n_frames == salsa_take.n_frames and partner.skeleton.n_joints == 19
+
+
+def silhouette_take(n: int, swapping: bool) -> TwoPeople:
+    """Two ellipse 'silhouettes' (image pixels, y down) dancing about x = 320; person 0 is the
+    left-hand individual, or (``swapping``) an identity that changes sides."""
+    t = np.arange(n)
+    middle = 320 + 60 * np.sin(t / 50)
+    side = np.sign(np.sin(t / 30) + 1e-9) if swapping else np.ones(n)
+    angle = np.linspace(0, 2 * np.pi, 32, endpoint=False) - np.pi / 2  # from the top
+    points, reference = [], []
+    for person, width in ((0, 25.0), (1, 35.0)):
+        x = middle + (2 * person - 1) * side * 40
+        px = x[:, None] + width * np.cos(angle)[None]
+        py = 240 + 90 * np.sin(angle)[None].repeat(n, 0)
+        points.append(np.stack([px, py], axis=-1))
+        reference.append(np.column_stack([x, np.full(n, 150.0)]))
+    return TwoPeople(
+        np.stack(points, axis=1),
+        np.stack(reference, axis=1),
+        np.full((n, 2), 180.0),
+        np.zeros((n, 2)),
+        25.0,
+        "ellipses",
+    )
+
+
+def test_silhouette_baseline_picks_the_side_without_being_told():
+    model = VirtualPartner(n_state_prototypes=8, n_behaviour_prototypes=8, random_state=0)
+    model.fit([silhouette_take(300, False), silhouette_take(250, False)])
+    assert model.centre_ == pytest.approx(320, abs=5)
+    test = silhouette_take(200, True)
+    real = test.person(0)
+    true_roles = (real.reference[:, 0] > test.reference[:, 1, 0]).astype(int)
+    guessed = model.centre_roles(real)
+    assert 0.5 < (guessed == true_roles).mean() < 1.0  # the middle drifts: some guesses fail
+    result = evaluate_partner(model, [test], "silhouette", 20, "ml")
+    assert result["unit"] == "fraction of body height"
+    assert result["mean_shape_true_side"] < result["mean_shape"]
+    right = model.mean_partner(real, true_roles)
+    err = np.linalg.norm(right.points - test.points[:, 1], axis=-1).mean(axis=1) / 180.0
+    assert err.mean() < 0.05  # the true side with the mean shape: the partner's own ellipse

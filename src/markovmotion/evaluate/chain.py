@@ -11,7 +11,10 @@ of a take is masked in turn. Errors (lower is better):
   true partner's height.
 
 The baseline holds the partner's mean shape (with the mean separation and
-relative scale) beside the real person. The dual-HMM partner (dual-HMM paper)
+relative scale) beside the real person. In silhouettes it must also pick the
+side: ``mean_shape`` puts the partner towards the middle of the training
+takes' floor, as a partner that knows only the real person could;
+``mean_shape_true_side`` is told where the partner truly is. The dual-HMM partner (dual-HMM paper)
 can be measured alongside, the same way on the same frames: it answers person
 A (the first file of each pair) with B.
 
@@ -147,8 +150,9 @@ def evaluate_partner(
     ``by_real_person`` (which person was real).
 
     In silhouette takes person 0 and 1 are two identities (not left and right):
-    the model matches the real person to either half (eq. 18) and the
-    baseline is placed on the side where the partner truly is.
+    the model matches the real person to either half (eq. 18); the baseline
+    takes the side towards the floor's middle (:meth:`VirtualPartner.centre_roles`)
+    and, as ``mean_shape_true_side``, the side where the partner truly is.
     """
     if source not in SOURCES:
         raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
@@ -167,7 +171,8 @@ def evaluate_partner(
         },
     }
     # sums[name][real person] of frame-weighted errors, and the frames they cover
-    names = ["mean_shape", *methods, *others]
+    baselines = ["mean_shape"] if source == "mocap" else ["mean_shape", "mean_shape_true_side"]
+    names = [*baselines, *methods, *others]
     sums = {k: [0.0, 0.0] for k in names}
     placed = {k: [0.0, 0.0] for k in names}
     frames = {k: [0, 0] for k in names}
@@ -177,11 +182,15 @@ def evaluate_partner(
         for i, take, person in track(jobs, "virtual partners"):
             real, truth = take.person(person), take.person(1 - person)
             if source == "mocap":
-                role, true_roles = person, np.full(take.n_frames, person)
+                role = person
+                partners = {"mean_shape": model.mean_partner(real, np.full(take.n_frames, role))}
             else:
                 role = None
                 true_roles = (real.reference[:, 0] > truth.reference[:, 0]).astype(int)
-            partners = {"mean_shape": model.mean_partner(real, true_roles)}
+                partners = {
+                    "mean_shape": model.mean_partner(real, model.centre_roles(real)),
+                    "mean_shape_true_side": model.mean_partner(real, true_roles),
+                }
             for name, options in methods.items():
                 start = time.perf_counter()
                 partners[name] = model.respond(real, role, seed=seed, **options).partner

@@ -113,6 +113,9 @@ class VirtualPartner(BaseEstimator):
             random_state=self.random_state,
         ).fit(states)
         self.mean_shape_ = np.vstack(states)[:, : self.chain_.dim].mean(axis=0)
+        self.centre_ = float(
+            np.median(np.concatenate([t.reference[..., 0].ravel() for t in takes]))
+        )
         self.fps_ = float(takes[0].fps)
         return self
 
@@ -204,6 +207,11 @@ class VirtualPartner(BaseEstimator):
             pick(left.height, right.height),
             pick(left.heading, right.heading),
         )
+
+    def centre_roles(self, real: Person) -> np.ndarray:
+        """(T,) the real person's half guessed from where it stands: the left-hand individual
+        (0) left of the middle of the training takes' floor (``centre_``), else 1."""
+        return (real.reference[:, 0] > self.centre_).astype(int)
 
     def mean_partner(self, real: Person, roles: np.ndarray) -> Person:
         """Baseline: the partner's mean shape, separation and scale placed beside ``real``."""
