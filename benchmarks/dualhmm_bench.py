@@ -15,16 +15,25 @@
   updates; seconds per iteration and the largest relative difference of the
   log-likelihood histories. Compiled kernels are loaded before timing.
 
+- Online partner (with ``--partner MODEL --take BVH``, instead of the above):
+  :meth:`Partner.step` on
+  every frame of a real take resampled to the model's rate, back to back (no
+  pacing: ``respond --realtime`` sleeps between frames and so also measures
+  the machine waking up), against :meth:`Partner.step_features` on the take's
+  features computed beforehand: the cost of one-frame motions in and out.
+
 BLAS runs on one thread for both (threadpoolctl): on a small shared machine
 OpenBLAS's threads only fight each other on these small matrices.
 
     python3 benchmarks/dualhmm_bench.py [--frames 20000] [--iters 5] [--steps 2000]
+        [--partner MODEL --take BVH [--take-fps FPS]]
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 from hmmlearn.hmm import GaussianHMM as HmmlearnGaussianHMM
@@ -32,6 +41,9 @@ from rich.console import Console
 from rich.table import Table
 from threadpoolctl import threadpool_limits
 
+from markovmotion.features.body_motion import ground_frame
+from markovmotion.io.bvh import read_bvh
+from markovmotion.models.dual_hmm import DualHMM
 from markovmotion.models.hmm import GaussianHMM, gaussian_log_density, precision_cholesky, safe_log
 from markovmotion.models.windowed_viterbi import WindowedViterbi, one_hot_log
 
@@ -119,14 +131,51 @@ def bench_em(hmm: GaussianHMM, x: np.ndarray, lengths: list[int], iters: int) ->
     }
 
 
+def bench_partner(model_path: Path, take: Path, fps: float | None) -> dict:
+    model = DualHMM.load(model_path)
+    motion = read_bvh(take, fps=fps)
+    if not np.isclose(motion.fps, model.fps):
+        motion = motion.resample(model.fps)
+    frames = [motion.trim(t, t + 1) for t in range(motion.n_frames)]
+    model.partner().step(frames[0])  # load the compiled kernels
+    partner, step_us = model.partner(), []
+    for frame in frames:
+        t0 = time.perf_counter_ns()
+        partner.step(frame)
+        step_us.append((time.perf_counter_ns() - t0) / 1e3)
+    xa, _ = model.features_a(motion)
+    origin, yaw = ground_frame(motion)
+    partner, features_us = model.partner(), []
+    for t, x in enumerate(xa):
+        t0 = time.perf_counter_ns()
+        partner.step_features(x, (origin[t], float(yaw[t])))
+        features_us.append((time.perf_counter_ns() - t0) / 1e3)
+    return {"step": np.array(step_us), "step_features": np.array(features_us)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=20000, help="EM training frames")
     parser.add_argument("--iters", type=int, default=5, help="EM iterations timed")
     parser.add_argument("--steps", type=int, default=2000, help="windowed steps timed")
     parser.add_argument("--ref-steps", type=int, default=300, help="hmmlearn windows timed")
+    parser.add_argument("--partner", type=Path, default=None, help="dual HMM model (.npz)")
+    parser.add_argument("--take", type=Path, default=None, help="person A's take for --partner")
+    parser.add_argument("--take-fps", type=float, default=None, help="the take's true frame rate")
     args = parser.parse_args()
     console = Console()
+    if args.partner is not None:
+        if args.take is None:
+            parser.error("--partner needs --take")
+        p = bench_partner(args.partner, args.take, args.take_fps)
+        table = Table(title=f"online partner, {args.take.name}, back to back (µs per frame)")
+        for c in ("call", "median", "p99", "frames"):
+            table.add_column(c)
+        for name, what in (("step", "step (one-frame Motion)"), ("step_features", "step_features")):
+            t = p[name]
+            table.add_row(what, f"{np.median(t):.0f}", f"{np.percentile(t, 99):.0f}", str(len(t)))
+        console.print(table)
+        return
 
     hmm = random_model()
     x, _ = hmm.sample(max(args.frames, args.steps), random_state=1)

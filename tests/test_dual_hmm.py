@@ -17,7 +17,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
 from markovmotion.evaluate.interaction import evaluate_pair
 from markovmotion.io import write_motion
-from markovmotion.models.dual_hmm import DualHMM
+from markovmotion.models.dual_hmm import DualHMM, into_frame, out_of_frame
 
 N_POSES = 4
 RNG = np.random.default_rng(11)
@@ -147,6 +147,53 @@ def test_missing_frames_are_skipped_with_a_warning(model, capsys):
     assert np.isfinite(generated).all()
     err = np.linalg.norm(generated - b.positions(), axis=-1).mean(axis=1)
     assert np.median(err) < 1.0
+
+
+def turning(a: Motion) -> Motion:
+    """``a`` turning and walking about: its root yawed and moved frame by frame."""
+    out = a.copy()
+    t = np.arange(a.n_frames)
+    yaw = Rotation.from_rotvec(np.outer(0.8 * np.sin(t / 9.0), [0.0, 1.0, 0.0]))
+    out.rotations[:, 0] = (yaw * Rotation.from_quat(a.rotations[:, 0])).as_quat()
+    out.translations[:, 0] += np.column_stack([15.0 * t, 0.0 * t, 400.0 * np.cos(t / 13.0)])
+    return out
+
+
+def test_partner_sees_a_as_the_offline_features_do(model, capsys):
+    """The partner's features, built frame by frame from each frame's own forward kinematics
+    and the last finite frame's, are the rows of the whole take's features."""
+    a = turning(synthetic_pair(60, 9)[0])
+    a.rotations[20:22] = np.nan
+    offline, missing = model.features_a(a)
+    partner = model.partner()
+    seen, step_features = [], partner.step_features
+    partner.step_features = lambda xa, place: seen.append(xa) or step_features(xa, place)
+    for t in range(a.n_frames):
+        partner.step(a.trim(t, t + 1))
+    assert [x is None for x in seen] == missing.tolist()
+    np.testing.assert_allclose(
+        np.array([x for x in seen if x is not None]), offline[~missing], rtol=1e-12, atol=1e-9
+    )
+    assert capsys.readouterr().err.count("skipped") == 2
+
+
+def test_into_and_out_of_a_ground_frame_turn_the_root_about_up():
+    a = turning(synthetic_pair(40, 10)[0])
+    rng = np.random.default_rng(0)
+    origin, yaw = rng.normal(0, 500, (40, 3)), rng.uniform(-np.pi, np.pi, 40)
+    out = out_of_frame(a, origin, yaw)
+    turn = Rotation.from_rotvec(np.outer(yaw, [0.0, 1.0, 0.0]))
+    expected = turn * Rotation.from_quat(a.rotations[:, 0])
+    np.testing.assert_allclose(
+        Rotation.from_quat(out.rotations[:, 0]).as_matrix(), expected.as_matrix(), atol=1e-12
+    )
+    np.testing.assert_allclose(
+        out.translations[:, 0], turn.apply(a.translations[:, 0]) + origin, atol=1e-9
+    )
+    np.testing.assert_array_equal(out.rotations[:, 1:], a.rotations[:, 1:])
+    back = into_frame(out, origin, yaw)
+    np.testing.assert_allclose(back.rotations, a.rotations, atol=1e-12)
+    np.testing.assert_allclose(back.translations, a.translations, atol=1e-9)
 
 
 def test_save_load_round_trip(model, tmp_path):

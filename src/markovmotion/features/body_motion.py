@@ -30,12 +30,13 @@ def ground_travel(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     Backward differences: row t is the move from frame t - 1 to t, seen from
     the heading at t - 1; row 0 is zero.
     """
-    step = np.diff(origin, axis=0)
+    step = origin[1:] - origin[:-1]
     c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
-    sideways = c * step[:, 0] - s * step[:, 2]
-    forward = s * step[:, 0] + c * step[:, 2]
-    turn = np.angle(np.exp(1j * np.diff(yaw)))
-    return np.vstack([np.zeros((1, 3)), np.column_stack([sideways, forward, turn])])
+    out = np.zeros((len(yaw), 3))
+    out[1:, 0] = c * step[:, 0] - s * step[:, 2]
+    out[1:, 1] = s * step[:, 0] + c * step[:, 2]
+    out[1:, 2] = np.angle(np.exp(1j * (yaw[1:] - yaw[:-1])))
+    return out
 
 
 @register
@@ -72,14 +73,20 @@ class BodyMotion(FeatureStep):
         for m in sequences:
             self.skeleton_.check_compatible(m.skeleton)
             pos = m.positions()
-            pose = m.body_centred_positions(pos).reshape(m.n_frames, -1)
-            change = np.vstack([np.zeros((1, pose.shape[1])), np.diff(pose, axis=0)])
-            travel = ground_travel(*ground_frame(m, pos)) * [1.0, 1.0, 1000.0]
-            out.append(
-                np.hstack(
-                    [pose, change * (self.horizon * m.fps), travel * (self.travel_horizon * m.fps)]
-                )
-            )
+            out.append(self.rows(m.body_centred_positions(pos), *ground_frame(m, pos), m.fps))
+        return out
+
+    def rows(self, pose: np.ndarray, origin: np.ndarray, yaw: np.ndarray, fps: float) -> np.ndarray:
+        """(F, 6J + 3) features of consecutive frames from their body-centred positions
+        (F, J, 3) and ground frame (:func:`ground_frame`), forward kinematics done by the
+        caller: an online partner gets row t from frames t - 1 and t alone."""
+        pose = pose.reshape(len(pose), -1)
+        d = pose.shape[1]
+        out = np.zeros((len(pose), 2 * d + 3))
+        out[:, :d] = pose
+        out[1:, d : 2 * d] = (pose[1:] - pose[:-1]) * (self.horizon * fps)
+        travel = ground_travel(origin, yaw) * [1.0, 1.0, 1000.0]
+        out[:, 2 * d :] = travel * (self.travel_horizon * fps)
         return out
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
