@@ -8,6 +8,7 @@ formats rotate into it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -81,7 +82,7 @@ class Skeleton:
     def children(self, j: int) -> list[int]:
         return [int(k) for k in np.flatnonzero(self.parents == j)]
 
-    @property
+    @cached_property
     def body_root(self) -> int:
         """The pelvis: the first joint with two or more children.
 
