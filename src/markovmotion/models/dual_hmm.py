@@ -516,9 +516,13 @@ class Partner:
             return None
         states = self.decoder.path
         cols = self._columns(states, self._slice)
-        shown = self._history[-1] if self._history else None
-        path = self._trellis.best_path(states, cols, shown, self._steps(states, cols))
+        path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         return self._show(path, 1)[0]
+
+    @property
+    def _shown(self) -> int | None:
+        """B's training frame shown last."""
+        return self._history[-1] if self._history else None
 
     def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray]]:
         """Show the first ``count`` B frames of ``path``, each with its averaged place."""
@@ -538,8 +542,7 @@ class Partner:
             states, entries = list(self.decoder.path[1:]), entries[1:]
         if not entries:
             return []
-        shown = self._history[-1] if self._history else None
-        path = self._trellis.best_path(states, self._columns(states, entries), shown)
+        path = self._trellis.best_path(states, self._columns(states, entries), self._shown)
         return self._show(path, len(path))
 
     def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
