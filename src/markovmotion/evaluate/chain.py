@@ -14,9 +14,10 @@ The baseline holds the partner's mean shape (with the mean separation and
 relative scale) beside the real person. In silhouettes it must also pick the
 side: ``mean_shape`` puts the partner towards the middle of the training
 takes' floor, as a partner that knows only the real person could;
-``mean_shape_true_side`` is told where the partner truly is. The dual-HMM partner (dual-HMM paper)
-can be measured alongside, the same way on the same frames: it answers person
-A (the first file of each pair) with B.
+``mean_shape_true_side`` is told where the partner truly is.
+
+The dual-HMM partner (dual-HMM paper) can be measured alongside, the same way
+on the same frames: it answers person A (the first file of each pair) with B.
 
 The split is fixed: of CMU's salsa takes, trials 12, 13 and 15 (the last three
 pairs) are held out; the other eight train.
