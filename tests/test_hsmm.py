@@ -111,6 +111,11 @@ def test_sampled_durations_follow_the_densities():
     np.testing.assert_array_equal(model.durations(contexts, rng=again), draws[0])
     # at speed 1 without rng: the means, rounded; faster and slower paces move the total
     assert list(model.durations(contexts)) == [3, 6, 4, 8, 6, 4]
+    # fractional means: the rounded partial sums follow the real ones, so nothing drifts
+    model.dur_means_ = np.array([3.3, 3.3, 3.3, 3.3])
+    most_likely = model.durations(np.tile(contexts, 10))
+    assert most_likely.sum() == 198 and set(most_likely) == {3, 4}  # 60 states x 3.3
+    model.dur_means_ = np.array([3.0, 6.0, 4.0, 8.0])
     fast = model.durations(np.tile(contexts, 4000), 1.25, rng).reshape(4000, -1).sum(axis=1)
     slow = model.durations(np.tile(contexts, 4000), 0.8, rng).reshape(4000, -1).sum(axis=1)
     total = model.dur_means_[dur].sum()

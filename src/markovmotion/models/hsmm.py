@@ -385,7 +385,10 @@ class HSMM(BaseEstimator):
 
         The most likely durations for a total of ``sum(m) / speed`` frames
         (Yoshimura et al.): ``d = m + rho sigma^2`` with one rho for the chain,
-        rounded, at least one frame. With ``rng``, each duration is drawn
+        rounded so that every partial sum is the rounded partial sum of the
+        real-valued d (rounding each state alone drifts: five states of 3.3
+        frames make 15-frame steps, not 16.5), at least one frame. With
+        ``rng``, each duration is drawn
         instead from its density with the mean moved to ``m + rho sigma^2``
         (at ``speed`` 1, the model's own densities).
         """
@@ -393,7 +396,8 @@ class HSMM(BaseEstimator):
         m, v = self.dur_means_[dur], self.dur_variances_[dur]
         rho = (m.sum() / speed - m.sum()) / v.sum()
         if rng is None:
-            return np.maximum(np.rint(m + rho * v), 1).astype(int)
+            ends = np.rint(np.cumsum(m + rho * v))
+            return np.maximum(np.diff(ends, prepend=0.0), 1).astype(int)
         return draw_durations(m + rho * v, v, self.max_duration_, rng)
 
     def frame_parameters(
