@@ -31,7 +31,7 @@ OBSERVATION = typer.Option(
 )
 CANDIDATES = typer.Option(10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = typer.Option(
-    15, help="Frames over which B's place relative to A is averaged (1: none)."
+    19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
 FPS = typer.Option(30.0, help="Model frame rate (takes are resampled).")
 WINDOW = typer.Option(10, help="Windowed-Viterbi slice length.")
