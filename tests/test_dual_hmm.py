@@ -15,7 +15,7 @@ from markovmotion.cli import main
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
-from markovmotion.evaluate.interaction import evaluate_pair
+from markovmotion.evaluate.interaction import cross_validate, evaluate_pair, summarise
 from markovmotion.io import write_motion
 from markovmotion.models.dual_hmm import DualHMM, into_frame, out_of_frame
 
@@ -132,6 +132,20 @@ def test_b_place_is_the_centred_mean_of_the_path_places(model):
     lo, hi = np.maximum(np.arange(80) - 2, 0), np.minimum(np.arange(80) + 3, 80)
     expected = (csum[hi] - csum[lo]) / (hi - lo)[:, None]
     np.testing.assert_allclose(smooth.translations[:, 0], expected, atol=1e-6)
+
+
+def test_nested_cross_validation_picks_the_placement_window_on_the_other_takes():
+    """B's place jumps with A's state here, so averaging it only blurs the jumps: every fold
+    must pick 1 frame, from its own training takes alone, and say so."""
+    takes = [
+        (f"t{seed}", "toy", *synthetic_pair(n, seed)[:2])
+        for n, seed in ((200, 1), (220, 2), (180, 3))
+    ]
+    model = DualHMM(n_states=N_POSES, n_iter=10, window=6)
+    results, _ = cross_validate(takes, model, placement_windows=[9, 1])
+    assert [r.chosen for r in results] == [{"placement_window": 1}] * 3
+    assert summarise(results, model)["per_pair"]["t2"]["chosen"] == {"placement_window": 1}
+    assert np.median(np.concatenate([r.errors["standard"] for r in results])) < 1.0
 
 
 def test_missing_frames_are_skipped_with_a_warning(model, capsys):

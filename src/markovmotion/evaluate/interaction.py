@@ -47,6 +47,7 @@ class PairResult:
     errors: dict[str, np.ndarray] = field(default_factory=dict)
     pose_errors: dict[str, np.ndarray] = field(default_factory=dict)
     latencies_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    chosen: dict = field(default_factory=dict)  # settings picked on inner folds, if any
 
 
 class _Baselines:
@@ -162,11 +163,12 @@ def describe(model: DualHMM) -> dict:
 def summarise(results: Sequence[PairResult], model: DualHMM) -> dict:
     """The evaluation JSON: ``model``, ``overall``, ``per_label.<label>``, ``per_pair.<name>``."""
     labels = sorted({r.label for r in results})
+    per_pair = {r.name: _summary([r]) | ({"chosen": r.chosen} if r.chosen else {}) for r in results}
     return {
         "model": describe(model),
         "overall": _summary(results),
         "per_label": {lab: _summary([r for r in results if r.label == lab]) for lab in labels},
-        "per_pair": {r.name: _summary([r]) for r in results},
+        "per_pair": per_pair,
     }
 
 
@@ -189,17 +191,43 @@ def evaluate_index(
     return summarise(results, model), plots
 
 
+def choose_placement(
+    takes: Sequence[tuple[str, str, Motion, Motion]], model: DualHMM, windows: Sequence[int]
+) -> int:
+    """The ``placement_window`` of ``windows`` with the lowest standard-Viterbi error over
+    leave-one-take-out folds of ``takes`` (the window changes generation, not training, so
+    each fold is trained once)."""
+    errors, frames = np.zeros(len(windows)), 0
+    for i, (_, _, a, b) in enumerate(takes):
+        fold = clone(model).fit([(ta, tb) for j, (_, _, ta, tb) in enumerate(takes) if j != i])
+        truth = model._rate(b).positions()
+        for k, w in enumerate(windows):
+            generated = fold.set_params(placement_window=w).generate(a, "standard")
+            errors[k] += trial_errors(generated.positions(), truth).sum()
+        frames += len(truth)
+    return int(windows[int(np.argmin(errors / frames))])
+
+
 def cross_validate(
     takes: Sequence[tuple[str, str, Motion, Motion]],
     model: DualHMM,
     plot_dir: str | os.PathLike[str] | None = None,
+    placement_windows: Sequence[int] | None = None,
 ) -> tuple[list[PairResult], list[Path]]:
     """Leave-one-take-out: each take ``(name, label, A, B)`` is evaluated by a copy of
-    ``model`` (same hyper-parameters) trained on all the other takes."""
+    ``model`` (same hyper-parameters) trained on all the other takes. With
+    ``placement_windows``, each copy's ``placement_window`` is first chosen among them on
+    the other takes alone (:func:`choose_placement`: nested leave-one-take-out)."""
     results, plots = [], []
     for i, (name, label, a, b) in enumerate(track(takes, "leave-one-take-out")):
-        fold = clone(model).fit([(ta, tb) for j, (_, _, ta, tb) in enumerate(takes) if j != i])
+        rest = [t for j, t in enumerate(takes) if j != i]
+        fold = clone(model)
+        if placement_windows:
+            fold.set_params(placement_window=choose_placement(rest, fold, placement_windows))
+        fold.fit([(ta, tb) for _, _, ta, tb in rest])
         results.append(evaluate_pair(fold, a, b, name, label))
+        if placement_windows:
+            results[-1].chosen = {"placement_window": fold.placement_window}
         if plot_dir is not None:
             plots.append(plot_pair(results[-1], Path(plot_dir) / f"{name}_error.png"))
     return results, plots
