@@ -311,7 +311,7 @@ def crossval(
     choose_placement: str = typer.Option(
         None,
         help="Comma-separated placement windows: each fold picks one on the other takes alone "
-        "(nested leave-one-take-out; ~7 min for 1,9,15,19 on salsa).",
+        "(nested leave-one-take-out; ~25 min for 1,9,15,19 on salsa).",
     ),
     json_out: bool = JSON,
 ) -> None:
