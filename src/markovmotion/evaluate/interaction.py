@@ -191,6 +191,11 @@ def evaluate_index(
     return summarise(results, model), plots
 
 
+def _fit_on(model: DualHMM, takes: Sequence[tuple[str, str, Motion, Motion]]) -> DualHMM:
+    """A copy of ``model`` (same hyper-parameters) trained on ``takes``."""
+    return clone(model).fit([(a, b) for _, _, a, b in takes])
+
+
 def choose_placement(
     takes: Sequence[tuple[str, str, Motion, Motion]], model: DualHMM, windows: Sequence[int]
 ) -> int:
@@ -199,7 +204,7 @@ def choose_placement(
     each fold is trained once)."""
     errors, frames = np.zeros(len(windows)), 0
     for i, (_, _, a, b) in enumerate(takes):
-        fold = clone(model).fit([(ta, tb) for j, (_, _, ta, tb) in enumerate(takes) if j != i])
+        fold = _fit_on(model, [t for j, t in enumerate(takes) if j != i])
         truth = model._rate(b).positions()
         for k, w in enumerate(windows):
             generated = fold.set_params(placement_window=w).generate(a, "standard")
@@ -224,7 +229,7 @@ def cross_validate(
         fold = clone(model)
         if placement_windows:
             fold.set_params(placement_window=choose_placement(rest, fold, placement_windows))
-        fold.fit([(ta, tb) for _, _, ta, tb in rest])
+        fold = _fit_on(fold, rest)
         results.append(evaluate_pair(fold, a, b, name, label))
         if placement_windows:
             results[-1].chosen = {"placement_window": fold.placement_window}
