@@ -72,7 +72,8 @@ def train(
     index = MocapIndex.load(data)
     entries = index.query(category=category, label=label or None)
     if not entries:
-        raise DataNotFoundError(f"no {category} takes labelled {label} in {index.root}")
+        which = f"{category} takes labelled {label}" if label else f"{category} takes"
+        raise DataNotFoundError(f"no {which} in {index.root}")
     train_entries, test_entries = held_out_split(entries) if hold_out else (entries, [])
     motions, skipped = load_motions(index, train_entries, fps)
     used = [e for e in train_entries if e not in skipped]

@@ -86,15 +86,16 @@ def write_stimuli(
 
     ``real`` and ``synthetic`` map a style to a motion file (``synthetic`` may
     hold ``average`` for the average-walk model). Files are numbered in a
-    random order so their names tell nothing; the manifest is written last.
+    random order so their names tell nothing. Every input is read before
+    anything is written, and the manifest is written last.
     """
     entries = [(s, "real", f) for s, f in real.items()]
     entries += [(s, "synthetic", f) for s, f in synthetic.items()]
+    motions = [read_motion(file) for _, _, file in entries]
     order = np.random.default_rng().permutation(2 * len(entries))
     root = Path(folder)
     stimuli: list[Stimulus] = []
-    for i, (style, kind, file) in enumerate(entries):
-        moving = read_motion(file)
+    for i, ((style, kind, _), moving) in enumerate(zip(entries, motions, strict=True)):
         for k, (motion, disp) in enumerate(((moving, True), (without_displacement(moving), False))):
             name = f"stimulus_{order[2 * i + k] + 1:03d}.bvh"
             write_motion(motion, root / name)

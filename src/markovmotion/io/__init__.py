@@ -28,6 +28,8 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
     ``fps`` overrides the file's frame rate (BVH header; AMC files carry none
     and default to CMU's 120 fps).
     """
+    if os.path.isdir(path):
+        raise MotionFormatError(path, "is a folder, not a motion file")
     suffix = base_suffix(path)
     if suffix == ".bvh":
         return read_bvh(path, fps=fps)

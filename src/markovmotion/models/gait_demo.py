@@ -48,7 +48,7 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     bvh_real = out / f"gait-{STYLE}-real.bvh"
     write_motion(synthesized, bvh_synth)
     write_motion(real, bvh_real)
-    title = f"'{STYLE}' walk: synthesized from 12 adaptation steps (top), captured (bottom)"
+    title = f"'{STYLE}' walk: synthesized from 12 adaptation steps (blue), captured (red)"
     pair = [synthesized, real]
     names = [synthesized.name, real.name]
     gif = render(
