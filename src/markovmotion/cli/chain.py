@@ -14,9 +14,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from markovmotion.core.motion import Motion
 from markovmotion.data import MocapIndex
-from markovmotion.errors import DataNotFoundError, MarkovMotionError
+from markovmotion.data.index import read_listed_motion
+from markovmotion.errors import MarkovMotionError
 from markovmotion.evaluate.chain import (
     SOURCES,
     dual_hmm_partners,
@@ -24,7 +24,7 @@ from markovmotion.evaluate.chain import (
     mocap_takes,
     salsa_split,
 )
-from markovmotion.io import read_motion, write_motion
+from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
 from markovmotion.models.condensation import (
     DEFAULT_RESPONSE,
@@ -68,18 +68,6 @@ def _training_takes(data: Path | None, source: str, label: str):
     from markovmotion.video.dataset import silhouette_takes
 
     return silhouette_takes(data, split="train")
-
-
-def _read_person(path: Path, fps: float | None) -> Motion:
-    """A BVH input; a file of the motion-capture collection is read as INDEX.csv says
-    (true frame rate, CMU's reference frame dropped)."""
-    if fps is None:
-        try:
-            index = MocapIndex.load()
-            return index.load_motion(index.find(path.resolve().relative_to(index.root).as_posix()))
-        except (DataNotFoundError, ValueError):
-            pass
-    return read_motion(path, fps=fps)
 
 
 @app.command()
@@ -160,7 +148,7 @@ def respond(
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
     if source == "mocap":
-        motion = _read_person(input, fps).resample(partner_model.fps_)
+        motion = read_listed_motion(input, fps).resample(partner_model.fps_)
         if suffix == ".bvh":
             partner = partner_model.respond_motion(motion, person, **options)
             write_motion(partner, out)

@@ -9,7 +9,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from markovmotion.io import read_motion, write_motion
+from markovmotion.data.index import read_listed_motion
+from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
 
 
@@ -25,7 +26,7 @@ def info(
         markers = read_c3d(file)
         console.print(markers.summary())
         return
-    motion = read_motion(file, fps=fps)
+    motion = read_listed_motion(file, fps=fps)
     sk = motion.skeleton
     pos = motion.positions()
     extent = pos.reshape(-1, 3).max(0) - pos.reshape(-1, 3).min(0)
@@ -49,7 +50,7 @@ def convert(
     resample: float = typer.Option(None, help="Resample to this frame rate before writing."),
 ) -> None:
     """Convert a motion to BVH (optionally at another frame rate)."""
-    motion = read_motion(src, fps=fps)
+    motion = read_listed_motion(src, fps=fps)
     if resample:
         motion = motion.resample(resample)
     write_motion(motion, dst)

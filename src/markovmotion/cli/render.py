@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from markovmotion.io import read_motion
+from markovmotion.data.index import read_listed_motion
 from markovmotion.io.files import base_suffix
 
 
@@ -40,7 +40,7 @@ def render(
                 markers.fps = data_fps
             items.append(markers)
         else:
-            items.append(read_motion(path, fps=data_fps))
+            items.append(read_listed_motion(path, fps=data_fps))
     render(items, out, side_by_side=side_by_side, fps=fps, max_seconds=max_seconds, title=title)
     Console(stderr=True).print(f"wrote {out}")
 

@@ -11,8 +11,9 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.index import read_listed_motion
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
-from markovmotion.io import check_motion_output, read_motion, write_motion
+from markovmotion.io import check_motion_output, write_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -151,7 +152,7 @@ def predict(
 
     check_motion_output(out)
     behaviour, _ = load_behaviour_model(model)
-    motion = read_motion(input, fps=fps)
+    motion = read_listed_motion(input, fps=fps)
     try:
         behaviour.skeleton_.check_compatible(motion.skeleton, "input")
     except SkeletonMismatchError as exc:

@@ -106,6 +106,13 @@ class Entry:
         """CMU's BVH conversions start with a reference pose in frame 0 (see the data README)."""
         return self.source == "cmu" and base_suffix(self.file) == ".bvh"
 
+    def read(self) -> Motion:
+        """The motion at its true frame rate, without CMU's reference frame."""
+        motion = read_motion(self.path, fps=self.fps)
+        if self.has_reference_frame and motion.n_frames > 1:
+            motion = motion.trim(1)
+        return motion
+
 
 class MocapIndex:
     """The entries of an INDEX.csv, with queries and loading."""
@@ -184,10 +191,7 @@ class MocapIndex:
 
     def load_motion(self, entry: Entry) -> Motion:
         """Read an entry at its true frame rate, without CMU's reference frame."""
-        motion = read_motion(entry.path, fps=entry.fps)
-        if entry.has_reference_frame and motion.n_frames > 1:
-            motion = motion.trim(1)
-        return motion
+        return entry.read()
 
     def pairs(self, label: str | Iterable[str] | None = None) -> list[tuple[Entry, Entry]]:
         """Two-person takes as (A, B) entries, each take once (A is the file listed first)."""
@@ -208,3 +212,20 @@ class MocapIndex:
             mb = mb.resample(ma.fps)
         n = min(ma.n_frames, mb.n_frames)
         return ma.trim(0, n), mb.trim(0, n)
+
+
+def listed_entry(path: str | os.PathLike[str]) -> Entry | None:
+    """The collection's entry for a file given by path, or None if it is not listed
+    (or no collection is found)."""
+    try:
+        index = MocapIndex.load()
+        return index.find(Path(path).resolve().relative_to(index.root).as_posix())
+    except (DataNotFoundError, ValueError):
+        return None
+
+
+def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motion:
+    """Read a motion file; one listed in the collection is read as INDEX.csv says (true frame
+    rate, CMU's reference frame dropped) unless ``fps`` overrides the file's rate."""
+    entry = None if fps is not None else listed_entry(path)
+    return entry.read() if entry is not None else read_motion(path, fps=fps)
