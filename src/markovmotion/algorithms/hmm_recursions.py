@@ -33,7 +33,7 @@ def _shifted_exp(v, out):  # pragma: no cover - numba
     return m
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _forward(log_startprob, transmat, log_frameprob):  # pragma: no cover - numba
     n_t, n = log_frameprob.shape
     log_alpha = np.empty((n_t, n))
@@ -51,7 +51,7 @@ def _forward(log_startprob, transmat, log_frameprob):  # pragma: no cover - numb
     return log_alpha, m + np.log(np.sum(p))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _backward(transmat, log_frameprob):  # pragma: no cover - numba
     n_t, n = log_frameprob.shape
     log_beta = np.empty((n_t, n))
@@ -68,7 +68,7 @@ def _backward(transmat, log_frameprob):  # pragma: no cover - numba
     return log_beta
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _transition_counts(
     log_alpha, log_beta, transmat, log_frameprob, log_likelihood
 ):  # pragma: no cover
@@ -92,7 +92,7 @@ def _transition_counts(
     return counts
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def viterbi_kernel(log_startprob, log_transmat_t, log_frameprob):  # pragma: no cover - numba
     """Compiled Viterbi without checks, for hot loops: the log transition matrix comes
     transposed (C-contiguous, predecessors along rows); returns (path, log probability)."""

@@ -37,6 +37,9 @@ FPS = typer.Option(30.0, help="Model frame rate (takes are resampled).")
 WINDOW = typer.Option(10, help="Windowed-Viterbi slice length.")
 N_ITER = typer.Option(50, help="Most EM iterations.")
 SEED = typer.Option(0, help="Random seed (k-means start).")
+JOBS = typer.Option(
+    1, "--jobs", min=0, help="Parallel jobs of EM's E-step over the takes (0: all cores)."
+)
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 
 
@@ -102,8 +105,11 @@ def train(
     window: int = WINDOW,
     n_iter: int = N_ITER,
     seed: int = SEED,
+    jobs: int = JOBS,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
+    import joblib
+
     from markovmotion.data import MocapIndex
 
     check_model_output(out)
@@ -114,7 +120,8 @@ def train(
     model = new_model(
         states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
     )
-    with err_console.status(f"EM on {sum(len(a) for a, _ in motions)} frames"):
+    frames = sum(len(a) for a, _ in motions)
+    with err_console.status(f"EM on {frames} frames"), joblib.parallel_config(n_jobs=jobs or -1):
         model.fit(motions)
     model.save(out)
     hmm = model.lambda_a_
@@ -307,6 +314,7 @@ def crossval(
     window: int = WINDOW,
     n_iter: int = N_ITER,
     seed: int = SEED,
+    jobs: int = JOBS,
     plots: Path = typer.Option(None, help="Folder for the per-frame error plots (Figs. 6-8)."),
     choose_placement: str = typer.Option(
         None,
@@ -316,6 +324,8 @@ def crossval(
     json_out: bool = JSON,
 ) -> None:
     """Leave-one-take-out evaluation: train on all takes but one, test on it, for every take."""
+    import joblib
+
     from markovmotion.data import MocapIndex
     from markovmotion.evaluate.interaction import cross_validate, summarise
 
@@ -329,7 +339,8 @@ def crossval(
         states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
     )
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
-    results, written = cross_validate(takes, model, plots, windows)
+    with joblib.parallel_config(n_jobs=jobs or -1):
+        results, written = cross_validate(takes, model, plots, windows)
     _report(summarise(results, model), written, json_out)
 
 

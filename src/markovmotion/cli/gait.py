@@ -80,8 +80,13 @@ def train(
     wat: str = typer.Option(
         "none", help="Walker-adaptive training unit: none, take, or dataset (the file's folder)."
     ),
+    jobs: int = typer.Option(
+        1, "--jobs", min=0, help="Parallel jobs of EM's E-step over the walks (0: all cores)."
+    ),
 ) -> None:
     """Train an average walk HSMM on neutral walks (gait paper §5.1.2)."""
+    import joblib
+
     from markovmotion.models.gait import GaitSynthesizer
 
     if wat not in ("none", "take", "dataset"):
@@ -91,7 +96,9 @@ def train(
     motions = load_walks(data, label, split, subset, folders)
     model = GaitSynthesizer(
         n_iter=n_iter, mdl_factor=mdl_factor, wat="unit" if wat == "dataset" else wat
-    ).fit(motions, style=label, units=folders)
+    )
+    with joblib.parallel_config(n_jobs=jobs or -1):
+        model.fit(motions, style=label, units=folders)
     model.save(out)
     h = model.hsmm_
     err_console.print(

@@ -232,7 +232,7 @@ class DualHMM(BaseEstimator):
             ``2 * lag + 1`` frames: the slice the decoder looks ahead anyway.
             The default, 2 x 9 + 1 for the paper's window, was chosen by
             nested leave-one-pair-out on salsa (README).
-        n_iter, tol, var_floor, random_state: EM settings (:class:`GaussianHMM`).
+        n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
     and T), ``pipeline_a_`` / ``pipeline_b_`` (features), ``expmaps_b_`` and
@@ -255,6 +255,7 @@ class DualHMM(BaseEstimator):
         tol: float = 1e-2,
         var_floor: float = 1e-3,
         random_state: int | None = 0,
+        n_jobs: int | None = None,
     ):
         self.n_states = n_states
         self.mode = mode
@@ -269,6 +270,7 @@ class DualHMM(BaseEstimator):
         self.tol = tol
         self.var_floor = var_floor
         self.random_state = random_state
+        self.n_jobs = n_jobs
 
     # ---------------------------------------------------------------- fitting
     def fit(self, pairs: Sequence[tuple[Motion, Motion]]) -> DualHMM:
@@ -301,7 +303,12 @@ class DualHMM(BaseEstimator):
         self.frames_b_ = np.vstack(self.expmaps_b_.fit_transform(b_rel)).astype(np.float32)
         self.train_a_, self.train_b_ = xa, xb
         hmm = GaussianHMM(
-            self.n_states, self.n_iter, self.tol, self.var_floor, random_state=self.random_state
+            self.n_states,
+            self.n_iter,
+            self.tol,
+            self.var_floor,
+            random_state=self.random_state,
+            n_jobs=self.n_jobs,
         )
         da = xa.shape[1]
         if self.mode == "paper":
@@ -436,7 +443,7 @@ def _sharing_chain(
     hmm: GaussianHMM, means: np.ndarray, covars: np.ndarray, floor: float
 ) -> GaussianHMM:
     """lambda = (T, B, pi) with ``hmm``'s pi and T and the Gaussians given (eqs. 1-2)."""
-    out = GaussianHMM(hmm.n_components, hmm.n_iter, hmm.tol, hmm.var_floor)
+    out = GaussianHMM(hmm.n_components, hmm.n_iter, hmm.tol, hmm.var_floor, n_jobs=hmm.n_jobs)
     out.startprob_, out.transmat_ = hmm.startprob_, hmm.transmat_
     out.means_, out.covars_, out.covar_floor_ = means, covars, floor
     out.history_, out.n_iter_, out.converged_ = hmm.history_, hmm.n_iter_, hmm.converged_

@@ -21,6 +21,7 @@ from sklearn.cluster import KMeans
 from sklearn.utils import check_random_state
 
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
+from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.state import register
 
 LOG_2PI = np.log(2.0 * np.pi)
@@ -38,7 +39,7 @@ def precision_cholesky(covars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(prec), -np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _quad_forms(x, means, prec):  # pragma: no cover - numba
     n_t, d = x.shape
     n = means.shape[0]
@@ -147,6 +148,9 @@ class BaseHMM(BaseEstimator):
         init_params: which parameters ``fit`` initialises (``s`` pi, ``t`` T,
             and the variant's letters); the others are used as already set.
         random_state: seed for the initialisation and sampling.
+        n_jobs: parallel jobs of the E-step, over chunks of sequences
+            (:mod:`markovmotion.algorithms.parallel`: None is one unless a
+            joblib context says otherwise, -1 every core, Dask through joblib).
 
     Variants implement ``_init_emissions(X, rng) -> labels | None``,
     ``_log_frameprob(X) -> (T, N)``, ``_m_step_emissions(X, gamma)`` and
@@ -160,12 +164,14 @@ class BaseHMM(BaseEstimator):
         tol: float = 1e-3,
         init_params: str = "stmc",
         random_state: int | None = 0,
+        n_jobs: int | None = None,
     ):
         self.n_components = n_components
         self.n_iter = n_iter
         self.tol = tol
         self.init_params = init_params
         self.random_state = random_state
+        self.n_jobs = n_jobs
 
     # ---------------------------------------------------------------- fitting
     def fit(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> BaseHMM:
@@ -205,6 +211,16 @@ class BaseHMM(BaseEstimator):
             self.transmat_ = counts / counts.sum(axis=1, keepdims=True)
 
     def _e_step(self, x: np.ndarray, lengths: np.ndarray):
+        """(log P(X), gamma (T, N), expected first states (N,), transition counts (N, N))."""
+        ends = np.cumsum(lengths)
+
+        def take(i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+            return x[ends[i] - lengths[i] : ends[j - 1]], lengths[i:j]
+
+        return map_sequences(self._e_step_chunk, _add_e_steps, lengths, take, self.n_jobs)
+
+    def _e_step_chunk(self, x: np.ndarray, lengths: np.ndarray):
+        """:meth:`_e_step` of whole sequences: forward-backward of each (Rabiner eqs. 27, 37-38)."""
         log_b = self._log_frameprob(x)
         log_pi, trans = safe_log(self.startprob_), self.transmat_
         gamma = np.empty_like(log_b)
@@ -276,6 +292,12 @@ class BaseHMM(BaseEstimator):
         raise NotImplementedError
 
 
+def _add_e_steps(parts: list[tuple]) -> tuple:
+    """:meth:`BaseHMM._e_step` of all sequences from those of consecutive chunks."""
+    lls, gammas, starts, counts = zip(*parts, strict=True)
+    return sum(lls), np.concatenate(gammas), sum(starts), sum(counts)
+
+
 def _normalise_rows(counts: np.ndarray, previous: np.ndarray) -> np.ndarray:
     """Rows of ``counts`` summing to one; a state never left keeps its previous row."""
     sums = counts.sum(axis=1, keepdims=True)
@@ -304,8 +326,9 @@ class GaussianHMM(BaseHMM):
         var_floor: float = 1e-3,
         init_params: str = "stmc",
         random_state: int | None = 0,
+        n_jobs: int | None = None,
     ):
-        super().__init__(n_components, n_iter, tol, init_params, random_state)
+        super().__init__(n_components, n_iter, tol, init_params, random_state, n_jobs)
         self.var_floor = var_floor
 
     def _init_emissions(self, x: np.ndarray, rng: np.random.RandomState) -> np.ndarray | None:

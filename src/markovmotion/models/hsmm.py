@@ -17,14 +17,16 @@ class only gathers statistics and re-estimates.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numba
 import numpy as np
 from scipy.special import logsumexp
 from sklearn.base import BaseEstimator
 
+from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.models.context_tree import LOG_2PI, cluster
 from markovmotion.state import register
 
@@ -73,7 +75,7 @@ def _lse(values, n):  # pragma: no cover - numba
     return top + np.log(acc)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _forward_backward(log_b, log_dur):  # pragma: no cover - numba
     t_len, n = log_b.shape
     dmax = log_dur.shape[1]
@@ -198,6 +200,12 @@ class ContextStats:
         np.add.at(self.dur_sumsq, contexts, p @ d**2)
         self.n_frames += len(x)
 
+    def merge(self, other: ContextStats) -> ContextStats:
+        """Add the statistics of other sequences (a partial E-step); returns ``self``."""
+        for f in fields(self):
+            setattr(self, f.name, getattr(self, f.name) + getattr(other, f.name))
+        return self
+
 
 def hard_posteriors(
     n_frames: int, boundaries: np.ndarray, n_states: int, max_duration: int
@@ -232,6 +240,9 @@ class HSMM(BaseEstimator):
             0.6 of the longest unit in the training data.
         mdl_factor: weight of the MDL penalty of context clustering (0 keeps
             every context that has data apart).
+        n_jobs: parallel jobs of the E-step, over chunks of sequences
+            (:mod:`markovmotion.algorithms.parallel`: None is one unless a
+            joblib context says otherwise, -1 every core, Dask through joblib).
 
     Learnt: ``means_``/``variances_`` (P, O) output densities,
     ``dur_means_``/``dur_variances_`` (Q,) duration densities, ``out_map_``/
@@ -248,6 +259,7 @@ class HSMM(BaseEstimator):
         dur_var_floor: float = DUR_VAR_FLOOR,
         max_duration: int | None = None,
         mdl_factor: float = 1.0,
+        n_jobs: int | None = None,
     ):
         self.n_states = n_states
         self.n_iter = n_iter
@@ -257,6 +269,7 @@ class HSMM(BaseEstimator):
         self.dur_var_floor = dur_var_floor
         self.max_duration = max_duration
         self.mdl_factor = mdl_factor
+        self.n_jobs = n_jobs
 
     # -------------------------------------------------------------- training
     def fit(
@@ -331,6 +344,19 @@ class HSMM(BaseEstimator):
     def _e_step(
         self, sequences: Sequence[np.ndarray], contexts: Sequence[np.ndarray]
     ) -> ContextStats:
+        """Statistics of all sequences, gathered over chunks of them (``n_jobs``)."""
+        return map_sequences(
+            self._e_step_chunk,
+            lambda parts: functools.reduce(ContextStats.merge, parts),
+            [len(x) for x in sequences],
+            lambda i, j: (sequences[i:j], contexts[i:j]),
+            self.n_jobs,
+        )
+
+    def _e_step_chunk(
+        self, sequences: Sequence[np.ndarray], contexts: Sequence[np.ndarray]
+    ) -> ContextStats:
+        """Statistics of the sequences that the chain of their contexts can produce."""
         stats = ContextStats.zeros(self.out_map_.shape[0], self.n_states, sequences[0].shape[1])
         for x, c in zip(sequences, contexts, strict=True):
             ll, gamma, dur_post = self.posteriors(x, np.asarray(c))
