@@ -103,3 +103,27 @@ def test_output_below_a_file_names_the_output(tmp_path, capsys):
     _one_error_line(err, out)
     assert "is a file, not a folder" in err
     assert ".tmp" not in err
+
+
+def test_stream_reader_names_the_users_file(tmp_path):
+    """A damaged frame line is repaired in a temporary copy; a file that stays unreadable
+    (the header promises frames that are not there) is reported under the user's path."""
+    from markovmotion.cli.dualhmm import read_stream
+    from markovmotion.errors import MotionFormatError
+
+    lines = bvh_text(make_motion(n_frames=6)).splitlines()
+    lines[-3] = "nan " + lines[-3].split(maxsplit=1)[1]  # one bad frame: repaired
+    path = tmp_path / "take.bvh"
+    path.write_text("\n".join(lines[:-1]) + "\n")  # and the last frame missing
+    with pytest.raises(MotionFormatError) as info:
+        read_stream(path)
+    assert info.value.path == str(path)
+
+
+def test_unknown_test_trial_is_refused(mocap, capsys):
+    """A mistyped held-out trial must not silently put every take into training."""
+    with pytest.raises(SystemExit) as info:
+        main(["dualhmm", "train", "--test-trials", "99", "--out", "never.npz"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "trial 99" in err and "Traceback" not in err

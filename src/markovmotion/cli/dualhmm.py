@@ -12,7 +12,8 @@ import numpy as np
 import typer
 from rich.console import Console
 
-from markovmotion.errors import DataNotFoundError
+from markovmotion.data.index import listed_entry
+from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console, track
 
@@ -52,6 +53,12 @@ def select_pairs(index, labels: list[str] | None, trials: list[str] | None, held
     pairs = index.pairs(label=labels)
     if trials is not None:
         wanted = {t.lstrip("0") for t in trials}
+        unknown = wanted - {p[0].trial.lstrip("0") for p in pairs}
+        if unknown:  # a mistyped test trial would otherwise leak into training
+            raise DataNotFoundError(
+                f"no two-person take of labels={labels or 'any'} has trial "
+                f"{', '.join(sorted(unknown))} in {index.root / 'INDEX.csv'}"
+            )
         pairs = [p for p in pairs if (p[0].trial.lstrip("0") in wanted) == held_out]
     if not pairs:
         raise DataNotFoundError(
@@ -136,7 +143,20 @@ def train(
 
 def read_stream(path: Path, fps: float | None = None):
     """A BVH replayed as a stream: (Motion, broken) with ``broken`` (F,) marking frames whose
-    line has NaN or missing values; their rotations are NaN, so the partner skips them."""
+    line has NaN or missing values; their rotations are NaN, so the partner skips them.
+
+    A file of the collection is read as INDEX.csv says (true frame rate, CMU's reference
+    frame dropped) unless ``fps`` overrides the file's rate.
+    """
+    entry = listed_entry(path) if fps is None else None
+    motion, broken = _repaired_bvh(path, entry.fps if entry else fps)
+    if entry is not None and motion.n_frames > 1:
+        motion, broken = motion.trim(entry.first_frame), broken[entry.first_frame :]
+    return motion, broken
+
+
+def _repaired_bvh(path: Path, fps: float | None):
+    """(Motion, broken): the BVH with each bad frame line replaced by a good one, flagged."""
     from markovmotion.io.bvh import read_bvh
     from markovmotion.io.files import read_text
 
@@ -161,7 +181,10 @@ def read_stream(path: Path, fps: float | None = None):
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / Path(path).name.removesuffix(".gz")
         copy.write_text("\n".join(fixed) + "\n", encoding="utf-8")
-        motion = read_bvh(copy, fps=fps)
+        try:
+            motion = read_bvh(copy, fps=fps)
+        except MotionFormatError as exc:  # name the user's file, not the repaired copy
+            raise MotionFormatError(path, exc.problem, exc.line) from None
     motion.name = Path(path).name
     motion.rotations[broken] = np.nan
     return motion, broken

@@ -106,12 +106,15 @@ class Entry:
         """CMU's BVH conversions start with a reference pose in frame 0 (see the data README)."""
         return self.source == "cmu" and base_suffix(self.file) == ".bvh"
 
+    @property
+    def first_frame(self) -> int:
+        """The first frame of the take proper: 1 after CMU's reference frame, else 0."""
+        return int(self.has_reference_frame)
+
     def read(self) -> Motion:
         """The motion at its true frame rate, without CMU's reference frame."""
         motion = read_motion(self.path, fps=self.fps)
-        if self.has_reference_frame and motion.n_frames > 1:
-            motion = motion.trim(1)
-        return motion
+        return motion.trim(self.first_frame) if motion.n_frames > 1 else motion
 
 
 class MocapIndex:
