@@ -1,7 +1,13 @@
-"""Progress bars for long work, on stderr so that JSON on stdout stays clean."""
+"""Progress bars for long work, on stderr so that JSON on stdout stays clean.
+
+On a terminal, Rich's live bar. Elsewhere (a log file, nohup, CI) a live bar
+cannot redraw, so long work prints a plain line every :data:`LOG_EVERY`
+seconds instead; work shorter than that prints nothing.
+"""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable, Iterator
 from typing import TypeVar
 
@@ -10,6 +16,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    TaskID,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -20,9 +27,40 @@ T = TypeVar("T")
 err_console = Console(stderr=True)
 
 
+#: Seconds between the plain progress lines printed off a terminal.
+LOG_EVERY = 30.0
+
+
+class _Progress(Progress):
+    """Rich's progress display, which logs a line now and then where it cannot draw."""
+
+    def __init__(self, *columns, **options):
+        super().__init__(*columns, **options)
+        self._logged_at = time.monotonic()
+
+    def advance(self, task_id: TaskID, advance: float = 1) -> None:
+        super().advance(task_id, advance)
+        self._log(task_id)
+
+    def update(self, task_id: TaskID, **changes) -> None:
+        super().update(task_id, **changes)
+        self._log(task_id)
+
+    def _log(self, task_id: TaskID) -> None:
+        now = time.monotonic()
+        if not self.disable or now - self._logged_at < LOG_EVERY:
+            return
+        self._logged_at = now
+        task = self._tasks[task_id]
+        done = f"{task.completed:g}/{task.total:g}" if task.total else f"{task.completed:g}"
+        self.console.print(
+            f"{task.description}: {done}, {task.elapsed or 0.0:.0f} s", highlight=False
+        )
+
+
 def progress_bar() -> Progress:
     """A Rich progress display with the columns used across markovmotion."""
-    return Progress(
+    return _Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
