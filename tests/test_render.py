@@ -216,3 +216,15 @@ def test_line_plot_is_written_atomically(tmp_path):
     with Image.open(path) as im:
         assert im.format == "PNG" and im.size[0] > 300
     assert [p.name for p in path.parent.iterdir()] == ["errors.png"]
+
+
+def test_gif_keeps_its_frame_rate(tmp_path):
+    """GIF delays are centiseconds: 15 fps must not play as 1000 // 15 // 10 = 6 cs (10 % fast)."""
+    render(make_motion(n_frames=60, fps=30), tmp_path / "w.gif", fps=15)  # 30 frames: 2 s
+    with Image.open(tmp_path / "w.gif") as im:
+        delays = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            delays.append(im.info["duration"])
+    assert sum(delays) == 2000
+    assert set(delays) <= {60, 70}
