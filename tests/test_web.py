@@ -640,3 +640,11 @@ def test_live_partner_page_draws_both_figures(dual_server, page):
     page.click("#start")
     page.wait_for_function("document.getElementById('error').textContent.startsWith('broken.bvh:')")
     page.screenshot(path=SHOTS / "live-invalid-upload.png")
+
+
+def test_results_without_stimuli_explain_how_to_start_an_evaluation(tmp_path):
+    write_motion(make_motion(n_frames=5), tmp_path / "walk.bvh")
+    with running(create_app(tmp_path, admin_token=ADMIN)) as url:
+        status, body = fetch(f"{url}/results?token={ADMIN}")
+    assert status == 503
+    assert b"No evaluation on this server" in body and b"--stimuli" in body

@@ -135,7 +135,7 @@ def create_app(
         except HTTPException as exc:
             if exc.status_code == 403:
                 return _page("forbidden", "Forbidden", status=403)
-            raise
+            return _page("no-evaluation", "No evaluation", status=exc.status_code)
         return _page("results", "Results")
 
     # ------------------------------------------------------------ motions
