@@ -198,10 +198,10 @@ def _fit_on(model: DualHMM, takes: Sequence[tuple[str, str, Motion, Motion]]) ->
 
 def choose_placement(
     takes: Sequence[tuple[str, str, Motion, Motion]], model: DualHMM, windows: Sequence[int]
-) -> int:
+) -> dict:
     """The ``placement_window`` of ``windows`` with the lowest standard-Viterbi error over
     leave-one-take-out folds of ``takes`` (the window changes generation, not training, so
-    each fold is trained once)."""
+    each fold is trained once); returns it and every window's error (mm, ``inner_mm``)."""
     errors, frames = np.zeros(len(windows)), 0
     for i, (_, _, a, b) in enumerate(takes):
         fold = _fit_on(model, [t for j, t in enumerate(takes) if j != i])
@@ -210,7 +210,11 @@ def choose_placement(
             generated = fold.set_params(placement_window=w).generate(a, "standard")
             errors[k] += trial_errors(generated.positions(), truth).sum()
         frames += len(truth)
-    return int(windows[int(np.argmin(errors / frames))])
+    mean = errors / frames
+    return {
+        "placement_window": int(windows[int(np.argmin(mean))]),
+        "inner_mm": {str(w): float(e) for w, e in zip(windows, mean, strict=True)},
+    }
 
 
 def cross_validate(
@@ -226,13 +230,13 @@ def cross_validate(
     results, plots = [], []
     for i, (name, label, a, b) in enumerate(track(takes, "leave-one-take-out")):
         rest = [t for j, t in enumerate(takes) if j != i]
-        fold = clone(model)
+        fold, chosen = clone(model), {}
         if placement_windows:
-            fold.set_params(placement_window=choose_placement(rest, fold, placement_windows))
+            chosen = choose_placement(rest, fold, placement_windows)
+            fold.set_params(placement_window=chosen["placement_window"])
         fold = _fit_on(fold, rest)
         results.append(evaluate_pair(fold, a, b, name, label))
-        if placement_windows:
-            results[-1].chosen = {"placement_window": fold.placement_window}
+        results[-1].chosen = chosen
         if plot_dir is not None:
             plots.append(plot_pair(results[-1], Path(plot_dir) / f"{name}_error.png"))
     return results, plots
