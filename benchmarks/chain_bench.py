@@ -27,7 +27,7 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.data import MocapIndex
 from markovmotion.evaluate.chain import mocap_takes, salsa_split
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.render import render_frames, side_camera
 from markovmotion.video.tracker import SilhouetteTracker
 

@@ -3,13 +3,13 @@
 - Windowed step: N = 64 states, window 10, 11 dims (the paper's PCA size), a
   random full-covariance Gaussian HMM. One step is the new frame's emission
   log-probabilities plus the windowed Viterbi of §3.1
-  (:class:`markovmotion.models.windowed_viterbi.WindowedViterbi`). The
+  (:class:`markovmotion.algorithms.windowed_viterbi.WindowedViterbi`). The
   reference re-runs hmmlearn's ``GaussianHMM.decode`` on each window with
   ``startprob_`` one-hot on the previous q2, which is the same algorithm; the
   decided states are checked to be identical.
 - EM: the same data (20,000 frames in 4 sequences sampled from the model),
   the same initial parameters, ``n_iter`` iterations of ours
-  (:class:`markovmotion.models.hmm.GaussianHMM`) and of hmmlearn's
+  (:class:`markovmotion.models.hmm.gaussian.GaussianHMM`) and of hmmlearn's
   ``GaussianHMM(covariance_type="full", implementation="log")`` with its
   covariance prior switched off so that both compute maximum-likelihood
   updates; seconds per iteration and the largest relative difference of the
@@ -41,11 +41,16 @@ from rich.console import Console
 from rich.table import Table
 from threadpoolctl import threadpool_limits
 
+from markovmotion.algorithms.windowed_viterbi import WindowedViterbi, one_hot_log
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.io.bvh import read_bvh
-from markovmotion.models.dual_hmm import DualHMM
-from markovmotion.models.hmm import GaussianHMM, gaussian_log_density, precision_cholesky, safe_log
-from markovmotion.models.windowed_viterbi import WindowedViterbi, one_hot_log
+from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.models.hmm.gaussian import (
+    GaussianHMM,
+    gaussian_log_density,
+    precision_cholesky,
+    safe_log,
+)
 
 N, DIMS, WINDOW = 64, 11, 10
 

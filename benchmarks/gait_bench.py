@@ -1,7 +1,7 @@
 """Gait synthesis speed: MLPG against nnmnkwii, MLPG with global variance, HSMM forward-backward.
 
 - MLPG: T = 10,000 frames x 54 static dimensions (162 observation dims), random
-  means and variances, solved by ``markovmotion.generate.mlpg.mlpg`` (one
+  means and variances, solved by ``markovmotion.algorithms.mlpg.mlpg`` (one
   compiled banded LDL' pass over all dimensions) and by
   ``nnmnkwii.paramgen.mlpg`` (Cython banded Cholesky per dimension) on the
   same input, taking turns. At the first and last two frames the delta windows
@@ -26,10 +26,10 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.data import MocapIndex
-from markovmotion.generate.mlpg import global_variance, mlpg, mlpg_gv
-from markovmotion.models.gait import GaitSynthesizer, gait_entries, split_walks
-from markovmotion.models.hsmm import duration_log_pmf, forward_backward, log_gaussian_diag
+from markovmotion.models.gait.hsmm import duration_log_pmf, forward_backward, log_gaussian_diag
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
 
 #: nnmnkwii's windows for eqs. (2) and (3): (left, right, coefficients).
 WINDOWS = [

@@ -41,8 +41,8 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.data import MocapIndex
 from markovmotion.features import PCA, FeaturePipeline, JointPositions
-from markovmotion.models.gait import GaitSynthesizer, gait_entries
-from markovmotion.models.hmm import GaussianHMM
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.hmm.gaussian import GaussianHMM
 from markovmotion.progress import track
 
 N_STATES, FPS = 32, 30.0

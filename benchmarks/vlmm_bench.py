@@ -24,7 +24,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from markovmotion.models.vlmm import VLMM
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 
 
 def sparse_source(n: int, k: int, seed: int = 0) -> np.ndarray:

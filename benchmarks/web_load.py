@@ -38,7 +38,7 @@ from markovmotion.data import MocapIndex
 from markovmotion.evaluate.stimuli import write_stimuli
 from markovmotion.evaluate.store import open_results
 from markovmotion.io import write_motion
-from markovmotion.models.dual_hmm import DualHMM
+from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.web import create_app
 from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import (

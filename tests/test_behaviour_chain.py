@@ -10,8 +10,8 @@ from markovmotion.cli import main
 from markovmotion.errors import ModelFormatError
 from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
 from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
-from markovmotion.models.behaviour_chain import BehaviourChain, decay_behaviour, proximities
-from markovmotion.models.condensation import (
+from markovmotion.models.chain.behaviour_chain import BehaviourChain, decay_behaviour, proximities
+from markovmotion.models.chain.condensation import (
     DEFAULT_SIGMA,
     MultipleHypotheses,
     SingleHypothesis,
@@ -19,7 +19,7 @@ from markovmotion.models.condensation import (
     likelihood_weights,
     weighted_mean,
 )
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.chain.partner import VirtualPartner
 
 
 # --------------------------------------------------------------- joint shape vectors

@@ -108,7 +108,7 @@ def test_output_below_a_file_names_the_output(tmp_path, capsys):
 def test_stream_reader_names_the_users_file(tmp_path):
     """A damaged frame line is repaired in a temporary copy; a file that stays unreadable
     (the header promises frames that are not there) is reported under the user's path."""
-    from markovmotion.cli.dualhmm import read_stream
+    from markovmotion.cli.hmm import read_stream
     from markovmotion.errors import MotionFormatError
 
     lines = bvh_text(make_motion(n_frames=6)).splitlines()

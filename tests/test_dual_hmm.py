@@ -15,9 +15,9 @@ from markovmotion.cli import main
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
-from markovmotion.evaluate.interaction import cross_validate, evaluate_pair, summarise
+from markovmotion.evaluate.hmm import cross_validate, evaluate_pair, summarise
 from markovmotion.io import write_motion
-from markovmotion.models.dual_hmm import DualHMM, into_frame, out_of_frame
+from markovmotion.models.hmm.dual import DualHMM, into_frame, out_of_frame
 
 N_POSES = 4
 RNG = np.random.default_rng(11)

@@ -18,7 +18,7 @@ from markovmotion.features.gait import (
     travel_yaw,
 )
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.models.gait import GaitSynthesizer, gait_entries, split_walks
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
 
 
 def angle_between(a: np.ndarray, b: np.ndarray) -> float:

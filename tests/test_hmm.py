@@ -10,13 +10,13 @@ from scipy.optimize import linear_sum_assignment
 from scipy.special import logsumexp
 
 from markovmotion.algorithms.hmm_recursions import forward, forward_backward, viterbi
-from markovmotion.models.hmm import GaussianHMM, floor_covariances
-from markovmotion.models.windowed_viterbi import (
+from markovmotion.algorithms.windowed_viterbi import (
     WindowedViterbi,
     leavable,
     one_hot_log,
     windowed_viterbi,
 )
+from markovmotion.models.hmm.gaussian import GaussianHMM, floor_covariances
 
 
 def random_chain(rng: np.random.Generator, n: int, stay: float = 0.0):

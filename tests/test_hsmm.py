@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from markovmotion.models.adaptation import (
+from markovmotion.models.gait.adaptation import (
     METHODS,
     RegressionTree,
     adapt,
@@ -18,8 +18,13 @@ from markovmotion.models.adaptation import (
     transform_blocks,
     walker_adaptive_training,
 )
-from markovmotion.models.context_tree import cluster_state
-from markovmotion.models.hsmm import HSMM, duration_log_pmf, forward_backward, log_gaussian_diag
+from markovmotion.models.gait.context_tree import cluster_state
+from markovmotion.models.gait.hsmm import (
+    HSMM,
+    duration_log_pmf,
+    forward_backward,
+    log_gaussian_diag,
+)
 from markovmotion.state import estimator_state, restore_estimator
 
 

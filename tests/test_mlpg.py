@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy.linalg import solveh_banded
 
-from markovmotion.features import add_deltas, delta_matrix
-from markovmotion.generate.mlpg import (
+from markovmotion.algorithms.mlpg import (
     _ldl_banded,
     _ldl_solve,
     _normal_equations,
@@ -15,6 +14,7 @@ from markovmotion.generate.mlpg import (
     mlpg,
     mlpg_gv,
 )
+from markovmotion.features import add_deltas, delta_matrix
 
 
 def random_case(t_len: int, dims: int, seed: int = 0):

@@ -9,8 +9,8 @@ from test_hmm import known_model as known_hmm
 from test_hsmm import known_model as known_hsmm
 
 from markovmotion.algorithms.parallel import chunk_bounds, map_sequences
-from markovmotion.models.hmm import GaussianHMM
-from markovmotion.models.hsmm import HSMM
+from markovmotion.models.gait.hsmm import HSMM
+from markovmotion.models.hmm.gaussian import GaussianHMM
 from markovmotion.state import estimator_state, restore_estimator
 
 

@@ -11,7 +11,7 @@ from PIL import Image
 from markovmotion import MarkovMotionError, read_motion
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
-from markovmotion.demo import WALK, run_demo
+from markovmotion.demo.run import WALK, run_demo
 from markovmotion.viz import render, render_frames, save_line_plot
 from markovmotion.viz.animation import COLOURS, _Stage, _tracks
 

@@ -7,7 +7,7 @@ import pytest
 
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.joint_shape import TwoPeople
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.bspline import (
     basis_matrix,
     evaluate_closed_bspline,

@@ -8,9 +8,9 @@ from conftest import make_skeleton
 from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
-from markovmotion.evaluate.horizon import evaluate_horizon
-from markovmotion.models.behaviour import BehaviourModel, load_behaviour_model
-from markovmotion.models.structured_vlmm import (
+from markovmotion.evaluate.vlmm import evaluate_horizon
+from markovmotion.models.vlmm.behaviour import BehaviourModel, load_behaviour_model
+from markovmotion.models.vlmm.structured import (
     StructuredBehaviourModel,
     key_positions,
     key_prototypes,

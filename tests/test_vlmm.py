@@ -9,14 +9,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
-from markovmotion.evaluate.horizon import HorizonCurve, ZeroVelocity, evaluate_horizon
-from markovmotion.models.behaviour import (
+from markovmotion.evaluate.vlmm import HorizonCurve, ZeroVelocity, evaluate_horizon
+from markovmotion.models.vlmm.behaviour import (
     BehaviourModel,
     held_out_split,
     load_behaviour_model,
     load_motions,
 )
-from markovmotion.models.vlmm import VLMM, prediction_suffix_tree
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM, prediction_suffix_tree
 
 
 def variable_order_source(n: int, seed: int = 0) -> np.ndarray:

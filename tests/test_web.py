@@ -35,7 +35,7 @@ from markovmotion.evaluate.stimuli import write_stimuli
 from markovmotion.evaluate.store import open_results
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.bvh import bvh_text
-from markovmotion.models.dual_hmm import DualHMM
+from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.web import create_app
 from markovmotion.web.library import display_parents
 from markovmotion.web.live import dual_hmm_partner

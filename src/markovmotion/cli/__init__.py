@@ -26,9 +26,9 @@ def _register() -> None:
         chain,
         data,
         demo,
-        dualhmm,
         evaluation,
         gait,
+        hmm,
         motion,
         render,
         serve,
@@ -40,7 +40,7 @@ def _register() -> None:
     render.register(app)
     app.add_typer(data.app, name="data")
     demo.register(app)
-    app.add_typer(dualhmm.app, name="dualhmm")
+    app.add_typer(hmm.app, name="dualhmm")
     app.add_typer(vlmm.app, name="vlmm")
     app.add_typer(gait.app, name="gait")
     app.add_typer(chain.app, name="chain")

@@ -26,13 +26,13 @@ from markovmotion.evaluate.chain import (
 )
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
-from markovmotion.models.condensation import (
+from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
     DEFAULT_RESYNC,
     DEFAULT_SIGMA,
     RESPONSES,
 )
-from markovmotion.models.virtual_partner import DEFAULT_PROTOTYPES, VirtualPartner
+from markovmotion.models.chain.partner import DEFAULT_PROTOTYPES, VirtualPartner
 from markovmotion.progress import err_console
 
 SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
@@ -196,7 +196,7 @@ def evaluate(
         _, held_out = salsa_split(index, label)
         takes = mocap_takes(index, held_out, fps=partner_model.fps_)
         if dual_hmm is not None:
-            from markovmotion.models.dual_hmm import DualHMM
+            from markovmotion.models.hmm.dual import DualHMM
 
             others = dual_hmm_partners(DualHMM.load(dual_hmm), index, held_out, takes)
     else:

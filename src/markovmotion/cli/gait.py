@@ -43,7 +43,7 @@ def load_walks(
     the held-out takes (every fourth of each style) or all. The folder of
     each walk (its dataset) is appended to ``folders`` if given.
     """
-    from markovmotion.models.gait import DEFAULT_SUBSET, gait_entries, split_walks
+    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries, split_walks
 
     if paths and not _is_index(paths):
         if folders is not None:
@@ -87,7 +87,7 @@ def train(
     """Train an average walk HSMM on neutral walks (gait paper §5.1.2)."""
     import joblib
 
-    from markovmotion.models.gait import GaitSynthesizer
+    from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
     if wat not in ("none", "take", "dataset"):
         raise typer.BadParameter("--wat must be none, take or dataset")
@@ -131,8 +131,8 @@ def adapt(
     split: str = typer.Option("train", help="Takes from an index: train, test or all."),
 ) -> None:
     """Adapt the average model to a style from a few steps (CSMAPLR/CMLLR + MAP, §5.1.3)."""
-    from markovmotion.models.adaptation import METHODS, STRUCTURES
-    from markovmotion.models.gait import GaitSynthesizer
+    from markovmotion.models.gait.adaptation import METHODS, STRUCTURES
+    from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
     if method not in METHODS:
         raise typer.BadParameter(f"--method must be one of {', '.join(METHODS)}")
@@ -176,7 +176,7 @@ def synthesize(
     ),
 ) -> None:
     """Synthesize a walk of any length from a gait model and write it as BVH (§5.1.4)."""
-    from markovmotion.models.gait import GaitSynthesizer
+    from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
     if first_side not in ("L", "R"):
         raise typer.BadParameter("--first-side must be L or R")
@@ -193,7 +193,7 @@ def synthesize(
 def _load_models(folder: Path) -> dict[str, dict[str, object]]:
     """Gait models of a folder by role and style (other model kinds are skipped)."""
     from markovmotion.errors import ModelFormatError
-    from markovmotion.models.gait import ROLES, GaitSynthesizer
+    from markovmotion.models.gait.synthesizer import ROLES, GaitSynthesizer
     from markovmotion.persist import load_npz
 
     if not folder.is_dir():
@@ -326,7 +326,7 @@ def evaluate(
     import json
 
     from markovmotion.evaluate.gait import ROLES, Evaluation, StyleClassifier
-    from markovmotion.models.gait import DEFAULT_SUBSET, gait_entries, split_walks
+    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries, split_walks
     from markovmotion.progress import progress_bar
 
     try:

@@ -67,7 +67,7 @@ def train(
     seed: int = typer.Option(0, help="Seed of the vector quantisation."),
 ) -> None:
     """Learn prototypes and a VLMM (optionally the structured model) from motion capture."""
-    from markovmotion.models.behaviour import BehaviourModel, held_out_split, load_motions
+    from markovmotion.models.vlmm.behaviour import BehaviourModel, held_out_split, load_motions
 
     check_model_output(out)
     index = MocapIndex.load(data)
@@ -89,7 +89,7 @@ def train(
         seed=seed,
     )
     if structured:
-        from markovmotion.models.structured_vlmm import StructuredBehaviourModel
+        from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 
         model = StructuredBehaviourModel(model, max_memory=key_memory, epsilon=epsilon)
     model.fit(motions)
@@ -129,7 +129,7 @@ def generate(
     seed: int = typer.Option(0, help="Seed of stochastic generation."),
 ) -> None:
     """Synthesize a new routine by traversing the automaton (§3.2.1, §4.3)."""
-    from markovmotion.models.behaviour import load_behaviour_model
+    from markovmotion.models.vlmm.behaviour import load_behaviour_model
 
     behaviour, _ = load_behaviour_model(model)
     motion = behaviour.generate(seconds, _rng(stochastic, seed))
@@ -148,7 +148,7 @@ def predict(
     seed: int = typer.Option(0, help="Seed of a stochastic prediction."),
 ) -> None:
     """Recognise the observed motion's state and predict how it continues (§3.2.2, §4.4)."""
-    from markovmotion.models.behaviour import load_behaviour_model
+    from markovmotion.models.vlmm.behaviour import load_behaviour_model
 
     check_motion_output(out)
     behaviour, _ = load_behaviour_model(model)
@@ -198,13 +198,13 @@ def evaluate(
     seed: int = typer.Option(0, help="Seed of the Monte Carlo predictions."),
 ) -> None:
     """E_T (eq. 9) in mm at 0.5, 1, 2 and 3 s against first-order Markov and zero velocity."""
-    from markovmotion.evaluate.horizon import (
+    from markovmotion.evaluate.vlmm import (
         REPORT_SECONDS,
         ZeroVelocity,
         evaluate_horizon,
         plot_horizon_curves,
     )
-    from markovmotion.models.behaviour import load_behaviour_model, load_motions
+    from markovmotion.models.vlmm.behaviour import load_behaviour_model, load_motions
     from markovmotion.viz.plots import check_figure_output
 
     if plot:

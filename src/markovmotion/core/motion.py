@@ -30,6 +30,8 @@ class Motion:
             global root position.
         fps: frames per second.
         name: where it came from (file name), for messages.
+        source: the path of the file it was read from ("" if none); models
+            record its content hash in ``train_files_``.
     """
 
     skeleton: Skeleton
@@ -37,6 +39,7 @@ class Motion:
     translations: np.ndarray
     fps: float
     name: str = ""
+    source: str = ""
 
     def __post_init__(self) -> None:
         self.rotations = np.asarray(self.rotations, dtype=float)
@@ -87,7 +90,12 @@ class Motion:
 
     def copy(self) -> Motion:
         return Motion(
-            self.skeleton, self.rotations.copy(), self.translations.copy(), self.fps, self.name
+            self.skeleton,
+            self.rotations.copy(),
+            self.translations.copy(),
+            self.fps,
+            self.name,
+            self.source,
         )
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
@@ -172,6 +180,7 @@ class Motion:
             self.translations[sl].copy(),
             self.fps,
             self.name,
+            self.source,
         )
 
     def resample(self, fps: float) -> Motion:
@@ -179,7 +188,9 @@ class Motion:
         if fps <= 0:
             raise ValueError(f"frame rate must be positive, got {fps}")
         if self.n_frames < 2 or np.isclose(fps, self.fps):
-            return Motion(self.skeleton, self.rotations, self.translations, fps, self.name)
+            return Motion(
+                self.skeleton, self.rotations, self.translations, fps, self.name, self.source
+            )
         t_old = np.arange(self.n_frames) / self.fps
         n_new = int(np.floor(t_old[-1] * fps + 1e-9)) + 1
         t_new = np.arange(n_new) / fps
@@ -188,7 +199,7 @@ class Motion:
             rot[:, j] = Slerp(t_old, Rotation.from_quat(self.rotations[:, j]))(t_new).as_quat()
         flat = self.translations.reshape(self.n_frames, -1)
         trans = np.stack([np.interp(t_new, t_old, c) for c in flat.T], axis=1)
-        return Motion(self.skeleton, rot, trans.reshape(n_new, -1, 3), fps, self.name)
+        return Motion(self.skeleton, rot, trans.reshape(n_new, -1, 3), fps, self.name, self.source)
 
     def align_heading(self, yaw: float = 0.0, to_origin: bool = True) -> Motion:
         """Rotate the whole motion about +Y so that frame 0 faces ``yaw``.

@@ -34,17 +34,17 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
-from markovmotion.models.condensation import (
+from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
     DEFAULT_RESYNC,
     DEFAULT_SIGMA,
     RESPONSES,
 )
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.progress import track
 
 if TYPE_CHECKING:
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.models.hmm.dual import DualHMM
 
 #: Held-out salsa trials (CMU subjects 60/61): the last three pairs.
 TEST_TRIALS = ("12", "13", "15")
@@ -101,7 +101,7 @@ def dual_hmm_partners(
     resampled to the takes' rate if the model's differs, and seen through the
     same shape joints as the takes, so that both models are measured alike.
     """
-    from markovmotion.models.dual_hmm import METHODS
+    from markovmotion.models.hmm.dual import METHODS
 
     out: dict[str, list[tuple[Person | None, Person | None]]] = {
         f"dual_hmm_{m}": [] for m in METHODS

@@ -63,14 +63,14 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from markovmotion.algorithms.dtw import dtw_distance, dtw_path
+from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
 from markovmotion.errors import DataNotFoundError
 from markovmotion.evaluate.perceptual import efficiency
 from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.gait import SIDES, align_walk, detect_steps, foot_slide
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.generate.mlpg import global_variance
-from markovmotion.models.gait import GaitSynthesizer
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
 ROLES = ("adapted", "average", "scratch")
 

@@ -31,10 +31,10 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
     if os.path.isdir(path):
         raise MotionFormatError(path, "is a folder, not a motion file")
     suffix = base_suffix(path)
-    if suffix == ".bvh":
-        return read_bvh(path, fps=fps)
-    if suffix == ".amc":
-        return read_amc(path, fps=fps)
+    if suffix in (".bvh", ".amc"):
+        motion = (read_bvh if suffix == ".bvh" else read_amc)(path, fps=fps)
+        motion.source = os.fspath(path)
+        return motion
     if suffix == ".c3d":
         raise MotionFormatError(
             path, "C3D holds markers, not a skeleton: read it with markovmotion.io.read_c3d"

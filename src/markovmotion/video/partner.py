@@ -16,7 +16,7 @@ import numpy as np
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError
 from markovmotion.features.joint_shape import person_from_motion
-from markovmotion.models.virtual_partner import VirtualPartner
+from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.render import (
     PEOPLE_COLOURS,

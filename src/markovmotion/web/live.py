@@ -33,7 +33,7 @@ from markovmotion.errors import MarkovMotionError
 from markovmotion.web.library import MotionLibrary, display_parents, read_upload
 
 if TYPE_CHECKING:
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.models.hmm.dual import DualHMM
 
 START_TIMEOUT = 30.0
 
@@ -75,7 +75,7 @@ class DualHMMPartner:
 
 def dual_hmm_partner(path: str | os.PathLike[str]) -> PartnerFactory:
     """Sessions answered by the dual HMM saved at ``path``."""
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.models.hmm.dual import DualHMM
 
     return partial(DualHMMPartner, DualHMM.load(path))
 

@@ -9,7 +9,7 @@ prototype plus an end state (eq. 13); traversing it visits state prototypes,
 joined by cubic Hermite segments whose durations come from the mean speed
 (eq. 15) and sampled at the frame rate (eq. 16).
 
-Extrapolations and the hypotheses of :mod:`markovmotion.models.condensation`
+Extrapolations and the hypotheses of :mod:`markovmotion.models.chain.condensation`
 share one vectorised representation, :class:`Hypotheses`: each is a Hermite
 segment from a start vector towards the state prototype of a chain state, with
 the time elapsed on it.

@@ -7,9 +7,9 @@ from pathlib import Path
 from rich.console import Console
 
 from markovmotion.data import MocapIndex
-from markovmotion.evaluate.interaction import evaluate_pair, plot_pair
+from markovmotion.evaluate.hmm import evaluate_pair, plot_pair
 from markovmotion.io import write_motion
-from markovmotion.models.dual_hmm import DualHMM
+from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.progress import track
 from markovmotion.viz import render
 

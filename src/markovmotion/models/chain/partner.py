@@ -28,8 +28,8 @@ from markovmotion.features.joint_shape import (
     person_from_motion,
     shape_joints,
 )
-from markovmotion.models.behaviour_chain import BehaviourChain
-from markovmotion.models.condensation import (
+from markovmotion.models.chain.behaviour_chain import BehaviourChain
+from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
     DEFAULT_RESYNC,
     DEFAULT_SIGMA,

@@ -10,7 +10,7 @@ chain (:func:`forward_backward`, log space).
 
 Units carry a context label (an integer); which states of which contexts
 share their output and duration densities is decided by context clustering
-(:mod:`markovmotion.models.context_tree`), so that contexts never seen in
+(:mod:`markovmotion.models.gait.context_tree`), so that contexts never seen in
 training still get densities. The recursions are pure functions; the model
 class only gathers statistics and re-estimates.
 """
@@ -27,7 +27,7 @@ from scipy.special import logsumexp
 from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.parallel import map_sequences
-from markovmotion.models.context_tree import LOG_2PI, cluster
+from markovmotion.models.gait.context_tree import LOG_2PI, cluster
 from markovmotion.state import register
 
 #: Default floor of the state duration variances, in frames squared: HTS's (0.01 x 10),

@@ -2,7 +2,7 @@
 
 Motion becomes augmented configuration vectors F = [C, lambda dC] in [0, 1]
 (eqs. 1-4), each replaced by its nearest prototype with repeats collapsed
-(eq. 3); a :class:`~markovmotion.models.vlmm.VLMM` learns the prototype
+(eq. 3); a :class:`~markovmotion.models.vlmm.prediction_suffix_tree.VLMM` learns the prototype
 sequences. Generation traverses the automaton and joins the emitted
 prototypes' configurations by cubic Hermite interpolation with the time
 intervals of eq. 8, sampled at the frame rate; prediction first recognises
@@ -37,7 +37,7 @@ from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.heading import RemoveHeading
 from markovmotion.features.select import DropStaticColumns
-from markovmotion.models.vlmm import VLMM
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, register, restore_estimator
 
@@ -393,7 +393,7 @@ def save_behaviour_model(
 
 def load_behaviour_model(path: str | os.PathLike[str]) -> tuple[BaseEstimator, dict]:
     """A model written by :meth:`BehaviourModel.save` (or the structured model) and its header."""
-    from markovmotion.models import structured_vlmm  # noqa: F401 - registers its class
+    from markovmotion.models.vlmm import structured  # noqa: F401 - registers its class
 
     header, arrays = load_npz(path, MODEL_KIND)
     return restore_estimator(header["model"], arrays), header

@@ -29,8 +29,8 @@ from sklearn.neighbors import NearestNeighbors
 
 from markovmotion.core.motion import UP, Motion
 from markovmotion.data.index import Entry, MocapIndex
-from markovmotion.evaluate.horizon import trial_errors
-from markovmotion.models.dual_hmm import DualHMM, ground_frame
+from markovmotion.evaluate.vlmm import trial_errors
+from markovmotion.models.hmm.dual import DualHMM, ground_frame
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 

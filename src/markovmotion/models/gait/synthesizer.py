@@ -7,10 +7,10 @@ singularity: :class:`~markovmotion.features.reference_pose.ReferencePose`),
 appends delta and delta-delta features (eqs. 2-3), cuts the walks into steps
 at heel strikes (:mod:`markovmotion.features.gait`), and trains
 context-dependent five-state HSMMs of left and right steps
-(:class:`~markovmotion.models.hsmm.HSMM`). Synthesis concatenates the step
+(:class:`~markovmotion.models.gait.hsmm.HSMM`). Synthesis concatenates the step
 models of the walk asked for, takes state durations from the duration
 densities, generates the joint angles by MLPG with global variance
-(:mod:`markovmotion.generate.mlpg`) and computes the root travel from foot
+(:mod:`markovmotion.algorithms.mlpg`) and computes the root travel from foot
 contact (§5.1.4).
 """
 
@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError, MotionFormatError
@@ -40,9 +41,8 @@ from markovmotion.features.gait import (
     step_positions,
 )
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.generate.mlpg import global_variance, mlpg, mlpg_gv
-from markovmotion.models.adaptation import adapt, walker_adaptive_training
-from markovmotion.models.hsmm import DUR_VAR_FLOOR, HSMM
+from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
+from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, register, restore_estimator
 
@@ -261,7 +261,7 @@ class GaitSynthesizer(BaseEstimator):
         """A style model: this (average) model adapted to the first ``n_steps`` steps of the walks (§5.1.3).
 
         Adaptation starts from the steps' boundaries, as training does.
-        ``options`` go to :func:`markovmotion.models.adaptation.adapt` (method,
+        ``options`` go to :func:`markovmotion.models.gait.adaptation.adapt` (method,
         structure, prior weights). The GV mean comes from the style walks, its
         variance from this model.
         """

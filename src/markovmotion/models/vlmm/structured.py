@@ -30,8 +30,8 @@ from sklearn.base import BaseEstimator, clone
 from markovmotion.algorithms.dtw import dtw_distance_matrix, open_end_dtw
 from markovmotion.algorithms.vector_quantisation import collapse_repeats, nearest_prototype
 from markovmotion.core.motion import Motion
-from markovmotion.models.behaviour import BehaviourModel, save_behaviour_model
-from markovmotion.models.vlmm import VLMM
+from markovmotion.models.vlmm.behaviour import BehaviourModel, save_behaviour_model
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 from markovmotion.state import register
 
 

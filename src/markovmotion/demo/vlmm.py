@@ -13,8 +13,8 @@ from markovmotion.io import write_motion
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Routines synthesized by VLMMs of CMU dance and martial arts (VLMM paper Figs. 3, 6, 9)."""
-    from markovmotion.models.behaviour import BehaviourModel, held_out_split, load_motions
-    from markovmotion.models.structured_vlmm import StructuredBehaviourModel
+    from markovmotion.models.vlmm.behaviour import BehaviourModel, held_out_split, load_motions
+    from markovmotion.models.vlmm.structured import StructuredBehaviourModel
     from markovmotion.viz import render
     from markovmotion.viz.plots import new_figure, save_figure
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.models.behaviour_chain import BehaviourChain, Hypotheses
+from markovmotion.models.chain.behaviour_chain import BehaviourChain, Hypotheses
 
 RESPONSES = ("ml", "map", "mean")
 #: The response of :class:`MultipleHypotheses` unless told: the paper's maximum-likelihood

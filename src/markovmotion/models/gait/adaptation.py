@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.models.hsmm import HSMM, hard_posteriors, log_gaussian_diag
+from markovmotion.models.gait.hsmm import HSMM, hard_posteriors, log_gaussian_diag
 
 STRUCTURES = ("stream", "diagonal")
 METHODS = ("csmaplr", "cmllr")
@@ -222,7 +222,7 @@ def adaptation_statistics(
     untransformed data; durations are one-dimensional observations d. With
     ``boundaries`` (first frame of each unit, then T, per sequence) the states
     are not inferred: each unit is split evenly among its states, as HSMM
-    training starts (:func:`~markovmotion.models.hsmm.hard_posteriors`), and
+    training starts (:func:`~markovmotion.models.gait.hsmm.hard_posteriors`), and
     the log-likelihood is 0. Returns (output stats, duration stats, log-likelihood).
     """
     n_pdf, dims = hsmm.means_.shape

@@ -80,7 +80,7 @@ def new_model(
     seed: int,
 ):
     """An unfitted DualHMM with the settings that ``train`` and ``crossval`` share."""
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.models.hmm.dual import DualHMM
 
     return DualHMM(
         n_states=states,
@@ -244,7 +244,7 @@ def respond(
 ) -> None:
     """Generate person B's response to person A's motion."""
     from markovmotion.io import check_motion_output, write_motion
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.viz import check_output, render
 
     if standard and (realtime or window):
@@ -313,8 +313,8 @@ def evaluate(
 ) -> None:
     """Error of the generated B against the real B on every test take, with baselines."""
     from markovmotion.data import MocapIndex
-    from markovmotion.evaluate.interaction import evaluate_index
-    from markovmotion.models.dual_hmm import DualHMM
+    from markovmotion.evaluate.hmm import evaluate_index
+    from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
     index = MocapIndex.load(test)
@@ -350,7 +350,7 @@ def crossval(
     import joblib
 
     from markovmotion.data import MocapIndex
-    from markovmotion.evaluate.interaction import cross_validate, summarise
+    from markovmotion.evaluate.hmm import cross_validate, summarise
 
     index = MocapIndex.load(data)
     pairs = select_pairs(index, _split(labels), None, held_out=False)

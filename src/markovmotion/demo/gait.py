@@ -10,7 +10,7 @@ from rich.console import Console
 from markovmotion.data import MocapIndex
 from markovmotion.features.gait import align_walk, detect_steps
 from markovmotion.io import write_motion
-from markovmotion.models.gait import GaitSynthesizer, gait_entries, split_walks
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
 from markovmotion.progress import track
 from markovmotion.viz import render, render_frames
 

@@ -1,1 +1,0 @@
-"""Generation of motion parameters from statistical models (MLPG with global variance: :mod:`.mlpg`)."""

@@ -1,0 +1,176 @@
+"""The one contract every top-level model of markovmotion follows.
+
+scikit-learn's conventions (``sklearn/base.py``), turned into a model file:
+
+- the constructor stores hyper-parameters only, unchanged; ``fit`` does the
+  work and returns ``self``; everything learnt ends in ``_``;
+- ``save(path)`` writes an ``.npz`` with a JSON header (never a pickle) from
+  the constructor's parameters and the ``_`` attributes (:mod:`markovmotion.state`);
+  ``Model.load(path)`` (or ``DualHMM.load(path)``) returns the model alone,
+  whatever its kind, found through the ``KIND`` each class registers once;
+  extra header entries given to ``save`` come back as attributes (``source``
+  -> ``source_``);
+- ``train_files_`` always says what the model was trained on (file name and
+  content hash, :func:`file_record`), so evaluation on any INDEX.csv can leave
+  those takes out (:mod:`markovmotion.evaluate.takes`);
+- the verbs of DESIGN.md, each with one meaning, where the model has it:
+  ``generate`` (new motion), ``predict`` (continue an observed motion),
+  ``respond`` (a whole partner motion for a whole input motion), ``score``
+  (log-likelihood), and ``partner()`` for the online protocol of
+  :mod:`markovmotion.models.online`. ``VERBS`` lists those a class offers.
+
+Randomness: ``random_state`` at construction, ``rng`` (a
+:class:`numpy.random.Generator`) at call time, and ``stochastic=`` where a
+verb can either draw or take the most likely choice.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterable, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import ModelFormatError
+from markovmotion.persist import load_npz, save_npz
+from markovmotion.state import estimator_state, register, restore_estimator
+
+#: Every model kind, by the ``KIND`` its class declares (filled at class creation).
+KINDS: dict[str, type[Model]] = {}
+
+#: The verbs of the contract, in the order the docs list them.
+ALL_VERBS = ("generate", "predict", "respond", "score", "partner")
+
+
+class Model(BaseEstimator):
+    """Base of every top-level model (module docstring).
+
+    Subclasses set ``KIND`` (the name written into model files) and ``VERBS``
+    (which of :data:`ALL_VERBS` they implement). Registration happens when the
+    class is created, so loading never needs a lazy import.
+    """
+
+    KIND: ClassVar[str] = ""
+    VERBS: ClassVar[tuple[str, ...]] = ()
+    #: Header entries of :meth:`save` that are not extras (everything else is one).
+    _RESERVED: ClassVar[frozenset[str]] = frozenset(
+        {"format", "format_version", "library_version", "kind", "model"}
+    )
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        register(cls)
+        kind = cls.__dict__.get("KIND")
+        if kind:
+            if kind in KINDS and KINDS[kind].__qualname__ != cls.__qualname__:
+                raise TypeError(f"model kind {kind!r} is taken by {KINDS[kind].__name__}")
+            KINDS[kind] = cls
+        unknown = set(cls.VERBS) - set(ALL_VERBS)
+        if unknown:
+            raise TypeError(f"{cls.__name__}.VERBS names unknown verbs {sorted(unknown)}")
+
+    # ------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike[str], **extras: Any) -> None:
+        """Write the model to ``path`` (``.npz`` + JSON header), atomically.
+
+        ``extras`` (JSON values) are stored in the header and come back from
+        :meth:`load` as attributes with a trailing ``_`` (``source="mocap"`` ->
+        ``model.source_``).
+        """
+        if not self.KIND:
+            raise TypeError(f"{type(self).__name__} declares no KIND and cannot be saved")
+        clash = self._RESERVED & set(extras)
+        if clash:
+            raise ValueError(f"header entries {sorted(clash)} are reserved")
+        if not hasattr(self, "train_files_"):
+            raise ValueError(f"{type(self).__name__} is not fitted: nothing to save")
+        arrays: dict[str, np.ndarray] = {}
+        header = {"model": estimator_state(self, "model", arrays), **extras}
+        save_npz(path, self.KIND, header, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Model:
+        """The model in ``path``, of this class (or any kind when called on :class:`Model`).
+
+        Raises:
+            ModelFormatError: not a model file, damaged, or of another kind.
+        """
+        header, arrays = load_npz(path)
+        kind = header.get("kind")
+        found = KINDS.get(kind) if isinstance(kind, str) else None
+        if found is None:
+            raise ModelFormatError(path, f"unknown model kind {kind!r}")
+        if not issubclass(found, cls):
+            raise ModelFormatError(path, f"is a {kind!r} model, expected {cls.KIND!r}")
+        state = header.get("model")
+        if not isinstance(state, dict):
+            raise ModelFormatError(path, "damaged model header (no model state)")
+        try:
+            model = restore_estimator(state, arrays)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ModelFormatError(path, f"damaged model ({type(exc).__name__}: {exc})") from None
+        if not isinstance(model, found):
+            raise ModelFormatError(path, f"header says {kind!r} but holds {type(model).__name__}")
+        for key, value in header.items():
+            if key not in cls._RESERVED:
+                setattr(model, f"{key}_", value)
+        return model
+
+    # ------------------------------------------------------------ training files
+    def record_training(self, motions: Iterable[Motion]) -> None:
+        """Set ``train_files_`` from the motions ``fit`` was given (:func:`file_record`)."""
+        seen: dict[str, dict[str, str]] = {}
+        for motion in motions:
+            rec = file_record(motion)
+            seen.setdefault(rec["sha256"], rec)
+        self.train_files_ = list(seen.values())
+
+
+def file_record(motion: Motion) -> dict[str, str]:
+    """Name and content hash of what ``motion`` was read from.
+
+    The SHA-256 of the file's bytes when the motion came from a file (so the
+    same take under another path or name is recognised), else of its arrays.
+    """
+    if motion.source and os.path.isfile(motion.source):
+        return {"file": os.path.basename(motion.source), "sha256": file_sha256(motion.source)}
+    digest = hashlib.sha256()
+    for arr in (motion.rotations, motion.translations):
+        digest.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+    return {"file": motion.name or "(in memory)", "sha256": digest.hexdigest()}
+
+
+_HASHES: dict[tuple[str, int, int], str] = {}
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks (memoised by path, size and mtime)."""
+    st = os.stat(path)
+    key = (os.path.realpath(path), st.st_size, st.st_mtime_ns)
+    if key not in _HASHES:
+        digest = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+        _HASHES[key] = digest.hexdigest()
+    return _HASHES[key]
+
+
+def training_hashes(model: Model) -> set[str]:
+    """The content hashes of the files ``model`` was trained on."""
+    return {rec["sha256"] for rec in getattr(model, "train_files_", [])}
+
+
+def flatten(takes: Sequence[Any]) -> list[Motion]:
+    """Motions in ``takes`` (Motions, or tuples of them as two-person takes)."""
+    out: list[Motion] = []
+    for take in takes:
+        if isinstance(take, Motion):
+            out.append(take)
+        elif isinstance(take, tuple | list):
+            out.extend(m for m in take if isinstance(m, Motion))
+    return out

@@ -1,0 +1,123 @@
+"""The online partner protocol, and a real-time replay of a motion through any partner.
+
+An online partner (the dual HMM's windowed-Viterbi partner, the behaviour
+chain's CONDENSATION partner) takes person A one frame at a time and answers
+with person B's frame for ``lag`` frames ago:
+
+- ``step(frame)``: ``frame`` is a one-frame :class:`Motion` of A (or None when
+  the frame is missing); returns B's one-frame Motion, or None while the
+  partner's look-ahead fills;
+- ``skip()``: a frame the caller could not deliver in time (dropped);
+- ``finish()``: B's frames still owed at the end of the stream;
+- ``lag`` (frames), ``fps`` (the partner's rate; A is resampled to it),
+  ``skeleton`` (B's skeleton).
+
+A model offers one through ``model.partner()``; ``respond --realtime``, the
+``/live`` page and ``serve --partner`` take any model that does.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
+
+
+@runtime_checkable
+class OnlinePartner(Protocol):
+    """What every online partner offers (module docstring)."""
+
+    lag: int
+    fps: float
+
+    @property
+    def skeleton(self) -> Skeleton: ...
+
+    def step(self, frame: Motion | None) -> Motion | None: ...
+
+    def skip(self) -> Motion | None: ...
+
+    def finish(self) -> list[Motion]: ...
+
+
+@dataclass
+class Replay:
+    """What a real-time replay gave: B, per-frame processing times and dropped frames.
+
+    Attributes:
+        motion: B's frames, at the partner's rate.
+        times_ms: (n,) processing time of each frame that was processed.
+        dropped: frames skipped because processing fell behind (a frame is
+            dropped when its successor is already due before it could start).
+        lag: the partner's lag in frames.
+    """
+
+    motion: Motion
+    times_ms: np.ndarray
+    dropped: int
+    lag: int
+
+    def summary(self) -> str:
+        """One line: latency median and p99, dropped frames, lag."""
+        times = self.times_ms if len(self.times_ms) else np.zeros(1)
+        return (
+            f"latency per frame median {np.median(times):.2f} ms, p99 "
+            f"{np.percentile(times, 99):.2f} ms; dropped frames {self.dropped}; lag {self.lag} "
+            f"frames ({self.lag / self.motion.fps:.2f} s)"
+        )
+
+
+def concatenate(frames: list[Motion], fps: float, name: str = "virtual partner") -> Motion:
+    """One Motion from a partner's one-frame Motions."""
+    if not frames:
+        raise ValueError("the partner produced no frames")
+    return Motion(
+        frames[0].skeleton,
+        np.concatenate([f.rotations for f in frames]),
+        np.concatenate([f.translations for f in frames]),
+        fps,
+        name=name,
+    )
+
+
+def run(partner: OnlinePartner, motion: Motion) -> Motion:
+    """B for the whole of ``motion`` through ``partner`` as fast as possible (no clock)."""
+    out = [f for t in range(motion.n_frames) if (f := partner.step(motion.trim(t, t + 1)))]
+    out.extend(partner.finish())
+    return concatenate(out, partner.fps)
+
+
+def replay(make_partner, motion: Motion) -> Replay:
+    """Replay ``motion`` at its frame rate through a fresh partner from ``make_partner()``.
+
+    ``motion`` must be at the partner's rate. A frame whose successor is
+    already due is dropped (:meth:`OnlinePartner.skip`), never queued. A first
+    partner is stepped once before the clock starts, so compiled kernels are
+    loaded before the first timed frame.
+    """
+    make_partner().step(motion.trim(0, 1))
+    partner = make_partner()
+    period = 1.0 / motion.fps
+    out, times, dropped = [], [], 0
+    start = time.perf_counter()
+    for t in range(motion.n_frames):
+        now = time.perf_counter()
+        due = start + t * period
+        if now < due:
+            time.sleep(due - now)
+        tick = time.perf_counter()
+        if tick > due + period:
+            dropped += 1
+            frame = partner.skip()
+        else:
+            frame = partner.step(motion.trim(t, t + 1))
+            times.append((time.perf_counter() - tick) * 1e3)
+        if frame is not None:
+            out.append(frame)
+    out.extend(partner.finish())
+    return Replay(concatenate(out, partner.fps), np.array(times), dropped, int(partner.lag))
