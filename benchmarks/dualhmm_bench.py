@@ -41,16 +41,12 @@ from rich.console import Console
 from rich.table import Table
 from threadpoolctl import threadpool_limits
 
+from markovmotion.algorithms.gaussian import gaussian_log_density, precision_cholesky
 from markovmotion.algorithms.windowed_viterbi import WindowedViterbi, one_hot_log
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.io.bvh import read_bvh
 from markovmotion.models.hmm.dual import DualHMM
-from markovmotion.models.hmm.gaussian import (
-    GaussianHMM,
-    gaussian_log_density,
-    precision_cholesky,
-    safe_log,
-)
+from markovmotion.models.hmm.gaussian import GaussianHMM, safe_log
 
 N, DIMS, WINDOW = 64, 11, 10
 

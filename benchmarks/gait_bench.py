@@ -26,9 +26,10 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from markovmotion.algorithms.gaussian import log_gaussian_diag
+from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.data import MocapIndex
-from markovmotion.models.gait.hsmm import duration_log_pmf, forward_backward, log_gaussian_diag
 from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
 
 #: nnmnkwii's windows for eqs. (2) and (3): (left, right, coefficients).

@@ -9,6 +9,7 @@ import pytest
 from scipy.optimize import linear_sum_assignment
 from scipy.special import logsumexp
 
+from markovmotion.algorithms.gaussian import floor_covariances
 from markovmotion.algorithms.hmm_recursions import forward, forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import (
     WindowedViterbi,
@@ -16,7 +17,7 @@ from markovmotion.algorithms.windowed_viterbi import (
     one_hot_log,
     windowed_viterbi,
 )
-from markovmotion.models.hmm.gaussian import GaussianHMM, floor_covariances
+from markovmotion.models.hmm.gaussian import GaussianHMM
 
 
 def random_chain(rng: np.random.Generator, n: int, stay: float = 0.0):

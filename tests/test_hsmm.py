@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
+from markovmotion.algorithms.gaussian import log_gaussian_diag
+from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.models.gait.adaptation import (
     METHODS,
     RegressionTree,
@@ -19,12 +21,7 @@ from markovmotion.models.gait.adaptation import (
     walker_adaptive_training,
 )
 from markovmotion.models.gait.context_tree import cluster_state
-from markovmotion.models.gait.hsmm import (
-    HSMM,
-    duration_log_pmf,
-    forward_backward,
-    log_gaussian_diag,
-)
+from markovmotion.models.gait.hsmm import HSMM
 from markovmotion.state import estimator_state, restore_estimator
 
 

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.models.gait.hsmm import HSMM, hard_posteriors, log_gaussian_diag
+from markovmotion.algorithms.gaussian import log_gaussian_diag
+from markovmotion.models.gait.hsmm import HSMM, hard_posteriors
 
 STRUCTURES = ("stream", "diagonal")
 METHODS = ("csmaplr", "cmllr")

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-LOG_2PI = np.log(2 * np.pi)
+from markovmotion.algorithms.gaussian import LOG_2PI
 
 
 def _log_like(occ: float, s1: np.ndarray, s2: np.ndarray, floor: np.ndarray) -> float:

@@ -47,6 +47,11 @@ import numba
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from markovmotion.algorithms.gaussian import (
+    gaussian_log_density,
+    precision_cholesky,
+    weighted_gaussians,
+)
 from markovmotion.algorithms.hmm_recursions import viterbi
 from markovmotion.algorithms.windowed_viterbi import (
     INITIAL,
@@ -58,14 +63,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_motion import ground_frame
-from markovmotion.models.hmm.gaussian import (
-    GaussianHMM,
-    check_sequences,
-    gaussian_log_density,
-    precision_cholesky,
-    safe_log,
-    weighted_gaussians,
-)
+from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.progress import err_console
 from markovmotion.state import estimator_state, register, restore_estimator
