@@ -26,7 +26,8 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from markovmotion.data import MocapIndex
-from markovmotion.evaluate.chain import mocap_takes, salsa_split
+from markovmotion.data.splits import held_out_pairs
+from markovmotion.evaluate.chain import mocap_takes
 from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.render import render_frames, side_camera
 from markovmotion.video.tracker import SilhouetteTracker
@@ -66,7 +67,7 @@ def main() -> None:
     cv2.setNumThreads(1)
 
     index = MocapIndex.load(args.data)
-    train, test = salsa_split(index)
+    train, test = held_out_pairs(index.pairs(label="salsa"))
     take = mocap_takes(index, test[:1])[0].trim(0, args.frames)
     if args.model:
         model, _ = VirtualPartner.load(args.model)

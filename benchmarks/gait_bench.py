@@ -30,7 +30,8 @@ from markovmotion.algorithms.gaussian import log_gaussian_diag
 from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.data import MocapIndex
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
+from markovmotion.data.splits import held_out_every
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
 
 #: nnmnkwii's windows for eqs. (2) and (3): (left, right, coefficients).
 WINDOWS = [
@@ -77,7 +78,7 @@ def bench_mlpg(repeats: int, t_len: int = 10_000, dims: int = 54) -> list[tuple[
 
 def bench_forward_backward(n_walks: int, repeats: int) -> list[tuple[str, str]]:
     index = MocapIndex.load()
-    train, _ = split_walks(gait_entries(index, "normal"))
+    train, _ = held_out_every(gait_entries(index, "normal"))
     motions = [index.load_motion(e) for e in train[:n_walks]]
     model = GaitSynthesizer(n_iter=1).fit(motions)
     data = model.walk_set(motions)

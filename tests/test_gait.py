@@ -7,6 +7,7 @@ import pytest
 
 from markovmotion import read_motion
 from markovmotion.cli import main
+from markovmotion.data.splits import held_out_every
 from markovmotion.errors import ModelFormatError
 from markovmotion.features import ExpMaps, FeaturePipeline
 from markovmotion.features.gait import (
@@ -18,7 +19,7 @@ from markovmotion.features.gait import (
     travel_yaw,
 )
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
 
 
 def angle_between(a: np.ndarray, b: np.ndarray) -> float:
@@ -29,7 +30,7 @@ def angle_between(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.fixture(scope="session")
 def normal_walks(mocap):
     """Four neutral Bandai walks (training split), read once."""
-    train, _ = split_walks(gait_entries(mocap, "normal"))
+    train, _ = held_out_every(gait_entries(mocap, "normal"))
     return [mocap.load_motion(e) for e in train[:4]]
 
 
@@ -159,7 +160,7 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
     """Adapted to 'elderly' from 12 training steps: its steps recognised as elderly, closer to held-out ones."""
     from markovmotion.evaluate.gait import Evaluation, StyleClassifier
 
-    train, test = split_walks(gait_entries(mocap, "elderly"))
+    train, test = held_out_every(gait_entries(mocap, "elderly"))
     elderly = [mocap.load_motion(e) for e in (*train[:2], test[0])]
     ev = Evaluation.prepare(
         {"normal": normal_walks[:2], "elderly": elderly[:2]},

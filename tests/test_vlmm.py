@@ -9,10 +9,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
+from markovmotion.data.splits import held_out_last
 from markovmotion.evaluate.vlmm import HorizonCurve, ZeroVelocity, evaluate_horizon
 from markovmotion.models.vlmm.behaviour import (
     BehaviourModel,
-    held_out_split,
     load_behaviour_model,
     load_motions,
 )
@@ -202,7 +202,7 @@ def test_e_t_agrees_with_a_hand_computation():
 def exercise(mocap):
     """Three Indian-dance takes for training and one held out, at 15 fps."""
     entries = mocap.query(category="exercise", label="indian_dance")
-    train, test = held_out_split(entries)
+    train, test = held_out_last(entries)
     assert [e.name for e in test] == ["indian_14"]
     motions, _ = load_motions(mocap, train[:3] + test, 15.0)
     return motions[:3], motions[3:]

@@ -16,13 +16,13 @@ from rich.table import Table
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
+from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import MarkovMotionError
 from markovmotion.evaluate.chain import (
     SOURCES,
     dual_hmm_partners,
     evaluate_partner,
     mocap_takes,
-    salsa_split,
 )
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
@@ -63,7 +63,7 @@ def _check_response(response: str) -> None:
 def _training_takes(data: Path | None, source: str, label: str):
     if source == "mocap":
         index = MocapIndex.load(data)
-        train, _ = salsa_split(index, label)
+        train, _ = held_out_pairs(index.pairs(label=label))
         return mocap_takes(index, train)
     from markovmotion.video.dataset import silhouette_takes
 
@@ -193,7 +193,7 @@ def evaluate(
     others = None
     if source == "mocap":
         index = MocapIndex.load(test)
-        _, held_out = salsa_split(index, label)
+        _, held_out = held_out_pairs(index.pairs(label=label))
         takes = mocap_takes(index, held_out, fps=partner_model.fps_)
         if dual_hmm is not None:
             from markovmotion.models.hmm.dual import DualHMM

@@ -43,7 +43,8 @@ def load_walks(
     the held-out takes (every fourth of each style) or all. The folder of
     each walk (its dataset) is appended to ``folders`` if given.
     """
-    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries, split_walks
+    from markovmotion.data.splits import held_out_every
+    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries
 
     if paths and not _is_index(paths):
         if folders is not None:
@@ -53,7 +54,7 @@ def load_walks(
         raise typer.BadParameter(f"split must be one of {', '.join(SPLITS)}")
     index = MocapIndex.load(paths[0] if paths else None)
     entries = gait_entries(index, labels, subset or DEFAULT_SUBSET)
-    train, test = split_walks(entries)
+    train, test = held_out_every(entries)
     chosen = {"train": train, "test": test, "all": entries}[split]
     if not chosen:
         raise DataNotFoundError(
@@ -325,8 +326,9 @@ def evaluate(
     """
     import json
 
+    from markovmotion.data.splits import held_out_every
     from markovmotion.evaluate.gait import ROLES, Evaluation, StyleClassifier
-    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries, split_walks
+    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries
     from markovmotion.progress import progress_bar
 
     try:
@@ -342,7 +344,7 @@ def evaluate(
     if ks and not found["average"]:
         raise DataNotFoundError(f"{models}: the sweep needs an average model in the folder")
     index = MocapIndex.load(test)
-    train, held_out = split_walks(gait_entries(index, None, subset or DEFAULT_SUBSET))
+    train, held_out = held_out_every(gait_entries(index, None, subset or DEFAULT_SUBSET))
     seen = {f for role in found.values() for m in role.values() for f in m.files_}
     leaked = sorted(seen & {e.name for e in held_out})
     if leaked:

@@ -13,7 +13,8 @@ import typer
 from rich.console import Console
 
 from markovmotion.data.index import listed_entry
-from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.data.splits import select_pairs
+from markovmotion.errors import MotionFormatError
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console, track
 
@@ -46,26 +47,6 @@ JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 
 def _split(values: str | None) -> list[str] | None:
     return [v.strip() for v in values.split(",") if v.strip()] if values else None
-
-
-def select_pairs(index, labels: list[str] | None, trials: list[str] | None, held_out: bool):
-    """Two-person takes of ``labels``: those of ``trials`` (``held_out``) or all the others."""
-    pairs = index.pairs(label=labels)
-    if trials is not None:
-        wanted = {t.lstrip("0") for t in trials}
-        unknown = wanted - {p[0].trial.lstrip("0") for p in pairs}
-        if unknown:  # a mistyped test trial would otherwise leak into training
-            raise DataNotFoundError(
-                f"no two-person take of labels={labels or 'any'} has trial "
-                f"{', '.join(sorted(unknown))} in {index.root / 'INDEX.csv'}"
-            )
-        pairs = [p for p in pairs if (p[0].trial.lstrip("0") in wanted) == held_out]
-    if not pairs:
-        raise DataNotFoundError(
-            f"no two-person takes in {index.root / 'INDEX.csv'} match "
-            f"labels={labels or 'any'} trials={trials or 'any'}"
-        )
-    return pairs
 
 
 def new_model(

@@ -67,7 +67,8 @@ def train(
     seed: int = typer.Option(0, help="Seed of the vector quantisation."),
 ) -> None:
     """Learn prototypes and a VLMM (optionally the structured model) from motion capture."""
-    from markovmotion.models.vlmm.behaviour import BehaviourModel, held_out_split, load_motions
+    from markovmotion.data.splits import held_out_last
+    from markovmotion.models.vlmm.behaviour import BehaviourModel, load_motions
 
     check_model_output(out)
     index = MocapIndex.load(data)
@@ -75,7 +76,7 @@ def train(
     if not entries:
         which = f"{category} takes labelled {label}" if label else f"{category} takes"
         raise DataNotFoundError(f"no {which} in {index.root}")
-    train_entries, test_entries = held_out_split(entries) if hold_out else (entries, [])
+    train_entries, test_entries = held_out_last(entries) if hold_out else (entries, [])
     motions, skipped = load_motions(index, train_entries, fps)
     used = [e for e in train_entries if e not in skipped]
     model = BehaviourModel(

@@ -8,9 +8,10 @@ import numpy as np
 from rich.console import Console
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.splits import held_out_every
 from markovmotion.features.gait import align_walk, detect_steps
 from markovmotion.io import write_motion
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries, split_walks
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
 from markovmotion.progress import track
 from markovmotion.viz import render, render_frames
 
@@ -21,8 +22,8 @@ ADAPTATION_STEPS = 12
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Stylistic gait (HSMM): an average walk adapted to an elderly style from 12 steps, beside a real one."""
-    normal_train, _ = split_walks(gait_entries(index, "normal"))
-    style_train, style_test = split_walks(gait_entries(index, STYLE))
+    normal_train, _ = held_out_every(gait_entries(index, "normal"))
+    style_train, style_test = held_out_every(gait_entries(index, STYLE))
     normal = [
         index.load_motion(e) for e in track(normal_train[:AVERAGE_WALKS], "loading neutral walks")
     ]

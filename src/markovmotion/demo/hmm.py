@@ -7,6 +7,7 @@ from pathlib import Path
 from rich.console import Console
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.splits import held_out_pairs
 from markovmotion.evaluate.hmm import evaluate_pair, plot_pair
 from markovmotion.io import write_motion
 from markovmotion.models.hmm.dual import DualHMM
@@ -14,15 +15,14 @@ from markovmotion.progress import track
 from markovmotion.viz import render
 
 LABEL = "salsa"
-HELD_OUT = ("03", "09", "13")  # the README's fixed split; the demo shows the last one
 TRAIN_TAKES = 4  # a minute at most: four takes, 16 states
 
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Virtual partner (dual HMM, windowed Viterbi): a held-out salsa dancer and the generated partner."""
     pairs = index.pairs(label=LABEL)
-    train = [p for p in pairs if p[0].trial not in HELD_OUT][:TRAIN_TAKES]
-    test = next(p for p in pairs if p[0].trial == HELD_OUT[-1])
+    train, held_out = held_out_pairs(pairs)
+    train, test = train[:TRAIN_TAKES], held_out[-1]
     takes = [index.load_pair(a, b) for a, b in track(train, "loading salsa takes")]
     model = DualHMM(n_states=16, n_iter=20).fit(takes)
     console.print(

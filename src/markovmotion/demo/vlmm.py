@@ -13,13 +13,14 @@ from markovmotion.io import write_motion
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Routines synthesized by VLMMs of CMU dance and martial arts (VLMM paper Figs. 3, 6, 9)."""
-    from markovmotion.models.vlmm.behaviour import BehaviourModel, held_out_split, load_motions
+    from markovmotion.data.splits import held_out_last
+    from markovmotion.models.vlmm.behaviour import BehaviourModel, load_motions
     from markovmotion.models.vlmm.structured import StructuredBehaviourModel
     from markovmotion.viz import render
     from markovmotion.viz.plots import new_figure, save_figure
 
     entries = index.query(category="exercise", label=("indian_dance", "martial_arts"))
-    train, _ = held_out_split(entries)
+    train, _ = held_out_last(entries)
     train = [e for label in ("indian_dance", "martial_arts") for e in train if e.label == label][:8]
     motions, _ = load_motions(index, train, 30.0)
     base = BehaviourModel(n_prototypes=80, max_memory=5)

@@ -46,18 +46,7 @@ from markovmotion.progress import track
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
 
-#: Held-out salsa trials (CMU subjects 60/61): the last three pairs.
-TEST_TRIALS = ("12", "13", "15")
 SOURCES = ("mocap", "silhouette")
-
-
-def salsa_split(
-    index: MocapIndex, label: str = "salsa"
-) -> tuple[list[tuple[Entry, Entry]], list[tuple[Entry, Entry]]]:
-    """(training, held-out) two-person takes of ``label``; held out: :data:`TEST_TRIALS`."""
-    pairs = index.pairs(label=label)
-    test = [p for p in pairs if p[0].trial in TEST_TRIALS]
-    return [p for p in pairs if p[0].trial not in TEST_TRIALS], test
 
 
 def mocap_takes(

@@ -1,0 +1,13 @@
+"""The models of the four papers, one package per family, on one contract.
+
+``base`` (:class:`Model`: fit / save / load / the verbs, the ``KIND``
+registry, ``train_files_``), ``online`` (the online partner protocol),
+``hmm`` (Gaussian and dual HMMs), ``vlmm`` (variable-length Markov models of
+behaviour), ``gait`` (HSMM gait synthesis and adaptation), ``chain``
+(behaviour chain and CONDENSATION partner). ``Model.load(path)`` reads a
+model of any kind.
+"""
+
+from markovmotion.models.base import KINDS, Model
+
+__all__ = ["KINDS", "Model"]

@@ -19,8 +19,9 @@ import os
 from pathlib import Path
 
 from markovmotion.data.index import MocapIndex
+from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import DataNotFoundError
-from markovmotion.evaluate.chain import mocap_takes, salsa_split
+from markovmotion.evaluate.chain import mocap_takes
 from markovmotion.features.joint_shape import TwoPeople
 from markovmotion.io.files import atomic_write
 from markovmotion.progress import track
@@ -42,7 +43,7 @@ def render_takes(
     """Render every two-person take of ``label`` into ``out`` (``.mp4`` files, or PNG folders
     with ``suffix`` ""); returns the path of ``index.json``."""
     index = MocapIndex.load(data)
-    train, test = salsa_split(index, label)
+    train, test = held_out_pairs(index.pairs(label=label))
     out = Path(out)
     entries = []
     for pair, split in track(

@@ -52,8 +52,6 @@ ROLES = ("average", "adapted", "scratch")
 #: The walks of the shared collection used by default: Bandai Namco dataset-2
 #: (about 20 takes of each of 7 styles, one skeleton).
 DEFAULT_SUBSET = "bandai/dataset-2/"
-#: Every TEST_EVERY-th take of each style (sorted by file) is held out for evaluation.
-TEST_EVERY = 4
 
 
 def gait_entries(
@@ -62,16 +60,6 @@ def gait_entries(
     """Walk entries (neutral and styled) whose file starts with ``subset``, optionally of some labels."""
     rows = index.query(category=["walk", "style_walk"], label=labels)
     return sorted((e for e in rows if e.file.startswith(subset)), key=lambda e: e.file)
-
-
-def split_walks(entries: Sequence[Entry]) -> tuple[list[Entry], list[Entry]]:
-    """(training, held-out) takes: every ``TEST_EVERY``-th take of each label is held out."""
-    train, test = [], []
-    for label in sorted({e.label for e in entries}):
-        rows = sorted((e for e in entries if e.label == label), key=lambda e: e.file)
-        for i, e in enumerate(rows):
-            (test if i % TEST_EVERY == TEST_EVERY - 1 else train).append(e)
-    return train, test
 
 
 @dataclass

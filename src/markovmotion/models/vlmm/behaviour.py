@@ -47,20 +47,6 @@ MODEL_KIND = "vlmm"
 
 
 # ------------------------------------------------------------------- data
-def held_out_split(entries: Sequence[Entry]) -> tuple[list[Entry], list[Entry]]:
-    """Hold out the last trial (in INDEX.csv order) of every label that has two or more.
-
-    Returns ``(train, test)``; a label with a single trial stays in training.
-    """
-    last: dict[str, Entry] = {}
-    counts: dict[str, int] = {}
-    for e in entries:
-        last[e.label] = e
-        counts[e.label] = counts.get(e.label, 0) + 1
-    test = [e for e in entries if counts[e.label] > 1 and last[e.label] is e]
-    return [e for e in entries if e not in test], test
-
-
 def load_motions(
     index: MocapIndex, entries: Sequence[Entry], fps: float
 ) -> tuple[list[Motion], list[Entry]]:

@@ -1,0 +1,84 @@
+"""Which takes of an INDEX.csv a model is evaluated on: any index, without leakage.
+
+Every family's ``evaluate --test PATH/INDEX.csv`` goes through
+:func:`test_takes`: the takes of that index that fit the model (a predicate
+the family gives: category, labels, skeleton) are candidates; those whose
+file content the model trained on (``train_files_``, compared by SHA-256, not
+by path or name) are left out and listed. If nothing remains, one line says
+so (:class:`~markovmotion.errors.DataNotFoundError`, exit 2 on the command
+line). Every family's JSON carries :meth:`TestTakes.report`'s two lists.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.errors import DataNotFoundError
+from markovmotion.models.base import Model, file_sha256, training_hashes
+
+T = TypeVar("T", Entry, tuple)
+
+
+@dataclass
+class TestTakes:
+    """Takes to evaluate on, and the listed takes left out because the model trained on them.
+
+    ``takes`` are entries, or (A, B) entry pairs for two-person models.
+    """
+
+    __test__ = False  # not a pytest class
+
+    takes: list[Any]
+    left_out: list[Any] = field(default_factory=list)
+
+    @staticmethod
+    def _files(items: Sequence[Any]) -> list[str]:
+        out: list[str] = []
+        for item in items:
+            for e in item if isinstance(item, tuple) else (item,):
+                out.append(e.file)
+        return out
+
+    def report(self) -> dict[str, list[str]]:
+        """``test_files`` and ``left_out_training_files`` (INDEX.csv file names) for a JSON."""
+        return {
+            "test_files": self._files(self.takes),
+            "left_out_training_files": self._files(self.left_out),
+        }
+
+
+def trained_on(model: Model, entry: Entry) -> bool:
+    """Whether the file of ``entry`` has the content of one of the model's training files."""
+    hashes = training_hashes(model)
+    return bool(hashes) and entry.path.is_file() and file_sha256(entry.path) in hashes
+
+
+def test_takes(
+    model: Model,
+    index: MocapIndex,
+    candidates: Sequence[T],
+    what: str = "take",
+) -> TestTakes:
+    """``candidates`` (entries or entry pairs of ``index`` that fit the model) minus those the
+    model trained on (a pair is left out if either person's file was a training file).
+
+    Raises:
+        DataNotFoundError: nothing fits the model, or every take that does is a training take.
+    """
+    where = index.root / "INDEX.csv"
+    if not candidates:
+        raise DataNotFoundError(f"no {what} in {where} fits the model")
+    keep: list[T] = []
+    left: list[T] = []
+    for item in candidates:
+        people = item if isinstance(item, tuple) else (item,)
+        (left if any(trained_on(model, e) for e in people) else keep).append(item)
+    if not keep:
+        names = ", ".join(TestTakes._files(left))
+        raise DataNotFoundError(
+            f"every {what} of {where} that fits the model is one it trained on: {names}"
+        )
+    return TestTakes(keep, left)
