@@ -1,0 +1,59 @@
+"""Printing result tables: Rich boxes on a terminal, full text everywhere else.
+
+Rich squeezes a table into the console width and truncates cells with an
+ellipsis. On a terminal that is what a reader wants; piped into a file or a
+log (80 columns assumed) a truncated name is lost. So when standard output is
+not a terminal and the table would be wider than 80 columns, it is printed as
+CSV (title and caption as ``#`` comment lines), every cell whole.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import sys
+
+from rich.console import Console
+from rich.measure import Measurement
+from rich.table import Table
+
+#: The width assumed for output that is not a terminal.
+PLAIN_WIDTH = 80
+
+
+def _plain(cell: object) -> str:
+    text = getattr(cell, "plain", None)
+    return str(cell) if text is None else text
+
+
+def table_rows(table: Table) -> list[list[str]]:
+    """The header and body of ``table`` as plain strings."""
+    columns = table.columns
+    header = [_plain(c.header) for c in columns]
+    cells = [[_plain(c) for c in col.cells] for col in columns]
+    return [header] + [list(row) for row in zip(*cells, strict=True)]
+
+
+def table_as_csv(table: Table) -> str:
+    """``table`` as CSV text, title and caption as ``#`` lines."""
+    buf = io.StringIO()
+    if table.title:
+        buf.write(f"# {_plain(table.title)}\n")
+    csv.writer(buf, lineterminator="\n").writerows(table_rows(table))
+    if table.caption:
+        buf.write(f"# {_plain(table.caption)}\n")
+    return buf.getvalue()
+
+
+def print_table(table: Table, console: Console | None = None) -> None:
+    """Print ``table`` to standard output (see the module docstring)."""
+    console = console or Console()
+    if console.is_terminal:
+        console.print(table)
+        return
+    wide = Console(width=10_000, file=io.StringIO())
+    width = Measurement.get(wide, wide.options, table).maximum
+    if width <= PLAIN_WIDTH:
+        Console(width=PLAIN_WIDTH, file=console.file).print(table)
+    else:
+        (console.file or sys.stdout).write(table_as_csv(table))
