@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.fetch import BANDAI_BASE_URL, CMU_BASE_URL, INTERACTION_SUBJECTS, fetch
 from markovmotion.progress import err_console
@@ -30,7 +30,7 @@ def list_(
         table.add_column(col)
     for e in rows:
         table.add_row(e.file, e.source, e.category, e.label, f"{e.fps:g}", str(e.frames))
-    Console().print(table)
+    print_table(table)
 
 
 def _subject_numbers(value: str) -> list[int]:

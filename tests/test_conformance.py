@@ -1,0 +1,215 @@
+"""One contract for every family (models/base.py), checked over the list of top-level models.
+
+As dynamax's ``models/test_models.py`` does over its model list: each model is
+fitted on a few seconds of real motion, saved, loaded back (by its own class
+and by ``Model.load``), and every verb it declares gives identical outputs
+before and after; the verbs return Motions (``score`` a finite float);
+``load`` of a file of another kind is a one-line error; the constructor
+stores hyper-parameters only. A fifth family adds one entry to ``FAMILIES``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+
+from markovmotion.core.motion import Motion
+from markovmotion.data.splits import held_out_every
+from markovmotion.errors import ModelFormatError
+from markovmotion.models import KINDS, Model
+from markovmotion.models.base import ALL_VERBS
+from markovmotion.models.chain.partner import VirtualPartner
+from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.models.online import OnlinePartner, run
+from markovmotion.models.vlmm.behaviour import BehaviourModel
+from markovmotion.models.vlmm.structured import StructuredBehaviourModel
+
+
+@dataclass
+class Family:
+    """A top-level model, how to make its training data, and how to call each of its verbs."""
+
+    name: str
+    make: Callable[[], Model]
+    data: str  # key into the ``data`` fixture
+    verbs: dict[str, Callable[[Any, Any], Any]]
+
+
+def _pairs_input(data):
+    return data[0][0]
+
+
+FAMILIES = [
+    Family(
+        "hmm",
+        lambda: DualHMM(n_states=4, n_iter=3, window=4, placement_window=3),
+        "pairs",
+        {
+            "respond": lambda m, d: m.respond(_pairs_input(d), method="windowed"),
+            "score": lambda m, d: m.score(_pairs_input(d)),
+            "partner": lambda m, d: run(m.partner(), _pairs_input(d)),
+        },
+    ),
+    Family(
+        "vlmm",
+        lambda: BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, seed=0),
+        "single",
+        {
+            "generate": lambda m, d: m.generate(2.0, rng=np.random.default_rng(0)),
+            "predict": lambda m, d: m.predict(d[0], 0.5, rng=np.random.default_rng(0)),
+            "score": lambda m, d: m.score(d),
+        },
+    ),
+    Family(
+        "structured_vlmm",
+        lambda: StructuredBehaviourModel(
+            prototype_model=BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, seed=0)
+        ),
+        "single",
+        {
+            "generate": lambda m, d: m.generate(2.0, rng=np.random.default_rng(0)),
+            "predict": lambda m, d: m.predict(d[0], 0.5, rng=np.random.default_rng(0)),
+            "score": lambda m, d: m.score(d),
+        },
+    ),
+    Family(
+        "gait",
+        lambda: GaitSynthesizer(n_iter=1),
+        "walks",
+        {
+            "generate": lambda m, d: m.generate(n_steps=3, rng=np.random.default_rng(0)),
+            "score": lambda m, d: m.score(d[:1]),
+        },
+    ),
+    Family(
+        "chain",
+        lambda: VirtualPartner(n_state_prototypes=12, n_behaviour_prototypes=8, n_epochs=2),
+        "pairs",
+        {
+            "respond": lambda m, d: m.respond(_pairs_input(d)),
+            "partner": lambda m, d: run(m.partner(), _pairs_input(d)),
+        },
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def data(mocap) -> dict[str, list]:
+    """A few seconds of real motion of each kind the families learn from."""
+    a, b = mocap.pairs(label="salsa")[0]
+    pair = tuple(m.trim(0, 240) for m in mocap.load_pair(a, b))  # 4 s at 60 fps
+    single = [mocap.load_motion(e).trim(0, 600) for e in mocap.query(category="exercise")[:2]]
+    walks, _ = held_out_every(gait_entries(mocap, "normal"))
+    return {
+        "pairs": [pair],
+        "single": single,
+        "walks": [mocap.load_motion(e) for e in walks[:2]],
+    }
+
+
+@pytest.fixture(scope="module")
+def fitted(data) -> dict[str, Model]:
+    out = {}
+    for fam in FAMILIES:
+        model = fam.make()
+        assert model.fit(data[fam.data]) is model, f"{fam.name}: fit must return self"
+        out[fam.name] = model
+    return out
+
+
+def _same(a: Any, b: Any) -> None:
+    if isinstance(a, Motion):
+        assert isinstance(b, Motion)
+        np.testing.assert_array_equal(a.rotations, b.rotations)
+        np.testing.assert_array_equal(a.translations, b.translations)
+        assert a.fps == b.fps
+    else:
+        assert a == b
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_verbs_are_declared_and_give_motions(fam, fitted, data):
+    model = fitted[fam.name]
+    assert set(model.VERBS) == set(fam.verbs), "every declared verb is exercised here, and only those"
+    assert set(model.VERBS) <= set(ALL_VERBS)
+    for verb, call in fam.verbs.items():
+        out = call(model, data[fam.data])
+        if verb == "score":
+            assert isinstance(out, float) and np.isfinite(out)
+        else:
+            assert isinstance(out, Motion) and out.n_frames > 0, verb
+            assert np.isfinite(out.positions()).all(), verb
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_save_load_gives_identical_outputs(fam, fitted, data, tmp_path):
+    model = fitted[fam.name]
+    path = tmp_path / f"{fam.name}.npz"
+    model.save(path, note="kept")
+    for loaded in (type(model).load(path), Model.load(path)):
+        assert type(loaded) is type(model)
+        assert loaded.note_ == "kept"
+        assert loaded.train_files_ == model.train_files_
+        assert loaded.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+        for call in fam.verbs.values():
+            _same(call(model, data[fam.data]), call(loaded, data[fam.data]))
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_training_files_are_recorded_by_content(fam, fitted, data):
+    model = fitted[fam.name]
+    sources = {m.source for take in data[fam.data] for m in (take if isinstance(take, tuple) else (take,))}
+    assert model.train_files_ and len(model.train_files_) == len(sources)
+    for rec in model.train_files_:
+        assert len(rec["sha256"]) == 64 and rec["file"].endswith((".bvh.gz", ".bvh", ".amc"))
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_constructor_stores_hyperparameters_only(fam):
+    model = fam.make()
+    learnt = [k for k in vars(model) if k.endswith("_") and not k.startswith("_")]
+    assert not learnt, f"learnt attributes before fit: {learnt}"
+    assert type(model).KIND in KINDS and KINDS[type(model).KIND] is type(model)
+    twin = clone(model)
+    assert twin.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+
+
+@pytest.mark.parametrize(
+    "saved, loader",
+    [(a, b) for a, b in itertools.permutations(FAMILIES, 2)],
+    ids=lambda f: f.name,
+)
+def test_loading_a_file_of_another_kind_is_one_line(saved, loader, fitted, tmp_path):
+    model = fitted[saved.name]
+    cls = type(fitted[loader.name])
+    if issubclass(type(model), cls):
+        pytest.skip("a file of a subclass loads")
+    path = tmp_path / "other.npz"
+    model.save(path)
+    with pytest.raises(ModelFormatError) as err:
+        cls.load(path)
+    message = str(err.value)
+    assert "\n" not in message and "other.npz" in message and type(model).KIND in message
+
+
+@pytest.mark.parametrize(
+    "fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name
+)
+def test_online_partners_follow_the_protocol(fam, fitted, data):
+    model = fitted[fam.name]
+    partner = model.partner()
+    assert isinstance(partner, OnlinePartner)
+    a = _pairs_input(data[fam.data])
+    a = a.resample(partner.fps)
+    out = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    shown = [f for f in out if f is not None] + partner.finish()
+    assert all(f is None for f in out[: partner.lag])
+    assert len(shown) == a.n_frames
+    assert all(f.n_frames == 1 and f.skeleton.names == partner.skeleton.names for f in shown)
