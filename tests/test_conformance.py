@@ -59,7 +59,7 @@ FAMILIES = [
     ),
     Family(
         "vlmm",
-        lambda: BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, seed=0),
+        lambda: BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, random_state=0),
         "single",
         {
             "generate": lambda m, d: m.generate(2.0, rng=np.random.default_rng(0)),
@@ -70,7 +70,7 @@ FAMILIES = [
     Family(
         "structured_vlmm",
         lambda: StructuredBehaviourModel(
-            prototype_model=BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, seed=0)
+            prototype_model=BehaviourModel(n_prototypes=12, max_memory=3, fps=15.0, random_state=0)
         ),
         "single",
         {
@@ -137,7 +137,9 @@ def _same(a: Any, b: Any) -> None:
 @pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
 def test_verbs_are_declared_and_give_motions(fam, fitted, data):
     model = fitted[fam.name]
-    assert set(model.VERBS) == set(fam.verbs), "every declared verb is exercised here, and only those"
+    assert set(model.VERBS) == set(fam.verbs), (
+        "every declared verb is exercised here, and only those"
+    )
     assert set(model.VERBS) <= set(ALL_VERBS)
     for verb, call in fam.verbs.items():
         out = call(model, data[fam.data])
@@ -165,7 +167,9 @@ def test_save_load_gives_identical_outputs(fam, fitted, data, tmp_path):
 @pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
 def test_training_files_are_recorded_by_content(fam, fitted, data):
     model = fitted[fam.name]
-    sources = {m.source for take in data[fam.data] for m in (take if isinstance(take, tuple) else (take,))}
+    sources = {
+        m.source for take in data[fam.data] for m in (take if isinstance(take, tuple) else (take,))
+    }
     assert model.train_files_ and len(model.train_files_) == len(sources)
     for rec in model.train_files_:
         assert len(rec["sha256"]) == 64 and rec["file"].endswith((".bvh.gz", ".bvh", ".amc"))
@@ -199,9 +203,7 @@ def test_loading_a_file_of_another_kind_is_one_line(saved, loader, fitted, tmp_p
     assert "\n" not in message and "other.npz" in message and type(model).KIND in message
 
 
-@pytest.mark.parametrize(
-    "fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name
-)
+@pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
 def test_online_partners_follow_the_protocol(fam, fitted, data):
     model = fitted[fam.name]
     partner = model.partner()

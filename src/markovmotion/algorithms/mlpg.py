@@ -3,7 +3,7 @@
 Given per-frame Gaussian means and variances of the observations
 ``o_t = [c_t, dc_t, d2c_t]`` (the layout of :func:`~markovmotion.features.add_deltas`),
 :func:`mlpg` finds the static trajectory C maximising ``P(WC | q, lambda)``
-(eq. 11, with W of eq. 4 from :func:`~markovmotion.features.delta_matrix`):
+(eq. 11, with W of eq. 4 from :func:`delta_matrix`):
 ``C = (W' S^-1 W)^-1 W' S^-1 mu``. The matrix ``W' S^-1 W`` is banded (half
 bandwidth 4, from the delta-delta window), so each dimension is one banded
 Cholesky (LDL') solve, O(T) in frames; all dimensions are factored in one
@@ -25,10 +25,29 @@ import numba
 import numpy as np
 from scipy import sparse
 
-from markovmotion.features.deltas import delta_matrix
-
 #: Half bandwidth of W' S^-1 W: the widest window (delta-delta) reaches 2 frames each way.
 BANDWIDTH = 4
+
+
+#: Regression windows of eqs. (2) and (3): offsets -> weights.
+DELTA_WINDOW = {-1: -0.5, 1: 0.5}
+DELTA2_WINDOW = {-2: 0.25, 0: -0.5, 2: 0.25}
+
+
+def delta_matrix(n_frames: int) -> sparse.csr_matrix:
+    """W of eq. (4) for one dimension: (3T, T) with rows [c_t, dc_t, d2c_t] per frame t.
+
+    Frames outside the sequence take the value of the nearest edge frame, so a
+    constant sequence has zero deltas everywhere.
+    """
+    rows, cols, vals = [], [], []
+    for t in range(n_frames):
+        for block, window in enumerate(({0: 1.0}, DELTA_WINDOW, DELTA2_WINDOW)):
+            for off, w in window.items():
+                rows.append(3 * t + block)
+                cols.append(min(max(t + off, 0), n_frames - 1))
+                vals.append(w)
+    return sparse.csr_matrix((vals, (rows, cols)), shape=(3 * n_frames, n_frames))
 
 
 @numba.njit(cache=True)

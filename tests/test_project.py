@@ -1,0 +1,56 @@
+"""Project checks that CI runs through the README's one test command.
+
+Lint and formatting (ruff), the import layers of ``[tool.importlinter]`` in
+pyproject.toml (import-linter), and the documentation site (``mkdocs build
+--strict``, API reference from the docstrings). Each runs as a subprocess from
+the project root, with the interpreter running the tests, and prints its
+output when it fails.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CODE = ["src", "tests", "benchmarks"]
+LINT_IMPORTS = (
+    "import sys; from importlinter.cli import lint_imports_command; "
+    "sys.exit(lint_imports_command(prog_name='lint-imports'))"
+)
+
+
+def run(args: list[str], timeout: float = 600) -> None:
+    """Run ``args`` in the project root; fail with its output unless it exits 0."""
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}  # mkdocs-material's banner, not a warning
+    proc = subprocess.run(
+        args, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout, check=False
+    )
+    if proc.returncode != 0:
+        pytest.fail(
+            f"{' '.join(args)} exited {proc.returncode}\n"
+            f"--- stdout ---\n{proc.stdout}\n--- stderr ---\n{proc.stderr}",
+            pytrace=False,
+        )
+
+
+def test_ruff_check() -> None:
+    run([sys.executable, "-m", "ruff", "check", *CODE])
+
+
+def test_ruff_format() -> None:
+    run([sys.executable, "-m", "ruff", "format", "--check", *CODE])
+
+
+def test_import_layers() -> None:
+    """cli > web | video > demo > evaluate > models > algorithms | features > io > core."""
+    run([sys.executable, "-c", LINT_IMPORTS])
+
+
+def test_docs_build_strict(tmp_path: Path) -> None:
+    """The mkdocs site builds with no warning (broken links, missing API objects)."""
+    run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")])
