@@ -3,7 +3,9 @@
 1. Hypothesis propagation: a behaviour chain trained on the salsa training
    takes (or ``--model``) follows a held-out take frame by frame; the time of
    each ``step`` (propagation, likelihoods, resampling, response) with 200
-   hypotheses (weighted-mean, ML and MAP responses) and with a single hypothesis.
+   hypotheses (weighted-mean, ML and MAP responses) and with a single hypothesis;
+   and the whole online partner (``model.partner().step``: A's frame in, shape
+   vector, 200 hypotheses, B's frame out by inverse kinematics).
 2. Tracking one 640x480 frame: background subtraction, blobs, outlines and
    B-spline fits of two people, on frames rendered from a salsa take.
 
@@ -70,10 +72,10 @@ def main() -> None:
     train, test = held_out_pairs(index.pairs(label="salsa"))
     take = mocap_takes(index, test[:1])[0].trim(0, args.frames)
     if args.model:
-        model, _ = VirtualPartner.load(args.model)
+        model = VirtualPartner.load(args.model)
     else:
         start = time.perf_counter()
-        model = VirtualPartner().fit(mocap_takes(index, train))
+        model = VirtualPartner().fit([index.load_pair(a, b) for a, b in train])
         print(f"trained the behaviour chain in {time.perf_counter() - start:.1f} s")
     observations = model.observe(take.person(0))
 
@@ -88,6 +90,14 @@ def main() -> None:
     ):
         prop = model.propagator(0, **options)
         row(table, name, timed_steps(prop.step, observations))
+    a = index.load_pair(*test[0])[0].resample(model.fps_).trim(0, args.frames)
+    partner = model.partner(n_hypotheses=200)
+    frames_a = [a.trim(t, t + 1) for t in range(a.n_frames)]
+    row(
+        table,
+        "online partner, 200 hypotheses (frame in, frame out)",
+        timed_steps(partner.step, frames_a),
+    )
 
     people = [take.person(0), take.person(1)]
     frames = list(render_frames(people, side_camera(people)))

@@ -16,7 +16,7 @@
   log-likelihood histories. Compiled kernels are loaded before timing.
 
 - Online partner (with ``--partner MODEL --take BVH``, instead of the above):
-  :meth:`Partner.step` on
+  :meth:`markovmotion.models.hmm.partner.Partner.step` on
   every frame of a real take resampled to the model's rate, back to back (no
   pacing: ``respond --realtime`` sleeps between frames and so also measures
   the machine waking up), against :meth:`Partner.step_features` on the take's

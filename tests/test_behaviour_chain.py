@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
 import pytest
+from conftest import make_skeleton
 
 from markovmotion import read_motion
 from markovmotion.cli import main
-from markovmotion.errors import ModelFormatError
+from markovmotion.core.motion import Motion
+from markovmotion.errors import ModelFormatError, SkeletonMismatchError
 from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
 from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
+from markovmotion.models.base import Model
 from markovmotion.models.chain.behaviour_chain import BehaviourChain, decay_behaviour, proximities
 from markovmotion.models.chain.condensation import (
     DEFAULT_SIGMA,
@@ -20,6 +26,7 @@ from markovmotion.models.chain.condensation import (
     weighted_mean,
 )
 from markovmotion.models.chain.partner import VirtualPartner
+from markovmotion.models.online import OnlinePartner, concatenate
 
 
 # --------------------------------------------------------------- joint shape vectors
@@ -273,16 +280,16 @@ def small_partner(salsa_take) -> VirtualPartner:
 def test_real_partner_follows_and_round_trips(small_partner, salsa_take, tmp_path):
     test = salsa_take.trim(600)
     real = test.person(0)
-    resp = small_partner.respond(real, 0, n_hypotheses=50)
+    resp = small_partner.respond_shapes(real, 0, n_hypotheses=50)
     assert resp.partner.points.shape == test.points[:, 1].shape
     assert np.all(np.isfinite(resp.partner.points))
     # the partner stands within arm's reach of where it was, its joints within 0.3 m
     err = np.linalg.norm(resp.partner.points - test.points[:, 1], axis=-1).mean()
     assert err < 1000.0
     small_partner.save(tmp_path / "m.npz")
-    back, source = VirtualPartner.load(tmp_path / "m.npz")
-    assert source == "mocap"
-    again = back.respond(real, 0, n_hypotheses=50)
+    back = VirtualPartner.load(tmp_path / "m.npz")
+    assert back.source == "mocap"
+    again = back.respond_shapes(real, 0, n_hypotheses=50)
     np.testing.assert_allclose(again.partner.points, resp.partner.points)
     with pytest.raises(ModelFormatError):
         VirtualPartner.load(tmp_path / "missing.npz")
@@ -292,7 +299,7 @@ def test_partner_of_the_second_person_is_the_first(small_partner, salsa_take):
     """With person 1 real, the partner is the model's person-0 half, placed from person 1."""
     seen = salsa_take.trim(0, 200)  # training frames: the chain knows them
     for person in (0, 1):
-        resp = small_partner.respond(seen.person(person), person, n_hypotheses=50)
+        resp = small_partner.respond_shapes(seen.person(person), person, n_hypotheses=50)
         assert np.all(resp.roles == person)
         to_partner = pose_error_mm(small_partner, resp.partner, seen.person(1 - person))
         to_real = pose_error_mm(small_partner, resp.partner, seen.person(person))
@@ -366,3 +373,97 @@ def test_silhouette_baseline_picks_the_side_without_being_told():
     right = model.mean_partner(real, true_roles)
     err = np.linalg.norm(right.points - test.points[:, 1], axis=-1).mean(axis=1) / 180.0
     assert err.mean() < 0.05  # the true side with the mean shape: the partner's own ellipse
+
+
+# ------------------------------------------------- the contract: pairs in, online partner
+@pytest.fixture(scope="session")
+def pair_partner(mocap) -> VirtualPartner:
+    """A small chain fitted on the contract's input: (Motion A, Motion B) pairs (10 s)."""
+    a, b = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    model = VirtualPartner(n_state_prototypes=12, n_behaviour_prototypes=10, n_epochs=2)
+    return model.fit([(a.trim(0, 600), b.trim(0, 600))])
+
+
+def test_fit_on_pairs_records_both_files_and_loads_alone(pair_partner, mocap, tmp_path):
+    a, b = mocap.pairs(label="salsa")[0]
+    assert [r["file"] for r in pair_partner.train_files_] == [a.path.name, b.path.name]
+    assert pair_partner.skeletons_[1].n_joints == 19 and pair_partner.fps_ == 25.0
+    pair_partner.save(tmp_path / "m.npz", source="mocap", labels=["salsa"])
+    back = Model.load(tmp_path / "m.npz")
+    assert isinstance(back, VirtualPartner) and back.source_ == "mocap"
+    assert back.labels_ == ["salsa"] and back.train_files_ == pair_partner.train_files_
+
+
+def test_online_partner_answers_frame_by_frame_as_respond(pair_partner, mocap):
+    a = mocap.load_motion(mocap.pairs(label="salsa")[0][0]).trim(600, 720)
+    whole = pair_partner.respond(a, n_hypotheses=20)
+    partner = pair_partner.partner(n_hypotheses=20)
+    assert isinstance(partner, OnlinePartner)
+    assert partner.lag == 2 and partner.fps == 25.0 and partner.skeleton.n_joints == 19
+    a25 = a.resample(partner.fps)
+    out = [partner.step(a25.trim(t, t + 1)) for t in range(a25.n_frames)]
+    assert out[:2] == [None, None] and all(f.n_frames == 1 for f in out[2:])
+    streamed = concatenate([f for f in out if f is not None] + partner.finish(), 25.0)
+    assert streamed.n_frames == whole.n_frames == a25.n_frames
+    np.testing.assert_allclose(streamed.positions(), whole.positions(), atol=1e-6)
+    with pytest.raises(SkeletonMismatchError):
+        partner.step(Motion.from_rotations(make_skeleton(), np.tile([0.0, 0, 0, 1], (1, 5, 1))))
+
+
+def _copy_index(root, mocap, trials: dict[str, str]) -> None:
+    """An INDEX.csv of COPIES of salsa takes under other names: ``{new name: trial}``."""
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    by_trial = {e.trial: (e, p) for e, p in mocap.pairs(label="salsa")}
+    (root / "takes").mkdir(parents=True)
+    for name, trial in trials.items():
+        for person, entry in zip("ab", by_trial[trial], strict=True):
+            shutil.copyfile(entry.path, root / "takes" / f"{name}_{person}.bvh.gz")
+        for me, other in ("ab", "ba"):
+            rows.append(
+                f"takes/{name}_{me}.bvh.gz,mine,,{name},interaction,salsa,"
+                f"takes/{name}_{other}.bvh.gz,60,,a dance"
+            )
+    (root / "INDEX.csv").write_text("\n".join(rows) + "\n")
+
+
+def test_evaluate_on_any_index_leaves_training_takes_out(pair_partner, mocap, tmp_path, capsys):
+    model = tmp_path / "m.npz"
+    pair_partner.save(model, source="mocap", labels=["salsa"])
+    train_trial = mocap.pairs(label="salsa")[0][0].trial
+    _copy_index(tmp_path / "mine", mocap, {"seen": train_trial, "new": "12"})
+    argv = ["chain", "evaluate", "--model", str(model), "--hypotheses", "4", "--json"]
+    main([*argv, "--test", str(tmp_path / "mine" / "INDEX.csv")])
+    result = json.loads(capsys.readouterr().out)
+    assert result["test_files"] == ["takes/new_a.bvh.gz", "takes/new_b.bvh.gz"]
+    assert result["left_out_training_files"] == ["takes/seen_a.bvh.gz", "takes/seen_b.bvh.gz"]
+    assert 0 < result["single_hypothesis"] < 1000 and 0 < result["mean_shape"] < 1000
+    # only training takes (the ZeroDivisionError of old), or none that fit: one line, exit 2
+    _copy_index(tmp_path / "seen", mocap, {"seen": train_trial})
+    (tmp_path / "none").mkdir()
+    (tmp_path / "none" / "INDEX.csv").write_text(
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+    )
+    for index, words in (("seen", "one it trained on: takes/seen_a"), ("none", "no two-person")):
+        with pytest.raises(SystemExit) as info:
+            main([*argv, "--test", str(tmp_path / index / "INDEX.csv")])
+        err = capsys.readouterr().err
+        assert info.value.code == 2 and words in err
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_evaluation_table_lists_partners_not_parameters(capsys):
+    from markovmotion.cli.chain import _print_errors
+
+    errors = {"mean_shape": 97.8, "multiple_hypotheses_ml": 96.3}
+    result = {
+        **errors,
+        "multiple_hypotheses": 96.3,
+        "placement_mm": {"mean_shape": 590.6, "multiple_hypotheses_ml": 584.0},
+        "per_frame_ms": {"multiple_hypotheses_ml": 0.4},
+        "sigma": 0.15,
+        "resync": 0.0,
+    }
+    _print_errors(result, "virtual partner", "ml")
+    out = capsys.readouterr().out
+    assert "mean_shape" in out and "multiple_hypotheses_ml *" in out and "584" in out
+    assert "sigma" not in out and "resync" not in out

@@ -172,7 +172,9 @@ def test_training_files_are_recorded_by_content(fam, fitted, data):
     }
     assert model.train_files_ and len(model.train_files_) == len(sources)
     for rec in model.train_files_:
-        assert len(rec["sha256"]) == 64 and rec["file"].endswith((".bvh.gz", ".bvh", ".amc"))
+        assert len(rec["sha256"]) == 64 and rec["file"].endswith(
+            (".bvh.gz", ".bvh", ".amc", ".amc.gz")
+        )
 
 
 @pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -14,10 +15,13 @@ from markovmotion import persist
 from markovmotion.cli import main
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.data import MocapIndex
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
-from markovmotion.evaluate.hmm import cross_validate, evaluate_pair, summarise
+from markovmotion.evaluate.hmm import cross_validate, evaluate_pair, index_record, summarise
 from markovmotion.io import write_motion
+from markovmotion.models.base import KINDS, Model
 from markovmotion.models.hmm.dual import DualHMM, into_frame, out_of_frame
+from markovmotion.models.online import OnlinePartner, replay, run
 
 N_POSES = 4
 RNG = np.random.default_rng(11)
@@ -78,8 +82,8 @@ def test_generated_b_recovers_the_known_function_of_a_state(training, mode, obse
     ).fit(training)
     a, b, states = synthetic_pair(200, 9)
     truth = b.positions()
-    standard = dual.generate(a, "standard")
-    windowed = dual.generate(a, "windowed")
+    standard = dual.respond(a, "standard")
+    windowed = dual.respond(a, "windowed")
     assert standard.n_frames == windowed.n_frames == a.n_frames
     assert standard.skeleton.same_topology(b.skeleton)
     err_std = np.linalg.norm(standard.positions() - truth, axis=-1).mean(axis=1)
@@ -96,7 +100,7 @@ def test_generated_b_recovers_the_known_function_of_a_state(training, mode, obse
 def test_partner_streams_what_windowed_generation_gives(model, placement_window, capsys):
     model = copy.copy(model).set_params(placement_window=placement_window)
     a, _, _ = synthetic_pair(90, 5)
-    offline = model.generate(a, "windowed").positions()
+    offline = model.respond(a, "windowed").positions()
     partner = model.partner()
     streamed = []
     for t in range(a.n_frames):
@@ -116,16 +120,16 @@ def test_a_window_as_long_as_the_take_gives_standard_generation(model, placement
     model = copy.copy(model).set_params(placement_window=placement_window)
     long_window = copy.copy(model).set_params(window=a.n_frames, initial="prior")
     np.testing.assert_allclose(
-        long_window.generate(a, "windowed").positions(),
-        model.generate(a, "standard").positions(),
+        long_window.respond(a, "windowed").positions(),
+        model.respond(a, "standard").positions(),
         atol=1e-9,
     )
 
 
 def test_b_place_is_the_centred_mean_of_the_path_places(model):
     a, _, _ = synthetic_pair(80, 4)
-    own = model.generate(a, "standard").translations[:, 0]
-    smooth = copy.copy(model).set_params(placement_window=5).generate(a, "standard")
+    own = model.respond(a, "standard").translations[:, 0]
+    smooth = copy.copy(model).set_params(placement_window=5).respond(a, "standard")
     # A stands still facing +Z, so B's place relative to A is its world place; 5 frames
     # centred, fewer at the ends.
     csum = np.vstack([np.zeros((1, 3)), np.cumsum(own, axis=0)])
@@ -159,7 +163,7 @@ def test_missing_frames_are_skipped_with_a_warning(model, capsys):
     outputs = [o for o in outputs if o is not None] + partner.finish()
     assert len(outputs) == a.n_frames
     assert capsys.readouterr().err.count("skipped") == 3
-    generated = model.generate(broken, "windowed").positions()
+    generated = model.respond(broken, "windowed").positions()
     assert np.isfinite(generated).all()
     err = np.linalg.norm(generated - b.positions(), axis=-1).mean(axis=1)
     assert np.median(err) < 1.0
@@ -219,11 +223,53 @@ def test_save_load_round_trip(model, tmp_path):
     a, _, _ = synthetic_pair(80, 7)
     for method in ("standard", "windowed"):
         np.testing.assert_allclose(
-            loaded.generate(a, method).positions(), model.generate(a, method).positions()
+            loaded.respond(a, method).positions(), model.respond(a, method).positions()
         )
     header, _ = persist.load_npz(path, "dual_hmm")
     learnt = header["model"]["learnt"]
     assert "pipeline_a_" in learnt and "pipeline_b_" in learnt and "skeleton_b_" in learnt
+
+
+def test_dual_hmm_follows_the_model_contract(model, training, tmp_path):
+    assert KINDS["dual_hmm"] is DualHMM and DualHMM.VERBS == ("respond", "score", "partner")
+    assert not hasattr(DualHMM, "generate")
+    # Both people of every take are training files (in memory: hashed by their arrays).
+    assert len(model.train_files_) == 2 * len(training)
+    labelled = DualHMM(n_states=N_POSES, n_iter=2, window=6).fit(training, ["toy", "b", "toy"])
+    assert labelled.labels_ == ["b", "toy"] and model.labels_ == []
+    with pytest.raises(ValueError, match="2 labels for 3"):
+        DualHMM(n_states=N_POSES).fit(training, ["toy", "b"])
+    labelled.save(tmp_path / "m.npz", source="toy data")
+    loaded = Model.load(tmp_path / "m.npz")
+    assert isinstance(loaded, DualHMM) and loaded.source_ == "toy data"
+    assert loaded.labels_ == ["b", "toy"] and loaded.train_files_ == labelled.train_files_
+
+
+def test_score_is_the_log_likelihood_of_a_under_lambda_a(model):
+    a, _, _ = synthetic_pair(80, 7)
+    xa, _ = model.features_a(a)
+    assert model.score(a) == pytest.approx(model.lambda_a_.score(xa), rel=1e-12)
+    shaken = a.copy()
+    shaken.rotations[:, 1:] = Rotation.random(80 * 4, random_state=0).as_quat().reshape(80, 4, 4)
+    assert model.score(shaken) < model.score(a) - 100  # a stranger's motion is unlikely
+    broken = a.copy()
+    broken.rotations[10:12] = np.nan  # missing frames: no observation, still a number
+    assert np.isfinite(model.score(broken))
+
+
+def test_partner_is_an_online_partner_that_any_replay_takes(model, capsys):
+    a, _, _ = synthetic_pair(40, 5)
+    partner = model.partner()
+    assert isinstance(partner, OnlinePartner)
+    assert partner.fps == model.fps and partner.skeleton is model.skeleton_b_
+    offline = model.respond(a, "windowed").positions()
+    np.testing.assert_allclose(run(partner, a).positions(), offline, atol=1e-6)
+    played = replay(model.partner, a)  # real time: 40 frames at 30 fps
+    assert played.motion.n_frames == a.n_frames and played.lag == model.window - 1
+    if played.dropped == 0:
+        np.testing.assert_allclose(played.motion.positions(), offline, atol=1e-6)
+    assert "dropped frames" in played.summary()
+    assert capsys.readouterr().err == ""
 
 
 def test_model_files_of_another_version_or_kind_are_refused(model, tmp_path, monkeypatch):
@@ -233,7 +279,7 @@ def test_model_files_of_another_version_or_kind_are_refused(model, tmp_path, mon
     with pytest.raises(ModelFormatError, match="format version 99"):
         DualHMM.load(tmp_path / "future.npz")
     persist.save_npz(tmp_path / "other.npz", "vlmm", {}, {})
-    with pytest.raises(ModelFormatError, match="'vlmm' model"):
+    with pytest.raises(ModelFormatError, match="'vlmm'"):  # unknown kind, or not a dual HMM
         DualHMM.load(tmp_path / "other.npz")
 
 
@@ -243,7 +289,7 @@ def test_a_skeleton_that_is_not_the_models_is_a_clear_error(model):
     other = Skeleton(("pelvis", *sk.names[1:]), sk.parents, sk.offsets, sk.channels, sk.end_site)
     stranger = Motion(other, a.rotations, a.translations, a.fps, name="stranger.bvh")
     with pytest.raises(SkeletonMismatchError, match="stranger.bvh: person A's skeleton"):
-        model.generate(stranger)
+        model.respond(stranger)
 
 
 def test_cli_train_respond_evaluate(tmp_path, capsys):
@@ -291,6 +337,22 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
     overall = report["overall"]
     assert overall["standard_mm"] < 0.1 * overall["mean_pose_mm"]
     assert len(list((tmp_path / "plots").glob("*.png"))) == 1
+    assert report["test_files"] == ["a4.bvh", "b4.bvh"]
+    assert report["left_out_training_files"] == []
+
+    # Without --test: the takes held out at training (recorded in the model file).
+    main(["dualhmm", "evaluate", "--model", str(model), "--json", "--plots", str(tmp_path)])
+    again = json.loads(capsys.readouterr().out)
+    assert again["test_files"] == ["a4.bvh", "b4.bvh"]
+    assert again["overall"]["standard_mm"] == overall["standard_mm"]
+
+    main(
+        ["dualhmm", "crossval", "--data", str(data), "--states", "4", "--window", "6"]
+        + ["--n-iter", "5", "--placement-window", "1", "--json"]
+    )
+    folds = json.loads(capsys.readouterr().out)
+    assert folds["overall"]["pairs"] == 4 and len(folds["test_files"]) == 8
+    assert folds["overall"]["standard_mm"] < 0.1 * folds["overall"]["mean_pose_mm"]
 
     sk = make_skeleton()
     other = Skeleton(("pelvis", *sk.names[1:]), sk.parents, sk.offsets, sk.channels, sk.end_site)
@@ -324,3 +386,70 @@ def test_real_salsa_held_out_pairs_beat_the_mean_pose(salsa):
     assert mean["windowed"] < 0.9 * mean["mean_pose"]
     assert mean["standard"] < 0.9 * mean["mean_pose"]
     assert abs(mean["windowed"] - mean["standard"]) < 0.1 * mean["standard"]
+
+
+# ------------------------------------------------------------------ evaluation on any index
+INDEX_HEADER = "file,source,subject,trial,category,label,partner_file,fps,frames,description"
+
+
+def pair_rows(fa: str, fb: str, source: str, trial: str, label: str, fps: float) -> list[str]:
+    return [
+        f"{fa},{source},1,{trial},interaction,{label},{fb},{fps:g},0,",
+        f"{fb},{source},1,{trial},interaction,{label},{fa},{fps:g},0,",
+    ]
+
+
+def test_evaluate_on_another_index_leaves_out_training_takes_by_content(mocap, tmp_path, capsys):
+    """A model trained on one salsa take (copied files) is evaluated on another index:
+    the same take under other names is left out by content, a take of another label is
+    not a candidate, a new take is evaluated; the training index exits 2 in one line."""
+    (a12, b12), (a03, b03) = (
+        next(p for p in mocap.pairs("salsa") if p[0].trial == t) for t in ("12", "03")
+    )
+    train, other = tmp_path / "train", tmp_path / "other"
+    train.mkdir()
+    other.mkdir()
+    rows = [INDEX_HEADER]
+    for e in (a12, b12):  # byte copies, not links: the same content under another path
+        shutil.copyfile(e.path, train / e.path.name)
+    rows += pair_rows(a12.path.name, b12.path.name, "cmu", "12", "salsa", a12.fps)
+    (train / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    shutil.copyfile(a12.path, other / "leader.bvh.gz")
+    shutil.copyfile(b12.path, other / "follower.bvh.gz")
+    rows = [INDEX_HEADER] + pair_rows(
+        "leader.bvh.gz", "follower.bvh.gz", "cmu", "x1", "salsa", a12.fps
+    )
+    a, b = mocap.load_pair(a03, b03)
+    for motion, name in ((a.trim(0, 120), "a3.bvh"), (b.trim(0, 120), "b3.bvh")):
+        write_motion(motion, other / name)
+    rows += pair_rows("a3.bvh", "b3.bvh", "test", "3", "salsa", a.fps)
+    for motion, name in ((a.trim(200, 230), "c.bvh"), (b.trim(200, 230), "d.bvh")):
+        write_motion(motion, other / name)
+    rows += pair_rows("c.bvh", "d.bvh", "test", "4", "pull", a.fps)  # not a label it knows
+    (other / "INDEX.csv").write_text("\n".join(rows) + "\n")
+
+    # Trained as ``dualhmm train --data TRAIN`` does, on the first 10 s (the files' hashes).
+    index = MocapIndex.load(train)
+    (pair,) = index.pairs()
+    motions = [m.trim(0, 600) for m in index.load_pair(*pair)]
+    dual = DualHMM(n_states=3, n_iter=3, window=4, candidates=3).fit([motions], ["salsa"])
+    model = tmp_path / "m.npz"
+    dual.save(model, data_index=index_record(index), held_out_files=[])
+    main(
+        ["dualhmm", "evaluate", "--model", str(model), "--test", str(other / "INDEX.csv")]
+        + ["--json", "--plots", str(tmp_path / "plots")]
+    )
+    report = json.loads(capsys.readouterr().out)
+    assert report["test_files"] == ["a3.bvh", "b3.bvh"]
+    assert report["left_out_training_files"] == ["leader.bvh.gz", "follower.bvh.gz"]
+    assert list(report["per_pair"]) == ["a3+b3"] and report["overall"]["frames"] == 60
+    for key in ("standard_mm", "windowed_mm", "mean_pose_mm"):
+        assert report["per_pair"]["a3+b3"][key] > 0 and report["overall"][key] > 0
+
+    for args in (["--test", str(train)], []):  # the training index, and its held-out takes
+        with pytest.raises(SystemExit) as exit_info:
+            main(["dualhmm", "evaluate", "--model", str(model), *args])
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert "salsa_12.bvh.gz" in err and "salsa_27.bvh.gz" in err
+        assert "trained on" in err and len(err.strip().splitlines()) == 1

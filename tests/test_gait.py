@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -103,7 +105,7 @@ def test_root_travel_from_contact_keeps_the_foot_planted(normal_walks):
 
 
 def test_synthesized_walk(small_model, tmp_path):
-    walk = small_model.synthesize(8)
+    walk = small_model.generate(8)
     assert walk.skeleton.names == small_model.pipeline_.steps[-1].skeleton_.names
     assert 8 * 12 < walk.n_frames < 8 * 22
     steps = detect_steps(walk)
@@ -112,25 +114,27 @@ def test_synthesized_walk(small_model, tmp_path):
     assert np.ptp(pelvis[:, 2]) > 3000  # it travels forwards (mm)
     assert np.abs(pelvis[:, 0]).max() < 0.2 * np.ptp(pelvis[:, 2])
     assert 800 < pelvis[:, 1].mean() < 1000  # standing on the floor
-    faster = small_model.synthesize(8, speed=1.5)
+    faster = small_model.generate(8, speed=1.5)
     assert faster.n_frames < walk.n_frames
     static, _, _ = small_model.generate_features(8, gv=False)
     with_gv, _, _ = small_model.generate_features(8)
     assert np.var(with_gv, axis=0).sum() > np.var(static, axis=0).sum()
 
 
-def test_model_file_round_trip(small_model, tmp_path):
+def test_model_file_round_trip(small_model, normal_walks, tmp_path):
     path = tmp_path / "avg.npz"
     small_model.save(path)
     back = GaitSynthesizer.load(path)
     a, _, _ = small_model.generate_features(6)
     b, _, _ = back.generate_features(6)
     np.testing.assert_array_equal(a, b)
-    assert back.files_ == small_model.files_ and back.role_ == "average"
-    with pytest.raises(ModelFormatError, match="gait-hsmm"):
-        from markovmotion.persist import save_npz
+    assert back.train_files_ == small_model.train_files_ and back.role_ == "average"
+    assert back.own_files == [Path(m.source).name for m in normal_walks[:3]]
+    assert back.n_inherited_files_ == 0
+    from markovmotion.persist import save_npz
 
-        save_npz(tmp_path / "other.npz", "vlmm", {}, {})
+    save_npz(tmp_path / "other.npz", "not-a-kind", {}, {})
+    with pytest.raises(ModelFormatError, match="unknown model kind .not-a-kind."):
         GaitSynthesizer.load(tmp_path / "other.npz")
 
 
@@ -175,7 +179,10 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
     adapted = small_model.adapt(elderly[:1], "elderly", 12)
     assert adapted.role_ == "adapted" and adapted.n_steps_ == 12
     scratch = small_model.scratch(elderly[:1], "elderly", 12)
-    assert scratch.n_steps_ == 12 and scratch.files_ == adapted.files_
+    assert scratch.n_steps_ == 12 and scratch.train_files_ == adapted.train_files_
+    # an adapted model depends on the average model's walks and its own
+    assert adapted.train_files_[:3] == small_model.train_files_
+    assert adapted.own_files == [Path(elderly[0].source).name]
     results = {
         role: ev.models({"elderly": [model]})[0]
         for role, model in (("adapted", adapted), ("average", small_model), ("scratch", scratch))
@@ -201,7 +208,7 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
     sweep = ev.sweep(small_model, ["elderly"], [3])["3"]
     assert sweep["adapted"]["adaptation_steps"] == {"elderly": [3]}
     assert sweep["scratch"]["adaptation_steps"] == {"elderly": [3]}
-    assert sweep["adapted"]["adaptation_files"] == {"elderly": [[elderly[0].name]]}
+    assert sweep["adapted"]["adaptation_files"] == {"elderly": [[Path(elderly[0].source).name]]}
     diff = sweep["adapted_minus_scratch"]
     lo, hi = diff["synthesized_rate_ci"]
     assert lo <= diff["synthesized_rate"] <= hi
@@ -211,12 +218,15 @@ def test_adaptation_and_objective_evaluation(mocap, normal_walks, small_model):
 def test_synthesized_walks_vary_with_the_seed(small_model):
     """Durations drawn from the densities: walks differ from one another, a seed repeats them."""
     rng = np.random.default_rng(1)
-    walks = [small_model.generate_features(8, rng=rng) for _ in range(3)]
+    walks = [small_model.generate_features(8, rng=rng, stochastic=True) for _ in range(3)]
     lengths = {len(f) for f, _, _ in walks}
     assert len(lengths) > 1
-    repeat = small_model.generate_features(8, rng=np.random.default_rng(1))
+    repeat = small_model.generate_features(8, rng=np.random.default_rng(1), stochastic=True)
     np.testing.assert_array_equal(repeat[0], walks[0][0])
     np.testing.assert_array_equal(repeat[1], walks[0][1])
+    # not stochastic: the most likely durations, whatever the generator
+    likely = small_model.generate_features(8)[1]
+    np.testing.assert_array_equal(small_model.generate_features(8, rng=rng)[1], likely)
 
 
 def test_adaptation_steps_come_from_the_first_takes(normal_walks, small_model):
@@ -299,6 +309,10 @@ def test_real_and_synthesized_steps_told_apart_only_when_they_differ():
     assert real_vs_synthesized(same, real) < 0.65
     assert real_vs_synthesized(shifted, real) > 0.9
     assert np.isnan(real_vs_synthesized(shifted, real[:1]))  # one walk: no fold holds both
+    # two short synthesized walks and three long real ones: grouped folds by size alone
+    # would train one fold on real walks only; folds then keep both kinds
+    long_real = fake_walks(rng, np.zeros(9), 3, n_steps=20)
+    assert 0.0 <= real_vs_synthesized(shifted[:2], long_real) <= 1.0
 
 
 def test_bootstrap_of_a_rate_over_styles():
@@ -336,3 +350,65 @@ def test_evaluate_command_errors(tmp_path, small_model):
     with pytest.raises(SystemExit) as exc:  # the sweep needs the average model
         main(["gait", "evaluate", "--models", str(tmp_path), "--sweep", "3"])
     assert exc.value.code == 2
+
+
+def _write_index(root: Path, rows: list[tuple[str, object]]) -> Path:
+    """An INDEX.csv in ``root`` listing COPIES of shared walks as ``(new name, entry)``."""
+    import csv
+    import shutil
+
+    root.mkdir(parents=True, exist_ok=True)
+    with open(root / "INDEX.csv", "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(
+            ["file", "source", "subject", "trial", "category", "label"]
+            + ["partner_file", "fps", "frames", "description"]
+        )
+        for name, e in rows:
+            (root / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(e.path, root / name)
+            out.writerow([name, "mine", "", "", e.category, e.label, "", e.fps, e.frames, ""])
+    return root / "INDEX.csv"
+
+
+def test_evaluate_on_another_index_leaves_training_walks_out(mocap, small_model, tmp_path, capsys):
+    """--test: walks found by content under other names; the model's own are left out and listed."""
+    import json
+
+    model = tmp_path / "avg.npz"
+    small_model.save(model)
+    normal_train, normal_test = held_out_every(gait_entries(mocap, "normal"))
+    elderly = gait_entries(mocap, "elderly")
+    test = _write_index(
+        tmp_path / "mine",
+        [
+            ("walks/seen.bvh.gz", normal_train[0]),  # trained on: left out
+            ("walks/new.bvh.gz", normal_test[0]),  # evaluated
+            ("walks/old.bvh.gz", elderly[0]),  # another style: does not fit the model
+            ("walks/taught.bvh.gz", normal_train[3]),  # the classifier learns from it
+        ],
+    )
+    # the style classifier learns from a small reference index (copies too)
+    ref = [
+        (f"bandai/dataset-2/{e.file.split('/')[-1]}", e) for e in normal_train[3:7] + elderly[:4]
+    ]
+    data = _write_index(tmp_path / "ref", ref)
+    args = ["gait", "evaluate", "--model", str(model), "--test", str(test), "--data", str(data)]
+    main(
+        [*args, "--json", "--walks", "2", "--walk-steps", "6", "--components", "0"]
+        + ["--bootstrap", "100"]
+    )
+    result = json.loads(capsys.readouterr().out)
+    assert result["test_files"] == ["walks/new.bvh.gz"]
+    assert result["left_out_training_files"] == ["walks/seen.bvh.gz"]
+    assert result["left_out_classifier_files"] == ["walks/taught.bvh.gz"]
+    assert result["targets"] == ["normal"] and result["real"]["walks"] == 1
+    assert result["average"]["synthesized_steps"] > 0
+    assert np.isfinite(result["average"]["test_log_likelihood"])
+    # an index of training walks only: one line, exit 2
+    only = _write_index(tmp_path / "seen", [("a.bvh.gz", normal_train[1])])
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "evaluate", "--model", str(model), "--test", str(only)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "trained on" in err and "a.bvh.gz" in err

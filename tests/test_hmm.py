@@ -116,6 +116,16 @@ def test_bad_lengths_are_refused():
         GaussianHMM(2).fit(x, [4, 4])
 
 
+@pytest.mark.parametrize("width", [1, 3, 7])
+@pytest.mark.parametrize("method", ["score", "decode", "predict_proba", "log_frameprob"])
+def test_input_of_another_width_than_the_model_is_refused(method, width):
+    """With more columns than the model, the compiled density read past its arrays."""
+    hmm = known_model()
+    x = np.random.default_rng(0).normal(size=(20, width))
+    with pytest.raises(ValueError, match=f"{width} columns.*2 features"):
+        getattr(hmm, method)(x)
+
+
 @pytest.mark.parametrize("extra", [0, 5])
 def test_windowed_viterbi_with_a_whole_sequence_window_is_standard_viterbi(extra):
     rng = np.random.default_rng(4)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from markovmotion.errors import MotionFormatError
+from markovmotion.errors import MarkovMotionError, MotionFormatError
 from markovmotion.features.joint_shape import TwoPeople
 from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.bspline import (
@@ -169,7 +169,10 @@ def test_silhouette_model_places_partner_in_the_image(salsa_frames):
         25.0,
     )
     model = VirtualPartner(n_state_prototypes=12, n_behaviour_prototypes=8, n_epochs=3).fit([take])
-    resp = model.respond(take.person(0), None, n_hypotheses=30)
+    resp = model.respond_shapes(take.person(0), None, n_hypotheses=30)
+    assert model.source == "silhouette" and len(model.train_files_) == 1
+    with pytest.raises(MarkovMotionError, match="3-D"):
+        model.partner()  # online partners answer motion capture
     # the partner stands on the real person's floor line, at a plausible size
     feet = resp.partner.reference[:, 1] + resp.partner.height
     np.testing.assert_allclose(feet, take.reference[:, 0, 1] + take.height[:, 0], atol=1e-6)

@@ -8,12 +8,15 @@ from conftest import make_skeleton
 from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
+from markovmotion.errors import ModelFormatError
 from markovmotion.evaluate.vlmm import evaluate_horizon
-from markovmotion.models.vlmm.behaviour import BehaviourModel, load_behaviour_model
+from markovmotion.models.base import Model
+from markovmotion.models.vlmm.behaviour import BehaviourModel
 from markovmotion.models.vlmm.structured import (
     StructuredBehaviourModel,
     key_positions,
     key_prototypes,
+    load_behaviour,
     resample,
 )
 
@@ -106,11 +109,26 @@ def test_prediction_uses_the_key_history(structured):
 
 
 def test_structured_save_load_round_trip(structured, tmp_path):
-    structured.save(tmp_path / "s.npz", {"train_files": []})
-    loaded, _ = load_behaviour_model(tmp_path / "s.npz")
-    assert isinstance(loaded, StructuredBehaviourModel)
+    structured.save(tmp_path / "s.npz", held_out_files=["x.bvh"])
+    loaded = StructuredBehaviourModel.load(tmp_path / "s.npz")
+    assert type(Model.load(tmp_path / "s.npz")) is StructuredBehaviourModel
+    assert type(load_behaviour(tmp_path / "s.npz")) is StructuredBehaviourModel
+    assert loaded.held_out_files_ == ["x.bvh"] and len(loaded.train_files_) == 3
+    with pytest.raises(ModelFormatError, match="is a 'structured_vlmm' model, expected 'vlmm'"):
+        BehaviourModel.load(tmp_path / "s.npz")
+    structured.prototype_model_.save(tmp_path / "b.npz")
+    with pytest.raises(ModelFormatError, match="is a 'vlmm' model, expected 'structured_vlmm'"):
+        StructuredBehaviourModel.load(tmp_path / "b.npz")
     assert np.array_equal(loaded.template_tokens_, structured.template_tokens_)
     rng = np.random.default_rng
     assert np.array_equal(
         loaded.generate_tokens(10.0, rng(3)), structured.generate_tokens(10.0, rng(3))
     )
+
+
+def test_score_is_the_likelihood_of_the_key_sequence(structured):
+    train = routine(40, seed=0)[0]
+    assert np.array_equal(structured.key_tokens(train), structured.key_sequences()[0])
+    test, _ = routine(16, seed=7)
+    deep, shallow = structured.score([test]), structured.with_key_memory(1).score([test])
+    assert shallow < deep < 0  # the key order needs memory (paper Fig. 9)

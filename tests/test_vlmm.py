@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -11,11 +12,8 @@ from scipy.spatial.transform import Rotation
 from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
 from markovmotion.data.splits import held_out_last
 from markovmotion.evaluate.vlmm import HorizonCurve, ZeroVelocity, evaluate_horizon
-from markovmotion.models.vlmm.behaviour import (
-    BehaviourModel,
-    load_behaviour_model,
-    load_motions,
-)
+from markovmotion.models.base import Model
+from markovmotion.models.vlmm.behaviour import BehaviourModel, load_motions
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM, prediction_suffix_tree
 
 
@@ -144,11 +142,23 @@ def test_generation_ml_is_deterministic_and_stochastic_follows_the_model(source_
     assert set(zip(sample[:-1].tolist(), sample[1:].tolist(), strict=True)) <= allowed
 
 
-def test_vlmm_save_load_round_trip(tmp_path, behaviour_model):
+def test_log_likelihood_by_hand():
+    m = VLMM(1, 0.0).fit([np.array([0, 1, 0, 1, 1]), np.array([1, 1, 0])], n_symbols=2)
+    # P(0) = 3/8 at the root, P(1 | 0) = 1, P(1 | 1) = P(0 | 1) = 1/2
+    assert m.log_likelihood([0, 1, 1, 0]) == pytest.approx(np.log(3 / 8) + 2 * np.log(0.5))
+    assert m.log_likelihood([]) == 0.0
+    # "0 0" is unseen after 0: backs off to the root's P(0)
+    assert m.log_likelihood([0, 0]) == pytest.approx(2 * np.log(3 / 8))
+
+
+def test_vlmm_save_load_round_trip(tmp_path, behaviour_model, exercise):
     path = tmp_path / "m.npz"
-    behaviour_model.save(path, {"test_files": ["x"]})
-    loaded, header = load_behaviour_model(path)
-    assert header["test_files"] == ["x"]
+    behaviour_model.save(path, note="x")
+    loaded = BehaviourModel.load(path)
+    assert type(Model.load(path)) is BehaviourModel and loaded.note_ == "x"
+    assert loaded.train_files_ == behaviour_model.train_files_
+    assert [r["file"] for r in loaded.train_files_] == [m.name for m in exercise[0]]
+    assert loaded.score(exercise[1]) == behaviour_model.score(exercise[1])
     assert np.array_equal(loaded.prototypes_, behaviour_model.prototypes_)
     assert np.array_equal(loaded.vlmm_.next_state_, behaviour_model.vlmm_.next_state_)
     a = behaviour_model.generate(3.0, np.random.default_rng(4))
@@ -211,14 +221,17 @@ def exercise(mocap):
 @pytest.fixture(scope="module")
 def behaviour_model(exercise) -> BehaviourModel:
     train, _ = exercise
-    return BehaviourModel(n_prototypes=40, max_memory=5, fps=15.0, seed=0).fit(train)
+    return BehaviourModel(n_prototypes=40, max_memory=5, fps=15.0, random_state=0).fit(train)
 
 
 def test_behaviour_model_generates_ml_deterministically_and_writes_bvh(behaviour_model, tmp_path):
     from markovmotion.io import read_motion, write_motion
 
-    a, b = behaviour_model.generate(4.0), behaviour_model.generate(4.0)
+    a = behaviour_model.generate(4.0, stochastic=False)
+    b = behaviour_model.generate(4.0, np.random.default_rng(9), stochastic=False)
     assert np.array_equal(a.rotations, b.rotations)
+    c, d = behaviour_model.generate(4.0), behaviour_model.generate(4.0)  # random_state
+    assert np.array_equal(c.rotations, d.rotations)
     assert a.n_frames == 61 and a.skeleton.same_topology(behaviour_model.skeleton_)
     write_motion(behaviour_model.generate(4.0, np.random.default_rng(1)), tmp_path / "g.bvh")
     assert read_motion(tmp_path / "g.bvh").n_frames == 61
@@ -227,7 +240,7 @@ def test_behaviour_model_generates_ml_deterministically_and_writes_bvh(behaviour
 def test_generated_motion_passes_through_the_prototypes(behaviour_model):
     m = behaviour_model
     tokens = m.generate_tokens(3.0, np.random.default_rng(2))
-    configs = m.synthesise(tokens)
+    configs = m.synthesize(tokens)
     c, dc = m.knots(tokens)
     times = np.r_[0, np.cumsum(m.intervals(c, dc))]
     at_knots = configs[np.round(times).astype(int)[np.isclose(times, np.round(times))]]
@@ -278,6 +291,15 @@ def test_prediction_beats_nothing_silly_on_held_out_dance(behaviour_model, exerc
     assert pred.n_frames == 60 + 15
 
 
+def test_score_is_the_vlmm_likelihood_of_the_prototype_sequences(behaviour_model, exercise):
+    m = behaviour_model
+    train = exercise[0]
+    assert np.array_equal(m.tokens(train[0]), m.token_sequences()[0])
+    total = sum(m.vlmm_.log_likelihood(t) for t in m.token_sequences())
+    assert m.score(train) == pytest.approx(total)
+    assert np.isfinite(m.score(exercise[1])) and m.score(exercise[1]) < 0
+
+
 def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
     from markovmotion.cli import main
 
@@ -297,6 +319,9 @@ def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
     for name in ("vlmm", "first_order", "zero_velocity"):
         for s in ("0.5", "1", "2", "3"):
             assert result[f"E_T_mm.{name}.{s}"] > 0
+    # the shared index: the model's category and labels, its five training takes left out
+    assert result["test_files"] == ["cmu/bvh/indian_14.bvh.gz"]
+    assert len(result["left_out_training_files"]) == 5
     assert (tmp_path / "et.png").stat().st_size > 1000
     walk = mocap.find(mocap.query(source="bandai")[0].file).path  # another skeleton: named
     with pytest.raises(SystemExit) as info:
@@ -304,3 +329,46 @@ def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
               "--out", str(tmp_path / "w.bvh")])  # fmt: skip
     assert info.value.code == 2
     assert f"{walk}: the input's skeleton does not match" in capsys.readouterr().err
+
+
+def copied_index(folder, rows) -> str:
+    """An INDEX.csv in ``folder`` listing byte copies of shared takes under new names."""
+    folder.mkdir()
+    lines = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for name, e in rows:
+        shutil.copyfile(e.path, folder / name)
+        lines.append(f"{name},{e.source},{e.subject},{e.trial},{e.category},{e.label},,"
+                     f"{e.fps:g},{e.frames},a copy")  # fmt: skip
+    (folder / "INDEX.csv").write_text("\n".join(lines) + "\n")
+    return str(folder / "INDEX.csv")
+
+
+def test_cli_evaluate_test_index_leaves_out_training_takes_by_content(
+    tmp_path, mocap, behaviour_model, capsys
+):
+    """--test on any index: its takes whatever their names, minus copies of training takes."""
+    from markovmotion.cli import main
+
+    model = tmp_path / "m.npz"
+    behaviour_model.save(model)  # trained on indian_04, 06 and 07
+    take = {e.name: e for e in mocap.query(category="exercise", label="indian_dance")}
+    walk = mocap.query(source="bandai")[0]
+    index = copied_index(tmp_path / "other", [("dance_a.bvh.gz", take["indian_04"]),
+                         ("dance_b.bvh.gz", take["indian_14"]), ("walk.bvh.gz", walk)])  # fmt: skip
+    capsys.readouterr()
+    main(["vlmm", "evaluate", "--model", str(model), "--test", index, "--samples", "2",
+          "--stride", "60", "--horizon", "1", "--json"])  # fmt: skip
+    result = json.loads(capsys.readouterr().out)
+    assert result["test_files"] == ["dance_b.bvh.gz"]
+    assert result["left_out_training_files"] == ["dance_a.bvh.gz"]
+    assert result["left_out_other_skeleton"] == ["walk.bvh.gz"]
+    for name in ("vlmm", "first_order", "zero_velocity"):
+        assert result[f"E_T_mm.{name}.0.5"] > 0 and result[f"E_T_mm.{name}.1"] > 0
+    # an index of training takes only: one line naming them, exit 2
+    index = copied_index(tmp_path / "train", [("a.bvh.gz", take["indian_04"]),
+                         ("b.bvh.gz", take["indian_06"])])  # fmt: skip
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "evaluate", "--model", str(model), "--test", index, "--json"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "trained on: a.bvh.gz, b.bvh.gz" in err

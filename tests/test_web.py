@@ -383,7 +383,7 @@ def test_live_session_streams_a_and_the_partner(server):
 def test_live_session_with_the_dual_hmm(dual_server, dual, site):
     model = DualHMM.load(dual)
     a = read_motion(site / "lib" / "salsa_a.bvh").resample(model.fps)
-    expected = model.generate(a, method="windowed").positions()
+    expected = model.respond(a, method="windowed").positions()
     with connect(ws_url(dual_server)) as ws:
         ws.send(json.dumps({"path": "salsa_a.bvh"}))
         start = json.loads(ws.recv(10))
@@ -508,9 +508,9 @@ def colours_drawn(page, selector: str) -> dict[str, int]:
 
 def test_viewer_plays_motions(server, page):
     page.goto(f"{server}/viewer?files=walk_active.bvh.gz")
-    page.wait_for_function("Number(document.body.dataset.frame) > 5")
+    page.wait_for_function("() => Number(document.body.dataset.frame) > 5")
     first = frame_of(page)
-    page.wait_for_function(f"Number(document.body.dataset.frame) > {first}")  # frames advance
+    page.wait_for_function(f"() => Number(document.body.dataset.frame) > {first}")  # frames advance
     page.click("#play")  # pause
     paused = frame_of(page)
     page.wait_for_timeout(300)
@@ -540,7 +540,7 @@ def test_viewer_invalid_upload_shows_the_error(server, page):
         "#upload",
         files=[{"name": "broken.bvh", "mimeType": "text/plain", "buffer": BAD_BVH.encode()}],
     )
-    page.wait_for_function("document.getElementById('error').textContent.length > 0")
+    page.wait_for_function("() => document.getElementById('error').textContent.length > 0")
     message = page.text_content("#error")
     assert message.startswith("broken.bvh:") and "channel" in message.lower()
     page.screenshot(path=SHOTS / "viewer-invalid-upload.png")
@@ -582,7 +582,7 @@ def test_evaluator_completes_all_tests_leaving_and_resuming(server, site, browse
     token = page.url.rsplit("/", 1)[1]
     page.wait_for_selector("#choices button")
     page.click(".play")
-    page.wait_for_function("Number(document.body.dataset.frame) > 3")
+    page.wait_for_function("() => Number(document.body.dataset.frame) > 3")
     page.screenshot(path=SHOTS / "evaluation-naturalness.png")
     for k in range(4):
         answer_current(page, k)
@@ -625,7 +625,7 @@ def test_results_page_shows_the_recomputed_figures(server, site, page):
             url = f"{server}/api/evaluation/{token}/{test['name']}/{k}"
             assert post_json(url, {"answer": test["choices"][0][0]})[0] == 200
     page.goto(f"{server}/results?token={ADMIN}")
-    page.wait_for_function("document.body.dataset.loaded === 'yes'")
+    page.wait_for_function("() => document.body.dataset.loaded === 'yes'")
     store = open_results(site / "results.sqlite")
     report = summarise(store.answered(), store.styles)
     assert page.text_content("#n-registered .big") == str(store.count_evaluators())
@@ -644,19 +644,21 @@ def test_live_partner_page_draws_both_figures(dual_server, page):
     page.select_option("#motion", "salsa_a.bvh")
     page.check("#loop")
     page.click("#start")
-    page.wait_for_function("Number(document.body.dataset.framesB || 0) > 20", timeout=20000)
+    page.wait_for_function("() => Number(document.body.dataset.framesB || 0) > 20", timeout=20000)
     drawn = colours_drawn(page, "#stage")
     assert drawn["blue"] > 50 and drawn["orange"] > 50
     assert float(page.text_content("#latency")) >= 0
     page.screenshot(path=SHOTS / "live-partner.png")
     page.click("#stop")
-    page.wait_for_function("document.getElementById('start').disabled === false")
+    page.wait_for_function("() => document.getElementById('start').disabled === false")
     page.set_input_files(
         "#upload",
         files=[{"name": "broken.bvh", "mimeType": "text/plain", "buffer": BAD_BVH.encode()}],
     )
     page.click("#start")
-    page.wait_for_function("document.getElementById('error').textContent.startsWith('broken.bvh:')")
+    page.wait_for_function(
+        "() => document.getElementById('error').textContent.startsWith('broken.bvh:')"
+    )
     page.screenshot(path=SHOTS / "live-invalid-upload.png")
 
 
@@ -666,3 +668,37 @@ def test_results_without_stimuli_explain_how_to_start_an_evaluation(tmp_path):
         status, body = fetch(f"{url}/results?token={ADMIN}")
     assert status == 503
     assert b"No evaluation on this server" in body and b"--stimuli" in body
+
+
+def test_live_partner_page_with_a_behaviour_chain(tmp_path, mocap, page):
+    """``serve --partner`` takes a behaviour chain: the /live page streams its B frames."""
+    from markovmotion.models.chain.partner import VirtualPartner
+    from markovmotion.web.live import model_partner
+
+    a, b = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    chain = VirtualPartner(n_state_prototypes=8, n_behaviour_prototypes=6, n_epochs=1)
+    chain.fit([(a.trim(0, 300), b.trim(0, 300))]).save(tmp_path / "chain.npz")
+    (tmp_path / "lib").mkdir()
+    write_motion(a.trim(300, 420), tmp_path / "lib" / "salsa_a.bvh")
+    app = create_app(
+        tmp_path / "lib", tmp_path / "r.sqlite", partner=model_partner(tmp_path / "chain.npz")
+    )
+    with running(app) as url:
+        with connect(ws_url(url)) as ws:
+            ws.send(json.dumps({"path": "salsa_a.bvh"}))
+            start = json.loads(ws.recv(10))
+            assert start["fps"] == 25.0 and start["lag"] == 2 and start["frames"] == 50
+            assert start["parents_b"] == display_parents(chain.skeletons_[1])
+            frames = [json.loads(ws.recv(10)) for _ in range(50)]
+        assert [f["b"] is None for f in frames] == [True] * 2 + [False] * 48
+        page.goto(f"{url}/live")
+        page.select_option("#motion", "salsa_a.bvh")
+        page.check("#loop")
+        page.click("#start")
+        page.wait_for_function(
+            "() => Number(document.body.dataset.framesB || 0) > 20", timeout=20000
+        )
+        drawn = colours_drawn(page, "#stage")
+        assert drawn["blue"] > 50 and drawn["orange"] > 50
+        page.screenshot(path=SHOTS / "live-partner-chain.png")
+        page.click("#stop")

@@ -39,3 +39,10 @@ class DataNotFoundError(MarkovMotionError):
 
 class SkeletonMismatchError(MarkovMotionError):
     """Two motions, or a motion and a model, do not share a skeleton."""
+
+
+class LimitError(MarkovMotionError, ValueError):
+    """A value out of its range, or an input beyond a limit of :mod:`markovmotion.limits`.
+
+    Also a :class:`ValueError`, so library callers that catch that keep working.
+    """

@@ -21,7 +21,9 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    """Attach every command group, in the order of the data flow."""
+    """Attach every command group, in the order of the data flow (once per process)."""
+    if getattr(app, "_markovmotion_registered", False):
+        return
     from markovmotion.cli import (
         chain,
         data,
@@ -47,6 +49,7 @@ def _register() -> None:
     app.add_typer(silhouette.app, name="silhouette")
     serve.register(app)
     app.add_typer(evaluation.app, name="evaluation")
+    app._markovmotion_registered = True  # type: ignore[attr-defined]
 
 
 def fail(message: str) -> None:
@@ -57,15 +60,30 @@ def fail(message: str) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script."""
+    try:  # Typer >= 0.26 vendors its own click
+        from typer._click.exceptions import ClickException, UsageError
+    except ImportError:  # pragma: no cover - older Typer on the real click
+        from click.exceptions import ClickException, UsageError
+
     _register()
     try:
-        app(args=argv, prog_name="markovmotion")
+        code = app(args=argv, prog_name="markovmotion", standalone_mode=False)
     except SystemExit as exc:  # Typer exits even on success; return normally then
         if exc.code not in (0, None):
             raise
+    except UsageError as exc:  # bad or missing options: one line, not a boxed panel
+        where = exc.ctx.command_path if exc.ctx is not None else "markovmotion"
+        fail(f"{where}: {exc.format_message()} (see {where} --help)")
+    except ClickException as exc:
+        fail(exc.format_message())
+    except typer.Abort:
+        raise SystemExit(1) from None
     except MarkovMotionError as exc:
         fail(str(exc))
     except KeyboardInterrupt:
         raise SystemExit(130) from None
     except OSError as exc:
         fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "))
+    else:
+        if isinstance(code, int) and not isinstance(code, bool) and code != 0:
+            raise SystemExit(code)

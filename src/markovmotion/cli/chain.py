@@ -11,19 +11,15 @@ import json
 from pathlib import Path
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from markovmotion.cli.options import ranged
+from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import MarkovMotionError
-from markovmotion.evaluate.chain import (
-    SOURCES,
-    dual_hmm_partners,
-    evaluate_partner,
-    mocap_takes,
-)
+from markovmotion.evaluate.chain import SOURCES, evaluate_model
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
 from markovmotion.models.chain.condensation import (
@@ -33,7 +29,7 @@ from markovmotion.models.chain.condensation import (
     RESPONSES,
 )
 from markovmotion.models.chain.partner import DEFAULT_PROTOTYPES, VirtualPartner
-from markovmotion.progress import err_console
+from markovmotion.progress import err_console, track
 
 SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
 RESYNC = typer.Option(
@@ -61,10 +57,11 @@ def _check_response(response: str) -> None:
 
 
 def _training_takes(data: Path | None, source: str, label: str):
+    """Motion-capture (A, B) pairs, or tracked silhouette takes."""
     if source == "mocap":
         index = MocapIndex.load(data)
         train, _ = held_out_pairs(index.pairs(label=label))
-        return mocap_takes(index, train)
+        return [index.load_pair(a, b) for a, b in track(train, "reading takes")]
     from markovmotion.video.dataset import silhouette_takes
 
     return silhouette_takes(data, split="train")
@@ -80,16 +77,16 @@ def train(
     ),
     source: str = typer.Option("mocap", help="mocap (3-D joints) or silhouette (tracked video)."),
     label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
-    prototypes: int = typer.Option(
-        DEFAULT_PROTOTYPES, min=2, help="State prototypes u (paper: 300)."
+    prototypes: int = ranged(
+        "states", DEFAULT_PROTOTYPES, min=2, help="State prototypes u (paper: 300)."
     ),
-    behaviours: int = typer.Option(
-        DEFAULT_PROTOTYPES, min=2, help="Behaviour prototypes v (paper: 300)."
+    behaviours: int = ranged(
+        "states", DEFAULT_PROTOTYPES, min=2, help="Behaviour prototypes v (paper: 300)."
     ),
     gamma: float = typer.Option(0.995, min=0.0, max=1.0, help="Decay constant of eq. 10."),
     lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10)."),
-    epochs: int = typer.Option(5, min=1, help="Passes of each competitive learning."),
-    seed: int = typer.Option(0, help="Random seed of the quantisations."),
+    epochs: int = ranged("iterations", 5, min=1, help="Passes of each competitive learning."),
+    seed: int = ranged("seed", 0, help="Random seed of the quantisations."),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded)."""
     _check_source(source)
@@ -104,11 +101,11 @@ def train(
     )
     with err_console.status("learning prototypes and chain"):
         model.fit(takes)
-    model.save(out, source=source)
+    model.save(out, source=source, labels=[label] if source == "mocap" else [])
     ch = model.chain_
-    frames = sum(t.n_frames for t in takes)
+    seconds = sum(t[0].duration if isinstance(t, tuple) else t.n_frames / t.fps for t in takes)
     err_console.print(
-        f"wrote {out}: {len(takes)} takes, {frames} frames at {model.fps_:g} fps, "
+        f"wrote {out}: {len(takes)} takes, {seconds:.0f} s at {model.fps_:g} fps, "
         f"{ch.state_prototypes_.shape} state prototypes, "
         f"{len(ch.behaviour_prototypes_) + 1}-state chain",
         highlight=False,
@@ -120,7 +117,7 @@ def respond(
     model: Path = typer.Option(..., help="Model from 'chain train'."),
     input: Path = typer.Option(..., help="The real person: BVH (mocap model) or video."),
     out: Path = typer.Option(..., help="Output: .bvh (mocap partner) or .mp4 (video)."),
-    hypotheses: int = typer.Option(200, min=1, help="Hypotheses N (1: single hypothesis)."),
+    hypotheses: int = ranged("hypotheses", 200, min=1, help="Hypotheses N (1: single hypothesis)."),
     response: str = typer.Option(
         DEFAULT_RESPONSE,
         help="Response of multiple hypotheses: ml (the paper's), map (eq. 21) or mean "
@@ -129,29 +126,49 @@ def respond(
     sigma: float = SIGMA,
     resync: float = RESYNC,
     person: int = typer.Option(0, min=0, max=1, help="Mocap: the real person's half of the model."),
-    fps: float = typer.Option(
-        None, help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there)."
+    fps: float = ranged(
+        "fps",
+        None,
+        help="True frame rate of a BVH input (default: INDEX.csv's if it is listed there).",
     ),
-    seed: int = typer.Option(0, help="Random seed."),
+    seed: int = ranged("seed", 0, help="Random seed."),
+    realtime: bool = typer.Option(
+        False,
+        help="Mocap: replay the input as a stream at the model's frame rate through the online "
+        "partner; report per-frame latency.",
+    ),
 ) -> None:
     """Drive a virtual partner from a real person's motion or video."""
     _check_response(response)
-    partner_model, source = VirtualPartner.load(model)
+    partner_model = VirtualPartner.load(model)
+    source = partner_model.source
     options = {
         "n_hypotheses": hypotheses,
         "response": response,
         "sigma": sigma,
         "resync": resync,
-        "seed": seed,
+        "rng": seed,
     }
     suffix = base_suffix(out)
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
+    if realtime and (source != "mocap" or suffix != ".bvh"):
+        raise typer.BadParameter("--realtime streams motion capture: a mocap model and a .bvh out")
     if source == "mocap":
-        motion = read_listed_motion(input, fps).resample(partner_model.fps_)
-        if suffix == ".bvh":
-            partner = partner_model.respond_motion(motion, person, **options)
-            write_motion(partner, out)
+        motion = read_listed_motion(input, fps)
+        partner_model.check_input(motion)
+        motion = motion.resample(partner_model.fps_)
+        if realtime:
+            from markovmotion.models.online import replay
+
+            result = replay(lambda: partner_model.partner(person, **options), motion)
+            err_console.print(
+                f"streamed {motion.n_frames} frames at {motion.fps:g} fps: {result.summary()}",
+                highlight=False,
+            )
+            write_motion(result.motion, out)
+        elif suffix == ".bvh":
+            write_motion(partner_model.respond(motion, person, **options), out)
         else:
             from markovmotion.video.partner import respond_motion_video
 
@@ -172,7 +189,9 @@ def evaluate(
         None,
         help="mocap: INDEX.csv or its folder; silhouette: folder written by 'silhouette render'.",
     ),
-    hypotheses: int = typer.Option(200, min=2, help="Hypotheses N of the multiple-hypothesis run."),
+    hypotheses: int = ranged(
+        "hypotheses", 200, min=2, help="Hypotheses N of the multiple-hypothesis run."
+    ),
     response: str = typer.Option(
         DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
     ),
@@ -183,39 +202,46 @@ def evaluate(
         help="mocap: also a dual-HMM model ('dualhmm train') answering person A with B, "
         "measured the same way on the same takes.",
     ),
-    label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
-    seed: int = typer.Option(0, help="Random seed."),
+    label: list[str] = typer.Option(
+        None,
+        help="Mocap: labels of the two-person takes (repeat; default: the model's training labels).",
+    ),
+    seed: int = ranged("seed", 0, help="Random seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON on stdout."),
 ) -> None:
-    """Mask one partner of each held-out take, generate it, report the errors."""
-    _check_response(response)
-    partner_model, source = VirtualPartner.load(model)
-    others = None
-    if source == "mocap":
-        index = MocapIndex.load(test)
-        _, held_out = held_out_pairs(index.pairs(label=label))
-        takes = mocap_takes(index, held_out, fps=partner_model.fps_)
-        if dual_hmm is not None:
-            from markovmotion.models.hmm.dual import DualHMM
+    """Mask one partner of each test take, generate it, report the errors.
 
-            others = dual_hmm_partners(DualHMM.load(dual_hmm), index, held_out, takes)
-    else:
-        if dual_hmm is not None:
+    With --test, the two-person takes of that INDEX.csv that fit the model, minus those it
+    trained on (by content); without, the collection's held-out takes.
+    """
+    _check_response(response)
+    partner_model = VirtualPartner.load(model)
+    dual = None
+    if dual_hmm is not None:
+        if partner_model.source != "mocap":
             raise typer.BadParameter("--dual-hmm compares 3-D partners: give a mocap model")
+        from markovmotion.models.hmm.dual import DualHMM
+
+        dual = DualHMM.load(dual_hmm)
+    takes = None
+    if partner_model.source == "silhouette":
         from markovmotion.video.dataset import silhouette_takes
 
         takes = silhouette_takes(test, split="test")
-    result = evaluate_partner(
-        partner_model, takes, source, hypotheses, response, seed, others, sigma, resync
+    result = evaluate_model(
+        partner_model, test, label, hypotheses, response, seed, sigma, resync, dual, takes
     )
     if as_json:
         typer.echo(json.dumps(result, indent=2))
         return
-    title = f"virtual partner on {len(takes)} held-out takes ({result['unit']})"
+    title = f"virtual partner on {len(result['takes'])} test takes ({result['unit']})"
     _print_errors(result, f"{title}, each person masked in turn", response)
-    if others:
+    if dual is not None:
         for person, part in enumerate(result["by_real_person"]):
             _print_errors(part, f"{title}, person {'AB'[person]} real", response)
+    left = result["left_out_training_files"]
+    if left:
+        err_console.print(f"left out (training takes): {', '.join(left)}", highlight=False)
 
 
 def _print_errors(result: dict, title: str, response: str) -> None:
@@ -232,7 +258,7 @@ def _print_errors(result: dict, title: str, response: str) -> None:
         if col:
             table.add_column(col)
     for key, value in result.items():
-        if not isinstance(value, float) or key == "multiple_hypotheses":
+        if not isinstance(value, float) or key in ("multiple_hypotheses", "sigma", "resync"):
             continue
         row = [f"{key} *" if key == f"multiple_hypotheses_{response}" else key, f"{value:.4g}"]
         if placement:
@@ -240,4 +266,4 @@ def _print_errors(result: dict, title: str, response: str) -> None:
         if ms:
             row.append(f"{ms[key]:.2f}" if key in ms else "")
         table.add_row(*row)
-    Console().print(table)
+    print_table(table)

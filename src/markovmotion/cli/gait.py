@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from markovmotion.cli.options import ranged
+from markovmotion.cli.tables import print_table
 from markovmotion.core.motion import Motion
 from markovmotion.data import MocapIndex
 from markovmotion.errors import DataNotFoundError
@@ -76,7 +77,7 @@ def train(
         "", help="Index files starting with this (default Bandai dataset-2)."
     ),
     split: str = typer.Option("train", help="Takes from an index: train, test or all."),
-    n_iter: int = typer.Option(10, min=1, help="EM iterations."),
+    n_iter: int = ranged("iterations", 10, min=1, help="EM iterations."),
     mdl_factor: float = typer.Option(1.0, min=0.0, help="MDL weight of context clustering."),
     wat: str = typer.Option(
         "none", help="Walker-adaptive training unit: none, take, or dataset (the file's folder)."
@@ -117,7 +118,9 @@ def adapt(
     ),
     label: str = typer.Option(..., help="The style (its label in an index)."),
     out: Path = typer.Option(..., help="Style model to write (.npz)."),
-    steps: int = typer.Option(None, min=1, help="Adapt on the first K steps only (default all)."),
+    steps: int = ranged(
+        "steps", None, min=1, help="Adapt on the first K steps only (default all)."
+    ),
     method: str = typer.Option("csmaplr", help="csmaplr (tree + structural MAP prior) or cmllr."),
     structure: str = typer.Option("stream", help="stream (full per block) or diagonal transforms."),
     tau: float = typer.Option(20.0, min=0.0, help="CSMAPLR prior weight (frames)."),
@@ -158,7 +161,7 @@ def adapt(
     result.save(out)
     err_console.print(
         f"wrote {out}: {result.role_} {label} model from {result.n_steps_} steps "
-        f"of {len(result.files_)} walk{'s' if len(result.files_) != 1 else ''}"
+        f"of {len(result.own_files)} walk{'s' if len(result.own_files) != 1 else ''}"
     )
 
 
@@ -166,11 +169,12 @@ def adapt(
 def synthesize(
     model: Path = typer.Option(..., help="Gait model (.npz) from 'gait train' or 'gait adapt'."),
     out: Path = typer.Option(..., help="Walk to write (.bvh or .bvh.gz)."),
-    steps: int = typer.Option(12, min=1, help="Number of steps."),
+    steps: int = ranged("steps", 12, min=1, help="Number of steps."),
     speed: float = typer.Option(1.0, min=0.05, help="Pace relative to the model's mean durations."),
     gv: bool = typer.Option(True, "--gv/--no-gv", help="Global-variance generation (eqs. 12-15)."),
     first_side: str = typer.Option("R", help="Foot that lands at the end of the first step (L/R)."),
-    seed: int = typer.Option(
+    seed: int = ranged(
+        "seed",
         None,
         help="Draw state durations from the duration densities with this seed "
         "(default: the most likely durations).",
@@ -183,33 +187,14 @@ def synthesize(
         raise typer.BadParameter("--first-side must be L or R")
     synth = GaitSynthesizer.load(model)
     rng = None if seed is None else np.random.default_rng(seed)
-    motion = synth.synthesize(steps, speed=speed, gv=gv, first_side=first_side, rng=rng)
+    motion = synth.generate(
+        steps, speed=speed, gv=gv, first_side=first_side, rng=rng, stochastic=seed is not None
+    )
     write_motion(motion, out)
     err_console.print(
         f"wrote {out}: {synth.style_} walk, {steps} steps, {motion.n_frames} frames "
         f"at {motion.fps:g} fps"
     )
-
-
-def _load_models(folder: Path) -> dict[str, dict[str, object]]:
-    """Gait models of a folder by role and style (other model kinds are skipped)."""
-    from markovmotion.errors import ModelFormatError
-    from markovmotion.models.gait.synthesizer import ROLES, GaitSynthesizer
-    from markovmotion.persist import load_npz
-
-    if not folder.is_dir():
-        raise DataNotFoundError(f"{folder}: no such folder of models")
-    found: dict[str, dict[str, object]] = {r: {} for r in ROLES}
-    for path in sorted(folder.glob("*.npz")):
-        try:
-            header, _ = load_npz(path)
-        except ModelFormatError:
-            continue
-        if header.get("kind") != "gait-hsmm":
-            continue
-        model = GaitSynthesizer.load(path)
-        found[model.role_][model.style_] = model
-    return found
 
 
 def _rate(value: float, ci: list[float] | None = None) -> str:
@@ -225,8 +210,8 @@ METRICS = (
     ("DTW joint error (mm)", "dtw_joint_mm", "{:.1f}"),
     ("foot slide (mm/step)", "foot_slide_mm", "{:.1f}"),
     ("GV ratio synthesized/real", "gv_ratio", "{:.2f}"),
-    ("told from real held-out steps (0.5: never)", "real_vs_synthesized", "{:.2f}"),
-    ("held-out log-likelihood/frame", "test_log_likelihood", "{:.0f}"),
+    ("told from real test steps (0.5: never)", "real_vs_synthesized", "{:.2f}"),
+    ("test log-likelihood/frame", "test_log_likelihood", "{:.0f}"),
 )
 
 
@@ -291,10 +276,20 @@ def _components(value: str) -> int | str | None:
 @app.command()
 def evaluate(
     models: Path = typer.Option(
-        ..., help="Folder with the average model and adapted/scratch models."
+        ...,
+        "--model",
+        "--models",
+        help="A gait model (.npz), or a folder with the average and adapted/scratch models.",
     ),
     test: Path = typer.Option(
-        None, help="INDEX.csv (or its folder) of the walks (default: see README)."
+        None,
+        help="INDEX.csv (or its folder) to evaluate on: its walks of the models' styles and "
+        "skeleton, less those the models trained on (default: the held-out takes of --data).",
+    ),
+    data: Path = typer.Option(
+        None,
+        help="INDEX.csv (or its folder) whose training takes teach the style classifier "
+        "(default: the shared collection).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
     sweep: str = typer.Option(
@@ -305,13 +300,13 @@ def evaluate(
     replicates: int = typer.Option(
         3, min=1, help="Sweep: models per style and K, each adapted on other training takes."
     ),
-    walk_steps: int = typer.Option(12, min=3, help="Steps per synthesized walk."),
+    walk_steps: int = ranged("steps", 12, min=3, help="Steps per synthesized walk."),
     components: str = typer.Option(
         "auto",
         help="Principal components the style classifier keeps: 'auto' (fewest reaching 90% "
         "cross-validated on training takes), or N (0: all statistics).",
     ),
-    seed: int = typer.Option(0, help="Seed of the synthesized durations and the bootstrap."),
+    seed: int = ranged("seed", 0, help="Seed of the synthesized durations and the bootstrap."),
     bootstrap: int = typer.Option(2000, min=100, help="Bootstrap replicates of the intervals."),
     subset: str = typer.Option(
         "", help="Index files starting with this (default Bandai dataset-2)."
@@ -320,15 +315,16 @@ def evaluate(
     """Objective evaluation (§6 replacement): recognition, real vs synthesized, DTW, foot slide, GV.
 
     A style classifier is trained on the steps of the training takes of every
-    style; every fourth take is held out. Models in MODELS must not have seen
-    held-out takes. The style of the average model (its training walks) is
-    a class of the classifier but not a target of the models.
+    style of --data; every fourth take is held out. Without --test the models
+    are evaluated on those held-out takes, which they must not have seen;
+    with --test on the walks of that index that fit them, leaving out (and
+    listing) those they trained on, by content. The style of the average
+    model (its training walks) is a class of the classifier but not a target
+    of the models.
     """
     import json
 
-    from markovmotion.data.splits import held_out_every
-    from markovmotion.evaluate.gait import ROLES, Evaluation, StyleClassifier
-    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries
+    from markovmotion.evaluate.gait import ROLES, StyleClassifier, evaluate_models, load_models
     from markovmotion.progress import progress_bar
 
     try:
@@ -338,56 +334,33 @@ def evaluate(
             f"--sweep {sweep!r} is not a comma-separated list of numbers"
         ) from None
     classifier = StyleClassifier(n_components=_components(components))
-    found = _load_models(models)
-    if not any(found.values()):
-        raise DataNotFoundError(f"{models}: no gait models (.npz) in this folder")
-    if ks and not found["average"]:
-        raise DataNotFoundError(f"{models}: the sweep needs an average model in the folder")
-    index = MocapIndex.load(test)
-    train, held_out = held_out_every(gait_entries(index, None, subset or DEFAULT_SUBSET))
-    seen = {f for role in found.values() for m in role.values() for f in m.files_}
-    leaked = sorted(seen & {e.name for e in held_out})
-    if leaked:
-        raise DataNotFoundError(
-            f"models in {models} were trained on held-out takes ({', '.join(leaked[:3])}); "
-            "train them on the training split"
-        )
-    by_style: dict[str, dict[str, list[Motion]]] = {"train": {}, "test": {}}
-    for part, rows in (("train", train), ("test", held_out)):
-        for e in track(rows, f"reading {part} walks"):
-            by_style[part].setdefault(e.label, []).append(index.load_motion(e))
-    with err_console.status("style classifier: choosing its components on the training takes"):
-        ev = Evaluation.prepare(
-            by_style["train"],
-            by_style["test"],
-            classifier,
+    found = load_models(models)
+    bar = progress_bar()  # started at the first model: reading walks shows its own
+    tasks: list = []
+
+    def advance(what: str, total: int) -> None:
+        if not tasks:
+            bar.start()
+            tasks.append(bar.add_task(what, total=total))
+        bar.update(tasks[0], advance=1, description=what, total=total)
+
+    try:
+        result = evaluate_models(
+            found,
+            test,
+            data=data,
+            sweep=ks,
+            classifier=classifier,
             n_walks=walks,
             walk_steps=walk_steps,
             replicates=replicates,
             seed=seed,
             n_boot=bootstrap,
+            subset=subset,
+            progress=advance,
         )
-    average = next(iter(found["average"].values()), None)
-    targets = [s for s in ev.styles if average is None or s != average.style_]
-    chosen = {
-        role: {s: [m] for s, m in found[role].items() if s in targets}
-        for role in ("adapted", "scratch")
-    }
-    if average is not None:
-        chosen["average"] = {s: [average] for s in targets}
-    work = sum(map(len, chosen.values())) + 3 * len(ks) * len(targets)
-    result: dict[str, object] = {"styles": ev.styles, "targets": targets, "real": ev.real()}
-    with progress_bar() as bar:
-        task = bar.add_task("synthesizing and classifying", total=work)
-
-        def advance(what: str) -> None:
-            bar.update(task, advance=1, description=what)
-
-        for role in ROLES:
-            if chosen.get(role):
-                result[role], _, _ = ev.models(chosen[role], advance, f"{role} ")
-        if ks:
-            result["sweep"] = ev.sweep(average, targets, ks, progress=advance)
+    finally:
+        bar.stop()
     if as_json:
         print(json.dumps(_finite(result), indent=1))
         return
@@ -405,16 +378,19 @@ def evaluate(
         },
         **{role: result[role] for role in ROLES if role in result},
     }
-    console = Console()
-    console.print(
+    left = result["left_out_training_files"]
+    print_table(
         _table(
-            f"gait models in {models}: {real['walks']} held-out walks, {real['steps']} steps; "
-            f"classifier on {real['classifier']['components'] or 'all'} components",
+            f"gait models in {models}: {real['walks']} {'test' if test else 'held-out'} walks, "
+            f"{real['steps']} steps; classifier on {real['classifier']['components'] or 'all'} "
+            "components",
             columns,
         )
     )
+    if left:
+        print(f"left out (the models trained on them): {', '.join(left)}")
     if "sweep" in result:
-        console.print(_sweep_table(result["sweep"], result.get("average")))
+        print_table(_sweep_table(result["sweep"], result.get("average")))
 
 
 def _finite(value: object) -> object:
@@ -458,4 +434,4 @@ def steps_(
             str(s.dropped),
         )
     table.caption = f"{total} steps in {len(motions)} walks"
-    Console().print(table)
+    print_table(table)

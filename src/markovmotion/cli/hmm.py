@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
-import tempfile
 import time
 from pathlib import Path
 
@@ -12,11 +10,10 @@ import numpy as np
 import typer
 from rich.console import Console
 
+from markovmotion.cli.options import ranged
 from markovmotion.data.index import listed_entry
-from markovmotion.data.splits import select_pairs
-from markovmotion.errors import MotionFormatError
 from markovmotion.persist import check_model_output
-from markovmotion.progress import err_console, track
+from markovmotion.progress import err_console
 
 app = typer.Typer(
     help="Virtual partner from a dual HMM with windowed Viterbi (dual-HMM paper).",
@@ -26,19 +23,19 @@ app = typer.Typer(
 
 DATA = typer.Option(None, help="Folder with INDEX.csv (default: see README).")
 LABELS = typer.Option(None, help="Comma-separated labels (default: every interaction).")
-STATES = typer.Option(32, help="Hidden states N.")
+STATES = ranged("states", 32, help="Hidden states N.")
 MODE = typer.Option("paper", help="'paper' (EM on A) or 'joint' (EM on [A, B]).")
 OBSERVATION = typer.Option(
     "motion", help="A as 'pose' (the paper's) or 'motion' (pose, its change and A's travel)."
 )
-CANDIDATES = typer.Option(10, help="Trellis candidates per frame (§3.2).")
-PLACEMENT_WINDOW = typer.Option(
-    19, help="Frames over which B's place relative to A is averaged (1: none)."
+CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
+PLACEMENT_WINDOW = ranged(
+    "window", 19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
-FPS = typer.Option(30.0, help="Model frame rate (takes are resampled).")
-WINDOW = typer.Option(10, help="Windowed-Viterbi slice length.")
-N_ITER = typer.Option(50, help="Most EM iterations.")
-SEED = typer.Option(0, help="Random seed (k-means start).")
+FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
+WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
+N_ITER = ranged("iterations", 50, help="Most EM iterations.")
+SEED = ranged("seed", 0, help="Random seed (k-means start).")
 JOBS = typer.Option(
     1, "--jobs", min=0, help="Parallel jobs of EM's E-step over the takes (0: all cores)."
 )
@@ -98,20 +95,16 @@ def train(
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
 
-    from markovmotion.data import MocapIndex
+    from markovmotion.evaluate.hmm import fit_on_index
 
     check_model_output(out)
-    index = MocapIndex.load(data)
-    pairs = select_pairs(index, _split(labels), _split(test_trials), held_out=False)
-    motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
     start = time.perf_counter()
     model = new_model(
         states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
     )
-    frames = sum(len(a) for a, _ in motions)
-    with err_console.status(f"EM on {frames} frames"), joblib.parallel_config(n_jobs=jobs or -1):
-        model.fit(motions)
-    model.save(out)
+    with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
+        model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
+    model.save(out, **extras)
     hmm = model.lambda_a_
     err_console.print(
         f"wrote {out}: {len(pairs)} takes, {len(model.train_a_)} frames at {fps:g} fps, "
@@ -130,84 +123,12 @@ def read_stream(path: Path, fps: float | None = None):
     frame dropped) unless ``fps`` overrides the file's rate.
     """
     entry = listed_entry(path) if fps is None else None
-    motion, broken = _repaired_bvh(path, entry.fps if entry else fps)
+    from markovmotion.io.bvh import read_bvh_stream
+
+    motion, broken = read_bvh_stream(path, entry.fps if entry else fps)
     if entry is not None and motion.n_frames > 1:
         motion, broken = motion.trim(entry.first_frame), broken[entry.first_frame :]
     return motion, broken
-
-
-def _repaired_bvh(path: Path, fps: float | None):
-    """(Motion, broken): the BVH with each bad frame line replaced by a good one, flagged."""
-    from markovmotion.io.bvh import read_bvh
-    from markovmotion.io.files import read_text
-
-    lines = read_text(path).splitlines()
-    at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), len(lines))
-    n_channels = sum(int(n) for n in re.findall(r"CHANNELS\s+(\d+)", "\n".join(lines[:at])))
-    body = lines[at + 3 :]
-
-    def good(line: str) -> bool:
-        try:
-            values = [float(v) for v in line.split()]
-        except ValueError:
-            return False
-        return len(values) == n_channels and bool(np.isfinite(values).all())
-
-    broken = np.array([not good(ln) for ln in body], dtype=bool)
-    if broken.all() or not broken.any():
-        motion = read_bvh(path, fps=fps)  # all good, or nothing to stream: the reader's own errors
-        return motion, np.zeros(motion.n_frames, dtype=bool)
-    filler = body[int(np.argmin(broken))]
-    fixed = lines[: at + 3] + [filler if b else ln for ln, b in zip(body, broken, strict=True)]
-    with tempfile.TemporaryDirectory() as tmp:
-        copy = Path(tmp) / Path(path).name.removesuffix(".gz")
-        copy.write_text("\n".join(fixed) + "\n", encoding="utf-8")
-        try:
-            motion = read_bvh(copy, fps=fps)
-        except MotionFormatError as exc:  # name the user's file, not the repaired copy
-            raise MotionFormatError(path, exc.problem, exc.line) from None
-    motion.name = Path(path).name
-    motion.rotations[broken] = np.nan
-    return motion, broken
-
-
-def stream(model, motion, window: int):
-    """Replay ``motion`` at its frame rate through an online partner.
-
-    Returns B (a Motion), per-frame processing times (ms) and the number of
-    frames dropped because processing fell behind (a frame is dropped when
-    its successor is already due before it could start).
-    """
-    from markovmotion.core.motion import Motion
-
-    model.partner(window).step(motion.trim(0, 1))  # load the compiled kernels before the clock
-    partner = model.partner(window)
-    period = 1.0 / motion.fps
-    out, times, dropped = [], [], 0
-    start = time.perf_counter()
-    for t in range(motion.n_frames):
-        now = time.perf_counter()
-        due = start + t * period
-        if now < due:
-            time.sleep(due - now)
-        tick = time.perf_counter()
-        if tick > due + period:
-            dropped += 1
-            frame = partner.skip()
-        else:
-            frame = partner.step(motion.trim(t, t + 1))
-            times.append((time.perf_counter() - tick) * 1e3)
-        if frame is not None:
-            out.append(frame)
-    out.extend(partner.finish())
-    b = Motion(
-        out[0].skeleton,
-        np.concatenate([f.rotations for f in out]),
-        np.concatenate([f.translations for f in out]),
-        model.fps,
-        name="virtual partner",
-    )
-    return b, np.array(times), dropped
 
 
 @app.command()
@@ -215,12 +136,14 @@ def respond(
     model: Path = typer.Option(..., help="Dual-HMM model file (.npz)."),
     input: Path = typer.Option(..., help="Person A's motion (BVH)."),
     out: Path = typer.Option(..., help="Person B's generated motion (.bvh)."),
-    window: int = typer.Option(None, help="Windowed-Viterbi slice length (default: the model's)."),
+    window: int = ranged(
+        "window", None, help="Windowed-Viterbi slice length (default: the model's)."
+    ),
     standard: bool = typer.Option(False, help="Standard Viterbi over the whole input instead."),
     realtime: bool = typer.Option(
         False, help="Replay A as a stream at its frame rate; report per-frame latency."
     ),
-    fps: float = typer.Option(None, help="True frame rate of the input, overriding the file's."),
+    fps: float = ranged("fps", None, help="True frame rate of the input, overriding the file's."),
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
 ) -> None:
     """Generate person B's response to person A's motion."""
@@ -242,13 +165,13 @@ def respond(
     window = window or dual.window
     console = Console(stderr=True)
     if realtime:
-        b, times, dropped = stream(dual, motion, window)
-        lag = window - 1
+        from markovmotion.models.online import replay
+
+        played = replay(lambda: dual.partner(window), motion)
+        b = played.motion
         console.print(
-            f"streamed {motion.n_frames} frames at {motion.fps:g} fps: latency per frame median "
-            f"{np.median(times):.2f} ms, p99 {np.percentile(times, 99):.2f} ms; dropped frames "
-            f"{dropped}; skipped (NaN/missing) {int(broken.sum())}; lag {lag} frames "
-            f"({lag / dual.fps:.2f} s)",
+            f"streamed {motion.n_frames} frames at {motion.fps:g} fps: {played.summary()}; "
+            f"skipped (NaN/missing) {int(broken.sum())}",
             highlight=False,
         )
     else:
@@ -259,7 +182,7 @@ def respond(
                 highlight=False,
             )
         dual.window = window
-        b = dual.generate(motion, "standard" if standard else "windowed")
+        b = dual.respond(motion, "standard" if standard else "windowed")
     write_motion(b, out)
     console.print(f"wrote {out} ({b.n_frames} frames at {b.fps:g} fps)")
     if animation is not None:
@@ -292,17 +215,18 @@ def evaluate(
     ),
     json_out: bool = JSON,
 ) -> None:
-    """Error of the generated B against the real B on every test take, with baselines."""
-    from markovmotion.data import MocapIndex
-    from markovmotion.evaluate.hmm import evaluate_index
+    """Error of the generated B against the real B on every test take, with baselines.
+
+    With --test, the takes of that index that fit the model (its labels, person A's
+    skeleton), leaving out (and listing) those it trained on, compared by content;
+    without, the takes held out when it was trained (--test-trials of ``train``).
+    """
+    from markovmotion.evaluate.hmm import evaluate_model
     from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
-    index = MocapIndex.load(test)
-    trials = _split(test_trials)
-    pairs = select_pairs(index, _split(labels), trials, held_out=True)
     plots = plots or model.with_name(f"{model.name.split('.')[0]}-plots")
-    _report(*evaluate_index(dual, index, pairs, plots), json_out)
+    _report(*evaluate_model(dual, test, _split(labels), _split(test_trials), plots), json_out)
 
 
 @app.command()
@@ -330,22 +254,15 @@ def crossval(
     """Leave-one-take-out evaluation: train on all takes but one, test on it, for every take."""
     import joblib
 
-    from markovmotion.data import MocapIndex
-    from markovmotion.evaluate.hmm import cross_validate, summarise
+    from markovmotion.evaluate.hmm import crossval_index
 
-    index = MocapIndex.load(data)
-    pairs = select_pairs(index, _split(labels), None, held_out=False)
-    takes = [
-        (f"{a.name}+{b.name}", a.label, *index.load_pair(a, b))
-        for a, b in track(pairs, "loading takes")
-    ]
     model = new_model(
         states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
     )
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
-        results, written = cross_validate(takes, model, plots, windows)
-    _report(summarise(results, model), written, json_out)
+        report, written = crossval_index(model, data, _split(labels), plots, windows)
+    _report(report, written, json_out)
 
 
 def _report(report: dict, written: list[Path], json_out: bool) -> None:
@@ -354,12 +271,17 @@ def _report(report: dict, written: list[Path], json_out: bool) -> None:
         typer.echo(json.dumps(report, indent=2))
     else:
         _print_table(report)
+    for key in ("test_files", "left_out_training_files", "incompatible_files"):
+        if report.get(key) and not json_out:
+            err_console.print(f"{key.replace('_', ' ')}: {', '.join(report[key])}", highlight=False)
     for p in written:
         err_console.print(f"wrote {p}", highlight=False)
 
 
 def _print_table(report: dict) -> None:
     from rich.table import Table
+
+    from markovmotion.cli.tables import print_table
 
     table = Table(title="dual HMM: mean per-frame error of B (mm)")
     cols = ("standard_mm", "windowed_mm", "mean_pose_mm", "nearest_neighbour_mm")
@@ -369,4 +291,4 @@ def _print_table(report: dict) -> None:
     for name, r in rows.items():
         lat = r["latency_us"]
         table.add_row(name, *(f"{r[c]:.1f}" for c in cols), f"{lat['median']:.0f}/{lat['p99']:.0f}")
-    Console().print(table)
+    print_table(table)

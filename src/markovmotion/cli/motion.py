@@ -9,6 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from markovmotion.cli.options import ranged
 from markovmotion.data.index import read_listed_motion
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
@@ -16,7 +17,7 @@ from markovmotion.io.files import base_suffix
 
 def info(
     file: Path = typer.Argument(..., help="BVH, ASF/AMC or C3D file."),
-    fps: float = typer.Option(None, help="True frame rate, overriding the file's."),
+    fps: float = ranged("fps", None, help="True frame rate, overriding the file's."),
 ) -> None:
     """Describe a motion file: skeleton, frames, frame rate, extent."""
     console = Console()
@@ -46,8 +47,8 @@ def info(
 def convert(
     src: Path = typer.Argument(..., help="Input motion (BVH or ASF/AMC)."),
     dst: Path = typer.Argument(..., help="Output .bvh or .bvh.gz."),
-    fps: float = typer.Option(None, help="True frame rate of the input, overriding the file's."),
-    resample: float = typer.Option(None, help="Resample to this frame rate before writing."),
+    fps: float = ranged("fps", None, help="True frame rate of the input, overriding the file's."),
+    resample: float = ranged("fps", None, help="Resample to this frame rate before writing."),
 ) -> None:
     """Convert a motion to BVH (optionally at another frame rate)."""
     motion = read_listed_motion(src, fps=fps)

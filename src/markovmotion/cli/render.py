@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
+from markovmotion.cli.options import ranged
 from markovmotion.data.index import read_listed_motion
 from markovmotion.io.files import base_suffix
 
@@ -19,12 +20,14 @@ def render(
     side_by_side: bool = typer.Option(
         False, "--side-by-side", help="One panel per input instead of one shared scene."
     ),
-    fps: float = typer.Option(15.0, min=0.1, help="Frames per second of the animation."),
-    max_seconds: float = typer.Option(None, min=0.01, help="Render at most this many seconds."),
-    data_fps: float = typer.Option(
-        None, min=0.01, help="True frame rate of the inputs, overriding the files'."
+    fps: float = ranged("fps", 15.0, min=0.1, help="Frames per second of the animation."),
+    max_seconds: float = ranged(
+        "seconds", None, min=0.01, help="Render at most this many seconds."
     ),
-    title: str = typer.Option(None, help="Text above the picture."),
+    data_fps: float = ranged(
+        "fps", None, min=0.01, help="True frame rate of the inputs, overriding the files'."
+    ),
+    title: str = ranged("title", None, help="Text above the picture."),
 ) -> None:
     """Draw motions as stick figures, in one scene (two partners) or side by side."""
     from markovmotion.viz import check_output, render

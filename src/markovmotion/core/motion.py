@@ -184,15 +184,31 @@ class Motion:
         )
 
     def resample(self, fps: float) -> Motion:
-        """The same motion sampled at ``fps``: slerp for rotations, linear for translations."""
-        if fps <= 0:
-            raise ValueError(f"frame rate must be positive, got {fps}")
+        """The same motion sampled at ``fps``: slerp for rotations, linear for translations.
+
+        Raises:
+            ValueError: ``fps`` not finite, not above 0 or above
+                :data:`markovmotion.limits.MAX_FPS`, or a result of more frames
+                or values than :mod:`markovmotion.limits` allows.
+        """
+        from markovmotion.errors import LimitError
+        from markovmotion.limits import MAX_FRAMES, MAX_VALUES, check_rate, max_frames, max_values
+
+        fps = check_rate(fps, "resampling frame rate")
         if self.n_frames < 2 or np.isclose(fps, self.fps):
             return Motion(
                 self.skeleton, self.rotations, self.translations, fps, self.name, self.source
             )
         t_old = np.arange(self.n_frames) / self.fps
-        n_new = int(np.floor(t_old[-1] * fps + 1e-9)) + 1
+        span = float(t_old[-1]) * fps
+        n_values = span * self.skeleton.n_joints * 7
+        if not np.isfinite(span) or span >= max_frames() or n_values > max_values():
+            raise LimitError(
+                f"resampling {self.n_frames} frames at {self.fps:g} fps to {fps:g} fps gives "
+                f"{span:.3g} frames, more than the limits allow "
+                f"({MAX_FRAMES.env}, {MAX_VALUES.env})"
+            )
+        n_new = int(np.floor(span + 1e-9)) + 1
         t_new = np.arange(n_new) / fps
         rot = np.empty((n_new, self.skeleton.n_joints, 4))
         for j in range(self.skeleton.n_joints):

@@ -8,6 +8,7 @@ Root resolution order: an explicit path, then ``$MARKOVMOTION_DATA``, then
 from __future__ import annotations
 
 import csv
+import io
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
@@ -16,7 +17,8 @@ from pathlib import Path
 from markovmotion.core.motion import Motion
 from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.io import read_motion
-from markovmotion.io.files import base_suffix
+from markovmotion.io.files import base_suffix, read_text
+from markovmotion.limits import MAX_FRAMES, check_rate, exceeded, max_frames
 
 ENV_VAR = "MARKOVMOTION_DATA"
 INDEX_NAME = "INDEX.csv"
@@ -129,7 +131,15 @@ class MocapIndex:
         """Read ``INDEX.csv`` from ``path`` (a folder or the CSV itself) or the default root."""
         root = data_root(path)
         csv_path = root / INDEX_NAME
-        with open(csv_path, newline="", encoding="utf-8") as fh:
+        try:
+            return cls._parse(root, csv_path, read_text(csv_path))
+        except csv.Error as exc:
+            raise MotionFormatError(csv_path, f"not a readable CSV file ({exc})") from None
+
+    @classmethod
+    def _parse(cls, root: Path, csv_path: Path, text: str) -> MocapIndex:
+        """The entries of ``text`` (INDEX.csv read within the limits of :mod:`markovmotion.limits`)."""
+        with io.StringIO(text, newline="") as fh:
             reader = csv.DictReader(fh)
             missing = [
                 c
@@ -139,7 +149,10 @@ class MocapIndex:
             if missing:
                 raise MotionFormatError(csv_path, f"missing columns: {', '.join(missing)}", 1)
             entries = []
+            cap = max_frames()
             for line, row in enumerate(reader, start=2):
+                if len(entries) >= cap:
+                    raise MotionFormatError(csv_path, exceeded(MAX_FRAMES, "rows"), line)
                 try:
                     entries.append(
                         Entry(
@@ -148,7 +161,7 @@ class MocapIndex:
                                 for f in fields(Entry)
                                 if f.name not in ("fps", "frames", "root")
                             },
-                            fps=float(row["fps"]),
+                            fps=check_rate(row["fps"], "fps"),
                             frames=int(row.get("frames") or 0),
                             root=root,
                         )
@@ -223,7 +236,7 @@ def listed_entry(path: str | os.PathLike[str]) -> Entry | None:
     try:
         index = MocapIndex.load()
         return index.find(Path(path).resolve().relative_to(index.root).as_posix())
-    except (DataNotFoundError, ValueError):
+    except (DataNotFoundError, ValueError, OSError, RuntimeError):  # a link loop: the reader says
         return None
 
 

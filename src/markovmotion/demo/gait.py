@@ -39,7 +39,7 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     console.print(
         f"adapted to '{STYLE}' (CSMAPLR + MAP) from {styled.n_steps_} steps of {style_walks[0].name}"
     )
-    synthesized = styled.synthesize(12)
+    synthesized = styled.generate(12)
     synthesized.name = f"synthesized {STYLE} walk (adapted model)"
     real = align_walk(index.load_motion(style_test[0]))
     steps = detect_steps(real)

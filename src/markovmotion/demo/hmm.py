@@ -31,7 +31,7 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     )
     a, b = index.load_pair(*test)
     a, b = a.resample(model.fps), b.resample(model.fps)
-    virtual = model.generate(a, "windowed")
+    virtual = model.respond(a, "windowed")
     result = evaluate_pair(model, a, b, f"{test[0].name}+{test[1].name}", LABEL)
     errors = {k: result.errors[k].mean() for k in ("standard", "windowed", "mean_pose")}
     console.print(

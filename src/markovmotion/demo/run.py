@@ -102,7 +102,21 @@ def stylized_walk(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     return demo_step(out, index, console)
 
 
-STEPS: list[Step] = [captured_walk, pca_energy, dual_hmm_partner, vlmm_routine, stylized_walk]
+def chain_partner(out: Path, index: MocapIndex, console: Console) -> list[Path]:
+    """A virtual salsa partner answered online by a behaviour chain (CONDENSATION)."""
+    from markovmotion.demo.chain import demo_step
+
+    return demo_step(out, index, console)
+
+
+STEPS: list[Step] = [
+    captured_walk,
+    pca_energy,
+    dual_hmm_partner,
+    chain_partner,
+    vlmm_routine,
+    stylized_walk,
+]
 
 
 def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None = None) -> None:

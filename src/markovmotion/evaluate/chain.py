@@ -19,20 +19,30 @@ takes' floor, as a partner that knows only the real person could;
 The dual-HMM partner (dual-HMM paper) can be measured alongside, the same way
 on the same frames: it answers person A (the first file of each pair) with B.
 
-The split is fixed: of CMU's salsa takes, trials 12, 13 and 15 (the last three
-pairs) are held out; the other eight train.
+Which takes: :func:`evaluate_model` evaluates a model on the two-person takes
+of any INDEX.csv that fit it (interaction pairs of its labels whose skeletons
+it can observe), leaving out those it trained on by content hash
+(:mod:`markovmotion.evaluate.takes`); without an index, on the held-out pairs
+of the collection (:func:`markovmotion.data.splits.held_out_pairs`: of CMU's
+salsa takes, trials 12, 13 and 15). Silhouette models are evaluated on the
+held-out takes of a folder written by ``silhouette render``.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.splits import held_out_pairs
+from markovmotion.errors import DataNotFoundError, MarkovMotionError
+from markovmotion.evaluate.takes import test_takes
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
 from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
@@ -41,7 +51,7 @@ from markovmotion.models.chain.condensation import (
     RESPONSES,
 )
 from markovmotion.models.chain.partner import VirtualPartner
-from markovmotion.progress import track
+from markovmotion.progress import err_console, track
 
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
@@ -57,6 +67,109 @@ def mocap_takes(
         TwoPeople.from_motions(*index.load_pair(a, b), fps=fps)
         for a, b in track(pairs, "reading takes")
     ]
+
+
+def model_labels(model: VirtualPartner, labels: Sequence[str] | None = None) -> list[str] | None:
+    """The labels of two-person takes the model answers: ``labels``, else those it was trained
+    on (``labels_``, saved by ``chain train``), else None (any)."""
+    if labels:
+        return list(labels)
+    known = getattr(model, "labels_", None)
+    return list(known) if known else None
+
+
+@dataclass
+class TestSet:
+    """The takes a chain model is evaluated on, and what the JSON says of them.
+
+    Attributes:
+        takes: both people of each take (joint positions, or tracked silhouettes).
+        pairs: the INDEX.csv entries of each take (motion capture), else None.
+        index: the index they come from (motion capture), else None.
+        report: ``test_files`` and ``left_out_training_files``.
+    """
+
+    __test__ = False  # not a pytest class
+
+    takes: list[TwoPeople]
+    pairs: list[tuple[Entry, Entry]] | None = None
+    index: MocapIndex | None = None
+    report: dict[str, list[str]] = field(default_factory=dict)
+
+
+def test_set(
+    model: VirtualPartner,
+    test: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    takes: Sequence[TwoPeople] | None = None,
+) -> TestSet:
+    """The takes to evaluate ``model`` on (see the module docstring).
+
+    Motion capture: the interaction pairs of ``test`` (an INDEX.csv or its
+    folder) with the model's labels (:func:`model_labels`), minus the model's
+    training takes (by content hash), minus pairs whose skeletons the model
+    cannot observe (a warning each); without ``test``, the held-out pairs of the
+    collection. Prepared ``takes`` (silhouettes tracked by
+    :func:`markovmotion.video.dataset.silhouette_takes`) are taken as they are.
+
+    Raises:
+        DataNotFoundError: no take remains (one line saying why).
+    """
+    if takes is not None:
+        if not takes:
+            raise DataNotFoundError(f"{test or 'the test folder'}: no held-out takes")
+        names = [t.name for t in takes]
+        return TestSet(list(takes), report={"test_files": names, "left_out_training_files": []})
+    if model.source != "mocap":
+        raise ValueError("a silhouette model is evaluated on tracked takes: give takes")
+    index = MocapIndex.load(test)
+    candidates = index.pairs(label=model_labels(model, labels))
+    if test is None:
+        _, candidates = held_out_pairs(candidates)
+    chosen = test_takes(model, index, candidates, "two-person take")
+    pairs, takes = [], []
+    for a, b in track(chosen.takes, "reading takes"):
+        try:
+            motions = index.load_pair(a, b)
+            for m in motions:
+                model.check_input(m)
+        except MarkovMotionError as exc:
+            err_console.print(f"[yellow]skipped[/] {a.file} + {b.file}: {exc}", highlight=False)
+            continue
+        pairs.append((a, b))
+        takes.append(TwoPeople.from_motions(*motions, fps=model.fps_))
+    if not takes:
+        raise DataNotFoundError(
+            f"no two-person take of {index.root / 'INDEX.csv'} can be observed by the model"
+        )
+    chosen.takes = pairs
+    return TestSet(takes, pairs, index, chosen.report())
+
+
+def evaluate_model(
+    model: VirtualPartner,
+    test: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    n_hypotheses: int = 200,
+    response: str = DEFAULT_RESPONSE,
+    seed: int = 0,
+    sigma: float = DEFAULT_SIGMA,
+    resync: float = DEFAULT_RESYNC,
+    dual_hmm: DualHMM | None = None,
+    takes: Sequence[TwoPeople] | None = None,
+) -> dict:
+    """:func:`evaluate_partner` on :func:`test_set`'s takes, with its ``test_files`` and
+    ``left_out_training_files``; ``dual_hmm`` (motion capture) is measured alongside."""
+    chosen = test_set(model, test, labels, takes)
+    others = None
+    if dual_hmm is not None:
+        if chosen.index is None or chosen.pairs is None:
+            raise ValueError("a dual HMM is compared on 3-D partners: give a mocap model")
+        others = dual_hmm_partners(dual_hmm, chosen.index, chosen.pairs, chosen.takes)
+    result = evaluate_partner(
+        model, chosen.takes, model.source, n_hypotheses, response, seed, others, sigma, resync
+    )
+    return {**result, **chosen.report}
 
 
 def pose_error_mm(model: VirtualPartner, pred: Person, truth: Person) -> float:
@@ -98,7 +211,7 @@ def dual_hmm_partners(
     for (ea, eb), take in zip(track(pairs, "dual HMM partners"), takes, strict=True):
         a, _ = index.load_pair(ea, eb)
         for m in METHODS:
-            b = dual.generate(a, m).resample(take.fps)
+            b = dual.respond(a, m).resample(take.fps)
             if b.n_frames < take.n_frames:
                 raise ValueError(
                     f"{take.name}: the dual HMM gave {b.n_frames} frames, not {take.n_frames}"
@@ -148,6 +261,8 @@ def evaluate_partner(
         raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
     if response not in RESPONSES:
         raise ValueError(f"response must be one of {RESPONSES}, got {response!r}")
+    if not takes:
+        raise ValueError("no takes to evaluate on")
     others = others or {}
     methods = {
         "single_hypothesis": {"n_hypotheses": 1, "resync": resync},
@@ -183,7 +298,7 @@ def evaluate_partner(
                 }
             for name, options in methods.items():
                 start = time.perf_counter()
-                partners[name] = model.respond(real, role, seed=seed, **options).partner
+                partners[name] = model.respond_shapes(real, role, rng=seed, **options).partner
                 seconds[name] += time.perf_counter() - start
             partners.update({k: v[i][person] for k, v in others.items()})
             for name, pred in partners.items():

@@ -49,8 +49,10 @@ the adapted models' walks can be told from the from-scratch models'.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,21 +60,34 @@ from sklearn.base import BaseEstimator
 from sklearn.decomposition import PCA
 from sklearn.linear_model import LogisticRegression
 from sklearn.metrics import balanced_accuracy_score
-from sklearn.model_selection import GroupKFold, cross_val_predict
+from sklearn.model_selection import GroupKFold, StratifiedGroupKFold, cross_val_predict
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from markovmotion.algorithms.dtw import dtw_distance, dtw_path
 from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
-from markovmotion.errors import DataNotFoundError
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.splits import held_out_every
+from markovmotion.errors import DataNotFoundError, ModelFormatError
 from markovmotion.evaluate.perceptual import efficiency
+from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.gait import SIDES, align_walk, detect_steps, foot_slide
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.models.gait.synthesizer import GaitSynthesizer
+from markovmotion.models.base import Model, file_sha256, training_hashes
+from markovmotion.models.gait.synthesizer import (
+    DEFAULT_SUBSET,
+    KIND,
+    GaitSynthesizer,
+    gait_entries,
+)
+from markovmotion.persist import load_npz
+from markovmotion.progress import track
 
 ROLES = ("adapted", "average", "scratch")
+#: Categories of INDEX.csv rows that are walks.
+WALK_CATEGORIES = ("walk", "style_walk")
 
 
 @dataclass
@@ -237,7 +252,10 @@ def real_vs_synthesized(
     model = make_pipeline(
         StandardScaler(), LogisticRegression(C=C, max_iter=5000, class_weight="balanced")
     )
-    folds = GroupKFold(min(n_folds, len(synth), len(real)))
+    k = min(n_folds, len(synth), len(real))
+    folds: GroupKFold | StratifiedGroupKFold = GroupKFold(k)
+    if any(len(set(y[train])) < 2 for train, _ in folds.split(x, y, groups)):
+        folds = StratifiedGroupKFold(k)  # a fold would train on one kind of walk only
     guess = cross_val_predict(model, x, y, groups=groups, cv=folds)
     return float(balanced_accuracy_score(y, guess))
 
@@ -383,12 +401,6 @@ def _step_duration_sd(walks: Mapping[str, Sequence[WalkSteps]], styles: Sequence
     return float(np.mean(sd))
 
 
-def _log_likelihood(model: GaitSynthesizer, motions: Sequence[Motion]) -> float:
-    """Log-likelihood per frame of real walks under a model (its own features)."""
-    data = model.walk_set(motions)
-    return model.hsmm_.score(data.obs, data.contexts) / sum(len(x) for x in data.obs)
-
-
 def adaptation_takes(
     motions: Sequence[Motion], steps_per_take: Sequence[int], n_steps: int, replicate: int = 0
 ) -> list[Motion]:
@@ -509,7 +521,9 @@ class Evaluation:
         out = []
         for i in range(self.n_walks):
             speed = rng.uniform(1 - self.speed_jitter, 1 + self.speed_jitter)
-            walk = model.synthesize(self.walk_steps, speed=speed, first_side=SIDES[i % 2], rng=rng)
+            walk = model.generate(
+                self.walk_steps, speed=speed, first_side=SIDES[i % 2], rng=rng, stochastic=True
+            )
             out.append(self.observer(walk))
         return out
 
@@ -568,12 +582,10 @@ class Evaluation:
             ),
             "dtw_joint_mm": _mean_over_styles([_per_walk([d[1] for d in dtw[s]]) for s in styles]),
             "test_log_likelihood": float(
-                np.mean(
-                    [_log_likelihood(m, self.test_motions[s]) for s in styles for m in models[s]]
-                )
+                np.mean([m.score(self.test_motions[s]) for s in styles for m in models[s]])
             ),
             "adaptation_steps": {s: [m.n_steps_ for m in models[s]] for s in styles},
-            "adaptation_files": {s: [m.files_ for m in models[s]] for s in styles},
+            "adaptation_files": {s: [m.own_files for m in models[s]] for s in styles},
             "confusion": rec.table(),
             "styles": styles,
         }
@@ -619,3 +631,200 @@ class Evaluation:
                 },
             }
         return out
+
+
+# ------------------------------------------------------------------ ``gait evaluate``
+Models = dict[str, dict[str, GaitSynthesizer]]
+
+
+def load_models(path: str | os.PathLike[str]) -> Models:
+    """Gait models by role and style: one model file, or those of a folder (other kinds skipped).
+
+    Raises:
+        DataNotFoundError: no such file or folder, or no gait model in the folder.
+        ModelFormatError: a file given by name that is not a gait model.
+    """
+    path = Path(path)
+    found: Models = {r: {} for r in ROLES}
+    if path.is_file():
+        model = _load(path)
+        found[model.role_][model.style_] = model
+        return found
+    if not path.is_dir():
+        raise DataNotFoundError(f"{path}: no such gait model or folder of models")
+    for file in sorted(path.glob("*.npz")):
+        try:
+            header, _ = load_npz(file)
+        except ModelFormatError:
+            continue
+        if header.get("kind") == KIND:
+            model = _load(file)
+            found[model.role_][model.style_] = model
+    if not any(found.values()):
+        raise DataNotFoundError(f"{path}: no gait models (.npz) in this folder")
+    return found
+
+
+def _load(path: Path) -> GaitSynthesizer:
+    model = GaitSynthesizer.load(path)
+    if not hasattr(model, "train_files_"):
+        raise ModelFormatError(
+            path, "written before models recorded their training files; train it again"
+        )
+    return model
+
+
+def _all(models: Models) -> list[GaitSynthesizer]:
+    return [m for role in models.values() for m in role.values()]
+
+
+def _trained_on_any(models: Models) -> Model:
+    """A stand-in whose ``train_files_`` are those of every model (for :func:`test_takes`)."""
+    union = Model()
+    union.train_files_ = [rec for m in _all(models) for rec in m.train_files_]
+    return union
+
+
+def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Motion]]:
+    """The walks of ``index`` that fit the models, read, without those any model trained on.
+
+    A walk fits if its category is a walk, its label the style of one of the
+    models, and its skeleton the models' (same joints, same order). Takes are
+    compared with the models' ``train_files_`` by content (:func:`test_takes`).
+
+    Raises:
+        DataNotFoundError: no walk fits, or every one that does is a training take.
+    """
+    styles = sorted({m.style_ for m in _all(models)})
+    skeleton = _all(models)[0].pipeline_.steps[-1].skeleton_
+    rows = sorted(index.query(category=list(WALK_CATEGORIES), label=styles), key=lambda e: e.file)
+    chosen = test_takes(_trained_on_any(models), index, rows, what=f"{'/'.join(styles)} walk")
+    kept: list[Entry] = []
+    motions: list[Motion] = []
+    for e in track(chosen.takes, "reading test walks"):
+        motion = index.load_motion(e)
+        if skeleton.same_topology(motion.skeleton):
+            kept.append(e)
+            motions.append(motion)
+    if not kept:
+        raise DataNotFoundError(
+            f"no walk of {', '.join(styles)} in {index.root / 'INDEX.csv'} has the models' "
+            f"skeleton ({skeleton.n_joints} joints)"
+        )
+    return TestTakes(kept, chosen.left_out), motions
+
+
+def evaluate_models(
+    models: Models,
+    test: str | os.PathLike[str] | None = None,
+    *,
+    data: str | os.PathLike[str] | None = None,
+    sweep: Sequence[int] = (),
+    classifier: StyleClassifier | None = None,
+    n_walks: int = 8,
+    walk_steps: int = 12,
+    replicates: int = 3,
+    seed: int = 0,
+    n_boot: int = 2000,
+    subset: str = "",
+    progress: Callable[[str, int], None] | None = None,
+) -> dict[str, Any]:
+    """Everything ``gait evaluate`` reports, on held-out walks or on the walks of another index.
+
+    The style classifier (and the sweep's adaptation) learns from the
+    training takes (:func:`~markovmotion.data.splits.held_out_every`) of the
+    walks of ``data`` (an INDEX.csv or its folder; default the shared
+    collection) whose file starts with ``subset`` (default Bandai dataset-2).
+    Without ``test``, the models are evaluated on the held-out takes of that
+    index, which they must not have trained on. With ``test`` (another
+    INDEX.csv), on its walks that fit the models (:func:`walks_to_test`),
+    less those the classifier learns from (compared by content too, listed
+    as ``left_out_classifier_files``). ``progress`` is told each piece of
+    work done and the total.
+
+    Returns the results (``real``, one entry per role, ``sweep``), with
+    ``test_files`` and ``left_out_training_files``.
+
+    Raises:
+        DataNotFoundError: no test walks, held-out walks the models trained
+            on, a test style the classifier has no training walks of, or a
+            sweep without an average model.
+    """
+    ks = list(sweep)
+    if ks and not models["average"]:
+        raise DataNotFoundError("the sweep needs an average model")
+    index = MocapIndex.load(data)
+    train, held_out = held_out_every(gait_entries(index, None, subset or DEFAULT_SUBSET))
+    by_classifier: list[str] = []
+    train_motions: dict[str, list[Motion]] = {}
+    test_motions: dict[str, list[Motion]] = {}
+    if test is None:
+        trained = set().union(*(training_hashes(m) for m in _all(models)))
+        leaked = sorted(e.name for e in held_out if file_sha256(e.path) in trained)
+        if leaked:
+            raise DataNotFoundError(
+                f"the models were trained on held-out takes ({', '.join(leaked[:3])}); "
+                "train them on the training split, or evaluate with a test index"
+            )
+        takes = TestTakes(held_out)
+        for e in track(held_out, "reading test walks"):
+            test_motions.setdefault(e.label, []).append(index.load_motion(e))
+    else:
+        found, motions = walks_to_test(models, MocapIndex.load(test))
+        learnt = {file_sha256(e.path) for e in train}
+        kept = [
+            (e, m)
+            for e, m in zip(found.takes, motions, strict=True)
+            if file_sha256(e.path) not in learnt
+        ]
+        by_classifier = [e.file for e in found.takes if file_sha256(e.path) in learnt]
+        if not kept:
+            raise DataNotFoundError(
+                f"every walk of {found.takes[0].root / 'INDEX.csv'} that fits the models and "
+                f"that they did not train on teaches the style classifier: "
+                f"{', '.join(by_classifier)}"
+            )
+        takes = TestTakes([e for e, _ in kept], found.left_out)
+        for e, m in kept:
+            test_motions.setdefault(e.label, []).append(m)
+        missing = sorted(set(test_motions) - {e.label for e in train})
+        if missing:
+            raise DataNotFoundError(
+                f"no training walks of {', '.join(missing)} in {index.root / 'INDEX.csv'} "
+                "for the style classifier"
+            )
+    for e in track(train, "reading training walks"):
+        train_motions.setdefault(e.label, []).append(index.load_motion(e))
+    ev = Evaluation.prepare(
+        train_motions,
+        test_motions,
+        classifier or StyleClassifier(),
+        n_walks=n_walks,
+        walk_steps=walk_steps,
+        replicates=replicates,
+        seed=seed,
+        n_boot=n_boot,
+    )
+    average = next(iter(models["average"].values()), None)
+    targets = [s for s in ev.styles if average is None or s != average.style_] or ev.styles
+    chosen = {
+        role: {s: [m] for s, m in models[role].items() if s in targets}
+        for role in ("adapted", "scratch")
+    }
+    if average is not None:
+        chosen["average"] = {s: [average] for s in targets}
+    work = sum(map(len, chosen.values())) + 3 * len(ks) * len(targets)
+
+    def advance(what: str) -> None:
+        if progress:
+            progress(what, work)
+
+    result: dict[str, Any] = {"styles": ev.styles, "targets": targets, "real": ev.real()}
+    for role in ROLES:
+        if chosen.get(role):
+            result[role], _, _ = ev.models(chosen[role], advance, f"{role} ")
+    if ks:
+        result["sweep"] = ev.sweep(average, targets, ks, progress=advance)
+    result.update(takes.report())
+    result["left_out_classifier_files"] = by_classifier
+    return result

@@ -12,6 +12,13 @@ for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares
 the windowed output with the real B ``lag`` frames later, as a live viewer
 sees it. Step latency is the time of one online partner step (emission
 probabilities, windowed Viterbi, trellis) on A's features.
+
+The command line's set-ups live here too (``dualhmm train``, ``evaluate``,
+``crossval`` each call one function): :func:`fit_on_index` (the takes of an
+index, minus ``--test-trials``; what to record in the model file),
+:func:`evaluate_model` (``evaluate --test PATH/INDEX.csv`` on any index,
+without leakage, through :func:`markovmotion.evaluate.takes.test_takes`; or
+the model's own held-out takes) and :func:`crossval_index`.
 """
 
 from __future__ import annotations
@@ -28,8 +35,12 @@ from sklearn.base import clone
 from sklearn.neighbors import NearestNeighbors
 
 from markovmotion.core.motion import UP, Motion
-from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
+from markovmotion.data.splits import select_pairs
+from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
+from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
+from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.dual import DualHMM, ground_frame
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
@@ -95,8 +106,8 @@ def evaluate_pair(
     origin, yaw = ground_frame(a)
     xa, _ = model.features_a(a)
     generated = {
-        "standard": model.generate(a, "standard"),
-        "windowed": model.generate(a, "windowed"),
+        "standard": model.respond(a, "standard"),
+        "windowed": model.respond(a, "windowed"),
         "nearest_neighbour": baselines.nearest(xa, origin, yaw),
     }
     truth, truth_pose = b.positions(), b.body_centred_positions()
@@ -172,25 +183,6 @@ def summarise(results: Sequence[PairResult], model: DualHMM) -> dict:
     }
 
 
-def evaluate_index(
-    model: DualHMM,
-    index: MocapIndex,
-    pairs: Sequence[tuple[Entry, Entry]],
-    plot_dir: str | os.PathLike[str] | None = None,
-) -> tuple[dict, list[Path]]:
-    """Evaluate ``model`` on the two-person takes ``pairs``; returns the JSON dict and plots written."""
-    baselines = _Baselines(model)
-    results, plots = [], []
-    for ea, eb in track(pairs, "evaluating pairs"):
-        a, b = index.load_pair(ea, eb)
-        model.check_input(a, ea.path)
-        res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
-        results.append(res)
-        if plot_dir is not None:
-            plots.append(plot_pair(res, Path(plot_dir) / f"{res.name}_error.png"))
-    return summarise(results, model), plots
-
-
 def _fit_on(model: DualHMM, takes: Sequence[tuple[str, str, Motion, Motion]]) -> DualHMM:
     """A copy of ``model`` (same hyper-parameters) trained on ``takes``."""
     return clone(model).fit([(a, b) for _, _, a, b in takes])
@@ -207,7 +199,7 @@ def choose_placement(
         fold = _fit_on(model, [t for j, t in enumerate(takes) if j != i])
         truth = model._rate(b).positions()
         for k, w in enumerate(windows):
-            generated = fold.set_params(placement_window=w).generate(a, "standard")
+            generated = fold.set_params(placement_window=w).respond(a, "standard")
             errors[k] += trial_errors(generated.positions(), truth).sum()
         frames += len(truth)
     mean = errors / frames
@@ -240,3 +232,127 @@ def cross_validate(
         if plot_dir is not None:
             plots.append(plot_pair(results[-1], Path(plot_dir) / f"{name}_error.png"))
     return results, plots
+
+
+# ------------------------------------------------------------------ the command line's set-ups
+Pair = tuple[Entry, Entry]
+
+
+def index_record(index: MocapIndex) -> dict[str, str]:
+    """Where an index is and what its INDEX.csv holds (SHA-256), for a model file."""
+    path = index.root / INDEX_NAME
+    return {"root": str(index.root.resolve()), "sha256": file_sha256(path)}
+
+
+def fit_on_index(
+    model: DualHMM,
+    data: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    test_trials: Sequence[str] | None = None,
+) -> tuple[DualHMM, dict, list[Pair]]:
+    """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
+    ``test_trials``. Returns the model, the extras to save with it (``data_index``: the
+    index, ``held_out_files``: the held-out takes' files, which ``evaluate`` without
+    ``--test`` evaluates on) and the training pairs."""
+    index = MocapIndex.load(data)
+    pairs = select_pairs(index, labels, test_trials, held_out=False)
+    motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
+    model.fit(motions, labels=[a.label for a, _ in pairs])
+    held: list[str] = []
+    if test_trials is not None:
+        for a, b in select_pairs(index, labels, test_trials, held_out=True):
+            held += [a.file, b.file]
+    return model, {"data_index": index_record(index), "held_out_files": held}, pairs
+
+
+def evaluation_pairs(
+    model: DualHMM,
+    test: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    trials: Sequence[str] | None = None,
+) -> tuple[MocapIndex, TestTakes]:
+    """The two-person takes ``model`` is evaluated on, and those left out as training takes.
+
+    With ``test`` (a folder or INDEX.csv): the takes of that index whose label is one of
+    the model's training labels (``labels_``; any interaction if none were recorded),
+    or of ``labels``, and (with ``trials``) of those trials. Without ``test``: the
+    model's training index (or the default one), restricted to ``trials`` or else to
+    the held-out takes recorded at training.
+    Either way takes whose files the model trained on (by content) are left out
+    (:func:`~markovmotion.evaluate.takes.test_takes`).
+
+    Raises:
+        DataNotFoundError: no take fits, or every one that does is a training take (one
+            line listing them).
+    """
+    wanted = list(labels or getattr(model, "labels_", None) or []) or None
+    if test is not None:
+        index = MocapIndex.load(test)
+    else:
+        record = getattr(model, "data_index_", None)
+        root = record.get("root") if isinstance(record, dict) else None
+        index = MocapIndex.load(root if root and Path(root).is_dir() else None)
+    if trials is not None:
+        pairs = select_pairs(index, wanted, trials, held_out=True)
+    else:
+        pairs = index.pairs(label=wanted)
+        held = getattr(model, "held_out_files_", None)
+        if test is None and held:
+            pairs = [p for p in pairs if p[0].file in held]
+    return index, test_takes(model, index, pairs, "two-person take")
+
+
+def evaluate_model(
+    model: DualHMM,
+    test: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    trials: Sequence[str] | None = None,
+    plot_dir: str | os.PathLike[str] | None = None,
+) -> tuple[dict, list[Path]]:
+    """``dualhmm evaluate``: the evaluation JSON (:func:`summarise`, with ``test_files``,
+    ``left_out_training_files`` and ``incompatible_files``, takes whose person A has
+    another skeleton) on the takes of :func:`evaluation_pairs`, and the plots written."""
+    index, takes = evaluation_pairs(model, test, labels, trials)
+    baselines = _Baselines(model)
+    results, plots, kept, incompatible = [], [], [], []
+    for ea, eb in track(takes.takes, "evaluating pairs"):
+        a, b = index.load_pair(ea, eb)
+        try:
+            model.check_input(a, ea.path)
+        except SkeletonMismatchError:
+            incompatible += [ea.file, eb.file]
+            continue
+        kept.append((ea, eb))
+        res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
+        results.append(res)
+        if plot_dir is not None:
+            plots.append(plot_pair(res, Path(plot_dir) / f"{res.name}_error.png"))
+    if not results:
+        raise DataNotFoundError(
+            f"no two-person take of {index.root / INDEX_NAME} has person A on the model's "
+            f"skeleton: {', '.join(incompatible)}"
+        )
+    report = summarise(results, model)
+    report.update(TestTakes(kept, takes.left_out).report(), incompatible_files=incompatible)
+    return report, plots
+
+
+def crossval_index(
+    model: DualHMM,
+    data: str | os.PathLike[str] | None = None,
+    labels: Sequence[str] | None = None,
+    plot_dir: str | os.PathLike[str] | None = None,
+    placement_windows: Sequence[int] | None = None,
+) -> tuple[dict, list[Path]]:
+    """``dualhmm crossval``: :func:`cross_validate` over the two-person takes of ``labels``
+    in the index at ``data``; the JSON (:func:`summarise`, with ``test_files``) and plots."""
+    index = MocapIndex.load(data)
+    pairs = select_pairs(index, labels, None, held_out=False)
+    takes = [
+        (f"{a.name}+{b.name}", a.label, *index.load_pair(a, b))
+        for a, b in track(pairs, "loading takes")
+    ]
+    results, written = cross_validate(takes, model, plot_dir, placement_windows)
+    report = summarise(results, model)
+    report.update(TestTakes(list(pairs)).report())
+    return report, written

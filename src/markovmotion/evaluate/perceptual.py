@@ -249,7 +249,9 @@ CSV_COLUMNS = (
 
 
 def answers_csv(items: Sequence[Item]) -> str:
-    """The answered items as CSV, one row per answer."""
+    """The answered items as CSV, one row per answer (formula-like cells quoted: :func:`csv_safe`)."""
+    from markovmotion.evaluate.store import csv_safe
+
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)
@@ -257,5 +259,5 @@ def answers_csv(items: Sequence[Item]) -> str:
         if i.answer is not None:
             row = [getattr(i, c) for c in CSV_COLUMNS]
             row[CSV_COLUMNS.index("displacement")] = "yes" if i.displacement else "no"
-            writer.writerow(["" if v is None else v for v in row])
+            writer.writerow(["" if v is None else csv_safe(v) for v in row])
     return out.getvalue()

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from markovmotion.core.motion import Motion
-from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionFormatError
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.files import atomic_write, read_text
 
@@ -91,6 +91,11 @@ def write_stimuli(
     """
     entries = [(s, "real", f) for s, f in real.items()]
     entries += [(s, "synthetic", f) for s, f in synthetic.items()]
+    if not entries:
+        raise MarkovMotionError(
+            f"{folder}: no stimuli to write: give walks with --real STYLE=FILE "
+            "and/or --synthetic STYLE=FILE"
+        )
     motions = [read_motion(file) for _, _, file in entries]
     order = np.random.default_rng().permutation(2 * len(entries))
     root = Path(folder)

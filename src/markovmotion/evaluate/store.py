@@ -235,6 +235,19 @@ class EvaluationStore:
         return self._con().execute("SELECT COUNT(*) FROM evaluators").fetchone()[0]
 
 
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+"""First characters that make a spreadsheet read a CSV cell as a formula (OWASP CSV injection)."""
+
+
+def csv_safe(value: object) -> object:
+    """``value`` for a CSV cell opened by a spreadsheet: a string beginning with one of
+    :data:`FORMULA_STARTS` gets a leading single quote so it stays text; numbers and
+    other strings are unchanged."""
+    if isinstance(value, str) and value.startswith(FORMULA_STARTS):
+        return "'" + value
+    return value
+
+
 def open_results(path: str | os.PathLike[str]) -> EvaluationStore:
     """An existing evaluation database, for the offline report."""
     if not Path(path).is_file():

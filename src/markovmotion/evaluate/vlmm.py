@@ -12,21 +12,35 @@ sequence, e.g. the recognised state at each frame),
 ``predict_configurations(features, prepared, frames, horizon, n_samples, rng)``
 -> (len(frames), n_samples, horizon, d), and ``configuration_positions(C)``
 -> (M, J, 3) mm.
+
+:func:`evaluate_model` is the experiment of ``vlmm evaluate``: a trained
+behaviour model (plain or structured) on the takes of any INDEX.csv that fit
+it, against a first-order Markov model over the same prototypes and the
+zero-velocity baseline.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from markovmotion.core.motion import Motion
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
+from markovmotion.evaluate.takes import TestTakes, test_takes
+from markovmotion.models.vlmm.behaviour import BehaviourModel
+from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 from markovmotion.progress import progress_bar
 from markovmotion.viz.plots import new_figure, save_figure
 
 #: Horizons reported by ``vlmm evaluate`` (seconds).
 REPORT_SECONDS = (0.5, 1.0, 2.0, 3.0)
+#: The first-order Markov model: memory 1, every context kept.
+FIRST_ORDER = (1, 0.0)
 
 
 def trial_errors(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -139,3 +153,152 @@ def plot_horizon_curves(
     ax.grid(alpha=0.3)
     ax.legend()
     save_figure(fig, path)
+
+
+# ------------------------------------------------------------------ the experiment
+@dataclass
+class VlmmEvaluation:
+    """E_T curves of ``vlmm evaluate`` and the takes they were measured on.
+
+    ``curves`` maps each predictor's name to its curve (a model asked for
+    under two names shares one); ``takes`` are the evaluated index entries and
+    the training takes left out, ``other_skeleton`` the takes left out for a
+    skeleton the model cannot read.
+    """
+
+    curves: dict[str, HorizonCurve]
+    takes: TestTakes
+    motions: list[Motion]
+    horizon: float
+    samples: int
+    stride: int
+    other_skeleton: list[Entry] = field(default_factory=list)
+
+    @property
+    def seconds(self) -> list[float]:
+        """The reported horizons (:data:`REPORT_SECONDS` up to ``horizon``)."""
+        return [s for s in REPORT_SECONDS if s <= self.horizon]
+
+    @property
+    def n_frames(self) -> int:
+        """Frames of the test takes at the model's frame rate."""
+        return sum(m.n_frames for m in self.motions)
+
+    def result(self) -> dict[str, Any]:
+        """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm, the
+        test files, the training files left out and (if any) those of another skeleton."""
+        out: dict[str, Any] = {
+            f"E_T_mm.{name}.{s:g}": round(c.at(s), 2)
+            for name, c in self.curves.items()
+            for s in self.seconds
+        }
+        out.update(self.takes.report())
+        if self.other_skeleton:
+            out["left_out_other_skeleton"] = [e.file for e in self.other_skeleton]
+        return out
+
+    def plot(self, path: str | os.PathLike[str]) -> None:
+        """E_T curves (paper Fig. 4) as a PNG."""
+        unique = list({id(c): c for c in self.curves.values()}.values())
+        plot_horizon_curves(
+            unique, path, f"E_T on {len(self.motions)} test takes ({self.n_frames} frames)"
+        )
+
+
+def candidate_takes(
+    model: BehaviourModel | StructuredBehaviourModel,
+    index: MocapIndex,
+    held_out: bool = False,
+    category: str | None = None,
+    labels: Sequence[str] | None = None,
+) -> list[Entry]:
+    """The takes of ``index`` a behaviour model is evaluated on, before leaving out its
+    training takes.
+
+    ``category``/``labels`` given: those takes. Else with ``held_out``: the
+    takes the model held out in training (``held_out_files_``, by INDEX.csv
+    file name). Else: the takes of the model's category and labels
+    (``category_``, ``labels_``; any when the model did not record them).
+
+    Raises:
+        DataNotFoundError: ``held_out`` and none of the model's held-out takes is in ``index``.
+    """
+    if category or labels:
+        return index.query(category=category, label=labels or None)
+    if held_out:
+        listed = set(getattr(model, "held_out_files_", []))
+        entries = [e for e in index if e.file in listed]
+        if not entries:
+            raise DataNotFoundError(
+                f"the model lists no held-out takes found in {index.root / 'INDEX.csv'}: "
+                "give an index of test takes with --test, or --category/--label"
+            )
+        return entries
+    return index.query(
+        category=getattr(model, "category_", None), label=getattr(model, "labels_", None) or None
+    )
+
+
+def evaluate_model(
+    model: BehaviourModel | StructuredBehaviourModel,
+    index: MocapIndex,
+    held_out: bool = False,
+    category: str | None = None,
+    labels: Sequence[str] | None = None,
+    samples: int = 50,
+    horizon: float = 3.0,
+    stride: int = 1,
+    memories: Sequence[int] = (),
+    seed: int = 0,
+) -> VlmmEvaluation:
+    """E_T (eq. 9) of a behaviour model on the takes of ``index`` that fit it.
+
+    The takes are :func:`candidate_takes` minus those the model trained on (by
+    content, :func:`markovmotion.evaluate.takes.test_takes`) minus those of
+    another skeleton. Predictors: ``vlmm`` (the model's prototype VLMM),
+    ``first_order`` (a first-order Markov model over the same prototypes),
+    ``zero_velocity``, ``vlmm_N<n>`` for each of ``memories`` and, for a
+    structured model, ``structured``. ``samples`` Monte Carlo predictions from
+    every ``stride``-th frame, up to ``horizon`` seconds.
+
+    Raises:
+        DataNotFoundError: no take fits, or every one that does is a training take.
+        SkeletonMismatchError: none of the remaining takes has the model's skeleton.
+    """
+    structured = isinstance(model, StructuredBehaviourModel)
+    base = model.prototype_model_ if structured else model
+    takes = test_takes(model, index, candidate_takes(model, index, held_out, category, labels))
+    motions, kept, other = [], [], []
+    for entry in takes.takes:
+        motion = index.load_motion(entry).resample(base.fps)
+        if motion.skeleton.same_topology(base.skeleton_):
+            motions.append(motion)
+            kept.append(entry)
+        else:
+            other.append(entry)
+    if not motions:
+        raise SkeletonMismatchError(
+            f"no test take of {index.root / 'INDEX.csv'} has the model's skeleton: "
+            + ", ".join(e.file for e in other)
+        )
+    takes = TestTakes(kept, takes.left_out)
+    features = base.observe(motions)
+    predictors: dict[str, Any] = {
+        "vlmm": base,
+        "first_order": base.with_vlmm(*FIRST_ORDER),
+        "zero_velocity": ZeroVelocity(base),
+    }
+    for n in memories:
+        predictors[f"vlmm_N{n}"] = base if n == base.max_memory else base.with_vlmm(n, base.epsilon)
+    if structured:
+        predictors["structured"] = model
+    n_frames = int(round(horizon * base.fps))
+    curves: dict[str, HorizonCurve] = {}
+    by_model: dict[int, HorizonCurve] = {}
+    for name, p in predictors.items():  # a model asked for twice is evaluated once
+        if id(p) not in by_model:
+            by_model[id(p)] = evaluate_horizon(
+                p, features, n_frames, base.fps, samples, stride, seed=seed, name=name
+            )
+        curves[name] = by_model[id(p)]
+    return VlmmEvaluation(curves, takes, motions, horizon, samples, stride, other)

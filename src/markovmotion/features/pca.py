@@ -31,7 +31,9 @@ class PCA(FeatureStep):
         k = self.n_components or int(np.searchsorted(np.cumsum(ratio), self.energy - 1e-12) + 1)
         k = min(k, len(ratio))
         self.mean_ = full.mean_
-        self.components_ = full.components_[:k]
+        # C order, as a loaded model has it: the same BLAS kernel, so a loaded model gives
+        # bit-identical features (a near-tie in the trellis turns 1e-12 into another frame)
+        self.components_ = np.ascontiguousarray(full.components_[:k])
         self.explained_variance_ratio_ = ratio
         self.n_components_ = k
         return self

@@ -43,6 +43,16 @@ from markovmotion.core.rotations import euler_to_quat, quat_multiply
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import MotionFormatError
 from markovmotion.io.files import read_text
+from markovmotion.limits import (
+    MAX_FRAMES,
+    MAX_JOINTS,
+    MAX_VALUES,
+    check_rate,
+    exceeded,
+    max_frames,
+    max_joints,
+    max_values,
+)
 
 CMU_FPS = 120.0
 INCH_MM = 25.4
@@ -92,7 +102,7 @@ class _AsfParser:
         self.path = str(path)
         self.sections: dict[str, list[tuple[int, list[str]]]] = {}
         current = None
-        lines = read_text(path).splitlines()
+        lines = _lines(path, read_text(path))
         for n, raw in enumerate(lines, start=1):
             line = raw.split("#", 1)[0].strip()
             if not line:
@@ -194,6 +204,8 @@ class _AsfParser:
             elif key == "end":
                 bones[bone.name] = self._checked(bone, bones, n)
                 bone = None
+                if len(bones) >= max_joints():
+                    raise self.error(f"the skeleton has {exceeded(MAX_JOINTS)}", n)
             elif key == "name":
                 if not rest:
                     raise self.error("bone without a name", n)
@@ -326,6 +338,14 @@ def read_asf(path: str | os.PathLike[str]) -> Skeleton:
     return _parse_asf(path).skeleton
 
 
+def _lines(path: str | os.PathLike[str], text: str) -> list[str]:
+    """``text`` split in lines, refused first if there are more than the limits allow."""
+    cap = max_values() // 3 + max_frames() + 10 * max_joints()
+    if text.count("\n") > cap:
+        raise MotionFormatError(path, f"more than {cap} lines (limit {MAX_VALUES.env})")
+    return text.splitlines()
+
+
 def _asf_beside(amc: str | os.PathLike[str]) -> Path:
     """CMU's naming: ``NN_TT.amc[.gz]`` is animated with ``NN.asf`` in the same folder."""
     amc = Path(amc)
@@ -354,7 +374,9 @@ def _parse_amc(path: str, text: str, asf: AsfSkeleton) -> tuple[np.ndarray, bool
     line_joint: list[int] = []
     line_no: list[int] = []
     tokens: list[str] = []
-    lines = text.splitlines()
+    lines = _lines(path, text)
+    del text
+    frame_cap, value_cap = max_frames(), max_values()
     for n, raw in enumerate(lines, start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
@@ -375,6 +397,8 @@ def _parse_amc(path: str, text: str, asf: AsfSkeleton) -> tuple[np.ndarray, bool
                 )
             frame_number = number
             frame_lines.append(n)
+            if len(frame_lines) > frame_cap:
+                raise MotionFormatError(path, exceeded(MAX_FRAMES), n)
             continue
         if not frame_lines:
             raise MotionFormatError(path, f"{parts[0][:30]!r} before the first frame number", n)
@@ -389,6 +413,8 @@ def _parse_amc(path: str, text: str, asf: AsfSkeleton) -> tuple[np.ndarray, bool
         line_joint.append(j)
         line_no.append(n)
         tokens.extend(parts[1:])
+        if len(tokens) > value_cap:
+            raise MotionFormatError(path, exceeded(MAX_VALUES), n)
     if not frame_lines:
         if not any(ln.strip() for ln in lines):
             raise MotionFormatError(path, "the file is empty")
@@ -495,6 +521,10 @@ def read_amc(
     """
     skeleton = _parse_asf(_asf_beside(path) if asf is None else asf)
     values, degrees = _parse_amc(str(path), read_text(path), skeleton)
-    quats, trans = _values_to_motion(skeleton, values, degrees)
-    rate = float(fps) if fps else CMU_FPS
+    with np.errstate(all="ignore"):  # overflow is reported below, not as a warning
+        quats, trans = _values_to_motion(skeleton, values, degrees)
+        usable = np.isfinite(quats).all() and np.isfinite(trans).all()
+    if not usable:
+        raise MotionFormatError(path, "values too large to convert to a motion")
+    rate = check_rate(fps, "fps") if fps is not None else CMU_FPS
     return Motion(skeleton.skeleton, quats, trans, rate, name=os.path.basename(str(path)))

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import io
 import os
-from collections import defaultdict
+from collections import defaultdict, deque
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -30,6 +30,18 @@ from markovmotion.core.rotations import euler_to_quat
 from markovmotion.core.skeleton import POSITION_CHANNELS, VALID_CHANNELS, Skeleton
 from markovmotion.errors import MotionFormatError
 from markovmotion.io.files import atomic_write, read_text
+from markovmotion.limits import (
+    MAX_CHANNELS,
+    MAX_FRAMES,
+    MAX_JOINTS,
+    MAX_VALUES,
+    check_rate,
+    exceeded,
+    max_channels,
+    max_frames,
+    max_joints,
+    max_values,
+)
 
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "inch": 25.4}
 
@@ -44,36 +56,58 @@ def _unit_scale(length_unit: str) -> float:
 
 
 class _Tokens:
-    """Header tokens with their line numbers, for error messages."""
+    """Header tokens with their line numbers, for error messages.
+
+    Tokenised lazily, line by line, so a hierarchy refused at a limit is never
+    held whole as tokens.
+    """
 
     def __init__(self, path: str, lines: list[str]):
         self.path = path
-        self.items: list[tuple[str, int]] = []
-        for n, line in enumerate(lines, start=1):
-            for tok in line.replace("{", " { ").replace("}", " } ").split():
-                self.items.append((tok, n))
-        self.i = 0
+        self._lines = lines
+        self._next_line = 0
+        self._pending: deque[tuple[str, int]] = deque()
+        self._last: tuple[str, int] | None = None
         self.last_line = len(lines)
 
+    def _fill(self) -> None:
+        while not self._pending and self._next_line < len(self._lines):
+            line = self._lines[self._next_line]
+            self._next_line += 1
+            n = self._next_line
+            self._pending.extend(
+                (t, n) for t in line.replace("{", " { ").replace("}", " } ").split()
+            )
+
+    def line(self) -> int:
+        """The line of the next token (the last line at the end)."""
+        self._fill()
+        return self._pending[0][1] if self._pending else self.last_line
+
     def error(self, problem: str, line: int | None = None) -> MotionFormatError:
-        if line is None:
-            line = self.items[self.i][1] if self.i < len(self.items) else self.last_line
-        return MotionFormatError(self.path, problem, line)
+        return MotionFormatError(self.path, problem, self.line() if line is None else line)
 
     def peek(self) -> str | None:
-        return self.items[self.i][0] if self.i < len(self.items) else None
+        self._fill()
+        return self._pending[0][0] if self._pending else None
+
+    def back(self) -> None:
+        """Put the last token read back (so that an error points at its line)."""
+        if self._last is not None:
+            self._pending.appendleft(self._last)
+            self._last = None
 
     def next(self, what: str) -> str:
-        if self.i >= len(self.items):
+        self._fill()
+        if not self._pending:
             raise self.error(f"file ends early, expected {what} (missing hierarchy or brace?)")
-        tok = self.items[self.i][0]
-        self.i += 1
-        return tok
+        self._last = self._pending.popleft()
+        return self._last[0]
 
     def expect(self, word: str) -> None:
         tok = self.next(repr(word))
         if tok.upper() != word.upper():
-            self.i -= 1
+            self.back()
             raise self.error(f"expected {word!r}, found {tok!r}")
 
     def number(self, what: str) -> float:
@@ -81,20 +115,24 @@ class _Tokens:
         try:
             value = float(tok)
         except ValueError:
-            self.i -= 1
+            self.back()
             raise self.error(f"expected a number for {what}, found {tok!r}") from None
         if not np.isfinite(value):
-            self.i -= 1
+            self.back()
             raise self.error(f"{what} is not finite ({tok})")
         return value
 
 
 def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
+    """The skeleton, parsed with an explicit stack (any depth, no recursion)."""
     names: list[str] = []
+    seen: set[str] = set()
     parents: list[int] = []
     offsets: list[tuple[float, float, float]] = []
     channels: list[tuple[str, ...]] = []
     end_site: list[bool] = []
+    joint_cap, channel_cap = max_joints(), max_channels()
+    n_channels = 0
 
     tok.expect("HIERARCHY")
     if (tok.peek() or "").upper() != "ROOT":
@@ -102,63 +140,76 @@ def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
 
     def offset() -> tuple[float, float, float]:
         tok.expect("OFFSET")
-        return tuple(tok.number("OFFSET") * scale for _ in range(3))  # type: ignore[return-value]
+        with np.errstate(over="ignore"):
+            return tuple(tok.number("OFFSET") * scale for _ in range(3))  # type: ignore[return-value]
 
-    def joint(parent: int) -> None:
-        tok.next("ROOT or JOINT")
-        name = tok.next("joint name")
-        if name in ("{", "}"):
-            tok.i -= 1
-            raise tok.error("joint without a name")
-        if name in names:
-            tok.i -= 1
-            raise tok.error(f"joint name {name!r} used twice")
-        tok.expect("{")
-        index = len(names)
+    def add(name: str, parent: int, chans: tuple[str, ...], end: bool) -> int:
+        if len(names) >= joint_cap:
+            raise tok.error(f"the skeleton has {exceeded(MAX_JOINTS)}")
         names.append(name)
         parents.append(parent)
         offsets.append(offset())
-        end_site.append(False)
+        channels.append(chans)
+        end_site.append(end)
+        return len(names) - 1
+
+    def open_joint(parent: int) -> tuple[int, str]:
+        nonlocal n_channels
+        tok.next("ROOT or JOINT")
+        name = tok.next("joint name")
+        if name in ("{", "}"):
+            tok.back()
+            raise tok.error("joint without a name")
+        if name in seen:
+            tok.back()
+            raise tok.error(f"joint name {name!r} used twice")
+        seen.add(name)
+        tok.expect("{")
+        index = add(name, parent, (), False)
         tok.expect("CHANNELS")
-        count_line = tok.items[tok.i][1] if tok.i < len(tok.items) else tok.last_line
+        count_line = tok.line()
         count = tok.number("channel count")
         if count != int(count) or not 0 <= count <= 6:
             raise tok.error(f"channel count must be 0 to 6, found {count:g}", count_line)
-        chans = []
+        chans: list[str] = []
         for _ in range(int(count)):
             c = tok.next("channel name")
             if c not in VALID_CHANNELS:
-                tok.i -= 1
+                tok.back()
                 raise tok.error(f"unknown channel {c!r} on joint {name!r}")
             if c in chans:
-                tok.i -= 1
+                tok.back()
                 raise tok.error(f"channel {c!r} repeated on joint {name!r}")
             chans.append(c)
-        channels.append(tuple(chans))
-        while True:
-            word = tok.peek()
-            if word is None:
-                raise tok.error(f"file ends inside joint {name!r}: unbalanced braces")
-            upper = word.upper()
-            if upper == "JOINT":
-                joint(index)
-            elif upper == "END":
-                tok.next("End Site")
-                tok.expect("Site")
-                tok.expect("{")
-                names.append(f"{name}_end")
-                parents.append(index)
-                offsets.append(offset())
-                channels.append(())
-                end_site.append(True)
-                tok.expect("}")
-            elif word == "}":
-                tok.next("}")
-                return
-            else:
-                raise tok.error(f"unexpected {word!r} in joint {name!r}")
+        n_channels += len(chans)
+        if n_channels > channel_cap:
+            raise tok.error(f"the skeleton has {exceeded(MAX_CHANNELS)}", count_line)
+        channels[index] = tuple(chans)
+        return index, name
 
-    joint(-1)
+    stack = [open_joint(-1)]
+    while stack:
+        index, name = stack[-1]
+        word = tok.peek()
+        if word is None:
+            raise tok.error(f"file ends inside joint {name!r}: unbalanced braces")
+        upper = word.upper()
+        if upper == "JOINT":
+            stack.append(open_joint(index))
+        elif upper == "END":
+            tok.next("End Site")
+            tok.expect("Site")
+            tok.expect("{")
+            if f"{name}_end" in seen:
+                raise tok.error(f"joint name {name + '_end'!r} used twice")
+            seen.add(f"{name}_end")
+            add(f"{name}_end", index, (), True)
+            tok.expect("}")
+        elif word == "}":
+            tok.next("}")
+            stack.pop()
+        else:
+            raise tok.error(f"unexpected {word!r} in joint {name!r}")
     if (tok.peek() or "").upper() == "ROOT":
         raise tok.error("more than one ROOT: only one skeleton per file is supported")
     if tok.peek() is not None:
@@ -172,8 +223,15 @@ def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
     )
 
 
-def _parse_motion_block(path: str, lines: list[str], first_line: int, n_channels: int):
-    """Frames and frame time from the lines after ``MOTION``; returns (values, frame_time)."""
+def _parse_motion_block(
+    path: str, lines: list[str], first_line: int, n_channels: int, bad_frames: str = "error"
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Frames and frame time from the lines after ``MOTION``; returns (values, frame_time, broken).
+
+    ``broken`` (F,) marks frame lines that are not ``n_channels`` finite numbers; with
+    ``bad_frames="missing"`` they are kept (filled with the first good frame), with
+    ``"error"`` the first one is an error (and ``broken`` is all False).
+    """
 
     def header(idx: int, key: str) -> float:
         if idx >= len(lines):
@@ -200,9 +258,14 @@ def _parse_motion_block(path: str, lines: list[str], first_line: int, n_channels
         raise MotionFormatError(
             path, f"frame count must be a whole number, found {n_frames:g}", first_line
         )
+    if n_frames > max_frames():
+        raise MotionFormatError(path, f"{exceeded(MAX_FRAMES, f'{n_frames:.6g}')}", first_line)
     n_frames = int(n_frames)
     if n_frames == 0:
         raise MotionFormatError(path, "the file has zero frames", first_line)
+    if n_frames * max(n_channels, 1) > max_values():
+        found = f"{n_frames} frames x {n_channels} channels"
+        raise MotionFormatError(path, exceeded(MAX_VALUES, found), first_line)
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise MotionFormatError(
             path, f"frame time must be positive, found {frame_time:g}", first_line + 1
@@ -222,25 +285,46 @@ def _parse_motion_block(path: str, lines: list[str], first_line: int, n_channels
             f"header says {n_frames} frames but {len(body)} lines follow",
             first_line + 2 + n_frames,
         )
+    broken = np.zeros(n_frames, dtype=bool)
     try:
         values = np.loadtxt(body, dtype=float, ndmin=2, comments=None)
+        if values.shape[1] != n_channels:
+            raise ValueError("wrong number of values")
     except ValueError:
-        raise _locate_bad_row(path, body, n_channels, first_line + 2) from None
-    if values.shape[1] != n_channels:
-        raise MotionFormatError(
-            path,
-            f"frames have {values.shape[1]} values, the hierarchy has {n_channels} channels",
-            first_line + 2,
-        )
-    bad = ~np.isfinite(values)
-    if bad.any():
-        i = int(np.argwhere(bad)[0, 0])
+        if bad_frames != "missing":
+            raise _locate_bad_row(path, body, n_channels, first_line + 2) from None
+        values, broken = _rows_with_missing(body, n_channels)
+    bad = ~np.isfinite(values).all(axis=1)
+    if bad_frames == "missing":
+        broken |= bad
+        if broken.all():  # nothing to keep: the first bad line's own error
+            raise _locate_bad_row(path, body, n_channels, first_line + 2, finite=True)
+        values[broken] = values[int(np.argmin(broken))]
+    elif bad.any():
+        i = int(np.argmax(bad))
         raise MotionFormatError(path, f"NaN or infinite value in frame {i}", first_line + 2 + i)
-    return values, frame_time
+    return values, frame_time, broken
 
 
-def _locate_bad_row(path: str, body: list[str], n_channels: int, first: int) -> MotionFormatError:
-    """The error for the first frame line that is not ``n_channels`` numbers."""
+def _rows_with_missing(body: list[str], n_channels: int) -> tuple[np.ndarray, np.ndarray]:
+    """(values, broken) of frame lines, a line that is not ``n_channels`` numbers being NaN."""
+    values = np.full((len(body), n_channels), np.nan)
+    broken = np.zeros(len(body), dtype=bool)
+    for i, line in enumerate(body):
+        row = line.split()
+        try:
+            if len(row) != n_channels:
+                raise ValueError
+            values[i] = [float(v) for v in row]
+        except ValueError:
+            broken[i] = True
+    return values, broken
+
+
+def _locate_bad_row(
+    path: str, body: list[str], n_channels: int, first: int, finite: bool = False
+) -> MotionFormatError:
+    """The error for the first frame line that is not ``n_channels`` (``finite``) numbers."""
     for i, line in enumerate(body):
         row = line.split()
         if len(row) != n_channels:
@@ -251,11 +335,13 @@ def _locate_bad_row(path: str, body: list[str], n_channels: int, first: int) -> 
             )
         for v in row:
             try:
-                float(v)
+                x = float(v)
             except ValueError:
                 return MotionFormatError(
                     path, f"non-numeric value {v[:20]!r} in frame {i}", first + i
                 )
+            if finite and not np.isfinite(x):
+                return MotionFormatError(path, f"NaN or infinite value in frame {i}", first + i)
     return MotionFormatError(path, "unreadable motion data", first)  # pragma: no cover
 
 
@@ -302,7 +388,10 @@ def _channels_to_motion(
 
 
 def read_bvh(
-    path: str | os.PathLike[str], fps: float | None = None, length_unit: str = "cm"
+    path: str | os.PathLike[str],
+    fps: float | None = None,
+    length_unit: str = "cm",
+    bad_frames: str = "error",
 ) -> Motion:
     """Read a BVH file (``.bvh`` or ``.bvh.gz``) into a :class:`Motion`.
 
@@ -311,35 +400,77 @@ def read_bvh(
         fps: the true frame rate, overriding the header's ``Frame Time`` (some
             files, such as the CMU salsa conversions, carry a wrong one).
         length_unit: the file's length unit (see module docstring).
+        bad_frames: ``"error"`` (a frame line with NaN, infinite or missing
+            values is an error) or ``"missing"`` (such frames are kept with NaN
+            rotations; :func:`read_bvh_stream` also returns which they are).
 
     Raises:
-        MotionFormatError: naming the file, line and problem, for any malformed input.
+        MotionFormatError: naming the file, line and problem, for any malformed
+            input, and for one beyond the limits of :mod:`markovmotion.limits`.
     """
+    return read_bvh_stream(path, fps, length_unit, bad_frames)[0]
+
+
+def read_bvh_stream(
+    path: str | os.PathLike[str],
+    fps: float | None = None,
+    length_unit: str = "cm",
+    bad_frames: str = "missing",
+) -> tuple[Motion, np.ndarray]:
+    """``(motion, broken)``: a BVH read as a recorded stream, ``broken`` (F,) marking the
+    frames whose line had NaN, infinite or missing values (their rotations are NaN).
+
+    A file whose frame lines are all bad is an error, as in :func:`read_bvh`.
+    """
+    if bad_frames not in ("error", "missing"):
+        raise ValueError(f"bad_frames must be 'error' or 'missing', got {bad_frames!r}")
+    if fps is not None:
+        fps = check_rate(fps, "fps")
     scale = _unit_scale(length_unit)
     text = read_text(path)
+    line_cap = max_frames() + 10 * max_joints() + 1000
+    if text.count("\n") > line_cap:
+        raise MotionFormatError(path, f"more than {line_cap} lines (limit {MAX_FRAMES.env})")
     lines = text.splitlines()
+    del text
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
     if motion_at is None:
         if not any(ln.strip() for ln in lines):
             raise MotionFormatError(path, "the file is empty")
         raise MotionFormatError(path, "no MOTION section (truncated file?)", len(lines))
     tok = _Tokens(str(path), lines[:motion_at])
-    if not tok.items:
+    if tok.peek() is None:
         raise MotionFormatError(path, "missing HIERARCHY before MOTION", motion_at + 1)
     try:
         skeleton = _parse_hierarchy(tok, scale)
     except ValueError as exc:  # the Skeleton's own checks
         raise MotionFormatError(path, str(exc)) from None
-    values, frame_time = _parse_motion_block(
-        str(path), lines[motion_at + 1 :], motion_at + 2, skeleton.n_channels
+    values, frame_time, broken = _parse_motion_block(
+        str(path), lines[motion_at + 1 :], motion_at + 2, skeleton.n_channels, bad_frames
     )
-    quats, trans = _channels_to_motion(skeleton, values, scale)
-    if not (np.isfinite(trans).all() and np.isfinite(skeleton.offsets).all()):
+    del lines
+    with np.errstate(all="ignore"):  # overflow is reported below, not as a warning
+        quats, trans = _channels_to_motion(skeleton, values, scale)
+        usable = (
+            np.isfinite(trans).all()
+            and np.isfinite(skeleton.offsets).all()
+            and np.isfinite(quats).all()
+        )
+    if not usable:
         raise MotionFormatError(path, f"values too large to convert from {length_unit} to mm")
-    rate = float(fps) if fps else 1.0 / frame_time
-    if not np.isfinite(rate):
-        raise MotionFormatError(path, f"frame time {frame_time:g} gives no usable frame rate")
-    return Motion(skeleton, quats, trans, rate, name=os.path.basename(str(path)))
+    if fps is None:
+        try:
+            fps = check_rate(1.0 / frame_time)
+        except ValueError:
+            raise MotionFormatError(
+                path,
+                f"Frame Time {frame_time:g} s gives {1.0 / frame_time:g} fps: "
+                "not a usable frame rate (pass the true one with fps)",
+            ) from None
+    motion = Motion(skeleton, quats, trans, fps, name=os.path.basename(str(path)))
+    if broken.any():
+        motion.rotations[broken] = np.nan
+    return motion, broken
 
 
 def motion_to_channels(motion: Motion, length_unit: str = "cm") -> np.ndarray:

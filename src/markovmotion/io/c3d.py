@@ -22,6 +22,18 @@ import numpy as np
 
 from markovmotion.core.markers import Markers
 from markovmotion.errors import MotionFormatError
+from markovmotion.io.files import open_regular
+from markovmotion.limits import (
+    MAX_BYTES,
+    MAX_CHANNELS,
+    MAX_VALUES,
+    check_rate,
+    exceeded,
+    max_bytes,
+    max_channels,
+    max_frames,
+    max_values,
+)
 
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 DEFAULT_SCREEN = ("+X", "+Z")
@@ -74,19 +86,22 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     import c3d
 
     path = str(path)
-    try:
-        handle = open(path, "rb")
-    except FileNotFoundError:
-        raise MotionFormatError(path, "no such file") from None
-    except OSError as exc:
-        raise MotionFormatError(path, f"cannot read file ({exc.strerror or exc})") from None
-    with handle, warnings.catch_warnings():
+    handle = open_regular(path)
+    with handle, warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")  # the package warns on truncation; counted below
-        if os.fstat(handle.fileno()).st_size == 0:
+        size = os.fstat(handle.fileno()).st_size
+        if size == 0:
             raise MotionFormatError(path, "the file is empty")
+        if size > max_bytes():
+            raise MotionFormatError(path, f"the file is {exceeded(MAX_BYTES)}")
         try:
             reader = c3d.Reader(handle)
             n_points, rate, expected = reader.point_used, reader.point_rate, reader.frame_count
+            if n_points > max_channels():
+                raise MotionFormatError(path, f"{exceeded(MAX_CHANNELS, f'{n_points} points')}")
+            if expected > max_frames() or expected * max(n_points, 1) * 3 > max_values():
+                found = f"{expected} frames x {n_points} points"
+                raise MotionFormatError(path, exceeded(MAX_VALUES, found))
             names = _labels(reader, n_points)
             unit = (_string(reader, "POINT:UNITS") or "mm").lower()
             screen = (
@@ -97,14 +112,18 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
                 points[:, :4].astype(float)
                 for _, points, _ in reader.read_frames(copy=False, analog_transform=False)
             ]
+        except MotionFormatError:
+            raise
         except Exception as exc:  # the package fails in many ways on a damaged file
             raise MotionFormatError(
                 path, f"not a readable C3D file ({type(exc).__name__}: {exc})"
             ) from None
     if n_points == 0:
         raise MotionFormatError(path, "the file has no 3-D points")
-    if not (np.isfinite(rate) and rate > 0):
-        raise MotionFormatError(path, f"POINT:RATE must be positive, found {rate:g}")
+    try:
+        rate = check_rate(rate, "POINT:RATE")
+    except ValueError as exc:
+        raise MotionFormatError(path, str(exc)) from None
     if expected <= 0 or not frames:
         raise MotionFormatError(path, "the file has zero frames")
     if len(frames) < expected:
@@ -114,6 +133,7 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     if unit not in UNIT_TO_MM:
         raise MotionFormatError(path, f"unknown POINT:UNITS {unit!r}; expected mm, cm or m")
     data = np.stack(frames)
-    positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
+    with np.errstate(all="ignore"):
+        positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
     positions[data[..., 3] < 0] = np.nan
     return Markers(names, positions, float(rate), name=os.path.basename(path))

@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import atexit
+import errno
 import gzip
 import os
 import secrets
+import signal
+import stat
 import tempfile
+import threading
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
 from markovmotion.errors import MotionFormatError
+from markovmotion.limits import MAX_BYTES, max_bytes, megabytes
 
 
 def is_gzip(path: str | os.PathLike[str]) -> bool:
@@ -26,22 +33,84 @@ def base_suffix(path: str | os.PathLike[str]) -> str:
     return p.suffix.lower()
 
 
+def open_regular(path: str | os.PathLike[str]) -> IO[bytes]:
+    """``path`` opened for binary reading if it is a regular file (links followed).
+
+    FIFOs, devices (``/dev/zero``, ``/dev/urandom`` or links to them), sockets,
+    folders and symbolic-link loops are refused by name with
+    :class:`MotionFormatError`, without blocking on a FIFO.
+    """
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        raise MotionFormatError(path, "no such file") from None
+    except IsADirectoryError:
+        raise MotionFormatError(path, "is a folder, not a file") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise MotionFormatError(path, "symbolic link loop") from None
+        raise MotionFormatError(path, f"cannot read file ({exc.strerror or exc})") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise MotionFormatError(path, f"is {_kind(mode)}, not a regular file")
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a file"
+
+
+def read_bytes(path: str | os.PathLike[str], limit: int | None = None) -> bytes:
+    """The bytes of regular file ``path``, decompressed if it ends in ``.gz``, at most ``limit``.
+
+    ``limit`` defaults to :data:`markovmotion.limits.MAX_BYTES`; a larger file, or
+    a ``.gz`` that decompresses to more, is refused after reading at most
+    ``limit`` bytes (a gzip bomb is never inflated whole).
+    """
+    cap = max_bytes() if limit is None else int(limit)
+    too_big = f"more than {megabytes(cap)} (limit {MAX_BYTES.env})"
+    with open_regular(path) as fh:
+        try:
+            if not is_gzip(path):
+                if os.fstat(fh.fileno()).st_size > cap:
+                    raise MotionFormatError(path, f"the file is {too_big}")
+                return fh.read(cap + 1)
+            chunks: list[bytes] = []
+            total = 0
+            with gzip.GzipFile(fileobj=fh, mode="rb") as gz:
+                while chunk := gz.read(min(1 << 20, cap + 1 - total)):
+                    total += len(chunk)
+                    if total > cap:
+                        raise MotionFormatError(path, f"decompresses to {too_big}")
+                    chunks.append(chunk)
+            return b"".join(chunks)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise MotionFormatError(path, f"cannot read file ({exc})") from None
+
+
 def read_text(path: str | os.PathLike[str]) -> str:
     """The whole text of ``path``, decompressed if it ends in ``.gz``.
 
     Raises :class:`MotionFormatError` for a missing, unreadable, binary or
-    truncated compressed file.
+    truncated compressed file, one that is not a regular file, or one larger
+    than :data:`markovmotion.limits.MAX_BYTES` (after decompression).
     """
-    try:
-        if is_gzip(path):
-            with gzip.open(path, "rb") as fh:
-                raw = fh.read()
-        else:
-            raw = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise MotionFormatError(path, "no such file") from None
-    except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        raise MotionFormatError(path, f"cannot read file ({exc})") from None
+    raw = read_bytes(path)
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -68,6 +137,7 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO]:
         else:
             problem = f"cannot write into the folder {path.parent} ({exc.strerror})"
         raise OSError(exc.errno, problem, str(path)) from None
+    _live(tmp)
     try:
         with os.fdopen(fd, "wb") as raw:
             if is_gzip(path):
@@ -77,11 +147,15 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO]:
                 yield raw
             else:
                 yield _TextOver(raw)
+            raw.flush()
+            os.fsync(raw.fileno())  # the data is on disk before the name points at it
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual mode
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    finally:
+        _done(tmp)
 
 
 @contextmanager
@@ -94,11 +168,69 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}")
+    _live(tmp)
     try:
         yield tmp
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+        _done(tmp)
+
+
+# Temporary outputs being written, removed on every exit path: normal exit and
+# exceptions (above), interpreter exit (atexit) and SIGTERM/SIGHUP (handler below;
+# SIGINT arrives as KeyboardInterrupt and takes the exception path).
+_LIVE: set[str] = set()
+_LIVE_LOCK = threading.Lock()
+_HANDLED: set[int] = set()
+
+
+def _live(tmp: str | os.PathLike[str]) -> None:
+    with _LIVE_LOCK:
+        _LIVE.add(os.fspath(tmp))
+    _install_handlers()
+
+
+def _done(tmp: str | os.PathLike[str]) -> None:
+    with _LIVE_LOCK:
+        _LIVE.discard(os.fspath(tmp))
+
+
+def remove_live_temporaries() -> None:
+    """Delete every temporary output still being written (atexit and signal handlers)."""
+    with _LIVE_LOCK:
+        names = list(_LIVE)
+        _LIVE.clear()
+    for name in names:
+        try:
+            os.unlink(name)
+        except OSError:
+            pass
+
+
+def _on_signal(signum: int, frame) -> None:
+    """SIGTERM/SIGHUP: remove the temporary outputs, then unwind as an exit (status
+    128 + signal), so that ``finally`` blocks run and child processes (ffmpeg) are stopped."""
+    remove_live_temporaries()
+    raise SystemExit(128 + signum)
+
+
+def _install_handlers() -> None:
+    """Once per signal, in the main thread, and only where no one else handles it."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if not _HANDLED:
+        atexit.register(remove_live_temporaries)
+    for name in ("SIGTERM", "SIGHUP"):
+        signum = getattr(signal, name, None)
+        if signum is None or signum in _HANDLED:
+            continue
+        _HANDLED.add(signum)
+        try:
+            if signal.getsignal(signum) == signal.SIG_DFL:
+                signal.signal(signum, _on_signal)
+        except (ValueError, OSError):  # pragma: no cover - not the main interpreter thread
+            pass
 
 
 def _umask() -> int:

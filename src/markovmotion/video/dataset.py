@@ -14,6 +14,7 @@ again.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -99,9 +100,12 @@ def silhouette_takes(folder: str | os.PathLike[str] | None, split: str) -> list[
     entries = [e for e in json.loads((folder / INDEX).read_text())["takes"] if e["split"] == split]
     takes = []
     for e in entries:
+        # named by the video and the captured files it shows (what a model records of it)
+        name = f"{e['video']} ({' + '.join(e.get('files', []))})"
         if split == "train":
-            takes.append(tracked(folder / e["video"], 2).two_people())
+            take = tracked(folder / e["video"], 2).two_people()
+            takes.append(dataclasses.replace(take, name=name))
             continue
         a, b = (tracked(folder / v, 1).person(0) for v in e["alone"])
-        takes.append(TwoPeople.from_people(a, b, FPS, e["name"]))
+        takes.append(TwoPeople.from_people(a, b, FPS, name))
     return takes

@@ -53,7 +53,7 @@ def respond_video(
     if model.shape_step.n_dims_ != 2:
         raise ModelFormatError(video, "videos need a model trained on silhouettes")
     real = track_video(video, n_people=1).person(0)
-    partner = model.respond(real, None, **options).partner
+    partner = model.respond_shapes(real, None, **options).partner
     frames = (
         draw_silhouette(f, partner.points[min(t, partner.n_frames - 1)])
         for t, f in enumerate(read_frames(video))
@@ -70,7 +70,7 @@ def respond_motion_video(
 ) -> Path:
     """Render a captured person (colour) and its 3-D virtual partner (black) from the side."""
     real = person_from_motion(motion)
-    partner = model.respond(real, person, **options).partner
+    partner = model.respond_shapes(real, person, **options).partner
     camera = side_camera([real, partner])
     frames = render_frames([real, partner], camera, colours=[PEOPLE_COLOURS[person], BLACK])
     return write_video(frames, out, motion.fps)

@@ -52,9 +52,16 @@ def write_mp4(
             macro_block_size=2,
             ffmpeg_log_level="error",
         )
-        writer.send(None)
-        writer.send(np.ascontiguousarray(first))
-        for f in frames:
-            writer.send(np.ascontiguousarray(f))
+        try:
+            writer.send(None)
+            writer.send(np.ascontiguousarray(first))
+            for f in frames:
+                writer.send(np.ascontiguousarray(f))
+        except BaseException:  # an error or a signal: stop ffmpeg now, not when collected
+            try:
+                writer.throw(SystemExit(1))  # imageio-ffmpeg kills ffmpeg on SystemExit
+            except BaseException:
+                pass
+            raise
         writer.close()
     return path

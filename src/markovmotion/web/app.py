@@ -11,13 +11,20 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import tempfile
+from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, BinaryIO
 
-from fastapi import FastAPI, File, HTTPException, UploadFile, WebSocket
+from fastapi import FastAPI, HTTPException, Request, WebSocket
+from fastapi import Path as PathParam
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel
+from starlette.datastructures import UploadFile
+from starlette.formparsers import MultiPartException, MultiPartParser
 
 from markovmotion.errors import MarkovMotionError
 from markovmotion.evaluate.perceptual import (
@@ -28,8 +35,17 @@ from markovmotion.evaluate.perceptual import (
 )
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
-from markovmotion.web.library import LibraryPathError, MotionLibrary, motion_payload, read_upload
+from markovmotion.web.library import (
+    LibraryPathError,
+    MotionLibrary,
+    UploadTooLargeError,
+    max_upload_bytes,
+    motion_payload,
+    read_upload,
+    shown,
+)
 from markovmotion.web.live import PartnerFactory, live_session
+from markovmotion.web.security import UPLOAD_SLACK, Guard
 
 HERE = Path(__file__).parent
 PAGES_DIR = HERE / "pages"
@@ -42,6 +58,30 @@ QUESTIONS = {
 
 class Answer(BaseModel):
     answer: str
+
+
+Position = Annotated[int, PathParam(ge=0, le=1_000_000)]
+"""An item's position in a test (bounded: SQLite integers are 64-bit)."""
+
+
+def _one_line(exc: RequestValidationError) -> str:
+    """The first problem of a request that does not validate, as one line."""
+    errors = exc.errors()
+    if not errors:
+        return "invalid request"
+    first = errors[0]
+    where = ".".join(str(part) for part in first.get("loc", ()) if part != "body") or "request"
+    return shown(f"{where}: {first.get('msg', 'invalid')}", 200)
+
+
+async def _bounded(stream: AsyncIterator[bytes], limit: int) -> AsyncIterator[bytes]:
+    """``stream`` as it arrives, refused with 413 as soon as it passes ``limit`` bytes."""
+    seen = 0
+    async for chunk in stream:
+        seen += len(chunk)
+        if seen > limit:
+            raise HTTPException(413, f"upload larger than {limit // 2**20} MiB")
+        yield chunk
 
 
 NAV = (("/viewer", "Viewer"), ("/live", "Live partner"), ("/evaluation", "Evaluation"))
@@ -75,12 +115,15 @@ def create_app(
     stimuli: str | os.PathLike[str] | None = None,
     admin_token: str | None = None,
     partner: PartnerFactory | None = None,
+    allow_hosts: Iterable[str] = (),
 ) -> FastAPI:
     """The app serving ``library``; the evaluation runs when a stimuli folder is given
     (default: ``library/stimuli`` if it holds a manifest) and stores answers in ``db``.
 
     ``admin_token`` guards the results (a random one if omitted: read it from
     ``app.state.admin_token``); ``partner`` builds the live partner of a session.
+    The server answers to 127.0.0.1, localhost and ::1 and to ``allow_hosts``
+    (the bound address, ``serve --allow-host``): see :mod:`markovmotion.web.security`.
     """
     lib = library if isinstance(library, MotionLibrary) else MotionLibrary(library)
     if stimuli is None and (lib.root / "stimuli" / MANIFEST).is_file():
@@ -96,7 +139,22 @@ def create_app(
     app.state.admin_token = admin_token or secrets.token_urlsafe(18)
     app.state.store = store
     app.state.library = lib
+    app.state.allow_hosts = tuple(allow_hosts)
+    app.add_middleware(
+        Guard,
+        hosts=app.state.allow_hosts,
+        upload_path="/api/upload",
+        upload_limit=max_upload_bytes,
+    )
     app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+        return JSONResponse({"detail": _one_line(exc)}, 422)
+
+    @app.exception_handler(MarkovMotionError)
+    async def library_error(request: Request, exc: MarkovMotionError) -> JSONResponse:
+        return JSONResponse({"detail": shown(str(exc), 300)}, 422)
 
     def need_store() -> EvaluationStore:
         if store is None or stim_lib is None:
@@ -110,7 +168,9 @@ def create_app(
         return s
 
     def need_admin(token: str | None) -> EvaluationStore:
-        if not token or not secrets.compare_digest(token, app.state.admin_token):
+        if not token or not secrets.compare_digest(
+            token.encode("utf-8", "replace"), app.state.admin_token.encode()
+        ):
             raise HTTPException(403, "the results need the admin token printed at start-up")
         if store is None:
             raise HTTPException(503, "no evaluation database on this server")
@@ -150,14 +210,44 @@ def create_app(
         except LibraryPathError as exc:
             raise HTTPException(404, str(exc)) from None
         except MarkovMotionError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(422, shown(str(exc), 300)) from None
+        except (RecursionError, MemoryError, ValueError) as exc:
+            problem = "nested too deeply" if isinstance(exc, RecursionError) else "cannot be read"
+            raise HTTPException(422, f"{shown(path)}: {problem}") from None
 
     @app.post("/api/upload")
-    def upload(file: Annotated[UploadFile, File()]) -> JSONResponse:
+    async def upload(request: Request, name: str = "upload.bvh") -> JSONResponse:
+        """A BVH (or .bvh.gz) as the form field ``file`` or as the raw body (``?name=``),
+        streamed to disk with a running count: 413 past the upload limit, counted again
+        after decompression; any problem reading it is a 422 with one line."""
+        limit = max_upload_bytes()
+        stream = _bounded(request.stream(), limit + UPLOAD_SLACK)
+        form = None
         try:
-            return JSONResponse(motion_payload(read_upload(file.filename or "", file.file.read())))
+            if request.headers.get("content-type", "").startswith("multipart/form-data"):
+                parser = MultiPartParser(request.headers, stream, max_files=1, max_fields=8)
+                try:
+                    form = await parser.parse()
+                except MultiPartException as exc:
+                    raise HTTPException(400, shown(str(exc.message), 200)) from None
+                file = form.get("file")
+                if not isinstance(file, UploadFile):
+                    raise HTTPException(422, 'send the BVH file as the form field "file"')
+                name, fh = file.filename or "upload.bvh", file.file
+            else:
+                fh = tempfile.SpooledTemporaryFile(max_size=1 << 20)
+                async for chunk in stream:
+                    fh.write(chunk)
+                fh.seek(0)
+            payload = await run_in_threadpool(_read_payload, name, fh)
+        except UploadTooLargeError as exc:
+            raise HTTPException(413, shown(str(exc), 300)) from None
         except MarkovMotionError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(422, shown(str(exc), 300)) from None
+        finally:
+            if form is not None:
+                await form.close()
+        return JSONResponse(payload)
 
     @app.websocket("/ws/live")
     async def live_ws(ws: WebSocket) -> None:
@@ -189,19 +279,22 @@ def create_app(
         }
 
     @app.get("/api/evaluation/{token}/{test}/{position}/{side}")
-    def stimulus(token: str, test: str, position: int, side: int) -> Response:
+    def stimulus(token: str, test: str, position: Position, side: Position) -> Response:
         item = need_evaluator(token).item(token, test, position)
         files = (item.file, item.file_b) if item is not None else ()
         if side not in range(len(files)) or files[side] is None:
             raise HTTPException(404, "no such stimulus")
-        return Response(stim_lib.json(files[side]), media_type="application/json")
+        try:
+            return Response(stim_lib.json(files[side]), media_type="application/json")
+        except LibraryPathError as exc:
+            raise HTTPException(404, str(exc)) from None
 
     @app.post("/api/evaluation/{token}/{test}/{position}")
-    def answer(token: str, test: str, position: int, body: Answer) -> dict:
+    def answer(token: str, test: str, position: Position, body: Answer) -> dict:
         try:
             need_evaluator(token).answer(token, test, position, body.answer)
         except EvaluationError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(422, shown(str(exc), 300)) from None
         return {"ok": True}
 
     # ------------------------------------------------------------ results
@@ -222,3 +315,11 @@ def create_app(
         )
 
     return app
+
+
+def _read_payload(name: str, fh: BinaryIO) -> dict:
+    """The JSON of an uploaded BVH (in a worker thread: reading may take a while)."""
+    try:
+        return motion_payload(read_upload(name, fh))
+    finally:
+        fh.close()

@@ -6,12 +6,16 @@ inside it (no ``..``, absolute paths or symbolic links out of it).
 
 from __future__ import annotations
 
+import gzip
+import io
 import json
 import os
 import tempfile
 import threading
+import zlib
 from collections import OrderedDict
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -22,12 +26,35 @@ from markovmotion.errors import MarkovMotionError, MotionFormatError
 from markovmotion.io import ALL_SUFFIXES, read_motion
 from markovmotion.io.bvh import read_bvh
 from markovmotion.io.files import base_suffix
+from markovmotion.limits import Limit
 
-MAX_UPLOAD_BYTES = 64 * 1024 * 1024
+MAX_UPLOAD = Limit(
+    "MARKOVMOTION_MAX_UPLOAD_BYTES", 64 * 1024 * 1024, "bytes of one upload (after decompression)"
+)
+"""Largest upload the server reads, counted on the wire and again after decompression."""
+MAX_UPLOAD_BYTES = int(MAX_UPLOAD.default)
+MAX_PATH_CHARS = 1024
+"""Longest library path a request may name."""
+CHUNK = 1 << 20
+
+
+def max_upload_bytes() -> int:
+    """The upload limit in force (``MARKOVMOTION_MAX_UPLOAD_BYTES``, default 64 MiB)."""
+    return int(MAX_UPLOAD)
+
+
+def shown(text: str, limit: int = 80) -> str:
+    """``text`` fit for a one-line message: control characters replaced, cut to ``limit``."""
+    text = "".join(c if c.isprintable() else "?" for c in text[: limit + 1])
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 class LibraryPathError(MarkovMotionError):
     """A requested path that is not a motion file inside the library folder."""
+
+
+class UploadTooLargeError(MotionFormatError):
+    """An upload above :func:`max_upload_bytes` (before or after decompression)."""
 
 
 def display_parents(skeleton: Skeleton) -> list[int]:
@@ -107,16 +134,23 @@ class MotionLibrary:
 
     def resolve(self, relative: str) -> Path:
         """The file at ``relative`` inside the folder; :class:`LibraryPathError` otherwise."""
+        name = repr(shown(relative))
+        if len(relative) > MAX_PATH_CHARS:
+            raise LibraryPathError(f"{name}: longer than {MAX_PATH_CHARS} characters")
         try:
             if not relative or Path(relative).is_absolute() or "\\" in relative:
                 raise ValueError
             path = (self.root / relative).resolve()
-        except (ValueError, OSError):
-            raise LibraryPathError(f"{relative!r}: not a path inside the library") from None
+        except (ValueError, OSError, RuntimeError):
+            raise LibraryPathError(f"{name}: not a path inside the library") from None
         if not path.is_relative_to(self.root):
-            raise LibraryPathError(f"{relative!r}: outside the library")
-        if not path.is_file() or base_suffix(path) not in ALL_SUFFIXES:
-            raise LibraryPathError(f"{relative!r}: no such motion file in the library")
+            raise LibraryPathError(f"{name}: outside the library")
+        try:
+            found = path.is_file() and base_suffix(path) in ALL_SUFFIXES
+        except (OSError, ValueError):
+            found = False
+        if not found:
+            raise LibraryPathError(f"{name}: no such motion file in the library")
         return path
 
     def motion(self, relative: str) -> Motion:
@@ -150,19 +184,56 @@ class MotionLibrary:
         return data
 
 
-def read_upload(name: str, content: bytes) -> Motion:
-    """A BVH file sent by a browser; errors name the uploaded file, not a temporary one."""
-    shown = Path(name or "upload.bvh").name
-    if len(content) > MAX_UPLOAD_BYTES:
-        raise MotionFormatError(shown, f"larger than {MAX_UPLOAD_BYTES // 2**20} MB")
-    if base_suffix(shown) != ".bvh":
-        raise MotionFormatError(shown, "only BVH files (.bvh, .bvh.gz) can be uploaded")
+def _copy_bounded(src: BinaryIO, dst: BinaryIO, name: str, limit: int) -> None:
+    """Copy ``src`` to ``dst`` chunk by chunk, stopping as soon as ``limit`` bytes are passed."""
+    total = 0
+    while chunk := src.read(CHUNK):
+        total += len(chunk)
+        if total > limit:
+            raise UploadTooLargeError(
+                name, f"larger than {limit // 2**20} MiB (limit {MAX_UPLOAD.env})"
+            )
+        dst.write(chunk)
+
+
+def read_upload(name: str, content: bytes | BinaryIO) -> Motion:
+    """A BVH file sent by a browser (bytes or a binary file); errors name the uploaded
+    file, not a temporary one.
+
+    The file is copied to a temporary folder in chunks, a ``.gz`` one decompressed
+    on the way, and refused (:class:`UploadTooLargeError`) as soon as it passes
+    :func:`max_upload_bytes`, so a gzip bomb never inflates past the limit. Any
+    failure to read it is a :class:`MotionFormatError` with one line.
+    """
+    base = Path(name or "upload.bvh").name or "upload.bvh"
+    label = shown(base)
+    if base_suffix(base) != ".bvh":
+        raise MotionFormatError(label, "only BVH files (.bvh, .bvh.gz) can be uploaded")
+    limit = max_upload_bytes()
+    src: BinaryIO = io.BytesIO(content) if isinstance(content, bytes | bytearray) else content
     with tempfile.TemporaryDirectory(prefix="markovmotion-upload-") as tmp:
-        path = Path(tmp) / shown
-        path.write_bytes(content)
+        path = Path(tmp) / "upload.bvh"
+        try:
+            with open(path, "wb") as dst:
+                if base.lower().endswith(".gz"):
+                    with gzip.GzipFile(fileobj=src, mode="rb") as gz:
+                        _copy_bounded(gz, dst, label, limit)
+                else:
+                    _copy_bounded(src, dst, label, limit)
+        except (gzip.BadGzipFile, EOFError, zlib.error) as exc:
+            raise MotionFormatError(label, f"not a valid gzip file ({exc})") from None
         try:
             motion = read_bvh(path)
         except MotionFormatError as exc:
-            raise MotionFormatError(shown, exc.problem, exc.line) from None
-    motion.name = shown
+            raise MotionFormatError(label, exc.problem, exc.line) from None
+        except MarkovMotionError as exc:
+            raise MotionFormatError(label, str(exc).replace(str(path), label)) from None
+        except RecursionError:
+            raise MotionFormatError(label, "the hierarchy is nested too deeply") from None
+        except MemoryError:
+            raise MotionFormatError(label, "too large to read in memory") from None
+        except (ValueError, OverflowError, IndexError) as exc:
+            problem = shown(str(exc).splitlines()[0] if str(exc) else type(exc).__name__, 200)
+            raise MotionFormatError(label, f"cannot be read: {problem}") from None
+    motion.name = label
     return motion

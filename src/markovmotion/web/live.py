@@ -23,17 +23,15 @@ import os
 import time
 from collections.abc import Callable
 from functools import partial
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from markovmotion.core.motion import Motion
-from markovmotion.errors import MarkovMotionError
+from markovmotion.errors import MarkovMotionError, ModelFormatError
+from markovmotion.models.base import KINDS, Model
 from markovmotion.web.library import MotionLibrary, display_parents, read_upload
-
-if TYPE_CHECKING:
-    from markovmotion.models.hmm.dual import DualHMM
 
 START_TIMEOUT = 30.0
 
@@ -44,7 +42,7 @@ class LivePartner(Protocol):
     parents: list[int]
     """Parent of each of B's joints (-1: no bone), to draw B (see ``display_parents``)."""
     lag: int
-    """How many frames B's answer trails A's (the fixed lag of windowed Viterbi)."""
+    """How many frames B's answer trails A's (the partner's look-ahead)."""
     fps: float | None
     """The rate A must come at (A is resampled to it), or None for A's own."""
 
@@ -58,36 +56,86 @@ PartnerFactory = Callable[[Motion], LivePartner]
 :class:`MarkovMotionError` if it cannot answer that motion)."""
 
 
-class DualHMMPartner:
-    """The dual HMM's windowed-Viterbi partner (:meth:`DualHMM.partner`) as a LivePartner."""
+class ModelPartner:
+    """A model's online partner (``model.partner()``, :mod:`markovmotion.models.online`) as a
+    LivePartner: the dual HMM's windowed-Viterbi partner or the behaviour chain's CONDENSATION
+    partner, one per session."""
 
-    def __init__(self, model: DualHMM, motion_a: Motion):
-        model.check_input(motion_a)
+    def __init__(self, model: Model, motion_a: Motion):
+        check = getattr(model, "check_input", None)
+        if check is not None:
+            check(motion_a)
         self._partner = model.partner()
-        self.lag = self._partner.lag
-        self.fps = model.fps
-        self.parents = display_parents(model.skeleton_b_)
+        self.lag = int(self._partner.lag)
+        self.fps = float(self._partner.fps)
+        self.parents = display_parents(self._partner.skeleton)
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
         out = self._partner.step(frame_a)
         return None if out is None else out.positions()[0]
 
 
-def dual_hmm_partner(path: str | os.PathLike[str]) -> PartnerFactory:
-    """Sessions answered by the dual HMM saved at ``path``."""
-    from markovmotion.models.hmm.dual import DualHMM
+def load_partner_model(path: str | os.PathLike[str]) -> Model:
+    """The model saved at ``path``, of any kind that offers ``partner()``.
 
-    return partial(DualHMMPartner, DualHMM.load(path))
+    Raises:
+        ModelFormatError: not a model file, or (one line naming the file and
+            its kind) a model without an online partner.
+    """
+    import importlib
+    import pkgutil
+
+    import markovmotion.models as models
+
+    for info in pkgutil.walk_packages(models.__path__, f"{models.__name__}."):
+        importlib.import_module(info.name)  # every family's KIND registered
+    model = Model.load(path)
+    if "partner" not in type(model).VERBS:
+        partners = sorted(k for k, c in KINDS.items() if "partner" in c.VERBS)
+        raise ModelFormatError(
+            path,
+            f"a {model.KIND!r} model has no online partner (models that have: "
+            f"{', '.join(partners)})",
+        )
+    return model
+
+
+def model_partner(path: str | os.PathLike[str]) -> PartnerFactory:
+    """Sessions answered by the model saved at ``path`` (:func:`load_partner_model`)."""
+    return partial(ModelPartner, load_partner_model(path))
+
+
+#: The factory's name from when only the dual HMM could answer on the live page.
+dual_hmm_partner = model_partner
 
 
 class _Garbage(ValueError):
-    """A message that is not part of the protocol."""
+    """A message that is not part of the protocol (closed with 1008, policy violation)."""
+
+    code = 1008
+
+
+class _Binary(_Garbage):
+    """A binary frame: the protocol is JSON text (closed with 1003, unsupported data)."""
+
+    code = 1003
+
+
+async def _receive_text(ws: WebSocket) -> str:
+    """The next text message; :class:`_Binary` for a binary frame, WebSocketDisconnect at the end."""
+    message = await ws.receive()
+    if message["type"] == "websocket.disconnect":
+        raise WebSocketDisconnect(message.get("code", 1000), message.get("reason"))
+    text = message.get("text")
+    if text is None:
+        raise _Binary("binary frames are not supported: send JSON text messages")
+    return text
 
 
 def _parse(text: str) -> dict:
     try:
         msg = json.loads(text)
-    except json.JSONDecodeError:
+    except (json.JSONDecodeError, RecursionError):
         raise _Garbage("the message is not JSON") from None
     if not isinstance(msg, dict):
         raise _Garbage("the message is not a JSON object")
@@ -110,23 +158,34 @@ async def _send(ws: WebSocket, msg: dict) -> None:
     await ws.send_text(json.dumps(msg, separators=(",", ":")))
 
 
-async def _close(ws: WebSocket, code: int = 1000) -> None:
+def _reason(message: str) -> str:
+    """A close reason: one line of at most 123 bytes (the WebSocket limit)."""
+    line = " ".join(message.split())
+    if len(line.encode()) <= 123:
+        return line
+    return line.encode()[:120].decode(errors="ignore") + "..."
+
+
+async def _close(ws: WebSocket, code: int = 1000, reason: str | None = None) -> None:
     if ws.application_state != WebSocketState.DISCONNECTED:
         try:
-            await ws.close(code)
+            await ws.close(code, _reason(reason) if reason else None)
         except (RuntimeError, WebSocketDisconnect, OSError):
             pass
 
 
-async def _listen(ws: WebSocket, stop: asyncio.Event) -> None:
-    """Stop the session on ``{"type": "stop"}``, on garbage or when the page goes away."""
+async def _listen(ws: WebSocket, stop: asyncio.Event, garbage: list[_Garbage]) -> None:
+    """Stop the session on ``{"type": "stop"}``, on garbage (kept in ``garbage`` for the
+    close frame) or when the page goes away."""
     try:
         while True:
-            msg = await ws.receive_text()
+            msg = await _receive_text(ws)
             if _parse(msg).get("type") == "stop":
                 break
             raise _Garbage("unexpected message during streaming")
-    except (_Garbage, WebSocketDisconnect, RuntimeError, KeyError):
+    except _Garbage as exc:
+        garbage.append(exc)
+    except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
         stop.set()
@@ -138,7 +197,7 @@ async def live_session(
     """Run one live-partner session on an accepted-to-be WebSocket (see the module protocol)."""
     await ws.accept()
     try:
-        msg = _parse(await asyncio.wait_for(ws.receive_text(), START_TIMEOUT))
+        msg = _parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT))
         if factory is None:
             raise _Garbage("this server has no partner model: start it with --partner MODEL")
         motion = await asyncio.to_thread(_motion_of, msg, library)
@@ -146,18 +205,24 @@ async def live_session(
         if partner.fps and not np.isclose(partner.fps, motion.fps):
             motion = await asyncio.to_thread(motion.resample, partner.fps)
         positions = await asyncio.to_thread(motion.positions)
-    except (_Garbage, MarkovMotionError, TimeoutError) as exc:
-        message = str(exc) or "no request in time"
+    except (_Garbage, MarkovMotionError, TimeoutError, RecursionError, MemoryError) as exc:
+        if isinstance(exc, _Garbage | MarkovMotionError):
+            message = str(exc)
+        elif isinstance(exc, TimeoutError):
+            message = "no request in time"
+        else:
+            message = "the motion cannot be read (too large or nested too deeply)"
         try:
             await _send(ws, {"type": "error", "message": message})
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
-        await _close(ws, 1008)
+        await _close(ws, getattr(exc, "code", 1008), message)
         return
     except (WebSocketDisconnect, RuntimeError):
         return
     stop = asyncio.Event()
-    listener = asyncio.create_task(_listen(ws, stop))
+    garbage: list[_Garbage] = []
+    listener = asyncio.create_task(_listen(ws, stop, garbage))
     loop = bool(msg.get("loop"))
     sent = 0
     try:
@@ -200,4 +265,7 @@ async def live_session(
         pass
     finally:
         listener.cancel()
-        await _close(ws)
+        if garbage:
+            await _close(ws, garbage[0].code, str(garbage[0]))
+        else:
+            await _close(ws)

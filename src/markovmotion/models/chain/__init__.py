@@ -5,3 +5,7 @@ behaviour prototypes, the Markov chain over them and Hermite extrapolation,
 §§3-4), ``condensation`` (single- and multiple-hypothesis propagation, §5) and
 ``partner`` (the virtual partner on 3-D joint-shape vectors or silhouettes).
 """
+
+from markovmotion.models.chain.partner import ChainPartner, VirtualPartner
+
+__all__ = ["ChainPartner", "VirtualPartner"]

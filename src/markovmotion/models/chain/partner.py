@@ -2,23 +2,28 @@
 
 :class:`VirtualPartner` chains the joint shape features (§2), the behaviour
 chain (§3-4) and hypothesis propagation (§5): trained on two-person takes
-(silhouettes tracked in video or 3-D motion capture), it answers one real
-person's observed shapes with the partner's shapes, placed in the image or the
-world from the real person's position and height.
+(pairs of motion-capture takes, or silhouettes tracked in video), it answers
+one real person's observed shapes with the partner's shapes, placed in the
+image or the world from the real person's position and height.
+
+Verbs (:mod:`markovmotion.models.base`): ``respond`` (the partner's whole
+motion for a whole captured motion) and ``partner()`` (the same, online, one
+frame at a time: :class:`ChainPartner`, :mod:`markovmotion.models.online`).
 """
 
 from __future__ import annotations
 
-import os
+import hashlib
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.kinematics import fit_rotations
 from markovmotion.core.motion import Motion
-from markovmotion.errors import SkeletonMismatchError
+from markovmotion.core.skeleton import Skeleton
+from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.joint_shape import (
     JointShape,
     Person,
@@ -28,6 +33,7 @@ from markovmotion.features.joint_shape import (
     person_from_motion,
     shape_joints,
 )
+from markovmotion.models.base import Model, flatten
 from markovmotion.models.chain.behaviour_chain import BehaviourChain
 from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
@@ -37,14 +43,13 @@ from markovmotion.models.chain.condensation import (
     Propagator,
     SingleHypothesis,
 )
-from markovmotion.persist import load_npz, save_npz
-from markovmotion.state import estimator_state, register, restore_estimator
 
-KIND = "behaviour-chain"
 #: State and behaviour prototypes unless told. The paper's 300 each (for its handshakes)
 #: give partners that lose to the mean shape on the eight salsa training takes; 40 each
 #: was the best of 20-300 by leave-one-take-out over them (see the README).
 DEFAULT_PROTOTYPES = 40
+#: The paper's frame rate: motion-capture pairs are resampled to it for training.
+DEFAULT_FPS = 25.0
 
 
 @dataclass
@@ -64,20 +69,26 @@ class PartnerResponse:
     errors: np.ndarray
 
 
-@register
-class VirtualPartner(BaseEstimator):
+class VirtualPartner(Model):
     """Interaction model: joint shape vectors, behaviour chain, virtual partner (§2-5).
 
     Args:
         window: smoothing window w (paper: 5).
         lam: derivative weight lambda of F = [C, lambda dC] (paper: 10).
         n_state_prototypes, n_behaviour_prototypes, gamma, n_epochs,
-        interval_noise, random_state: passed to :class:`BehaviourChain`.
+        interval_noise, random_state: passed to :class:`BehaviourChain`
+            (``random_state`` also seeds the propagation unless a verb is given ``rng``).
+        fps: the rate motion-capture pairs are resampled to for training (paper: 25).
 
     Learnt: ``pipeline_`` (TwoPeople -> state vectors), ``chain_``,
     ``mean_shape_`` (d,) the mean normalised combined shape (the baseline
-    partner), ``fps_``.
+    partner), ``centre_``, ``fps_``, ``skeletons_`` (each person's skeleton
+    of shape joints, from motion-capture pairs; None from prepared takes),
+    ``train_files_``.
     """
+
+    KIND = "behaviour-chain"
+    VERBS = ("respond", "partner")
 
     def __init__(
         self,
@@ -89,6 +100,7 @@ class VirtualPartner(BaseEstimator):
         n_epochs: int = 5,
         interval_noise: tuple[float, float] = (0.5, 0.25),
         random_state: int = 0,
+        fps: float = DEFAULT_FPS,
     ):
         self.window = window
         self.lam = lam
@@ -98,11 +110,35 @@ class VirtualPartner(BaseEstimator):
         self.n_epochs = n_epochs
         self.interval_noise = interval_noise
         self.random_state = random_state
+        self.fps = fps
 
-    def fit(self, takes: Sequence[TwoPeople]) -> VirtualPartner:
-        """Learn the feature ranges, both prototype sets and the chain from two-person takes."""
-        self.pipeline_ = joint_shape_pipeline(takes, self.window, self.lam)
-        states = self.pipeline_.fit_transform(takes)
+    def fit(self, takes: Sequence[tuple[Motion, Motion]] | Sequence[TwoPeople]) -> VirtualPartner:
+        """Learn the feature ranges, both prototype sets and the chain from two-person takes.
+
+        ``takes``: pairs (A, B) of motion-capture takes (resampled to ``fps``;
+        both files recorded in ``train_files_``), or prepared :class:`TwoPeople`
+        (silhouettes tracked in video: their names and a hash of their points
+        are recorded).
+        """
+        takes = list(takes)
+        if not takes:
+            raise ValueError("no two-person takes to learn from")
+        if all(isinstance(t, TwoPeople) for t in takes):
+            people = takes
+            self.skeletons_ = None
+            self.train_files_ = [_take_record(t) for t in people]
+        else:
+            pairs = [tuple(t) for t in takes]
+            if not all(len(t) == 2 and all(isinstance(m, Motion) for m in t) for t in pairs):
+                raise TypeError("fit takes (Motion A, Motion B) pairs or TwoPeople takes")
+            people = [TwoPeople.from_motions(a, b, fps=self.fps) for a, b in pairs]
+            a, b = pairs[0]
+            self.skeletons_ = [
+                joints_skeleton(m.skeleton, shape_joints(m.skeleton)) for m in (a, b)
+            ]
+            self.record_training(flatten(pairs))
+        self.pipeline_ = joint_shape_pipeline(people, self.window, self.lam)
+        states = self.pipeline_.fit_transform(people)
         self.chain_ = BehaviourChain(
             n_state_prototypes=self.n_state_prototypes,
             n_behaviour_prototypes=self.n_behaviour_prototypes,
@@ -114,10 +150,15 @@ class VirtualPartner(BaseEstimator):
         ).fit(states)
         self.mean_shape_ = np.vstack(states)[:, : self.chain_.dim].mean(axis=0)
         self.centre_ = float(
-            np.median(np.concatenate([t.reference[..., 0].ravel() for t in takes]))
+            np.median(np.concatenate([t.reference[..., 0].ravel() for t in people]))
         )
-        self.fps_ = float(takes[0].fps)
+        self.fps_ = float(people[0].fps)
         return self
+
+    @property
+    def source(self) -> str:
+        """``mocap`` (a model of 3-D joint shapes) or ``silhouette`` (of tracked outlines)."""
+        return "mocap" if self.shape_step.n_dims_ == 3 else "silhouette"
 
     @property
     def shape_step(self) -> JointShape:
@@ -134,8 +175,12 @@ class VirtualPartner(BaseEstimator):
 
     def observe(self, real: Person) -> np.ndarray:
         """(T, KD) the real person's shape vectors S^H, smoothed and normalised like C."""
-        _, smoothing, scaling = self.pipeline_.steps
-        s = smoothing.transform([self.shape_step.shape_vectors(real)])[0]
+        _, smoothing, _ = self.pipeline_.steps
+        return self.normalise(smoothing.transform([self.shape_step.shape_vectors(real)])[0])
+
+    def normalise(self, s: np.ndarray) -> np.ndarray:
+        """Smoothed shape vectors (..., KD) of one person mapped into C's [0, 1] range."""
+        _, _, scaling = self.pipeline_.steps
         sl = self.shape_step.person_slice(0)
         return (s - scaling.min_[sl]) / scaling.scale_[sl]
 
@@ -147,21 +192,24 @@ class VirtualPartner(BaseEstimator):
         response: str = DEFAULT_RESPONSE,
         map_radius: float | None = None,
         resync: float = DEFAULT_RESYNC,
-        seed: int = 0,
+        rng: np.random.Generator | int | None = None,
     ) -> Propagator:
         """Single-hypothesis propagation if ``n_hypotheses`` is 1 (re-synchronised with margin
         ``resync``), else CONDENSATION (§5).
 
-        The propagator's roles index :meth:`people` of ``person``.
+        The propagator's roles index :meth:`people` of ``person``. ``rng`` (a
+        Generator or a seed) drives extrapolation and resampling; default
+        ``random_state``.
         """
         roles = self.roles(person)
+        seed = self.random_state if rng is None else rng
         if n_hypotheses == 1:
             return SingleHypothesis(self.chain_, roles, resync, seed=seed)
         return MultipleHypotheses(
             self.chain_, roles, n_hypotheses, sigma, response, map_radius, seed=seed
         )
 
-    def respond(self, real: Person, person: int | None = None, **options) -> PartnerResponse:
+    def respond_shapes(self, real: Person, person: int | None = None, **options) -> PartnerResponse:
         """The virtual partner of ``real`` over a whole sequence (options: :meth:`propagator`).
 
         ``person`` is the real person's half of the model (0 or 1); None lets
@@ -171,22 +219,57 @@ class VirtualPartner(BaseEstimator):
         roles = np.asarray(self.people(person))[matched]
         return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
 
-    def respond_motion(self, motion: Motion, person: int = 0, **options) -> Motion:
-        """The 3-D partner of a captured person, as a motion of that person's major joints.
-
-        The partner's joint positions are turned into rotations by inverse
-        kinematics on the skeleton of the shape joints (the real person's bone
-        lengths; the partner's own relative scale is not kept).
-        """
+    def check_input(self, motion: Motion) -> None:
+        """Raise :class:`SkeletonMismatchError` unless this 3-D model can observe ``motion``."""
         joints = shape_joints(motion.skeleton)
         if len(joints) != self.shape_step.n_points_ or self.shape_step.n_dims_ != 3:
             raise SkeletonMismatchError(
                 f"{motion.name or 'motion'}: {len(joints)} shape joints, but the model was "
                 f"trained on {self.shape_step.n_points_} in {self.shape_step.n_dims_}-D"
             )
-        resp = self.respond(person_from_motion(motion), person, **options)
-        skeleton = joints_skeleton(motion.skeleton, joints)
-        return fit_rotations(skeleton, resp.partner.points, fps=motion.fps)
+
+    def partner_skeleton(self, motion: Motion | None = None, person: int = 0) -> Skeleton:
+        """The skeleton the partner of ``person`` is written on: the partner's own shape joints
+        from training, or (models fitted on prepared takes) those of the real ``motion``."""
+        if getattr(self, "skeletons_", None):
+            return self.skeletons_[1 - person]
+        if motion is None:
+            raise MarkovMotionError(
+                "this model has no partner skeleton (fitted on prepared takes): "
+                "refit it on motion-capture pairs"
+            )
+        return joints_skeleton(motion.skeleton, shape_joints(motion.skeleton))
+
+    def respond(
+        self,
+        motion: Motion,
+        person: int = 0,
+        rng: np.random.Generator | int | None = None,
+        **options,
+    ) -> Motion:
+        """The 3-D partner of a captured person over the whole of ``motion``, at ``fps_``.
+
+        ``motion`` is resampled to the model's rate. The partner's joint
+        positions are turned into rotations by inverse kinematics on the
+        partner's skeleton (:meth:`partner_skeleton`). ``options``: those of
+        :meth:`propagator` (``n_hypotheses``, ``sigma``, ``response``, ``resync``).
+        """
+        self.check_input(motion)
+        motion = motion.resample(self.fps_)
+        resp = self.respond_shapes(person_from_motion(motion), person, rng=rng, **options)
+        skeleton = self.partner_skeleton(motion, person)
+        out = fit_rotations(skeleton, resp.partner.points, fps=self.fps_)
+        out.name = f"partner of {motion.name}" if motion.name else "virtual partner"
+        return out
+
+    def partner(
+        self,
+        person: int = 0,
+        rng: np.random.Generator | int | None = None,
+        **options,
+    ) -> ChainPartner:
+        """An online partner (:class:`ChainPartner`) answering ``person`` frame by frame."""
+        return ChainPartner(self, person, rng, **options)
 
     def place(self, shapes: np.ndarray, roles: np.ndarray, real: Person) -> Person:
         """Partners of ``real`` from normalised combined shapes (T, d), real person's roles (T,)."""
@@ -218,15 +301,108 @@ class VirtualPartner(BaseEstimator):
         shapes = np.broadcast_to(self.mean_shape_, (real.n_frames, len(self.mean_shape_)))
         return self.place(shapes, np.asarray(roles), real)
 
-    # ------------------------------------------------------------ persistence
-    def save(self, path: str | os.PathLike[str], source: str = "mocap") -> None:
-        """Write the model as ``.npz`` arrays + JSON header."""
-        arrays: dict[str, np.ndarray] = {}
-        header = {"source": source, "model": estimator_state(self, "model", arrays)}
-        save_npz(path, KIND, header, arrays)
 
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> tuple[VirtualPartner, str]:
-        """A model written by :meth:`save`, and its source (``mocap`` or ``silhouette``)."""
-        header, arrays = load_npz(path, KIND)
-        return restore_estimator(header["model"], arrays), header.get("source", "mocap")
+def _take_record(take: TwoPeople) -> dict[str, str]:
+    """What :meth:`VirtualPartner.fit` records of a prepared take: its name and a points hash."""
+    digest = hashlib.sha256(np.ascontiguousarray(take.points, dtype=np.float64).tobytes())
+    return {"file": take.name or "(in memory)", "sha256": digest.hexdigest()}
+
+
+class ChainPartner:
+    """The behaviour chain's virtual partner online (:class:`markovmotion.models.online.OnlinePartner`).
+
+    Each frame of A gives its shape vector S^H (§2); the propagator
+    (:mod:`markovmotion.models.chain.condensation`) steps once on it (§5) and
+    the chosen hypothesis's other half is placed beside A and written on the
+    partner's skeleton by inverse kinematics. The model smooths shapes over a
+    centred window of ``window`` frames, so B's frame for A's frame t comes
+    when frame t + ``lag`` has arrived (``lag = window - 1 - window // 2``, 2
+    frames = 0.08 s at 25 fps with the paper's w = 5); over a whole motion the
+    frames equal :meth:`VirtualPartner.respond`'s. A missing or dropped frame
+    repeats A's last one.
+    """
+
+    def __init__(
+        self,
+        model: VirtualPartner,
+        person: int = 0,
+        rng: np.random.Generator | int | None = None,
+        **options,
+    ):
+        if model.shape_step.n_dims_ != 3:
+            raise MarkovMotionError("an online partner needs a model of 3-D motion capture")
+        self.model = model
+        self.person = person
+        self.fps = model.fps_
+        w = self._window = int(model.window)
+        self._behind = w // 2  # frames of the centred window before its frame
+        self.lag = w - 1 - self._behind
+        self._skeleton = model.partner_skeleton(None, person)
+        self._propagator = model.propagator(person, rng=rng, **options)
+        self._propagator.reset()
+        self._shapes: deque = deque(maxlen=w)  # A's last raw shape vectors
+        self._people: deque = deque(maxlen=self.lag + 1)  # A's last frames (Person)
+        self._first: np.ndarray | None = None
+        self._last: Motion | None = None
+        self._checked = None
+        self._height: tuple[Skeleton, np.ndarray] | None = None
+        self._frames_in = 0
+
+    @property
+    def skeleton(self) -> Skeleton:
+        """B's skeleton (the partner's shape joints)."""
+        return self._skeleton
+
+    def step(self, frame: Motion | None) -> Motion | None:
+        """One frame of A in (None: missing); B's frame for ``lag`` frames ago out."""
+        if frame is None or not (
+            np.isfinite(frame.rotations).all() and np.isfinite(frame.translations).all()
+        ):
+            return self.skip()
+        if frame.skeleton is not self._checked:
+            self.model.check_input(frame)
+            self._checked = frame.skeleton
+        self._last = frame
+        real = self._person(frame)
+        s = self.model.shape_step.shape_vectors(real)[0]
+        if self._first is None:
+            self._first = s
+        self._shapes.append(s)
+        self._people.append(real)
+        self._frames_in += 1
+        if self._frames_in <= self.lag:
+            return None
+        return self._answer(self._frames_in - 1 - self.lag, self._frames_in - 1)
+
+    def _person(self, frame: Motion) -> Person:
+        """:func:`person_from_motion` of one frame, the rest-pose height computed once."""
+        if self._height is None or frame.skeleton is not self._height[0]:
+            self._height = (frame.skeleton, person_from_motion(frame).height)
+        pos = frame.positions()
+        ref = pos[:, frame.skeleton.body_root].copy()
+        ref[:, 1] = 0.0
+        joints = shape_joints(frame.skeleton)
+        return Person(pos[:, joints], ref, self._height[1], frame.heading(pos))
+
+    def skip(self) -> Motion | None:
+        """A frame that did not come in time: A's last frame again (nothing before the first)."""
+        return None if self._last is None else self.step(self._last)
+
+    def finish(self) -> list[Motion]:
+        """B's frames still owed at the end of the stream (the window's edge repeats A's last)."""
+        n = self._frames_in
+        return [self._answer(t, n - 1) for t in range(max(n - self.lag, 0), n)]
+
+    def _answer(self, t: int, newest: int) -> Motion:
+        """B's frame for A's frame ``t``, given A's frames up to ``newest``."""
+        shapes = list(self._shapes)  # A's frames newest - len + 1 .. newest
+        oldest = newest - len(shapes) + 1
+        rows = []
+        for i in range(t - self._behind, t - self._behind + self._window):
+            i = min(max(i, 0), newest)
+            rows.append(self._first if i < oldest else shapes[i - oldest])
+        r = self._propagator.step(self.model.normalise(np.mean(rows, axis=0)))
+        real = self._people[t - (newest - len(self._people) + 1)]
+        role = np.asarray(self.model.people(self.person))[[r.role]]
+        placed = self.model.place(r.shape[None], role, real)
+        return fit_rotations(self._skeleton, placed.points, fps=self.fps)

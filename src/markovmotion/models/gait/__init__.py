@@ -6,3 +6,8 @@ explicit-duration recursions of :mod:`markovmotion.algorithms.hsmm_recursions`),
 (CMLLR / CSMAPLR then MAP, walker-adaptive training) and ``synthesizer``
 (the average walk, its adaptation to a style, and MLPG synthesis).
 """
+
+from markovmotion.models.gait.hsmm import HSMM
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
+
+__all__ = ["HSMM", "GaitSynthesizer"]

@@ -1,4 +1,4 @@
-"""Stylistic gait synthesis with HSMMs: train, synthesize, save (gait paper §4-5).
+"""Stylistic gait synthesis with HSMMs: train, adapt, generate, score, save (gait paper §4-5).
 
 :class:`GaitSynthesizer` turns walks into exponential maps of every rotating
 joint (root translation dropped, each walk turned to travel along +Z, §4;
@@ -16,13 +16,11 @@ contact (§5.1.4).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
@@ -41,10 +39,9 @@ from markovmotion.features.gait import (
     step_positions,
 )
 from markovmotion.features.reference_pose import ReferencePose
+from markovmotion.models.base import Model
 from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
 from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
-from markovmotion.persist import load_npz, save_npz
-from markovmotion.state import estimator_state, register, restore_estimator
 
 KIND = "gait-hsmm"
 WAT_UNITS = ("none", "take", "unit")
@@ -160,8 +157,7 @@ def walk_contexts(n_steps: int, first_side: str = "R") -> tuple[np.ndarray, tupl
     return np.array(ids, dtype=int), sides
 
 
-@register
-class GaitSynthesizer(BaseEstimator):
+class GaitSynthesizer(Model):
     """An HSMM walk model with its feature pipeline and global-variance statistics.
 
     Args:
@@ -174,11 +170,20 @@ class GaitSynthesizer(BaseEstimator):
         wat: walker-adaptive training (§5.1.2) with one transform per
             ``"take"``, per unit given to :meth:`fit` (``"unit"``: a walker, a
             dataset), or ``"none"``.
+        random_state: seed of the durations :meth:`generate` draws when
+            ``stochastic`` and no ``rng`` is given.
 
     Learnt: ``pipeline_`` (exponential maps), ``hsmm_``, ``gv_mean_``/``gv_var_``
     (D,) global variance Gaussian, ``floor_`` (mm), ``fps_``, and what it was
-    trained on: ``role_``, ``style_``, ``files_``, ``n_steps_``.
+    trained on: ``role_``, ``style_``, ``n_steps_`` (steps of its own walks),
+    ``train_files_`` (every walk it depends on, by content hash: an adapted or
+    from-scratch model lists the average model's walks, whose reference pose
+    it keeps, then its own), ``n_inherited_files_`` (how many of
+    ``train_files_`` come from the average model; 0 for an average model).
     """
+
+    KIND = KIND
+    VERBS = ("generate", "score")
 
     def __init__(
         self,
@@ -188,6 +193,7 @@ class GaitSynthesizer(BaseEstimator):
         var_floor: float = 0.01,
         dur_var_floor: float = DUR_VAR_FLOOR,
         wat: str = "none",
+        random_state: int | None = None,
     ):
         self.n_states = n_states
         self.n_iter = n_iter
@@ -195,6 +201,7 @@ class GaitSynthesizer(BaseEstimator):
         self.var_floor = var_floor
         self.dur_var_floor = dur_var_floor
         self.wat = wat
+        self.random_state = random_state
 
     def fit(
         self,
@@ -215,7 +222,10 @@ class GaitSynthesizer(BaseEstimator):
         self.pipeline_ = FeaturePipeline([ReferencePose(), ExpMaps(root_position="none")])
         self.pipeline_.fit([align_walk(m) for m in motions])
         data = walk_set(motions, self.pipeline_, units).first_steps(n_steps)
-        return self.fit_walks(data, style=style, role=role)
+        self.fit_walks(data, style=style, role=role)
+        self.record_training(motions[: len(data.names)])
+        self.n_inherited_files_ = 0
+        return self
 
     def fit_walks(self, data: WalkSet, style: str, role: str) -> GaitSynthesizer:
         """Train the HSMM and GV statistics on prepared walks (``pipeline_`` already fitted)."""
@@ -235,9 +245,20 @@ class GaitSynthesizer(BaseEstimator):
         self.floor_ = data.floor
         self.fps_ = float(self.pipeline_.steps[-1].fps_)
         self.role_, self.style_ = role, style
-        self.files_ = list(data.names)
         self.n_steps_ = data.n_steps
         return self
+
+    def _inherit_files(self, average: GaitSynthesizer, motions: Sequence[Motion]) -> None:
+        """``train_files_``: the average model's, then those of ``motions`` (its own walks)."""
+        self.record_training(motions)
+        inherited = list(average.train_files_)
+        self.train_files_ = inherited + self.train_files_
+        self.n_inherited_files_ = len(inherited)
+
+    @property
+    def own_files(self) -> list[str]:
+        """File names of the walks whose steps this model was fitted or adapted on."""
+        return [rec["file"] for rec in self.train_files_[self.n_inherited_files_ :]]
 
     def adapt(
         self,
@@ -267,7 +288,8 @@ class GaitSynthesizer(BaseEstimator):
         )
         out.set_gv(data.gv(), var=self.gv_var_)
         out.role_, out.style_ = "adapted", style
-        out.files_, out.n_steps_ = list(data.names), data.n_steps
+        out.n_steps_ = data.n_steps
+        out._inherit_files(self, motions[: len(data.names)])
         return out
 
     def scratch(
@@ -280,7 +302,10 @@ class GaitSynthesizer(BaseEstimator):
         """
         out = GaitSynthesizer(**self.get_params())
         out.pipeline_ = self.pipeline_
-        return out.fit_walks(self.walk_set(motions).first_steps(n_steps), style, "scratch")
+        data = self.walk_set(motions).first_steps(n_steps)
+        out.fit_walks(data, style, "scratch")
+        out._inherit_files(self, motions[: len(data.names)])
+        return out
 
     def set_gv(self, gv: np.ndarray, var: np.ndarray | None = None) -> None:
         """GV Gaussian from per-walk global variances (the variance may be given instead)."""
@@ -293,6 +318,12 @@ class GaitSynthesizer(BaseEstimator):
         return walk_set(motions, self.pipeline_, units)
 
     # ------------------------------------------------------------ synthesis
+    def _rng(self, rng: np.random.Generator | None, stochastic: bool) -> np.random.Generator | None:
+        """The generator durations are drawn with, or None for the most likely durations."""
+        if not stochastic:
+            return None
+        return rng if rng is not None else np.random.default_rng(self.random_state)
+
     def generate_features(
         self,
         n_steps: int,
@@ -300,19 +331,21 @@ class GaitSynthesizer(BaseEstimator):
         gv: bool = True,
         first_side: str = "R",
         rng: np.random.Generator | None = None,
+        stochastic: bool = False,
     ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
         """Static exponential maps (T, D), step boundaries and sides of a new walk (§5.1.4).
 
-        State durations are the most likely ones at ``speed``, or with ``rng``
-        drawn from the duration densities (:meth:`HSMM.durations`), so that
-        walks differ.
+        State durations are the most likely ones at ``speed``, or, if
+        ``stochastic``, drawn from the duration densities
+        (:meth:`HSMM.durations`) with ``rng`` (default: a generator seeded
+        with ``random_state``), so that walks differ.
         """
         if n_steps < 1:
             raise ValueError("a walk needs at least one step")
         if speed <= 0:
             raise ValueError("speed must be positive")
         contexts, sides = walk_contexts(n_steps, first_side)
-        durations = self.hsmm_.durations(contexts, speed, rng)
+        durations = self.hsmm_.durations(contexts, speed, self._rng(rng, stochastic))
         means, variances = self.hsmm_.frame_parameters(contexts, durations)
         if gv:
             static = mlpg_gv(means, variances, self.gv_mean_, self.gv_var_)
@@ -322,35 +355,33 @@ class GaitSynthesizer(BaseEstimator):
         boundaries = np.concatenate([[0], np.cumsum(per_step)])
         return static, boundaries, sides
 
-    def synthesize(
+    def generate(
         self,
         n_steps: int = 12,
         speed: float = 1.0,
         gv: bool = True,
         first_side: str = "R",
         rng: np.random.Generator | None = None,
+        stochastic: bool = False,
     ) -> Motion:
-        """A new walk of ``n_steps`` steps, with its root travel from foot contact."""
-        static, boundaries, sides = self.generate_features(n_steps, speed, gv, first_side, rng)
+        """A new walk of ``n_steps`` steps, with its root travel from foot contact.
+
+        ``stochastic``: state durations drawn with ``rng`` rather than the most
+        likely ones (:meth:`generate_features`).
+        """
+        static, boundaries, sides = self.generate_features(
+            n_steps, speed, gv, first_side, rng, stochastic
+        )
         motion = self.pipeline_.inverse_transform([static])[0]
         motion = root_from_contact(motion, boundaries, sides, floor=self.floor_)
         motion.name = f"{self.style_} walk ({self.role_} model, {n_steps} steps)"
         return motion
 
-    # ------------------------------------------------------------ files
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model (``.npz`` arrays + JSON header)."""
-        arrays: dict[str, np.ndarray] = {}
-        state = estimator_state(self, "model", arrays)
-        header = {
-            "role": self.role_,
-            "style": self.style_,
-            "skeleton": self.pipeline_.steps[-1].skeleton_.to_dict(),
-            "model": state,
-        }
-        save_npz(path, KIND, header, arrays)
+    def score(self, motions: Sequence[Motion]) -> float:
+        """HSMM log-likelihood per frame of the steps of real walks (first to last heel strike).
 
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> GaitSynthesizer:
-        header, arrays = load_npz(path, KIND)
-        return restore_estimator(header["model"], arrays)
+        The walks go through this model's own features, each step under the
+        model of its context (side and position in the walk).
+        """
+        data = self.walk_set(motions)
+        return float(self.hsmm_.score(data.obs, data.contexts) / sum(len(x) for x in data.obs))

@@ -7,3 +7,9 @@ emission sets: the dual HMM, eqs. 1-2 of
 generation of B's poses from real training frames) and ``partner`` (the
 online partner: windowed Viterbi plus the trellis, frame by frame).
 """
+
+from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.models.hmm.gaussian import GaussianHMM
+from markovmotion.models.hmm.partner import Partner
+
+__all__ = ["DualHMM", "GaussianHMM", "Partner"]

@@ -10,19 +10,18 @@ A's poses and lambda_B = (T, B_B, pi) over B's, each pose reduced by PCA to
 - ``mode="joint"``: EM on the concatenated [A, B] vectors; B_A and B_B are
   the marginals of each state's Gaussian.
 
-Generation (§3): A's states by standard Viterbi over the whole input, or by
-the windowed Viterbi decoder frame by frame (:mod:`.windowed_viterbi`); then
-B's poses through the trellis of §3.2. Column t of the trellis holds
-``candidates`` training frames of B from state q_t, those whose paired A
-frames are nearest the input A pose; D4 is that Mahalanobis distance (under
-B_A of q_t) and D1..DK the Mahalanobis distances (under B_B of q_t) from a
-candidate to the candidates of column t - 1. A step into candidate j costs
-(D_k) x D4, so the error of a path is a sum of (D1 + D2 + D3)-type terms
-weighted by D4, with E = D4 in the first column; the lowest-error path is
-back-tracked. Online, the trellis runs over each slice of the windowed
-decoder, from the B frame already shown, and its first step is taken
-(:class:`Partner`). Where B stands relative to A is then averaged over the
-path's neighbouring frames (``placement_window``; our addition, README).
+Responding (§3): A's states by standard Viterbi over the whole input, or by
+the windowed Viterbi decoder frame by frame
+(:mod:`markovmotion.algorithms.windowed_viterbi`); then B's poses, real
+training frames of B, through the trellis of §3.2 (:mod:`.trellis`: its
+equations and how ours differs). Online, the trellis runs over each slice
+of the windowed decoder, from the B frame already shown, and its first step
+is taken (:class:`~markovmotion.models.hmm.partner.Partner`, from
+:meth:`DualHMM.partner`). Where B stands relative to A is then averaged
+over the path's neighbouring frames (``placement_window``; our addition).
+
+The verbs (:mod:`markovmotion.models.base`): ``respond`` (B for the whole of
+A), ``score`` (log-likelihood of A under lambda_A), ``partner()`` (online).
 
 Features. A is seen as body-centred joint positions (mm), as the paper's
 marker positions, by default with their change and A's travel
@@ -39,36 +38,24 @@ ground frame.
 from __future__ import annotations
 
 import os
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 
-import numba
 import numpy as np
-from sklearn.base import BaseEstimator
 
-from markovmotion.algorithms.gaussian import (
-    gaussian_log_density,
-    precision_cholesky,
-    weighted_gaussians,
-)
-from markovmotion.algorithms.hmm_recursions import viterbi
-from markovmotion.algorithms.windowed_viterbi import (
-    INITIAL,
-    WindowedViterbi,
-    leavable,
-    start_distribution,
-)
+from markovmotion.algorithms.gaussian import precision_cholesky, weighted_gaussians
+from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
+from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
 from markovmotion.core.motion import Motion
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_motion import ground_frame
+from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
-from markovmotion.persist import load_npz, save_npz
-from markovmotion.progress import err_console
-from markovmotion.state import estimator_state, register, restore_estimator
+from markovmotion.models.hmm.partner import Partner, finite_frames
+from markovmotion.models.hmm.trellis import Trellis, build_trellis
 
-KIND = "dual_hmm"
+__all__ = ["DualHMM", "Partner", "finite_frames", "into_frame", "out_of_frame"]
+
 MODES = ("paper", "joint")
 OBSERVATIONS = ("pose", "motion")
 METHODS = ("standard", "windowed")
@@ -108,109 +95,9 @@ def _turn_root(
     return turned, np.stack([c * px + s * pz, py, c * pz - s * px], axis=1)
 
 
-def finite_frames(motion: Motion) -> np.ndarray:
-    """(F,) whether each frame's rotations and translations are all finite numbers."""
-    return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
-        axis=(1, 2)
-    )
-
-
-# ------------------------------------------------------------------ the trellis of §3.2
-@dataclass
-class _Trellis:
-    """Training frames grouped by state, pre-whitened for the Mahalanobis distances of §3.2."""
-
-    members: list[np.ndarray]  # per state: indices of its training frames
-    white_a: list[np.ndarray]  # per state: their A vectors @ P_A[k]
-    prec_a: np.ndarray  # (N, Da, Da)
-    prec_b: np.ndarray  # (N, Db, Db)
-    train_b: np.ndarray  # (frames, Db)
-    size: int
-    motion_b: Motion  # B's training frames relative to A, decoded once
-
-    def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
-        wa = self.white_a[state]
-        k = min(self.size, len(wa))
-        if xa is None:
-            d4 = np.linalg.norm(wa - wa.mean(axis=0), axis=1)
-        else:
-            d4 = np.linalg.norm(wa - xa @ self.prec_a[state], axis=1)
-        pick = np.argpartition(d4, k - 1)[:k] if k < len(wa) else np.arange(len(wa))
-        return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
-
-    def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
-        """(K, K') Mahalanobis distances D1..DK' between B candidates, under B_B of ``state``."""
-        p = self.prec_b[state]
-        return np.linalg.norm(
-            (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
-        )
-
-    def columns(self, states: Sequence[int], xa: Sequence[np.ndarray | None]) -> list[tuple]:
-        """The trellis columns (:meth:`candidates`) of frames in ``states`` seen as ``xa``."""
-        return [self.candidates(q, x) for q, x in zip(states, xa, strict=True)]
-
-    def best_path(
-        self,
-        states: Sequence[int],
-        cols: list[tuple],
-        previous: int | None = None,
-        steps: list[np.ndarray] | None = None,
-    ) -> np.ndarray:
-        """Training frame per column on the lowest-error path; E = D4 in the first column, or
-        D x D4 from the frame ``previous`` already shown. ``steps[t - 1]``: the
-        :meth:`distances` from column t - 1 to column t, if already computed."""
-        idx, cost = cols[0]
-        if previous is not None:
-            cost = cost * self.distances(states[0], idx, np.array([previous]))[:, 0]
-        if steps is None:
-            steps = [
-                self.distances(states[t], cols[t][0], cols[t - 1][0]) for t in range(1, len(cols))
-            ]
-        k = len(idx)  # every column holds K = min(size, training frames) (see DualHMM._trellis)
-        d4 = np.array([c[1] for c in cols[1:]]).reshape(-1, k)
-        pick = _lowest_error_path(cost, d4, np.array(steps).reshape(-1, k, k))
-        return np.array([c[0][j] for c, j in zip(cols, pick, strict=True)], dtype=int)
-
-    def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
-        """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
-        t + half (those that exist; ``before``: frames shown before the path's first)."""
-        roots = self.motion_b.translations[np.concatenate([before, path]).astype(int), 0]
-        csum = np.vstack([np.zeros((1, 3)), np.cumsum(roots, axis=0)])
-        t = np.arange(len(before), len(roots))
-        lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(roots))
-        return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
-
-
-@numba.njit(cache=True)
-def _lowest_error_path(cost, d4, steps):  # pragma: no cover - numba
-    """Entry per column (T,) on the lowest-error path through the trellis: E_t(i) =
-    min_j E_{t-1}(j) + D_t(i, j) D4_t(i), from E_0 = ``cost`` (K,), ``d4`` (T - 1, K) and
-    ``steps`` D_t (T - 1, K, K); ties go to the first entry, as with ``argmin``. Compiled:
-    in NumPy each column cost several calls, most of an online step's trellis time."""
-    n, k = len(d4) + 1, len(cost)
-    back = np.zeros((n, k), dtype=np.int64)
-    cost, new = cost.copy(), np.empty(k)
-    for t in range(1, n):
-        for i in range(k):
-            best, arg = np.inf, 0
-            for j in range(k):
-                e = cost[j] + steps[t - 1, i, j] * d4[t - 1, i]
-                if e < best:
-                    best, arg = e, j
-            new[i], back[t, i] = best, arg
-        cost[:] = new
-    path = np.empty(n, dtype=np.int64)
-    path[-1] = np.argmin(cost)
-    for t in range(n - 1, 0, -1):
-        path[t - 1] = back[t, path[t]]
-    return path
-
-
 # ------------------------------------------------------------------ the model
-@register
-class DualHMM(BaseEstimator):
-    """Dual HMM of two interacting people; generates B from A offline or online.
+class DualHMM(Model):
+    """Dual HMM of two interacting people; responds to A with B, offline or online.
 
     Args:
         n_states: hidden states N.
@@ -235,8 +122,13 @@ class DualHMM(BaseEstimator):
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
     and T), ``pipeline_a_`` / ``pipeline_b_`` (features), ``expmaps_b_`` and
     ``frames_b_`` (B's training frames), ``train_a_`` / ``train_b_`` (their
-    features), ``train_states_``, ``skeleton_a_`` / ``skeleton_b_``.
+    features), ``train_states_``, ``skeleton_a_`` / ``skeleton_b_``,
+    ``labels_`` (the training takes' labels, if given), ``train_files_``
+    (both people's files, :meth:`Model.record_training`).
     """
+
+    KIND = "dual_hmm"
+    VERBS = ("respond", "score", "partner")
 
     def __init__(
         self,
@@ -271,8 +163,17 @@ class DualHMM(BaseEstimator):
         self.n_jobs = n_jobs
 
     # ---------------------------------------------------------------- fitting
-    def fit(self, pairs: Sequence[tuple[Motion, Motion]]) -> DualHMM:
-        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A)."""
+    def fit(
+        self,
+        pairs: Sequence[tuple[Motion, Motion]],
+        labels: Sequence[str] | None = None,
+    ) -> DualHMM:
+        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A).
+
+        ``labels``: the takes' interaction labels (INDEX.csv's ``label``), kept
+        in ``labels_`` (sorted, distinct) so that evaluation on another index
+        picks takes of the same interactions; empty if not given.
+        """
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
         if self.observation not in OBSERVATIONS:
@@ -281,6 +182,8 @@ class DualHMM(BaseEstimator):
             raise ValueError(f"initial must be one of {INITIAL}, got {self.initial!r}")
         if not pairs:
             raise ValueError("no two-person takes to learn from")
+        if labels is not None and len(labels) != len(pairs):
+            raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
         a_list, b_rel = [], []
         for a, b in pairs:
             if a.n_frames != b.n_frames:
@@ -326,13 +229,15 @@ class DualHMM(BaseEstimator):
             self.lambda_a_ = _sharing_chain(joint, m[:, :da], c[:, :da, :da], floor)
             self.lambda_b_ = _sharing_chain(joint, m[:, da:], c[:, da:, da:], floor)
         self.history_ = hmm.history_
+        self.labels_ = sorted(set(labels or ()))
+        self.record_training(flatten(pairs))
         self._trellis_cache = None
         return self
 
     def _rate(self, motion: Motion) -> Motion:
         return motion if np.isclose(motion.fps, self.fps) else motion.resample(self.fps)
 
-    # ---------------------------------------------------------------- generation
+    # ---------------------------------------------------------------- responding
     def check_input(self, motion: Motion, source: str | os.PathLike[str] | None = None) -> None:
         """Raise :class:`SkeletonMismatchError` (naming ``source``) unless A's skeleton is the model's."""
         try:
@@ -348,8 +253,22 @@ class DualHMM(BaseEstimator):
         missing = ~finite_frames(motion)
         return self.pipeline_a_.transform([_fill_missing(motion, missing)])[0], missing
 
-    def generate(self, motion_a: Motion, method: str = "standard") -> Motion:
-        """B's responsive motion to ``motion_a`` (at the model's rate, in A's world).
+    def score(self, motion_a: Motion) -> float:
+        """log P(A's features | lambda_A): how well the model knows person A's motion.
+
+        The forward algorithm over A's frames at the model's rate; a frame with
+        NaN values is a missing observation (emission probability 1), as in
+        :meth:`respond`.
+        """
+        self.check_input(motion_a)
+        xa, missing = self.features_a(self._rate(motion_a))
+        log_b = self.lambda_a_.log_frameprob(xa)
+        log_b[missing] = 0.0
+        hmm = self.lambda_a_
+        return float(forward_backward(safe_log(hmm.startprob_), hmm.transmat_, log_b)[0])
+
+    def respond(self, motion_a: Motion, method: str = "standard") -> Motion:
+        """B's responsive motion to the whole of ``motion_a`` (at the model's rate, in A's world).
 
         ``method="standard"``: Viterbi over all of A, lowest-error trellis path.
         ``method="windowed"``: exactly what :meth:`partner` streams, frame by frame.
@@ -401,40 +320,29 @@ class DualHMM(BaseEstimator):
         return out
 
     def partner(self, window: int | None = None) -> Partner:
-        """An online virtual partner (windowed Viterbi; ``window`` defaults to the model's)."""
+        """An online virtual partner (windowed Viterbi; ``window`` defaults to the model's):
+        an :class:`~markovmotion.models.online.OnlinePartner`."""
         return Partner(self, window or self.window)
 
-    def _trellis(self) -> _Trellis:
+    def _trellis(self) -> Trellis:
+        """The §3.2 trellis over the training frames (:mod:`.trellis`), built once."""
         cache = getattr(self, "_trellis_cache", None)
         if cache is not None:
             return cache
         prec_a, _ = precision_cholesky(self.lambda_a_.covars_)
         prec_b, _ = precision_cholesky(self.lambda_b_.covars_)
-        members, white = [], []
-        for k in range(self.n_states):
-            idx = np.flatnonzero(self.train_states_ == k)
-            if len(idx) < self.candidates:  # a state no training frame decodes to: nearest frames
-                d = np.linalg.norm((self.train_a_ - self.lambda_a_.means_[k]) @ prec_a[k], axis=1)
-                idx = np.argsort(d)[: self.candidates]
-            members.append(idx)
-            white.append(self.train_a_[idx] @ prec_a[k])
         motion_b = self.expmaps_b_.inverse_transform([self.frames_b_.astype(float)])[0]
-        self._trellis_cache = _Trellis(
-            members, white, prec_a, prec_b, self.train_b_, self.candidates, motion_b
+        self._trellis_cache = build_trellis(
+            self.train_a_,
+            self.train_b_,
+            self.train_states_,
+            self.lambda_a_.means_,
+            prec_a,
+            prec_b,
+            self.candidates,
+            motion_b,
         )
         return self._trellis_cache
-
-    # ---------------------------------------------------------------- files
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model (pipelines and skeletons in the header) to an ``.npz``."""
-        arrays: dict[str, np.ndarray] = {}
-        save_npz(path, KIND, {"model": estimator_state(self, "model", arrays)}, arrays)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> DualHMM:
-        """Read a model written by :meth:`save` (:class:`ModelFormatError` if it is not one)."""
-        header, arrays = load_npz(path, KIND)
-        return restore_estimator(header["model"], arrays)
 
 
 def _sharing_chain(
@@ -463,169 +371,3 @@ def _fill_missing(motion: Motion, missing: np.ndarray) -> Motion:
     keep[: int(np.argmin(missing))] = int(np.argmin(missing))
     out.rotations, out.translations = motion.rotations[keep], motion.translations[keep]
     return out
-
-
-class Partner:
-    """The virtual partner online: one frame of A in, one frame of B out, ``lag`` frames late.
-
-    ``lag = window - 1`` frames (0.30 s at 30 fps with the paper's window of
-    10). When frame t + lag arrives, the windowed decoder's latest slice
-    covers frames t .. t + lag: its q_1 is frame t's state, decided (§3.1),
-    the rest are that slice's best path. B's frame for t is the first step of
-    the lowest-error trellis path (§3.2) over the slice, starting from the B
-    frame shown last: the trellis run the windowed way, as §3.1 runs Viterbi,
-    so it looks as far ahead as the decoder; B's place relative to A is
-    averaged over the frames shown last and the path ahead
-    (``placement_window``). :meth:`step` returns None until the first B frame
-    is due; :meth:`finish` returns the last ``lag`` frames.
-    A frame that is None or holds NaN is a missing observation: a warning,
-    and the partner goes on from the dynamics alone.
-    """
-
-    def __init__(self, model: DualHMM, window: int):
-        self.model = model
-        hmm = model.lambda_a_
-        start = start_distribution(safe_log(hmm.startprob_), model.initial)
-        self.decoder = WindowedViterbi(start, safe_log(hmm.transmat_), window)
-        self.lag = window - 1
-        self._trellis = model._trellis()
-        prec, log_det = precision_cholesky(hmm.covars_)
-        self._emission = (hmm.means_, prec, log_det)
-        self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
-        self._places: deque = deque(maxlen=window)  # where A stood in the slice's frames
-        self._half = min(model.placement_window // 2, self.lag)
-        self._history: deque = deque(maxlen=max(self._half, 1))  # B's training frames shown
-        self._frames_in = 0
-        self._place = (np.zeros(3), 0.0)
-        self._checked = None  # A's skeleton, once checked against the model's
-        self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
-
-    def step_features(
-        self, xa: np.ndarray | None, place: tuple[np.ndarray, float]
-    ) -> tuple[int, np.ndarray] | None:
-        """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
-        frames ago, once one is due, B's training frame and B's root in A's ground frame."""
-        if xa is None:
-            log_b = np.zeros(len(self._emission[0]))
-        else:
-            log_b = gaussian_log_density(xa[None], *self._emission)[0]
-        self._places.append(place)
-        return self.step_log_frameprob(log_b, xa)
-
-    def step_log_frameprob(
-        self, log_b: np.ndarray, xa: np.ndarray | None
-    ) -> tuple[int, np.ndarray] | None:
-        """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
-        self._slice.append((xa, {}))
-        self.decoder.push(log_b)
-        self._frames_in += 1
-        if self._frames_in <= self.lag:
-            return None
-        states = self.decoder.path
-        cols = self._columns(states, self._slice)
-        path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
-        return self._show(path, 1)[0]
-
-    @property
-    def _shown(self) -> int | None:
-        """B's training frame shown last."""
-        return self._history[-1] if self._history else None
-
-    def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray]]:
-        """Show the first ``count`` B frames of ``path``, each with its averaged place."""
-        before = list(self._history) if self._half else []  # the last ``half`` shown
-        roots = self._trellis.placement(path, self._half, before)[:count]
-        self._history.extend(int(i) for i in path[:count])
-        return [(int(i), r) for i, r in zip(path[:count], roots, strict=True)]
-
-    def finish_frames(self) -> list[tuple[int, np.ndarray]]:
-        """B's training frames and places still owed at the end of the stream."""
-        if self._frames_in == 0:
-            return []
-        entries = list(self._slice)
-        if self._frames_in < self.decoder.window:
-            states = self.decoder.flush()
-        else:
-            states, entries = list(self.decoder.path[1:]), entries[1:]
-        if not entries:
-            return []
-        path = self._trellis.best_path(states, self._columns(states, entries), self._shown)
-        return self._show(path, len(path))
-
-    def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
-        cols = []
-        for q, (xa, cache) in zip(states, entries, strict=True):
-            if q not in cache:
-                cache[q] = self._trellis.candidates(q, xa)
-            cols.append(cache[q])
-        return cols
-
-    def _steps(self, states: Sequence[int], cols: list[tuple]) -> list[np.ndarray]:
-        """Distances between consecutive columns of the slice, each computed once per pair of
-        states (a slice shares all but its last column with the one before)."""
-        out = []
-        for t in range(1, len(cols)):
-            cache = self._slice[t][1]
-            key = (states[t], states[t - 1])
-            if key not in cache:
-                cache[key] = self._trellis.distances(states[t], cols[t][0], cols[t - 1][0])
-            out.append(cache[key])
-        return out
-
-    def step(self, frame: Motion | None) -> Motion | None:
-        """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
-        if frame is None or not finite_frames(frame)[0]:
-            err_console.print(
-                f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
-                highlight=False,
-            )
-            return self.skip()
-        if frame.skeleton is not self._checked:
-            self.model.check_input(frame)
-            self._checked = frame.skeleton
-        pos = frame.positions()
-        origin, yaw = ground_frame(frame, pos)
-        self._place = (origin[0], float(yaw[0]))
-        return self._motion(
-            self.step_features(self._features(frame, pos, origin, yaw), self._place)
-        )
-
-    def _features(
-        self, frame: Motion, pos: np.ndarray, origin: np.ndarray, yaw: np.ndarray
-    ) -> np.ndarray:
-        """A's model features of ``frame`` from its joint positions and ground frame: with A's
-        motion in the observation, :meth:`BodyMotion.rows` of the last finite frame and this
-        one (what :meth:`DualHMM.features_a` gives for this frame of the whole stream)."""
-        first, *rest = self.model.pipeline_a_.steps
-        if not isinstance(first, BodyMotion):
-            return self.model.features_a(frame)[0][-1]
-        now = (frame.body_centred_positions(pos), origin, yaw)
-        last, self._last = self._last, now
-        if last is not None:
-            now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
-        x = first.rows(*now, frame.fps)
-        for step in rest:
-            x = step.transform([x])[0]
-        return x[-1]
-
-    def skip(self) -> Motion | None:
-        """A frame the caller could not deliver (dropped): no observation, no warning."""
-        return self._motion(self.step_features(None, self._place))
-
-    def finish(self) -> list[Motion]:
-        """B's frames still owed at the end of the stream."""
-        frames = self.finish_frames()
-        places = list(self._places)[len(self._places) - len(frames) :]
-        return [self._motion(i, p) for i, p in zip(frames, places, strict=True)]
-
-    def _motion(
-        self, shown: tuple[int, np.ndarray] | None, place: tuple[np.ndarray, float] | None = None
-    ) -> Motion | None:
-        """B's frame ``shown`` (training frame, root) placed by A's place for it (default: the
-        slice's first)."""
-        if shown is None:
-            return None
-        origin, yaw = place or self._places[0]
-        return self.model.frames_to_motion(
-            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None]
-        )

@@ -171,25 +171,43 @@ class BaseHMM(BaseEstimator):
         return total, gamma, starts, counts
 
     # ---------------------------------------------------------------- inference
+    def _check_input(
+        self, x: np.ndarray, lengths: Sequence[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`check_sequences`, and ``X`` as wide as the model's observations (the
+        compiled densities do not check: wider input read past their arrays)."""
+        x, lengths = check_sequences(x, lengths)
+        width = self._n_features()
+        if width is not None and x.shape[1] != width:
+            raise ValueError(
+                f"X has {x.shape[1]} columns but {type(self).__name__} was fitted on "
+                f"{width} features"
+            )
+        return x, lengths
+
+    def _n_features(self) -> int | None:
+        """Width of the observations the emission model holds (None: not known yet)."""
+        return None
+
     def log_frameprob(self, x: np.ndarray) -> np.ndarray:
         """(T, N) log b_j(o_t) of every frame under every state's emission density."""
-        return self._log_frameprob(check_sequences(x)[0])
+        return self._log_frameprob(self._check_input(x)[0])
 
     def score(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> float:
         """log P(X | model), summed over the sequences."""
-        x, lengths = check_sequences(x, lengths)
+        x, lengths = self._check_input(x, lengths)
         return self._e_step(x, lengths)[0]
 
     def predict_proba(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> np.ndarray:
         """State posteriors gamma (T, N)."""
-        x, lengths = check_sequences(x, lengths)
+        x, lengths = self._check_input(x, lengths)
         return self._e_step(x, lengths)[1]
 
     def decode(
         self, x: np.ndarray, lengths: Sequence[int] | None = None
     ) -> tuple[float, np.ndarray]:
         """Standard Viterbi: (log probability of the best paths, states (T,))."""
-        x, lengths = check_sequences(x, lengths)
+        x, lengths = self._check_input(x, lengths)
         log_b = self._log_frameprob(x)
         log_pi, log_t = safe_log(self.startprob_), safe_log(self.transmat_)
         states = np.empty(len(x), dtype=int)
@@ -268,7 +286,9 @@ class GaussianHMM(BaseHMM):
         self.var_floor = var_floor
 
     def _init_emissions(self, x: np.ndarray, rng: np.random.RandomState) -> np.ndarray | None:
-        self.covar_floor_ = float(self.var_floor * np.var(x, axis=0).mean())
+        spread = float(np.var(x, axis=0).mean()) if len(x) > 1 else 0.0
+        # constant input (or one frame) has no scale: then the floor is absolute
+        self.covar_floor_ = float(self.var_floor * (spread if spread > 0 else 1.0))
         if not {"m", "c", "s", "t"} & set(self.init_params):
             return None
         km = KMeans(self.n_components, n_init=2, random_state=rng.randint(2**31 - 1)).fit(x)
@@ -276,7 +296,8 @@ class GaussianHMM(BaseHMM):
         if "m" in self.init_params:
             self.means_ = km.cluster_centers_.copy()
         if "c" in self.init_params:
-            total = np.cov(x, rowvar=False).reshape(x.shape[1], x.shape[1])
+            d = x.shape[1]
+            total = np.cov(x, rowvar=False).reshape(d, d) if len(x) > 1 else np.zeros((d, d))
             covars = np.empty((self.n_components, x.shape[1], x.shape[1]))
             for k in range(self.n_components):
                 members = x[labels == k]
@@ -287,6 +308,40 @@ class GaussianHMM(BaseHMM):
                 )
             self.covars_ = floor_covariances(covars, self.covar_floor_)
         return labels
+
+    def check_state(self) -> None:
+        """Raise ValueError unless the learnt parameters (as read from a model file) fit:
+        shapes of pi (N,), T (N, N), means (N, D) and covariances (N, D, D), probabilities
+        in [0, 1] summing to one, covariances symmetric positive definite."""
+        n = self.n_components
+        if not isinstance(n, int) or n < 1:
+            raise ValueError(f"n_components must be a positive integer, found {n!r}")
+        pi, trans = np.asarray(self.startprob_), np.asarray(self.transmat_)
+        means, covars = np.asarray(self.means_), np.asarray(self.covars_)
+        d = means.shape[-1] if means.ndim == 2 else -1
+        for name, arr, shape in (
+            ("startprob_", pi, (n,)),
+            ("transmat_", trans, (n, n)),
+            ("means_", means, (n, d)),
+            ("covars_", covars, (n, d, d)),
+        ):
+            if arr.shape != shape or d < 1:
+                raise ValueError(f"{name} has shape {arr.shape}, expected {shape} for N={n}")
+        for name, p in (("startprob_", pi), ("transmat_", trans)):
+            if not (np.all(p >= 0) and np.all(p <= 1)):
+                raise ValueError(f"{name} holds values outside [0, 1]")
+            if not np.allclose(p.sum(axis=-1), 1.0, atol=1e-6):
+                raise ValueError(f"{name} rows do not sum to 1")
+        if not np.allclose(covars, np.swapaxes(covars, 1, 2), rtol=1e-6, atol=1e-9):
+            raise ValueError("covars_ are not symmetric")
+        try:
+            np.linalg.cholesky(covars)
+        except np.linalg.LinAlgError:
+            raise ValueError("covars_ are not positive definite") from None
+
+    def _n_features(self) -> int | None:
+        means = getattr(self, "means_", None)
+        return None if means is None else int(np.shape(means)[-1])
 
     def _log_frameprob(self, x: np.ndarray) -> np.ndarray:
         prec, log_det = precision_cholesky(self.covars_)

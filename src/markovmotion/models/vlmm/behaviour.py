@@ -18,11 +18,10 @@ fit to the training skeleton).
 from __future__ import annotations
 
 import copy
-import os
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.hermite import constant_acceleration_intervals, hermite_sample
 from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
@@ -34,16 +33,15 @@ from markovmotion.algorithms.vector_quantisation import (
 )
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.errors import DataNotFoundError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.heading import RemoveHeading
 from markovmotion.features.select import DropStaticColumns
+from markovmotion.models.base import Model
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
-from markovmotion.persist import load_npz, save_npz
-from markovmotion.state import estimator_state, register, restore_estimator
 
 CONFIGURATIONS = ("rotations", "positions")
 QUANTISERS = ("kmeans", "competitive")
-MODEL_KIND = "vlmm"
 
 
 # ------------------------------------------------------------------- data
@@ -95,9 +93,18 @@ def evaluation_joints(motions: Sequence[Motion], tol: float = 1e-3) -> np.ndarra
     return np.flatnonzero(keep)
 
 
+def call_rng(
+    rng: np.random.Generator | None, stochastic: bool, random_state: int | None
+) -> np.random.Generator | None:
+    """The generator a verb draws from: ``None`` (maximum likelihood) unless ``stochastic``;
+    then ``rng``, or a new one seeded with the model's ``random_state``."""
+    if not stochastic:
+        return None
+    return rng if rng is not None else np.random.default_rng(random_state)
+
+
 # ------------------------------------------------------------------ model
-@register
-class BehaviourModel(BaseEstimator):
+class BehaviourModel(Model):
     """Prototypes in augmented configuration space and a VLMM over them (§2, §3.2).
 
     Args:
@@ -111,13 +118,18 @@ class BehaviourModel(BaseEstimator):
         quantiser: ``"kmeans"`` or ``"competitive"`` (robust competitive learning).
         time_scale: factor on the eq. 8 intervals (1: the paper's).
         max_interval: longest interval between two prototypes, in seconds.
-        seed: seed of the vector quantisation.
+        random_state: seed of the vector quantisation, and of :meth:`generate`
+            and :meth:`predict` when they are stochastic and given no ``rng``.
 
     Learnt attributes: ``pipeline_`` (motion -> F), ``prototypes_`` (K, 2d),
     ``vlmm_``, ``train_tokens_`` / ``train_lengths_`` (the collapsed training
-    token sequences, concatenated), ``eval_joints_``,
-    ``skeleton_``.
+    token sequences, concatenated), ``eval_joints_``, ``skeleton_``,
+    ``train_files_``; :func:`fit_index` adds ``category_``, ``labels_`` and
+    ``held_out_files_``.
     """
+
+    KIND = "vlmm"
+    VERBS = ("generate", "predict", "score")
 
     def __init__(
         self,
@@ -130,7 +142,7 @@ class BehaviourModel(BaseEstimator):
         quantiser: str = "kmeans",
         time_scale: float = 1.0,
         max_interval: float = 1.0,
-        seed: int = 0,
+        random_state: int | None = 0,
     ):
         self.n_prototypes = n_prototypes
         self.max_memory = max_memory
@@ -141,7 +153,7 @@ class BehaviourModel(BaseEstimator):
         self.quantiser = quantiser
         self.time_scale = time_scale
         self.max_interval = max_interval
-        self.seed = seed
+        self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
     def _make_pipeline(self) -> FeaturePipeline:
@@ -157,15 +169,16 @@ class BehaviourModel(BaseEstimator):
         """Learn prototypes and the VLMM from motions (resampled to ``fps``); returns self."""
         if self.quantiser not in QUANTISERS:
             raise ValueError(f"quantiser must be one of {QUANTISERS}")
+        self.record_training(motions)
         motions = [m.resample(self.fps) for m in motions]
         self.skeleton_ = motions[0].skeleton
         self.pipeline_ = self._make_pipeline()
         feats = self.pipeline_.fit_transform(motions)
         x = np.vstack(feats)
         if self.quantiser == "kmeans":
-            self.prototypes_ = kmeans_prototypes(x, self.n_prototypes, seed=self.seed)
+            self.prototypes_ = kmeans_prototypes(x, self.n_prototypes, seed=self.random_state)
         else:
-            self.prototypes_ = competitive_learning(x, self.n_prototypes, seed=self.seed)
+            self.prototypes_ = competitive_learning(x, self.n_prototypes, seed=self.random_state)
         runs = [collapse_repeats(nearest_prototype(f, self.prototypes_)) for f in feats]
         self.train_tokens_ = np.concatenate([r[0] for r in runs])
         self.train_lengths_ = np.array([len(r[0]) for r in runs])
@@ -209,7 +222,7 @@ class BehaviourModel(BaseEstimator):
         tau = constant_acceleration_intervals(c, dc) * self.time_scale
         return np.clip(tau, 1.0, self.max_interval * self.fps)
 
-    def synthesise(
+    def synthesize(
         self, tokens: np.ndarray, start: tuple[np.ndarray, np.ndarray] | None = None
     ) -> np.ndarray:
         """Configurations (F, d) at the frame rate through the prototypes ``tokens``.
@@ -251,8 +264,15 @@ class BehaviourModel(BaseEstimator):
         return rotvec_positions(sk, rotvecs, root, self.eval_joints_, root_joint=sk.body_root)
 
     # ----------------------------------------------------------- generation
-    def generate_tokens(self, seconds: float, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Prototypes from a start state until they span ``seconds`` (§3.2.1)."""
+    def generate_tokens(
+        self, seconds: float, rng: np.random.Generator | None = None, stochastic: bool = True
+    ) -> np.ndarray:
+        """Prototypes from a start state until they span ``seconds`` (§3.2.1).
+
+        Drawn from the automaton when ``stochastic`` (from ``rng``, else a
+        generator seeded with ``random_state``), else its most likely path.
+        """
+        rng = call_rng(rng, stochastic, self.random_state)
         n_frames = seconds * self.fps
         start = self.vlmm_.start_state(rng)
         state = np.array([start])
@@ -270,9 +290,15 @@ class BehaviourModel(BaseEstimator):
             prev = tok[0]
         return np.array(tokens)
 
-    def generate(self, seconds: float, rng: np.random.Generator | None = None) -> Motion:
-        """A new routine of about ``seconds``: stochastic with ``rng``, else maximum likelihood."""
-        configs = self.synthesise(self.generate_tokens(seconds, rng))
+    def generate(
+        self, seconds: float, rng: np.random.Generator | None = None, stochastic: bool = True
+    ) -> Motion:
+        """A new routine of ``seconds`` (plus its first frame) on the training skeleton.
+
+        Drawn from the automaton when ``stochastic`` (from ``rng``, else a
+        generator seeded with ``random_state``), else its most likely path.
+        """
+        configs = self.synthesize(self.generate_tokens(seconds, rng, stochastic))
         return self.to_motion(configs[: int(round(seconds * self.fps)) + 1])
 
     # ----------------------------------------------------------- prediction
@@ -293,9 +319,11 @@ class BehaviourModel(BaseEstimator):
     ) -> np.ndarray:
         """(len(frames), n_samples, horizon, d) predicted configurations after each frame.
 
-        From the state at frame t, ``n_samples`` traversals (stochastic with
-        ``rng``, else maximum likelihood) emit prototypes until ``horizon``
-        frames are covered; the curve starts at the observed C_t, dC_t.
+        From the state at frame t, ``n_samples`` traversals (drawn from
+        ``rng``; the most likely path when ``rng`` is None) emit prototypes
+        until ``horizon`` frames are covered; the curve starts at the observed
+        C_t, dC_t. This is the predictor protocol of
+        :func:`markovmotion.evaluate.vlmm.evaluate_horizon`.
         """
         frames = np.asarray(frames)
         c0, dc0 = self.start_knots(features, frames, n_samples)
@@ -351,35 +379,77 @@ class BehaviourModel(BaseEstimator):
         return hermite_sample(c, dc, times, np.arange(1, horizon + 1))
 
     def predict(
-        self, motion: Motion, seconds: float, rng: np.random.Generator | None = None
+        self,
+        motion: Motion,
+        seconds: float,
+        rng: np.random.Generator | None = None,
+        stochastic: bool = False,
     ) -> Motion:
-        """The observed motion followed by ``seconds`` of predicted continuation."""
+        """The observed motion (at the model's frame rate) followed by ``seconds`` of
+        predicted continuation: the most likely one, or drawn when ``stochastic``."""
         feats = self.observe([motion])[0]
         states = self.prepare(feats)
         horizon = int(round(seconds * self.fps))
+        rng = call_rng(rng, stochastic, self.random_state)
         pred = self.predict_configurations(
             feats, states, np.array([len(feats) - 1]), horizon, 1, rng
         )[0, 0]
         return self.to_motion(np.vstack([feats[:, : self.n_dims], pred]))
 
-    # ------------------------------------------------------------- files
-    def save(self, path: str | os.PathLike[str], extra: dict | None = None) -> None:
-        """Write the model (and its feature pipeline) to an ``.npz`` with a JSON header."""
-        save_behaviour_model(self, path, extra)
+    # ---------------------------------------------------------------- score
+    def tokens(self, motion: Motion) -> np.ndarray:
+        """The collapsed prototype sequence of a motion (eq. 3)."""
+        return collapse_repeats(nearest_prototype(self.observe([motion])[0], self.prototypes_))[0]
+
+    def score(self, motions: Sequence[Motion]) -> float:
+        """Log-likelihood (nats) of the motions' collapsed prototype sequences under the VLMM,
+        summed over the motions (:meth:`VLMM.log_likelihood`: each sequence read from the
+        root, unseen events backed off to P(a))."""
+        return float(sum(self.vlmm_.log_likelihood(self.tokens(m)) for m in motions))
 
 
-def save_behaviour_model(
-    model: BaseEstimator, path: str | os.PathLike[str], extra: dict | None = None
-) -> None:
-    """Write a behaviour model (its state, arrays and ``extra`` header entries) to ``path``."""
-    arrays: dict[str, np.ndarray] = {}
-    header = {"model": estimator_state(model, "model", arrays), **(extra or {})}
-    save_npz(path, MODEL_KIND, header, arrays)
+# ------------------------------------------------------------------ training on an index
+@dataclass
+class IndexFit:
+    """What :func:`fit_index` trained on: the takes used, held out, and left out."""
+
+    model: Model
+    motions: list[Motion]
+    used: list[Entry]
+    held_out: list[Entry] = field(default_factory=list)
+    other_skeleton: list[Entry] = field(default_factory=list)
 
 
-def load_behaviour_model(path: str | os.PathLike[str]) -> tuple[BaseEstimator, dict]:
-    """A model written by :meth:`BehaviourModel.save` (or the structured model) and its header."""
-    from markovmotion.models.vlmm import structured  # noqa: F401 - registers its class
+def fit_index(
+    model: Model,
+    index: MocapIndex,
+    category: str = "exercise",
+    labels: Sequence[str] | None = None,
+    hold_out: bool = True,
+) -> IndexFit:
+    """Fit ``model`` (a behaviour model, plain or structured) on the takes of ``category``
+    (and ``labels``) of an index, the last take of each label held out when ``hold_out``
+    (:func:`markovmotion.data.splits.held_out_last`), keeping the largest group of takes
+    that share a skeleton.
 
-    header, arrays = load_npz(path, MODEL_KIND)
-    return restore_estimator(header["model"], arrays), header
+    Records on the model ``category_``, ``labels_`` (those of the takes used) and
+    ``held_out_files_`` (INDEX.csv file names), which ``vlmm evaluate`` reads.
+
+    Raises:
+        DataNotFoundError: no take of that category and labels.
+    """
+    from markovmotion.data.splits import held_out_last
+
+    entries = index.query(category=category, label=labels or None)
+    if not entries:
+        which = f"{category} takes labelled {', '.join(labels)}" if labels else f"{category} takes"
+        raise DataNotFoundError(f"no {which} in {index.root / 'INDEX.csv'}")
+    train, held_out = held_out_last(entries) if hold_out else (list(entries), [])
+    base = model if isinstance(model, BehaviourModel) else model.prototype_model
+    motions, skipped = load_motions(index, train, (base or BehaviourModel()).fps)
+    used = [e for e in train if e not in skipped]
+    model.fit(motions)
+    model.category_ = category
+    model.labels_ = sorted({e.label for e in used})
+    model.held_out_files_ = [e.file for e in held_out]
+    return IndexFit(model, motions, used, held_out, skipped)

@@ -309,6 +309,26 @@ class VLMM(BaseEstimator):
             out[i] = s[0]
         return out
 
+    def log_likelihood(self, tokens: np.ndarray, state: int = 0) -> float:
+        """log P(tokens) reading from ``state`` (default: the root), in nats.
+
+        Each token is scored by gamma(q, a) of the state q before it; an event
+        unseen in q backs off to the root's P(a), as :meth:`transition` does
+        (§3.2.2), so the value is a log-likelihood of the model with its
+        back-off. A token never seen in training scores ``-inf``.
+        """
+        tokens = np.asarray(tokens, dtype=np.int64)
+        if len(tokens) == 0:
+            return 0.0
+        before = np.r_[state, self.recognise(tokens, state)[:-1]]
+        edge = self._edge(before, tokens)
+        unseen = edge < 0
+        if unseen.any():
+            edge[unseen] = self._edge(np.zeros(unseen.sum(), dtype=np.int64), tokens[unseen])
+        probs = np.where(edge >= 0, self.out_probs_[np.maximum(edge, 0)], 0.0)
+        with np.errstate(divide="ignore"):
+            return float(np.log(probs).sum())
+
     # ------------------------------------------------------------- generation
     def step(
         self, states: np.ndarray, rng: np.random.Generator | None = None

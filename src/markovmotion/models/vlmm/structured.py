@@ -25,14 +25,15 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial.distance import squareform
-from sklearn.base import BaseEstimator, clone
+from sklearn.base import clone
 
 from markovmotion.algorithms.dtw import dtw_distance_matrix, open_end_dtw
 from markovmotion.algorithms.vector_quantisation import collapse_repeats, nearest_prototype
 from markovmotion.core.motion import Motion
-from markovmotion.models.vlmm.behaviour import BehaviourModel, save_behaviour_model
+from markovmotion.errors import ModelFormatError
+from markovmotion.models.base import Model
+from markovmotion.models.vlmm.behaviour import BehaviourModel, call_rng
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
-from markovmotion.state import register
 
 
 def key_prototypes(
@@ -83,8 +84,21 @@ def cluster_sequences(sequences: Sequence[np.ndarray], max_distance: float) -> n
     return fcluster(tree, max_distance, criterion="distance") - 1
 
 
-@register
-class StructuredBehaviourModel(BaseEstimator):
+def load_behaviour(path: str | os.PathLike[str]) -> BehaviourModel | StructuredBehaviourModel:
+    """The behaviour model in ``path``, plain or structured (what ``vlmm train`` writes).
+
+    Raises:
+        ModelFormatError: not a model file, or a model of another family.
+    """
+    model = Model.load(path)
+    if not isinstance(model, BehaviourModel | StructuredBehaviourModel):
+        raise ModelFormatError(
+            path, f"is a {model.KIND!r} model, expected 'vlmm' or 'structured_vlmm'"
+        )
+    return model
+
+
+class StructuredBehaviourModel(Model):
     """Key prototypes, atomic-behaviour templates and a VLMM over keys (§4).
 
     Args:
@@ -104,8 +118,14 @@ class StructuredBehaviourModel(BaseEstimator):
     ``vlmm_`` (over key indices), ``train_keys_`` / ``train_key_lengths_``,
     templates as ``template_tokens_`` (concatenated prototype ids),
     ``template_tokens_lengths_``, ``template_pairs_`` (n, 2) key indices (i, j)
-    and ``template_probs_`` P(template | a_ij).
+    and ``template_probs_`` P(template | a_ij), ``train_files_``; :func:`fit_index
+    <markovmotion.models.vlmm.behaviour.fit_index>` adds ``category_``, ``labels_`` and
+    ``held_out_files_``. Randomness at call time defaults to the prototype model's
+    ``random_state``.
     """
+
+    KIND = "structured_vlmm"
+    VERBS = ("generate", "predict", "score")
 
     def __init__(
         self,
@@ -128,6 +148,7 @@ class StructuredBehaviourModel(BaseEstimator):
     # ---------------------------------------------------------------- fitting
     def fit(self, motions: Sequence[Motion]) -> StructuredBehaviourModel:
         """Fit the prototype model, then keys, templates and the key VLMM; returns self."""
+        self.record_training(motions)
         base = clone(self.prototype_model or BehaviourModel()).fit(motions)
         self.prototype_model_ = base
         feats = base.observe(motions)
@@ -212,6 +233,11 @@ class StructuredBehaviourModel(BaseEstimator):
     def _templates_from(self, i: int) -> np.ndarray:
         return np.flatnonzero(self.template_pairs_[:, 0] == i)
 
+    @property
+    def random_state(self) -> int | None:
+        """The prototype model's ``random_state`` (seeds stochastic verbs given no ``rng``)."""
+        return self.prototype_model_.random_state
+
     def _choose_template(self, i: int, j: int, rng: np.random.Generator | None) -> int:
         """A template of a_ij: sampled from P(template | a_ij), else the most probable."""
         ids = np.flatnonzero((self.template_pairs_[:, 0] == i) & (self.template_pairs_[:, 1] == j))
@@ -241,8 +267,15 @@ class StructuredBehaviourModel(BaseEstimator):
         return tokens
 
     # ------------------------------------------------------------- generation
-    def generate_tokens(self, seconds: float, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Prototypes of a new routine: key traversal, each key pair replaced by a template (§4.3)."""
+    def generate_tokens(
+        self, seconds: float, rng: np.random.Generator | None = None, stochastic: bool = True
+    ) -> np.ndarray:
+        """Prototypes of a new routine: key traversal, each key pair replaced by a template (§4.3).
+
+        Drawn when ``stochastic`` (from ``rng``, else seeded with ``random_state``),
+        else the most likely keys and templates.
+        """
+        rng = call_rng(rng, stochastic, self.random_state)
         start = self.vlmm_.start_state(rng)
         memory = self.vlmm_.memories_[start]
         first = (
@@ -254,10 +287,16 @@ class StructuredBehaviourModel(BaseEstimator):
             self._expand(first, start, [int(self.keys_[first])], 0.0, seconds * self.fps, rng)
         )
 
-    def generate(self, seconds: float, rng: np.random.Generator | None = None) -> Motion:
-        """A new routine of about ``seconds``: stochastic with ``rng``, else maximum likelihood."""
+    def generate(
+        self, seconds: float, rng: np.random.Generator | None = None, stochastic: bool = True
+    ) -> Motion:
+        """A new routine of ``seconds`` (plus its first frame) on the training skeleton.
+
+        Drawn when ``stochastic`` (from ``rng``, else seeded with ``random_state``),
+        else the most likely keys and templates.
+        """
         base = self.prototype_model_
-        configs = base.synthesise(self.generate_tokens(seconds, rng))
+        configs = base.synthesize(self.generate_tokens(seconds, rng, stochastic))
         return base.to_motion(configs[: int(round(seconds * self.fps)) + 1])
 
     # ------------------------------------------------------------- prediction
@@ -339,13 +378,19 @@ class StructuredBehaviourModel(BaseEstimator):
         return out.reshape(len(frames), n_samples, horizon, base.n_dims)
 
     def predict(
-        self, motion: Motion, seconds: float, rng: np.random.Generator | None = None
+        self,
+        motion: Motion,
+        seconds: float,
+        rng: np.random.Generator | None = None,
+        stochastic: bool = False,
     ) -> Motion:
-        """The observed motion followed by ``seconds`` of predicted continuation."""
+        """The observed motion (at the model's frame rate) followed by ``seconds`` of
+        predicted continuation: the most likely one, or drawn when ``stochastic``."""
         base = self.prototype_model_
         feats = self.observe([motion])[0]
         horizon = int(round(seconds * self.fps))
         last = np.array([len(feats) - 1])
+        rng = call_rng(rng, stochastic, self.random_state)
         pred = self.predict_configurations(feats, self.prepare(feats), last, horizon, 1, rng)
         return base.to_motion(np.vstack([feats[:, : base.n_dims], pred[0, 0]]))
 
@@ -368,6 +413,17 @@ class StructuredBehaviourModel(BaseEstimator):
     def configuration_positions(self, configs: np.ndarray) -> np.ndarray:
         return self.prototype_model_.configuration_positions(configs)
 
-    def save(self, path: str | os.PathLike[str], extra: dict | None = None) -> None:
-        """Write the model (with its prototype model and pipeline) to an ``.npz``."""
-        save_behaviour_model(self, path, extra)
+    # ---------------------------------------------------------------- score
+    def key_tokens(self, motion: Motion) -> np.ndarray:
+        """The key-prototype sequence (key indices) a motion passes through (§4.1)."""
+        tokens = self.prototype_model_.tokens(motion)
+        key_index = np.full(len(self.prototype_model_.prototypes_), -1)
+        key_index[self.keys_] = np.arange(len(self.keys_))
+        return key_index[tokens[key_positions(tokens, self.keys_)]]
+
+    def score(self, motions: Sequence[Motion]) -> float:
+        """Log-likelihood (nats) of the motions' key-prototype sequences under the key VLMM,
+        summed over the motions. The templates between keys are matched by DTW, not
+        scored, so this is the likelihood of the sequence of keys only; the prototype
+        model's :meth:`~BehaviourModel.score` scores every prototype."""
+        return float(sum(self.vlmm_.log_likelihood(self.key_tokens(m)) for m in motions))

@@ -1,0 +1,126 @@
+"""Option ranges of the command line, declared once and enforced when the options are parsed.
+
+Every numeric option of a kind (frame rates, seeds, window lengths, ...) is
+declared with :func:`ranged`, which is ``typer.Option`` plus a check of the
+value against :data:`RANGES`; a value outside is a usage error, printed as one
+line (``error: markovmotion convert: Invalid value for '--resample': ...``)
+with exit code 2 before any work starts. Frame-rate bounds follow
+:data:`markovmotion.limits.MIN_FPS` and ``MAX_FPS`` (``MARKOVMOTION_MIN_FPS``,
+``MARKOVMOTION_MAX_FPS``).
+
+Usage::
+
+    fps: float = ranged("fps", None, help="True frame rate, overriding the file's.")
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import typer
+
+from markovmotion.limits import MAX_FPS, MIN_FPS
+
+
+@dataclass(frozen=True)
+class Range:
+    """Allowed values of one kind of option: ``lo < v`` (or ``<=``) and ``v <= hi``."""
+
+    lo: float | Callable[[], float]
+    hi: float | Callable[[], float] | None
+    lo_open: bool = False
+    unit: str = ""
+    max_length: int | None = None  # for text options
+
+    def high(self) -> float:
+        return self.hi() if callable(self.hi) else self.hi  # type: ignore[return-value]
+
+    def low(self) -> float:
+        return self.lo() if callable(self.lo) else self.lo
+
+    def problem(self, value: Any) -> str | None:
+        """Why ``value`` is not allowed, or None."""
+        if self.max_length is not None:
+            if isinstance(value, str) and len(value) > self.max_length:
+                return f"at most {self.max_length} characters, got {len(value)}"
+            return None
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            return f"must be a number, got {value!r}"
+        lo, hi = self.low(), self.high()
+        if isinstance(value, int) and not isinstance(value, bool):
+            if lo <= value <= hi and not (self.lo_open and value == lo):
+                return None
+            return f"must be a whole number from {lo:.0f} to {hi:.0f}, got {value}"
+        unit = f" {self.unit}" if self.unit else ""
+        low = f"above {lo:g}" if self.lo_open else f"at least {lo:g}"
+        span = f"{low} and at most {hi:g}{unit}"
+        bad = not math.isfinite(v) or (v <= lo if self.lo_open else v < lo) or v > hi
+        return f"must be a finite number {span}, got {value:g}" if bad else None
+
+
+def _max_fps() -> float:
+    return MAX_FPS.value
+
+
+def _min_fps() -> float:
+    return MIN_FPS.value
+
+
+RANGES: dict[str, Range] = {
+    # frame rates (a file's true rate, a resampling target, an animation's rate)
+    "fps": Range(_min_fps, _max_fps, unit="fps"),
+    # random seeds (NumPy takes 0 .. 2**32 - 1 for legacy seeding)
+    "seed": Range(0, 2**32 - 1),
+    # Viterbi slice / sliding window lengths in frames
+    "window": Range(1, 1000, unit="frames"),
+    # hidden states, prototypes, clusters
+    "states": Range(1, 1024),
+    # prediction horizons in seconds
+    "horizon": Range(0, 600, lo_open=True, unit="s"),
+    # lengths of generated or rendered motion in seconds
+    "seconds": Range(0, 3600, lo_open=True, unit="s"),
+    # walking steps to synthesize or adapt on
+    "steps": Range(1, 10_000),
+    # CONDENSATION hypotheses
+    "hypotheses": Range(1, 100_000),
+    # EM iterations
+    "iterations": Range(1, 100_000),
+    # trellis candidates and similar small counts
+    "count": Range(1, 10_000),
+    # titles and labels drawn on pictures
+    "title": Range(0, None, max_length=200),
+}
+
+
+def check_range(kind: str, name: str, value: Any) -> Any:
+    """``value`` if allowed for options of ``kind``; else :class:`typer.BadParameter`."""
+    if value is None:
+        return value
+    problem = RANGES[kind].problem(value)
+    if problem:
+        raise typer.BadParameter(problem, param_hint=f"'{name}'")
+    return value
+
+
+def _callback(kind: str):
+    RANGES[kind]  # fail at import for an unknown kind
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        name = (param.opts or [param.name or kind])[0]
+        if isinstance(value, list | tuple):
+            for v in value:
+                check_range(kind, name, v)
+            return value
+        return check_range(kind, name, value)
+
+    return check
+
+
+def ranged(kind: str, default: Any, *param_decls: str, **kwargs: Any) -> Any:
+    """``typer.Option(default, *param_decls, **kwargs)`` checked against ``RANGES[kind]``."""
+    return typer.Option(default, *param_decls, callback=_callback(kind), **kwargs)

@@ -1,0 +1,216 @@
+"""The dual HMM's online virtual partner: one frame of A in, one frame of B out, ``lag`` late.
+
+Windowed Viterbi (§3.1 of ``papers/dual-hmm-windowed-viterbi-interaction.txt``,
+:mod:`markovmotion.algorithms.windowed_viterbi`) decides A's states one
+slice at a time; the trellis of §3.2 (:mod:`.trellis`) picks B's frames. The
+partner follows the online protocol of :mod:`markovmotion.models.online`
+(``step``, ``skip``, ``finish``, ``lag``, ``fps``, ``skeleton``), so the
+real-time replay (``dualhmm respond --realtime``) and the ``/live`` page
+take it like any other online partner. It is made by
+:meth:`DualHMM.partner <markovmotion.models.hmm.dual.DualHMM.partner>` and
+takes the model as an argument (this module does not import the model's).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from markovmotion.algorithms.gaussian import gaussian_log_density, precision_cholesky
+from markovmotion.algorithms.windowed_viterbi import WindowedViterbi, start_distribution
+from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
+from markovmotion.features import BodyMotion
+from markovmotion.features.body_motion import ground_frame
+from markovmotion.models.hmm.gaussian import safe_log
+from markovmotion.progress import err_console
+
+if TYPE_CHECKING:
+    from markovmotion.models.hmm.dual import DualHMM
+
+
+def finite_frames(motion: Motion) -> np.ndarray:
+    """(F,) whether each frame's rotations and translations are all finite numbers."""
+    return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
+        axis=(1, 2)
+    )
+
+
+class Partner:
+    """The virtual partner online: one frame of A in, one frame of B out, ``lag`` frames late.
+
+    ``lag = window - 1`` frames (0.30 s at 30 fps with the paper's window of
+    10). When frame t + lag arrives, the windowed decoder's latest slice
+    covers frames t .. t + lag: its q_1 is frame t's state, decided (§3.1),
+    the rest are that slice's best path. B's frame for t is the first step of
+    the lowest-error trellis path (§3.2) over the slice, starting from the B
+    frame shown last: the trellis run the windowed way, as §3.1 runs Viterbi,
+    so it looks as far ahead as the decoder; B's place relative to A is
+    averaged over the frames shown last and the path ahead
+    (``placement_window``). :meth:`step` returns None until the first B frame
+    is due; :meth:`finish` returns the last ``lag`` frames.
+    A frame that is None or holds NaN is a missing observation: a warning,
+    and the partner goes on from the dynamics alone.
+
+    Attributes:
+        lag: frames B trails A (``window - 1``).
+        fps: the model's rate (A must come at it).
+        skeleton: B's skeleton (of the frames :meth:`step` returns).
+    """
+
+    def __init__(self, model: DualHMM, window: int):
+        self.model = model
+        hmm = model.lambda_a_
+        start = start_distribution(safe_log(hmm.startprob_), model.initial)
+        self.decoder = WindowedViterbi(start, safe_log(hmm.transmat_), window)
+        self.lag = window - 1
+        self.fps = float(model.fps)
+        self._trellis = model._trellis()
+        prec, log_det = precision_cholesky(hmm.covars_)
+        self._emission = (hmm.means_, prec, log_det)
+        self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
+        self._places: deque = deque(maxlen=window)  # where A stood in the slice's frames
+        self._half = min(model.placement_window // 2, self.lag)
+        self._history: deque = deque(maxlen=max(self._half, 1))  # B's training frames shown
+        self._frames_in = 0
+        self._place = (np.zeros(3), 0.0)
+        self._checked = None  # A's skeleton, once checked against the model's
+        self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
+
+    @property
+    def skeleton(self) -> Skeleton:
+        """B's skeleton."""
+        return self.model.skeleton_b_
+
+    def step_features(
+        self, xa: np.ndarray | None, place: tuple[np.ndarray, float]
+    ) -> tuple[int, np.ndarray] | None:
+        """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
+        frames ago, once one is due, B's training frame and B's root in A's ground frame."""
+        if xa is None:
+            log_b = np.zeros(len(self._emission[0]))
+        else:
+            log_b = gaussian_log_density(xa[None], *self._emission)[0]
+        self._places.append(place)
+        return self.step_log_frameprob(log_b, xa)
+
+    def step_log_frameprob(
+        self, log_b: np.ndarray, xa: np.ndarray | None
+    ) -> tuple[int, np.ndarray] | None:
+        """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
+        self._slice.append((xa, {}))
+        self.decoder.push(log_b)
+        self._frames_in += 1
+        if self._frames_in <= self.lag:
+            return None
+        states = self.decoder.path
+        cols = self._columns(states, self._slice)
+        path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
+        return self._show(path, 1)[0]
+
+    @property
+    def _shown(self) -> int | None:
+        """B's training frame shown last."""
+        return self._history[-1] if self._history else None
+
+    def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray]]:
+        """Show the first ``count`` B frames of ``path``, each with its averaged place."""
+        before = list(self._history) if self._half else []  # the last ``half`` shown
+        roots = self._trellis.placement(path, self._half, before)[:count]
+        self._history.extend(int(i) for i in path[:count])
+        return [(int(i), r) for i, r in zip(path[:count], roots, strict=True)]
+
+    def finish_frames(self) -> list[tuple[int, np.ndarray]]:
+        """B's training frames and places still owed at the end of the stream."""
+        if self._frames_in == 0:
+            return []
+        entries = list(self._slice)
+        if self._frames_in < self.decoder.window:
+            states = self.decoder.flush()
+        else:
+            states, entries = list(self.decoder.path[1:]), entries[1:]
+        if not entries:
+            return []
+        path = self._trellis.best_path(states, self._columns(states, entries), self._shown)
+        return self._show(path, len(path))
+
+    def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
+        cols = []
+        for q, (xa, cache) in zip(states, entries, strict=True):
+            if q not in cache:
+                cache[q] = self._trellis.candidates(q, xa)
+            cols.append(cache[q])
+        return cols
+
+    def _steps(self, states: Sequence[int], cols: list[tuple]) -> list[np.ndarray]:
+        """Distances between consecutive columns of the slice, each computed once per pair of
+        states (a slice shares all but its last column with the one before)."""
+        out = []
+        for t in range(1, len(cols)):
+            cache = self._slice[t][1]
+            key = (states[t], states[t - 1])
+            if key not in cache:
+                cache[key] = self._trellis.distances(states[t], cols[t][0], cols[t - 1][0])
+            out.append(cache[key])
+        return out
+
+    def step(self, frame: Motion | None) -> Motion | None:
+        """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
+        if frame is None or not finite_frames(frame)[0]:
+            err_console.print(
+                f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
+                highlight=False,
+            )
+            return self.skip()
+        if frame.skeleton is not self._checked:
+            self.model.check_input(frame)
+            self._checked = frame.skeleton
+        pos = frame.positions()
+        origin, yaw = ground_frame(frame, pos)
+        self._place = (origin[0], float(yaw[0]))
+        return self._motion(
+            self.step_features(self._features(frame, pos, origin, yaw), self._place)
+        )
+
+    def _features(
+        self, frame: Motion, pos: np.ndarray, origin: np.ndarray, yaw: np.ndarray
+    ) -> np.ndarray:
+        """A's model features of ``frame`` from its joint positions and ground frame: with A's
+        motion in the observation, :meth:`BodyMotion.rows` of the last finite frame and this
+        one (what :meth:`DualHMM.features_a` gives for this frame of the whole stream)."""
+        first, *rest = self.model.pipeline_a_.steps
+        if not isinstance(first, BodyMotion):
+            return self.model.features_a(frame)[0][-1]
+        now = (frame.body_centred_positions(pos), origin, yaw)
+        last, self._last = self._last, now
+        if last is not None:
+            now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
+        x = first.rows(*now, frame.fps)
+        for step in rest:
+            x = step.transform([x])[0]
+        return x[-1]
+
+    def skip(self) -> Motion | None:
+        """A frame the caller could not deliver (dropped): no observation, no warning."""
+        return self._motion(self.step_features(None, self._place))
+
+    def finish(self) -> list[Motion]:
+        """B's frames still owed at the end of the stream."""
+        frames = self.finish_frames()
+        places = list(self._places)[len(self._places) - len(frames) :]
+        return [self._motion(i, p) for i, p in zip(frames, places, strict=True)]
+
+    def _motion(
+        self, shown: tuple[int, np.ndarray] | None, place: tuple[np.ndarray, float] | None = None
+    ) -> Motion | None:
+        """B's frame ``shown`` (training frame, root) placed by A's place for it (default: the
+        slice's first)."""
+        if shown is None:
+            return None
+        origin, yaw = place or self._places[0]
+        return self.model.frames_to_motion(
+            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None]
+        )

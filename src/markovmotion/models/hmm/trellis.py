@@ -1,0 +1,177 @@
+"""The trellis of §3.2 of the dual-HMM paper: B's poses chosen among real training frames.
+
+``papers/dual-hmm-windowed-viterbi-interaction.txt``, §3.2 "Estimating Output
+Behaviours" (after Cosker et al., 2004), Fig. 2:
+
+- Column t of the trellis holds candidate data vectors C_t^j of person B for
+  frame t of the input (the paper's figure: three per column).
+- Each candidate is given an error. For the first column, E = D4: the
+  Mahalanobis distance between the new input b_input (A's pose at t) and the
+  data vector b_a of person A stored with the candidate (same location in
+  the training data).
+- For the other columns t = 2 .. M, D1, D2, D3 are the distances between a
+  candidate C_t^j and the candidates C_{t-1}^1..3 of the column before, and
+  E = (D1 + D2 + D3) x D4.
+- Once the errors are known, one works backwards through the trellis and
+  picks, per column, B's motion data with the lowest error.
+
+What we do (and where it differs):
+
+- Column t holds ``size`` (K, default 10, not 3) training frames of B taken
+  from the training frames decoded to A's state q_t: the K whose paired A
+  frames are nearest the input, by D4 under B_A of q_t (the state's
+  covariance; a missing A frame gives D4 = 1 for all). A state no training
+  frame decodes to uses the frames nearest its mean.
+- D between two candidates is the Mahalanobis distance under B_B of q_t
+  between B's features (joint positions in A's ground frame + PCA).
+- The path is found by dynamic programming, as Viterbi does: a step from
+  candidate j of column t - 1 into candidate i of column t costs
+  D_t(i, j) x D4_t(i), and E_t(i) = min_j E_{t-1}(j) + D_t(i, j) D4_t(i),
+  from E_1 = D4 (:func:`lowest_error_path`); the lowest-error path is
+  back-tracked from the last column. The paper's (D1 + D2 + D3) x D4 sums
+  the distances to *every* candidate before; ours keeps the one the path
+  comes from, so the chosen frames follow each other.
+- Online (:mod:`.partner`), the trellis runs over each slice of the windowed
+  decoder, starting from the B frame already shown (E_1 = D x D4 from it),
+  and only its first step is shown.
+- B's place relative to A is then the mean of the path's root positions over
+  ``placement_window`` frames (:meth:`Trellis.placement`; our addition).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from markovmotion.core.motion import Motion
+
+
+@dataclass
+class Trellis:
+    """Training frames grouped by state, pre-whitened for the Mahalanobis distances of §3.2.
+
+    Attributes:
+        members: per state, the indices of its training frames.
+        white_a: per state, their A features times the state's precision factor under B_A.
+        prec_a: (N, Da, Da) precision factors of B_A.
+        prec_b: (N, Db, Db) precision factors of B_B.
+        train_b: (frames, Db) B's training features.
+        size: candidates per column K.
+        motion_b: B's training frames relative to A, decoded once.
+    """
+
+    members: list[np.ndarray]
+    white_a: list[np.ndarray]
+    prec_a: np.ndarray
+    prec_b: np.ndarray
+    train_b: np.ndarray
+    size: int
+    motion_b: Motion
+
+    def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
+        wa = self.white_a[state]
+        k = min(self.size, len(wa))
+        if xa is None:
+            d4 = np.linalg.norm(wa - wa.mean(axis=0), axis=1)
+        else:
+            d4 = np.linalg.norm(wa - xa @ self.prec_a[state], axis=1)
+        pick = np.argpartition(d4, k - 1)[:k] if k < len(wa) else np.arange(len(wa))
+        return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
+
+    def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
+        """(K, K') Mahalanobis distances D1..DK' between B candidates, under B_B of ``state``."""
+        p = self.prec_b[state]
+        return np.linalg.norm(
+            (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
+        )
+
+    def columns(self, states: Sequence[int], xa: Sequence[np.ndarray | None]) -> list[tuple]:
+        """The trellis columns (:meth:`candidates`) of frames in ``states`` seen as ``xa``."""
+        return [self.candidates(q, x) for q, x in zip(states, xa, strict=True)]
+
+    def best_path(
+        self,
+        states: Sequence[int],
+        cols: list[tuple],
+        previous: int | None = None,
+        steps: list[np.ndarray] | None = None,
+    ) -> np.ndarray:
+        """Training frame per column on the lowest-error path; E = D4 in the first column, or
+        D x D4 from the frame ``previous`` already shown. ``steps[t - 1]``: the
+        :meth:`distances` from column t - 1 to column t, if already computed."""
+        idx, cost = cols[0]
+        if previous is not None:
+            cost = cost * self.distances(states[0], idx, np.array([previous]))[:, 0]
+        if steps is None:
+            steps = [
+                self.distances(states[t], cols[t][0], cols[t - 1][0]) for t in range(1, len(cols))
+            ]
+        k = len(idx)  # every column holds K = min(size, training frames) (see build_trellis)
+        d4 = np.array([c[1] for c in cols[1:]]).reshape(-1, k)
+        pick = lowest_error_path(cost, d4, np.array(steps).reshape(-1, k, k))
+        return np.array([c[0][j] for c, j in zip(cols, pick, strict=True)], dtype=int)
+
+    def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
+        """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
+        t + half (those that exist; ``before``: frames shown before the path's first)."""
+        roots = self.motion_b.translations[np.concatenate([before, path]).astype(int), 0]
+        csum = np.vstack([np.zeros((1, 3)), np.cumsum(roots, axis=0)])
+        t = np.arange(len(before), len(roots))
+        lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(roots))
+        return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+
+
+def build_trellis(
+    train_a: np.ndarray,
+    train_b: np.ndarray,
+    train_states: np.ndarray,
+    means_a: np.ndarray,
+    prec_a: np.ndarray,
+    prec_b: np.ndarray,
+    size: int,
+    motion_b: Motion,
+) -> Trellis:
+    """A :class:`Trellis` over training frames (A's and B's features, their states).
+
+    A state with fewer than ``size`` training frames takes the ``size`` frames
+    whose A features are nearest its mean (under its B_A), so every column
+    holds the same number of candidates.
+    """
+    members, white = [], []
+    for k in range(len(prec_a)):
+        idx = np.flatnonzero(train_states == k)
+        if len(idx) < size:  # a state no training frame decodes to: nearest frames
+            d = np.linalg.norm((train_a - means_a[k]) @ prec_a[k], axis=1)
+            idx = np.argsort(d)[:size]
+        members.append(idx)
+        white.append(train_a[idx] @ prec_a[k])
+    return Trellis(members, white, prec_a, prec_b, train_b, size, motion_b)
+
+
+@numba.njit(cache=True)
+def lowest_error_path(cost, d4, steps):  # pragma: no cover - numba
+    """Entry per column (T,) on the lowest-error path through the trellis: E_t(i) =
+    min_j E_{t-1}(j) + D_t(i, j) D4_t(i), from E_0 = ``cost`` (K,), ``d4`` (T - 1, K) and
+    ``steps`` D_t (T - 1, K, K); ties go to the first entry, as with ``argmin``. Compiled:
+    in NumPy each column cost several calls, most of an online step's trellis time."""
+    n, k = len(d4) + 1, len(cost)
+    back = np.zeros((n, k), dtype=np.int64)
+    cost, new = cost.copy(), np.empty(k)
+    for t in range(1, n):
+        for i in range(k):
+            best, arg = np.inf, 0
+            for j in range(k):
+                e = cost[j] + steps[t - 1, i, j] * d4[t - 1, i]
+                if e < best:
+                    best, arg = e, j
+            new[i], back[t, i] = best, arg
+        cost[:] = new
+    path = np.empty(n, dtype=np.int64)
+    path[-1] = np.argmin(cost)
+    for t in range(n - 1, 0, -1):
+        path[t - 1] = back[t, path[t]]
+    return path
