@@ -298,8 +298,10 @@ def test_local_hosts_are_served(server, host):
     assert raw(server, "GET", "/api/motions", {"Host": host})[0] == 200
 
 
-def test_allow_host_adds_a_name(site):
-    app = create_app(site / "lib", admin_token=ADMIN, allow_hosts=["motion.example"])
+def test_allow_host_adds_a_name(site, tmp_path):
+    app = create_app(
+        site / "lib", tmp_path / "r.sqlite", admin_token=ADMIN, allow_hosts=["motion.example"]
+    )
     with running(app) as url:
         assert raw(url, "GET", "/api/motions", {"Host": "motion.example:8000"})[0] == 200
         assert raw(url, "GET", "/api/motions", {"Host": "other.example"})[0] == 400
