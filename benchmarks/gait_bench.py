@@ -31,7 +31,8 @@ from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_ba
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_every
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.data.walks import gait_entries
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
 #: nnmnkwii's windows for eqs. (2) and (3): (left, right, coefficients).
 WINDOWS = [

@@ -40,8 +40,9 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.walks import gait_entries
 from markovmotion.features import PCA, FeaturePipeline, JointPositions
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 from markovmotion.models.hmm.gaussian import GaussianHMM
 from markovmotion.progress import track
 

@@ -21,11 +21,12 @@ from sklearn.base import clone
 
 from markovmotion.core.motion import Motion
 from markovmotion.data.splits import held_out_every
+from markovmotion.data.walks import gait_entries
 from markovmotion.errors import ModelFormatError
 from markovmotion.models import KINDS, Model
 from markovmotion.models.base import ALL_VERBS
 from markovmotion.models.chain.partner import VirtualPartner
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.online import OnlinePartner, run
 from markovmotion.models.vlmm.behaviour import BehaviourModel

@@ -10,6 +10,7 @@ import pytest
 from markovmotion import read_motion
 from markovmotion.cli import main
 from markovmotion.data.splits import held_out_every
+from markovmotion.data.walks import gait_entries
 from markovmotion.errors import ModelFormatError
 from markovmotion.features import ExpMaps, FeaturePipeline
 from markovmotion.features.gait import (
@@ -21,7 +22,7 @@ from markovmotion.features.gait import (
     travel_yaw,
 )
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 
 
 def angle_between(a: np.ndarray, b: np.ndarray) -> float:

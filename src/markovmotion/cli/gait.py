@@ -10,12 +10,10 @@ from rich.table import Table
 
 from markovmotion.cli.options import ranged
 from markovmotion.cli.tables import print_table
-from markovmotion.core.motion import Motion
-from markovmotion.data import MocapIndex
-from markovmotion.errors import DataNotFoundError
-from markovmotion.io import read_motion, write_motion
+from markovmotion.data.walks import SPLITS, load_walks
+from markovmotion.io import write_motion
 from markovmotion.persist import check_model_output
-from markovmotion.progress import err_console, track
+from markovmotion.progress import err_console
 
 app = typer.Typer(
     help="Stylistic walks with hidden semi-Markov models (gait paper): train an average walk, "
@@ -23,47 +21,14 @@ app = typer.Typer(
     no_args_is_help=True,
 )
 
-SPLITS = ("train", "test", "all")
+
+def _split(value: str) -> str:
+    if value not in SPLITS:
+        raise typer.BadParameter(f"{value!r}: must be one of {', '.join(SPLITS)}")
+    return value
 
 
-def _is_index(paths: list[Path]) -> bool:
-    return len(paths) == 1 and (paths[0].is_dir() or paths[0].name.lower().endswith(".csv"))
-
-
-def load_walks(
-    paths: list[Path] | None,
-    labels: list[str] | str | None,
-    split: str = "train",
-    subset: str = "",
-    folders: list[str] | None = None,
-) -> list[Motion]:
-    """Walks from motion files, or from an INDEX.csv (or its folder) by label and split.
-
-    From an index, the walks are those of ``subset`` (Bandai dataset-2 by
-    default) with the labels asked for; ``split`` keeps the training takes,
-    the held-out takes (every fourth of each style) or all. The folder of
-    each walk (its dataset) is appended to ``folders`` if given.
-    """
-    from markovmotion.data.splits import held_out_every
-    from markovmotion.models.gait.synthesizer import DEFAULT_SUBSET, gait_entries
-
-    if paths and not _is_index(paths):
-        if folders is not None:
-            folders.extend(p.resolve().parent.name for p in paths)
-        return [read_motion(p) for p in track(paths, "reading walks")]
-    if split not in SPLITS:
-        raise typer.BadParameter(f"split must be one of {', '.join(SPLITS)}")
-    index = MocapIndex.load(paths[0] if paths else None)
-    entries = gait_entries(index, labels, subset or DEFAULT_SUBSET)
-    train, test = held_out_every(entries)
-    chosen = {"train": train, "test": test, "all": entries}[split]
-    if not chosen:
-        raise DataNotFoundError(
-            f"no walks labelled {labels} under {subset or DEFAULT_SUBSET} in {index.root}"
-        )
-    if folders is not None:
-        folders.extend(Path(e.file).parent.name for e in chosen)
-    return [index.load_motion(e) for e in track(chosen, "reading walks")]
+SPLIT = typer.Option("train", callback=_split, help="Takes from an index: train, test or all.")
 
 
 @app.command()
@@ -76,7 +41,7 @@ def train(
     subset: str = typer.Option(
         "", help="Index files starting with this (default Bandai dataset-2)."
     ),
-    split: str = typer.Option("train", help="Takes from an index: train, test or all."),
+    split: str = SPLIT,
     n_iter: int = ranged("iterations", 10, min=1, help="EM iterations."),
     mdl_factor: float = typer.Option(1.0, min=0.0, help="MDL weight of context clustering."),
     wat: str = typer.Option(
@@ -132,7 +97,7 @@ def adapt(
     subset: str = typer.Option(
         "", help="Index files starting with this (default Bandai dataset-2)."
     ),
-    split: str = typer.Option("train", help="Takes from an index: train, test or all."),
+    split: str = SPLIT,
 ) -> None:
     """Adapt the average model to a style from a few steps (CSMAPLR/CMLLR + MAP, §5.1.3)."""
     from markovmotion.models.gait.adaptation import METHODS, STRUCTURES

@@ -9,9 +9,10 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_every
+from markovmotion.data.walks import gait_entries
 from markovmotion.features.gait import align_walk, detect_steps
 from markovmotion.io import write_motion
-from markovmotion.models.gait.synthesizer import GaitSynthesizer, gait_entries
+from markovmotion.models.gait.synthesizer import GaitSynthesizer
 from markovmotion.progress import track
 from markovmotion.viz import render, render_frames
 

@@ -69,6 +69,7 @@ from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.splits import held_out_every
+from markovmotion.data.walks import DEFAULT_SUBSET, gait_entries
 from markovmotion.errors import DataNotFoundError, ModelFormatError
 from markovmotion.evaluate.perceptual import efficiency
 from markovmotion.evaluate.takes import TestTakes, test_takes
@@ -76,12 +77,7 @@ from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.gait import SIDES, align_walk, detect_steps, foot_slide
 from markovmotion.features.reference_pose import ReferencePose
 from markovmotion.models.base import Model, file_sha256, training_hashes
-from markovmotion.models.gait.synthesizer import (
-    DEFAULT_SUBSET,
-    KIND,
-    GaitSynthesizer,
-    gait_entries,
-)
+from markovmotion.models.gait.synthesizer import KIND, GaitSynthesizer
 from markovmotion.persist import load_npz
 from markovmotion.progress import track
 

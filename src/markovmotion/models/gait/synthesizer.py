@@ -24,7 +24,6 @@ import numpy as np
 
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
-from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.features import ExpMaps, FeaturePipeline, add_deltas
 from markovmotion.features.gait import (
@@ -46,17 +45,6 @@ from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
 KIND = "gait-hsmm"
 WAT_UNITS = ("none", "take", "unit")
 ROLES = ("average", "adapted", "scratch")
-#: The walks of the shared collection used by default: Bandai Namco dataset-2
-#: (about 20 takes of each of 7 styles, one skeleton).
-DEFAULT_SUBSET = "bandai/dataset-2/"
-
-
-def gait_entries(
-    index: MocapIndex, labels: str | Sequence[str] | None = None, subset: str = DEFAULT_SUBSET
-) -> list[Entry]:
-    """Walk entries (neutral and styled) whose file starts with ``subset``, optionally of some labels."""
-    rows = index.query(category=["walk", "style_walk"], label=labels)
-    return sorted((e for e in rows if e.file.startswith(subset)), key=lambda e: e.file)
 
 
 @dataclass
