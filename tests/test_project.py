@@ -9,6 +9,9 @@ output when it fails.
 
 from __future__ import annotations
 
+import ast
+import importlib
+import importlib.util
 import os
 import subprocess
 import sys
@@ -47,10 +50,23 @@ def test_ruff_format() -> None:
 
 
 def test_import_layers() -> None:
-    """cli > web | video > demo > evaluate > models > algorithms | features > io > core."""
+    """cli > web | video > demo > evaluate > models > features > algorithms > io > core."""
     run([sys.executable, "-c", LINT_IMPORTS])
 
 
 def test_docs_build_strict(tmp_path: Path) -> None:
     """The mkdocs site builds with no warning (broken links, missing API objects)."""
     run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")])
+
+
+@pytest.mark.parametrize("script", sorted((ROOT / "benchmarks").glob("*.py")), ids=lambda p: p.name)
+def test_benchmarks_import_what_exists(script: Path) -> None:
+    """Every ``from markovmotion... import name`` of a benchmark names something that exists
+    (the benchmarks need the ``bench`` extra's peers to run, so they are not imported whole)."""
+    for node in ast.walk(ast.parse(script.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("markovmotion"):
+            module = importlib.import_module(node.module)
+            for alias in node.names:
+                assert hasattr(module, alias.name) or importlib.util.find_spec(
+                    f"{node.module}.{alias.name}"
+                ), f"{script.name}: {node.module} has no {alias.name}"
