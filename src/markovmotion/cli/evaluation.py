@@ -9,6 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from markovmotion.cli.tables import print_table
 from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, answers_csv, summarise
 from markovmotion.evaluate.store import open_results
 from markovmotion.io.files import atomic_write
@@ -70,7 +71,7 @@ def report(
     for kind, name in (("real", "original"), ("synthetic", "synthesized")):
         row = rep.naturalness[kind]
         t.add_row(name, *(_pct(row[c]) for c in ("real", "synthetic", "dont_know")), str(row["n"]))
-    console.print(t)
+    print_table(t, console)
 
     t = Table(title="Style recognition (Table 3), % correct")
     for col in ("", "original", "synthesized"):
@@ -84,7 +85,7 @@ def report(
         f"{rep.efficiency['real']:.2f}",
         f"{rep.efficiency['synthetic']:.2f}",
     )
-    console.print(t)
+    print_table(t, console)
     console.print(
         f"chance {rep.chance:.2f} %; Pearson correlation of per-style recognition, "
         f"original vs synthesized: {rep.correlation:.4f}",
@@ -98,13 +99,13 @@ def report(
             t.add_column(LABELS.get(col, col), justify="right")
         for style, row in zip(c.rows, c.percent, strict=True):
             t.add_row(LABELS.get(style, style), *(_pct(v) for v in row))
-        console.print(t)
+        print_table(t, console)
     t = Table(title=f"Resemblance (Fig. 8): mean score {rep.resemblance_score:.2f} of 4")
     t.add_column("level")
     t.add_column("answers", justify="right")
     for level in range(len(RESEMBLANCE) - 1, -1, -1):
         t.add_row(f"{level} {RESEMBLANCE[level]}", str(rep.resemblance_histogram[level]))
-    console.print(t)
+    print_table(t, console)
     if csv:
         with atomic_write(csv) as fh:
             fh.write(answers_csv(items))

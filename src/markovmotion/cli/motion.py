@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.cli.options import ranged
+from markovmotion.cli.tables import print_table
 from markovmotion.data.index import read_listed_motion
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
@@ -41,7 +42,7 @@ def info(
     table.add_row("pelvis", sk.names[sk.body_root])
     table.add_row("extent (mm)", " x ".join(f"{v:.0f}" for v in extent))
     table.add_row("height (mm)", f"{np.ptp(pos[0, :, 1]):.0f} in frame 0")
-    console.print(table)
+    print_table(table, console)
 
 
 def convert(
