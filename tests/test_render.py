@@ -195,10 +195,16 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     with Image.open(out / "pca-energy.png") as im:
         assert im.format == "PNG"
     # the trained models' outputs: motions that read back, animations that move
-    for name in ("partner-virtual.bvh", "vlmm-routine.bvh", "gait-elderly-synthesized.bvh"):
+    bvhs = (
+        "partner-virtual.bvh",
+        "vlmm-routine.bvh",
+        "gait-elderly-synthesized.bvh",
+        "chain-partner.bvh",
+    )
+    for name in bvhs:
         motion = read_motion(out / name)
         assert motion.n_frames > 30 and np.isfinite(motion.positions()).all()
-    for name in ("partner.gif", "vlmm-routine.gif", "gait-elderly.gif"):
+    for name in ("partner.gif", "vlmm-routine.gif", "gait-elderly.gif", "chain-partner.gif"):
         frames = gif_frames(out / name)
         assert len(frames) > 10 and not np.array_equal(frames[0], frames[-1])
 

@@ -18,7 +18,7 @@ from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs
-from markovmotion.errors import MarkovMotionError
+from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.evaluate.chain import SOURCES, evaluate_model
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
@@ -61,6 +61,10 @@ def _training_takes(data: Path | None, source: str, label: str):
     if source == "mocap":
         index = MocapIndex.load(data)
         train, _ = held_out_pairs(index.pairs(label=label))
+        if not train:
+            raise DataNotFoundError(
+                f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
+            )
         return [index.load_pair(a, b) for a, b in track(train, "reading takes")]
     from markovmotion.video.dataset import silhouette_takes
 

@@ -11,7 +11,7 @@ def demo(
     out: Path = typer.Option(Path("demo-out"), help="Folder for the outputs."),
     data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
 ) -> None:
-    """Train on the CMU data and write motion (BVH), an animation (GIF) and plots (PNG)."""
+    """One model of each family on the CMU and Bandai data: motion (BVH), animations (GIF), plots (PNG)."""
     from markovmotion.demo import run_demo
 
     run_demo(out, data)

@@ -10,8 +10,8 @@ import numpy as np
 import typer
 from rich.console import Console
 
-from markovmotion.cli.options import ranged
-from markovmotion.data.index import listed_entry
+from markovmotion.cli.options import choice, ranged
+from markovmotion.data.index import listed_entry, read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -24,9 +24,16 @@ app = typer.Typer(
 DATA = typer.Option(None, help="Folder with INDEX.csv (default: see README).")
 LABELS = typer.Option(None, help="Comma-separated labels (default: every interaction).")
 STATES = ranged("states", 32, help="Hidden states N.")
-MODE = typer.Option("paper", help="'paper' (EM on A) or 'joint' (EM on [A, B]).")
+# The choices of DualHMM's MODES and OBSERVATIONS (not imported: the models load lazily)
+MODE = typer.Option(
+    "paper",
+    callback=choice(("paper", "joint")),
+    help="'paper' (EM on A) or 'joint' (EM on [A, B]).",
+)
 OBSERVATION = typer.Option(
-    "motion", help="A as 'pose' (the paper's) or 'motion' (pose, its change and A's travel)."
+    "motion",
+    callback=choice(("pose", "motion")),
+    help="A as 'pose' (the paper's) or 'motion' (pose, its change and A's travel).",
 )
 CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = ranged(
@@ -122,9 +129,13 @@ def read_stream(path: Path, fps: float | None = None):
     A file of the collection is read as INDEX.csv says (true frame rate, CMU's reference
     frame dropped) unless ``fps`` overrides the file's rate.
     """
-    entry = listed_entry(path) if fps is None else None
     from markovmotion.io.bvh import read_bvh_stream
+    from markovmotion.io.files import base_suffix
 
+    if base_suffix(path) != ".bvh":  # ASF/AMC: no frame lines to repair
+        motion = read_listed_motion(path, fps=fps)
+        return motion, np.zeros(motion.n_frames, dtype=bool)
+    entry = listed_entry(path) if fps is None else None
     motion, broken = read_bvh_stream(path, entry.fps if entry else fps)
     if entry is not None and motion.n_frames > 1:
         motion, broken = motion.trim(entry.first_frame), broken[entry.first_frame :]
@@ -143,7 +154,11 @@ def respond(
     realtime: bool = typer.Option(
         False, help="Replay A as a stream at its frame rate; report per-frame latency."
     ),
-    fps: float = ranged("fps", None, help="True frame rate of the input, overriding the file's."),
+    fps: float = ranged(
+        "fps",
+        None,
+        help="True frame rate of the input (default: INDEX.csv's for a file of the collection, else the file's).",
+    ),
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
 ) -> None:
     """Generate person B's response to person A's motion."""

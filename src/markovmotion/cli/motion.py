@@ -18,7 +18,11 @@ from markovmotion.io.files import base_suffix
 
 def info(
     file: Path = typer.Argument(..., help="BVH, ASF/AMC or C3D file."),
-    fps: float = ranged("fps", None, help="True frame rate, overriding the file's."),
+    fps: float = ranged(
+        "fps",
+        None,
+        help="True frame rate (default: INDEX.csv's for a file of the collection, else the file's).",
+    ),
 ) -> None:
     """Describe a motion file: skeleton, frames, frame rate, extent."""
     console = Console()
@@ -48,7 +52,11 @@ def info(
 def convert(
     src: Path = typer.Argument(..., help="Input motion (BVH or ASF/AMC)."),
     dst: Path = typer.Argument(..., help="Output .bvh or .bvh.gz."),
-    fps: float = ranged("fps", None, help="True frame rate of the input, overriding the file's."),
+    fps: float = ranged(
+        "fps",
+        None,
+        help="True frame rate of the input (default: INDEX.csv's for a file of the collection, else the file's).",
+    ),
     resample: float = ranged("fps", None, help="Resample to this frame rate before writing."),
 ) -> None:
     """Convert a motion to BVH (optionally at another frame rate)."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import typer
@@ -40,6 +40,14 @@ class Range:
 
     def low(self) -> float:
         return self.lo() if callable(self.lo) else self.lo
+
+    def describe(self) -> str:
+        """The range as the help text shows it."""
+        if self.max_length is not None:
+            return f"at most {self.max_length} characters"
+        unit = f" {self.unit}" if self.unit else ""
+        low = f">{self.low():g}" if self.lo_open else f"{self.low():g}"
+        return f"{low} to {self.high():g}{unit}"
 
     def problem(self, value: Any) -> str | None:
         """Why ``value`` is not allowed, or None."""
@@ -97,30 +105,61 @@ RANGES: dict[str, Range] = {
 }
 
 
-def check_range(kind: str, name: str, value: Any) -> Any:
-    """``value`` if allowed for options of ``kind``; else :class:`typer.BadParameter`."""
+def check_range(kind: str | Range, name: str, value: Any) -> Any:
+    """``value`` if allowed for options of ``kind`` (a key of :data:`RANGES` or a
+    :class:`Range`); else :class:`typer.BadParameter`."""
     if value is None:
         return value
-    problem = RANGES[kind].problem(value)
+    problem = (RANGES[kind] if isinstance(kind, str) else kind).problem(value)
     if problem:
         raise typer.BadParameter(problem, param_hint=f"'{name}'")
     return value
 
 
-def _callback(kind: str):
-    RANGES[kind]  # fail at import for an unknown kind
-
+def _callback(allowed: Range):
     def check(param: typer.CallbackParam, value: Any) -> Any:
-        name = (param.opts or [param.name or kind])[0]
+        name = (param.opts or [param.name or "value"])[0]
         if isinstance(value, list | tuple):
             for v in value:
-                check_range(kind, name, v)
+                check_range(allowed, name, v)
             return value
-        return check_range(kind, name, value)
+        return check_range(allowed, name, value)
 
     return check
 
 
-def ranged(kind: str, default: Any, *param_decls: str, **kwargs: Any) -> Any:
-    """``typer.Option(default, *param_decls, **kwargs)`` checked against ``RANGES[kind]``."""
-    return typer.Option(default, *param_decls, callback=_callback(kind), **kwargs)
+def ranged(
+    kind: str,
+    default: Any,
+    *param_decls: str,
+    min: float | None = None,  # noqa: A002 - typer.Option's names
+    max: float | None = None,  # noqa: A002
+    **kwargs: Any,
+) -> Any:
+    """``typer.Option(default, *param_decls, **kwargs)`` checked against ``RANGES[kind]``,
+    narrowed by ``min`` / ``max``; the help text ends with the range, and every value out of
+    it gets the same one-line message."""
+    allowed = RANGES[kind]  # fail at import for an unknown kind
+    if min is not None or max is not None:
+        allowed = replace(
+            allowed,
+            lo=allowed.lo if min is None else min,
+            hi=allowed.hi if max is None else max,
+        )
+    kwargs["help"] = f"{kwargs.get('help', '')} [{allowed.describe()}]".strip()
+    return typer.Option(default, *param_decls, callback=_callback(allowed), **kwargs)
+
+
+def choice(values: tuple[str, ...] | list[str]):
+    """A callback for ``typer.Option(..., callback=choice(VALUES))``: one of ``values``,
+    checked when the options are parsed (before any work)."""
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        if value is not None and value not in values:
+            name = (param.opts or [param.name or "value"])[0]
+            raise typer.BadParameter(
+                f"must be one of {', '.join(values)}, got {value!r}", param_hint=f"'{name}'"
+            )
+        return value
+
+    return check

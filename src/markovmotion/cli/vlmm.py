@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import ranged
+from markovmotion.cli.options import choice, ranged
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -50,8 +50,12 @@ def train(
     max_memory: int = typer.Option(5, min=0, help="Maximum memory length N of the VLMM."),
     epsilon: float = typer.Option(1e-4, min=0.0, help="KL threshold (eq. 5)."),
     lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC/dt (eq. 2)."),
-    configuration: str = typer.Option("rotations", help="rotations or positions."),
-    quantiser: str = typer.Option("kmeans", help="kmeans or competitive."),
+    configuration: str = typer.Option(
+        "rotations", callback=choice(("rotations", "positions")), help="rotations or positions."
+    ),
+    quantiser: str = typer.Option(
+        "kmeans", callback=choice(("kmeans", "competitive")), help="kmeans or competitive."
+    ),
     fps: float = ranged("fps", 30.0, min=1.0, help="Frame rate for modelling."),
     hold_out: bool = typer.Option(
         True, "--hold-out/--no-hold-out", help="Keep the last trial of each label for testing."
@@ -127,7 +131,11 @@ def predict(
     input: Path = typer.Option(..., help="Observed motion (BVH or ASF/AMC)."),
     out: Path = typer.Option(..., help="Observed motion plus prediction (.bvh)."),
     horizon: float = ranged("horizon", 3.0, min=0.05, help="Seconds to predict."),
-    fps: float = ranged("fps", None, help="True frame rate of the input, overriding the file's."),
+    fps: float = ranged(
+        "fps",
+        None,
+        help="True frame rate of the input (default: INDEX.csv's for a file of the collection, else the file's).",
+    ),
     stochastic: bool = typer.Option(False, "--stochastic/--ml", help="Sample the prediction."),
     seed: int = ranged("seed", 0, help="Seed of a stochastic prediction."),
 ) -> None:

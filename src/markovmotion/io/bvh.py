@@ -434,9 +434,12 @@ def read_bvh_stream(
     lines = text.splitlines()
     del text
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
+    first = next((ln.strip() for ln in lines if ln.strip()), None)
+    if first is None:
+        raise MotionFormatError(path, "the file is empty")
+    if first.split()[0].upper() != "HIERARCHY":
+        raise MotionFormatError(path, "not a BVH file (it does not begin with HIERARCHY)", 1)
     if motion_at is None:
-        if not any(ln.strip() for ln in lines):
-            raise MotionFormatError(path, "the file is empty")
         raise MotionFormatError(path, "no MOTION section (truncated file?)", len(lines))
     tok = _Tokens(str(path), lines[:motion_at])
     if tok.peek() is None:

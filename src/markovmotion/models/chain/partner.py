@@ -23,7 +23,7 @@ import numpy as np
 from markovmotion.algorithms.kinematics import fit_rotations
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
-from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
+from markovmotion.errors import DataNotFoundError, MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.joint_shape import (
     JointShape,
     Person,
@@ -122,7 +122,7 @@ class VirtualPartner(Model):
         """
         takes = list(takes)
         if not takes:
-            raise ValueError("no two-person takes to learn from")
+            raise DataNotFoundError("no two-person takes to learn from")
         if all(isinstance(t, TwoPeople) for t in takes):
             people = takes
             self.skeletons_ = None
