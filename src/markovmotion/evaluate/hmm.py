@@ -310,7 +310,7 @@ def evaluate_model(
     plot_dir: str | os.PathLike[str] | None = None,
 ) -> tuple[dict, list[Path]]:
     """``dualhmm evaluate``: the evaluation JSON (:func:`summarise`, with ``test_files``,
-    ``left_out_training_files`` and ``incompatible_files``, takes whose person A has
+    ``left_out_training_files`` and ``left_out_other_skeleton``, takes whose person A has
     another skeleton) on the takes of :func:`evaluation_pairs`, and the plots written."""
     index, takes = evaluation_pairs(model, test, labels, trials)
     baselines = _Baselines(model)
@@ -333,7 +333,7 @@ def evaluate_model(
             f"skeleton: {', '.join(incompatible)}"
         )
     report = summarise(results, model)
-    report.update(TestTakes(kept, takes.left_out).report(), incompatible_files=incompatible)
+    report.update(TestTakes(kept, takes.left_out).report(), left_out_other_skeleton=incompatible)
     return report, plots
 
 
