@@ -67,6 +67,122 @@ def check_array(arr: Any, field: str) -> np.ndarray:
     return arr
 
 
+# ------------------------------------------------------------ checks for ``check_state``
+# Small, cheap checks shared by every estimator's ``check_state`` (they run on every load);
+# each raises StateError naming the learnt attribute (``restore_estimator`` adds the field).
+
+
+def is_fitted(est: Any) -> bool:
+    """Whether ``est`` holds any learnt attribute (an unfitted estimator, e.g. a
+    hyper-parameter template, has nothing to check)."""
+    return any(k.endswith("_") and not k.startswith("_") for k in vars(est))
+
+
+def require(est: Any, *names: str) -> None:
+    """Raise ``missing learnt attribute NAME`` unless ``est`` has every one of ``names``."""
+    for name in names:
+        if not hasattr(est, name):
+            raise StateError(f"missing learnt attribute {name}")
+
+
+def require_types(est: Any, **types: type) -> None:
+    """Raise unless ``est`` has each learnt attribute ``name=type`` given, of that type."""
+    require(est, *types)
+    for name, cls in types.items():
+        if not isinstance(getattr(est, name), cls):
+            found = type(getattr(est, name)).__name__
+            raise StateError(f"{name}: expected a {cls.__name__}, found {found}")
+
+
+def check_shape(name: str, arr: Any, shape: tuple[int | None, ...]) -> np.ndarray:
+    """``arr`` if it is an array of ``shape`` (``None`` matches any length)."""
+    if not isinstance(arr, np.ndarray):
+        raise StateError(f"{name}: expected an array, found {type(arr).__name__}")
+    if arr.ndim != len(shape) or any(
+        e is not None and e != n for e, n in zip(shape, arr.shape, strict=True)
+    ):
+        want = ", ".join("*" if e is None else str(e) for e in shape)
+        raise StateError(f"{name}: shape {arr.shape}, expected ({want}{',' * (len(shape) == 1)})")
+    return arr
+
+
+def check_index(name: str, arr: Any, n: int, low: int = 0) -> np.ndarray:
+    """``arr`` if it is an integer array (or integer) with every value in ``[low, n)``."""
+    a = np.asarray(arr)
+    if a.dtype.kind not in "iu" or isinstance(arr, bool):
+        raise StateError(f"{name}: expected integer indices, found {a.dtype}")
+    if a.size and (a.min() < low or a.max() >= n):
+        bad = a[(a < low) | (a >= n)].flat[0]
+        raise StateError(f"{name}: index {bad} outside [{low}, {n})")
+    return a
+
+
+def check_count(name: str, value: Any, minimum: int = 1) -> int:
+    """``value`` if it is an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise StateError(f"{name}: expected an integer >= {minimum}, found {value!r}")
+    return int(value)
+
+
+def check_lengths(name: str, lengths: Any, total: int) -> np.ndarray:
+    """``lengths`` if it is a 1-D array of non-negative integers summing to ``total``
+    (the sequence lengths of a concatenated array of ``total`` items)."""
+    check_index(name, check_shape(name, lengths, (None,)), total + 1)
+    if int(lengths.sum()) != total:
+        raise StateError(f"{name}: lengths sum to {int(lengths.sum())}, not {total}")
+    return lengths
+
+
+def check_positive(name: str, arr: Any) -> np.ndarray:
+    """``arr`` if every value is > 0 (variances, scales, durations)."""
+    a = np.asarray(arr)
+    if a.size and not np.all(a > 0):
+        raise StateError(f"{name}: values must be positive (found {np.min(a):.3g})")
+    return a
+
+
+def check_distribution_rows(name: str, arr: Any, indptr: Any = None) -> np.ndarray:
+    """``arr`` if its values are in [0, 1] and each row sums to 1: rows along the last
+    axis, or the segments ``arr[indptr[i]:indptr[i + 1]]`` (non-empty ones) of a flat array."""
+    a = np.asarray(arr, dtype=float)
+    if a.size and not (np.all(a >= 0) and np.all(a <= 1)):
+        raise StateError(f"{name}: probabilities outside [0, 1]")
+    if indptr is None:
+        sums = a.sum(axis=-1) if a.size else np.ones(1)
+    else:
+        ptr = np.asarray(indptr)
+        starts = ptr[:-1][ptr[1:] > ptr[:-1]]
+        sums = np.add.reduceat(a, starts) if len(starts) else np.ones(1)
+    if not np.allclose(sums, 1.0, atol=1e-6):
+        raise StateError(f"{name}: a probability row does not sum to 1")
+    return a
+
+
+def check_indptr(name: str, ptr: Any, n_rows: int, n_values: int) -> np.ndarray:
+    """``ptr`` if it is a CSR row pointer: ``n_rows + 1`` non-decreasing integers
+    from 0 to ``n_values``."""
+    check_shape(name, ptr, (n_rows + 1,))
+    check_index(name, ptr, n_values + 1)
+    if ptr[0] != 0 or ptr[-1] != n_values or np.any(np.diff(ptr) < 0):
+        raise StateError(f"{name}: not a row pointer from 0 to {n_values}")
+    return ptr
+
+
+def check_joint_index(est: Any) -> None:
+    """A fitted step's ``skeleton_`` is a Skeleton and its ``joint_index_`` joints of it."""
+    if is_fitted(est):
+        require(est, "skeleton_", "joint_index_")
+        if not isinstance(est.skeleton_, Skeleton):
+            raise StateError(
+                f"skeleton_: expected a skeleton, found {type(est.skeleton_).__name__}"
+            )
+        check_index(
+            "joint_index_",
+            check_shape("joint_index_", est.joint_index_, (None,)),
+            est.skeleton_.n_joints,
+        )
+
+
 def _from_json(value: Any, arrays: dict[str, np.ndarray], field: str = "model") -> Any:
     if isinstance(value, dict):
         if "__array__" in value:
@@ -158,8 +274,8 @@ def restore_estimator(
     if callable(check):
         try:
             check()
-        except StateError:
-            raise
+        except StateError as exc:
+            raise StateError(f"{field}: {cls.__name__} {exc}") from None
         except (ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
             raise StateError(f"{field}: {cls.__name__} state is inconsistent ({exc})") from None
     return est

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import check_positive, check_shape, is_fitted, register, require
 
 
 @register
@@ -30,6 +30,19 @@ class AugmentedConfiguration(FeatureStep):
         span = x.max(axis=0) - self.min_
         self.scale_ = np.where(span > 1e-12, span, 1.0)
         return self
+
+    def check_state(self) -> None:
+        """min_ and scale_ (D,), scale_ positive."""
+        if is_fitted(self):
+            require(self, "min_", "scale_")
+            d = len(check_shape("min_", self.min_, (None,)))
+            check_positive("scale_", check_shape("scale_", self.scale_, (d,)))
+
+    def input_width(self) -> int | None:
+        return len(self.min_)
+
+    def output_width(self) -> int | None:
+        return 2 * len(self.min_)
 
     def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         out = []

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from markovmotion.state import estimator_state, register, restore_estimator
+from markovmotion.state import StateError, estimator_state, is_fitted, register, restore_estimator
 
 
 class FeatureStep(BaseEstimator):
@@ -31,6 +31,14 @@ class FeatureStep(BaseEstimator):
 
     def fit_transform(self, sequences: Sequence[Any]) -> list[Any]:
         return self.fit(sequences).transform(sequences)
+
+    def output_width(self) -> int | None:
+        """Columns of the fitted step's output arrays, when the step knows them."""
+        return None
+
+    def input_width(self) -> int | None:
+        """Columns of the arrays the fitted step takes, when the step knows them."""
+        return None
 
 
 @register
@@ -65,6 +73,22 @@ class FeaturePipeline(FeatureStep):
         for step in reversed(self.steps or []):
             data = step.inverse_transform(data)
         return data
+
+    def output_width(self) -> int | None:
+        return self.steps[-1].output_width() if self.steps else None
+
+    def check_state(self) -> None:
+        """Steps are feature steps; each fitted one takes the width the one before gives."""
+        steps = self.steps or []
+        if not isinstance(steps, list) or not all(isinstance(s, FeatureStep) for s in steps):
+            raise StateError("steps: expected a list of feature steps")
+        for i in range(1, len(steps)):
+            if is_fitted(steps[i - 1]) and is_fitted(steps[i]):
+                given, taken = steps[i - 1].output_width(), steps[i].input_width()
+                if None not in (given, taken) and given != taken:
+                    raise StateError(
+                        f"steps[{i}]: takes {taken} features, steps[{i - 1}] gives {given}"
+                    )
 
     def to_state(self, arrays: dict[str, np.ndarray], prefix: str = "pipeline") -> dict[str, Any]:
         """JSON description for a model header; arrays are added to ``arrays``."""

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import check_joint_index, register
 
 ROOT_POSITION = ("none", "height", "full")
 
@@ -68,6 +68,13 @@ class ExpMaps(FeatureStep):
 
     def _root_columns(self) -> list[int]:
         return {"none": [], "height": [1], "full": [0, 1, 2]}[self.root_position]
+
+    def check_state(self) -> None:
+        """skeleton_ a Skeleton, joint_index_ joints of it."""
+        check_joint_index(self)
+
+    def output_width(self) -> int | None:
+        return 3 * len(self.joint_index_) + len(self._root_columns())
 
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []

@@ -39,7 +39,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
 from markovmotion.features.smoothing import TemporalSmoothing
-from markovmotion.state import register
+from markovmotion.state import StateError, check_count, is_fitted, register, require
 
 #: Joints of CMU's retargeted figure kept for 3-D shapes (no fingers or eyes).
 MAJOR_JOINTS = (
@@ -261,6 +261,14 @@ class JointShape(FeatureStep):
     def person_slice(self, person: int) -> slice:
         """Columns of C holding person 0's or person 1's shape."""
         return slice(person * self.shape_size, (person + 1) * self.shape_size)
+
+    def check_state(self) -> None:
+        """n_points_ >= 1 points of n_dims_ (2 or 3) coordinates."""
+        if is_fitted(self):
+            require(self, "n_points_", "n_dims_")
+            check_count("n_points_", self.n_points_)
+            if check_count("n_dims_", self.n_dims_) not in (2, 3):
+                raise StateError(f"n_dims_: must be 2 or 3, found {self.n_dims_}")
 
     def transform(self, sequences: Sequence[TwoPeople]) -> list[np.ndarray]:
         return [self._combine(p) for p in sequences]

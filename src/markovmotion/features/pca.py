@@ -8,7 +8,7 @@ import numpy as np
 from sklearn.decomposition import PCA as _SkPCA
 
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import StateError, check_shape, is_fitted, register, require
 
 
 @register
@@ -37,6 +37,24 @@ class PCA(FeatureStep):
         self.explained_variance_ratio_ = ratio
         self.n_components_ = k
         return self
+
+    def check_state(self) -> None:
+        """mean_ (D,), components_ (K, D) with K >= 1, n_components_ == K."""
+        if not is_fitted(self):
+            return
+        require(self, "mean_", "components_")
+        d = len(check_shape("mean_", self.mean_, (None,)))
+        k = len(check_shape("components_", self.components_, (None, d)))
+        if k < 1 or getattr(self, "n_components_", k) != k:
+            raise StateError(
+                f"n_components_: {getattr(self, 'n_components_', k)}, components_ has {k}"
+            )
+
+    def input_width(self) -> int | None:
+        return len(self.mean_)
+
+    def output_width(self) -> int | None:
+        return len(self.components_)
 
     def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         return [(np.asarray(s) - self.mean_) @ self.components_.T for s in sequences]

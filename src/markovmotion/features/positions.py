@@ -8,7 +8,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import check_joint_index, register
 
 
 @register
@@ -38,6 +38,13 @@ class JointPositions(FeatureStep):
             [sk.index(n) for n in self.joints] if self.joints else np.arange(sk.n_joints)
         )
         return self
+
+    def check_state(self) -> None:
+        """skeleton_ a Skeleton, joint_index_ joints of it."""
+        check_joint_index(self)
+
+    def output_width(self) -> int | None:
+        return 3 * len(self.joint_index_)
 
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import StateError, check_shape, is_fitted, register, require
 
 
 @register
@@ -34,6 +34,14 @@ class ReferencePose(FeatureStep):
             [Rotation.from_quat(quats[:, j]).mean().as_quat() for j in range(quats.shape[1])]
         )
         return self
+
+    def check_state(self) -> None:
+        """reference_ (J, 4) unit quaternions."""
+        if is_fitted(self):
+            require(self, "reference_")
+            norms = np.linalg.norm(check_shape("reference_", self.reference_, (None, 4)), axis=1)
+            if not np.allclose(norms, 1.0, atol=1e-6):
+                raise StateError("reference_: not unit quaternions")
 
     def _compose(self, sequences: Sequence[Motion], inverse: bool) -> list[Motion]:
         out = []

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from markovmotion.features.base import FeatureStep
-from markovmotion.state import register
+from markovmotion.state import check_index, check_shape, is_fitted, register, require
 
 
 @register
@@ -28,6 +28,19 @@ class DropStaticColumns(FeatureStep):
         self.keep_ = np.flatnonzero(np.ptp(x, axis=0) > self.tol)
         self.mean_ = x.mean(axis=0)
         return self
+
+    def check_state(self) -> None:
+        """mean_ (D,), keep_ column indices in [0, D)."""
+        if is_fitted(self):
+            require(self, "keep_", "mean_")
+            d = len(check_shape("mean_", self.mean_, (None,)))
+            check_index("keep_", check_shape("keep_", self.keep_, (None,)), d)
+
+    def input_width(self) -> int | None:
+        return len(self.mean_)
+
+    def output_width(self) -> int | None:
+        return len(self.keep_)
 
     def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         return [np.asarray(s, dtype=float)[:, self.keep_] for s in sequences]

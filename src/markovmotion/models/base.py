@@ -115,6 +115,10 @@ class Model(BaseEstimator):
             raise ModelFormatError(path, f"damaged model ({type(exc).__name__}: {exc})") from None
         if not isinstance(model, found):
             raise ModelFormatError(path, f"header says {kind!r} but holds {type(model).__name__}")
+        if not hasattr(model, "train_files_"):  # saved models are fitted (see save)
+            raise ModelFormatError(
+                path, "damaged model: model: missing learnt attribute train_files_"
+            )
         for key, value in header.items():
             if key not in cls._RESERVED:
                 setattr(model, f"{key}_", value)

@@ -29,7 +29,16 @@ from markovmotion.algorithms.vector_quantisation import (
     competitive_learning,
     nearest_prototype,
 )
-from markovmotion.state import register
+from markovmotion.state import (
+    StateError,
+    check_distribution_rows,
+    check_index,
+    check_positive,
+    check_shape,
+    is_fitted,
+    register,
+    require,
+)
 
 
 def proximities(x: np.ndarray, prototypes: np.ndarray) -> np.ndarray:
@@ -212,6 +221,28 @@ class BehaviourChain(BaseEstimator):
         return self
 
     # -------------------------------------------------------------- recognition
+    def check_state(self) -> None:
+        """u state prototypes of an even width D, v behaviour prototypes over them, each
+        chain state's prototype in [0, u), transition rows, start and occupancy
+        distributions over the v + 1 chain states, a positive interval scale."""
+        if not is_fitted(self):
+            return
+        require(self, "state_prototypes_", "behaviour_prototypes_", "chain_prototype_")
+        require(self, "transmat_", "startprob_", "occupancy_", "interval_scale_")
+        u, d = check_shape("state_prototypes_", self.state_prototypes_, (None, None)).shape
+        if d % 2 or u < 1:
+            raise StateError(f"state_prototypes_: shape {(u, d)}, expected (u >= 1, an even D)")
+        v = len(check_shape("behaviour_prototypes_", self.behaviour_prototypes_, (None, u)))
+        check_index(
+            "chain_prototype_", check_shape("chain_prototype_", self.chain_prototype_, (v,)), u
+        )
+        check_distribution_rows(
+            "transmat_", check_shape("transmat_", self.transmat_, (v + 1, v + 1))
+        )
+        for name in ("startprob_", "occupancy_"):
+            check_distribution_rows(name, check_shape(name, getattr(self, name), (v + 1,)))
+        check_positive("interval_scale_", self.interval_scale_)
+
     @property
     def end_state(self) -> int:
         return len(self.behaviour_prototypes_)

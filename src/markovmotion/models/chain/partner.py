@@ -24,6 +24,7 @@ from markovmotion.algorithms.kinematics import fit_rotations
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import DataNotFoundError, MarkovMotionError, SkeletonMismatchError
+from markovmotion.features.base import FeaturePipeline
 from markovmotion.features.joint_shape import (
     JointShape,
     Person,
@@ -42,6 +43,14 @@ from markovmotion.models.chain.condensation import (
     MultipleHypotheses,
     Propagator,
     SingleHypothesis,
+)
+from markovmotion.state import (
+    StateError,
+    check_positive,
+    check_shape,
+    is_fitted,
+    require,
+    require_types,
 )
 
 #: State and behaviour prototypes unless told. The paper's 300 each (for its handshakes)
@@ -154,6 +163,26 @@ class VirtualPartner(Model):
         )
         self.fps_ = float(people[0].fps)
         return self
+
+    def check_state(self) -> None:
+        """The learnt parts a model file must hold, and that they fit: chain_ state
+        vectors of the pipeline's width, mean_shape_ their configuration half,
+        skeletons_ none or one per person, a positive frame rate."""
+        if not is_fitted(self):
+            return
+        require(self, "train_files_", "mean_shape_", "centre_", "fps_", "skeletons_")
+        require_types(self, pipeline_=FeaturePipeline, chain_=BehaviourChain)
+        width = self.pipeline_.output_width()
+        check_shape("chain_.state_prototypes_", self.chain_.state_prototypes_, (None, width))
+        check_shape("mean_shape_", self.mean_shape_, (self.chain_.dim,))
+        skeletons = self.skeletons_
+        if skeletons is not None and not (
+            isinstance(skeletons, list)
+            and len(skeletons) == 2
+            and all(isinstance(s, Skeleton) for s in skeletons)
+        ):
+            raise StateError("skeletons_: expected none or a skeleton for each of two people")
+        check_positive("fps_", self.fps_)
 
     @property
     def source(self) -> str:

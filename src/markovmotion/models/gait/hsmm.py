@@ -28,7 +28,16 @@ from markovmotion.algorithms.gaussian import log_gaussian_diag
 from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.models.gait.context_tree import cluster
-from markovmotion.state import register
+from markovmotion.state import (
+    StateError,
+    check_count,
+    check_index,
+    check_positive,
+    check_shape,
+    is_fitted,
+    register,
+    require,
+)
 
 #: Default floor of the state duration variances, in frames squared: HTS's (0.01 x 10),
 #: and the best floor common to average, adapted and from-scratch gait models by the
@@ -265,6 +274,26 @@ class HSMM(BaseEstimator):
         self.dur_variances_ = np.maximum(var[:, 0], self.dur_var_floor)
 
     # -------------------------------------------------------------- inference
+    def check_state(self) -> None:
+        """P output densities of O dims with positive variances (and floor), Q duration
+        densities with positive means and variances, each context's n_states states
+        mapped to densities in range."""
+        if not is_fitted(self):
+            return
+        require(self, "means_", "variances_", "var_floor_", "dur_means_", "dur_variances_")
+        require(self, "out_map_", "dur_map_", "max_duration_")
+        p, o = check_shape("means_", self.means_, (None, None)).shape
+        check_positive("variances_", check_shape("variances_", self.variances_, (p, o)))
+        check_positive("var_floor_", check_shape("var_floor_", self.var_floor_, (o,)))
+        q = len(check_positive("dur_means_", check_shape("dur_means_", self.dur_means_, (None,))))
+        check_positive("dur_variances_", check_shape("dur_variances_", self.dur_variances_, (q,)))
+        c = len(check_shape("out_map_", self.out_map_, (None, self.n_states)))
+        check_index("out_map_", self.out_map_, p)
+        check_index("dur_map_", check_shape("dur_map_", self.dur_map_, (c, self.n_states)), q)
+        check_count("max_duration_", self.max_duration_)
+        if p < 1 or q < 1:
+            raise StateError("means_: no output or duration densities")
+
     def chain(self, contexts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Output and duration density indices of the chain of units with these contexts."""
         return self.out_map_[contexts].ravel(), self.dur_map_[contexts].ravel()

@@ -41,6 +41,14 @@ from markovmotion.features.reference_pose import ReferencePose
 from markovmotion.models.base import Model
 from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
 from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
+from markovmotion.state import (
+    StateError,
+    check_positive,
+    check_shape,
+    is_fitted,
+    require,
+    require_types,
+)
 
 KIND = "gait-hsmm"
 WAT_UNITS = ("none", "take", "unit")
@@ -242,6 +250,22 @@ class GaitSynthesizer(Model):
         inherited = list(average.train_files_)
         self.train_files_ = inherited + self.train_files_
         self.n_inherited_files_ = len(inherited)
+
+    def check_state(self) -> None:
+        """The learnt parts a model file must hold, and that they fit: hsmm_ over every
+        context, its observations the pipeline's D features with deltas (3D), the global
+        variance Gaussian (D,) with positive variances."""
+        if not is_fitted(self):
+            return
+        require(self, "train_files_", "gv_mean_", "gv_var_", "floor_", "fps_")
+        require_types(self, pipeline_=FeaturePipeline, hsmm_=HSMM)
+        d = len(check_shape("gv_mean_", self.gv_mean_, (self.pipeline_.output_width(),)))
+        check_positive("gv_var_", check_shape("gv_var_", self.gv_var_, (d,)))
+        check_shape("hsmm_.means_", self.hsmm_.means_, (None, 3 * d))
+        check_shape("hsmm_.out_map_", self.hsmm_.out_map_, (len(CONTEXTS), None))
+        if self.hsmm_.n_states != self.n_states:
+            raise StateError(f"hsmm_: {self.hsmm_.n_states} states, n_states is {self.n_states}")
+        check_positive("fps_", self.fps_)
 
     @property
     def own_files(self) -> list[str]:

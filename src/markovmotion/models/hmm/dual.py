@@ -46,6 +46,7 @@ from markovmotion.algorithms.gaussian import precision_cholesky, weighted_gaussi
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
 from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_motion import ground_frame
@@ -53,6 +54,14 @@ from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner, finite_frames
 from markovmotion.models.hmm.trellis import Trellis, build_trellis
+from markovmotion.state import (
+    StateError,
+    check_index,
+    check_shape,
+    is_fitted,
+    require,
+    require_types,
+)
 
 __all__ = ["DualHMM", "Partner", "finite_frames", "into_frame", "out_of_frame"]
 
@@ -96,6 +105,32 @@ def _turn_root(
 
 
 # ------------------------------------------------------------------ the model
+#: What a fitted DualHMM holds (``check_state``), and the types of its parts.
+_LEARNT = (
+    "skeleton_a_",
+    "skeleton_b_",
+    "pipeline_a_",
+    "pipeline_b_",
+    "expmaps_b_",
+    "frames_b_",
+    "train_a_",
+    "train_b_",
+    "lambda_a_",
+    "lambda_b_",
+    "train_states_",
+    "train_files_",
+)
+_LEARNT_TYPES = {
+    "skeleton_a_": Skeleton,
+    "skeleton_b_": Skeleton,
+    "pipeline_a_": FeaturePipeline,
+    "pipeline_b_": FeaturePipeline,
+    "expmaps_b_": ExpMaps,
+    "lambda_a_": GaussianHMM,
+    "lambda_b_": GaussianHMM,
+}
+
+
 class DualHMM(Model):
     """Dual HMM of two interacting people; responds to A with B, offline or online.
 
@@ -233,6 +268,31 @@ class DualHMM(Model):
         self.record_training(flatten(pairs))
         self._trellis_cache = None
         return self
+
+    def check_state(self) -> None:
+        """The learnt parts a model file must hold, and that they fit each other: both
+        chains of n_states states, T training frames in train_a_, train_b_, frames_b_ and
+        train_states_ (states in range), feature widths those of the pipelines and chains,
+        frames_b_ the width ExpMaps gives skeleton_b_."""
+        if not is_fitted(self):
+            return
+        require(self, *_LEARNT)
+        require_types(self, **_LEARNT_TYPES)
+        n = self.n_states
+        t = len(check_shape("train_states_", self.train_states_, (None,)))
+        check_index("train_states_", self.train_states_, n)
+        for side in ("a", "b"):
+            chain = getattr(self, f"lambda_{side}_")
+            if chain.n_components != n:
+                raise StateError(f"lambda_{side}_: {chain.n_components} states, n_states is {n}")
+            width = chain.means_.shape[1]
+            check_shape(f"train_{side}_", getattr(self, f"train_{side}_"), (t, width))
+            out = getattr(self, f"pipeline_{side}_").output_width()
+            if out is not None and out != width:
+                raise StateError(f"pipeline_{side}_: gives {out} features, lambda_{side}_ {width}")
+        check_shape("frames_b_", self.frames_b_, (t, self.expmaps_b_.output_width()))
+        if self.expmaps_b_.skeleton_.n_joints != self.skeleton_b_.n_joints:
+            raise StateError("expmaps_b_: its skeleton is not skeleton_b_")
 
     def _rate(self, motion: Motion) -> Motion:
         return motion if np.isclose(motion.fps, self.fps) else motion.resample(self.fps)

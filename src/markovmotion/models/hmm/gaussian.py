@@ -27,7 +27,14 @@ from markovmotion.algorithms.gaussian import (
 )
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.parallel import map_sequences
-from markovmotion.state import register
+from markovmotion.state import (
+    StateError,
+    check_count,
+    check_distribution_rows,
+    check_shape,
+    register,
+    require,
+)
 
 
 # ------------------------------------------------------------------ EM bookkeeping
@@ -310,34 +317,21 @@ class GaussianHMM(BaseHMM):
         return labels
 
     def check_state(self) -> None:
-        """Raise ValueError unless the learnt parameters (as read from a model file) fit:
+        """Raise StateError unless the learnt parameters (as read from a model file) fit:
         shapes of pi (N,), T (N, N), means (N, D) and covariances (N, D, D), probabilities
         in [0, 1] summing to one, covariances symmetric positive definite."""
-        n = self.n_components
-        if not isinstance(n, int) or n < 1:
-            raise ValueError(f"n_components must be a positive integer, found {n!r}")
-        pi, trans = np.asarray(self.startprob_), np.asarray(self.transmat_)
-        means, covars = np.asarray(self.means_), np.asarray(self.covars_)
-        d = means.shape[-1] if means.ndim == 2 else -1
-        for name, arr, shape in (
-            ("startprob_", pi, (n,)),
-            ("transmat_", trans, (n, n)),
-            ("means_", means, (n, d)),
-            ("covars_", covars, (n, d, d)),
-        ):
-            if arr.shape != shape or d < 1:
-                raise ValueError(f"{name} has shape {arr.shape}, expected {shape} for N={n}")
-        for name, p in (("startprob_", pi), ("transmat_", trans)):
-            if not (np.all(p >= 0) and np.all(p <= 1)):
-                raise ValueError(f"{name} holds values outside [0, 1]")
-            if not np.allclose(p.sum(axis=-1), 1.0, atol=1e-6):
-                raise ValueError(f"{name} rows do not sum to 1")
-        if not np.allclose(covars, np.swapaxes(covars, 1, 2), rtol=1e-6, atol=1e-9):
-            raise ValueError("covars_ are not symmetric")
+        n = check_count("n_components", self.n_components)
+        require(self, "startprob_", "transmat_", "means_", "covars_")
+        d = check_shape("means_", self.means_, (n, None)).shape[1]
+        covars = check_shape("covars_", self.covars_, (n, d, d))
+        check_distribution_rows("startprob_", check_shape("startprob_", self.startprob_, (n,)))
+        check_distribution_rows("transmat_", check_shape("transmat_", self.transmat_, (n, n)))
+        if d < 1 or not np.allclose(covars, np.swapaxes(covars, 1, 2), rtol=1e-6, atol=1e-9):
+            raise StateError("covars_: not symmetric")
         try:
             np.linalg.cholesky(covars)
         except np.linalg.LinAlgError:
-            raise ValueError("covars_ are not positive definite") from None
+            raise StateError("covars_: not positive definite") from None
 
     def _n_features(self) -> int | None:
         means = getattr(self, "means_", None)

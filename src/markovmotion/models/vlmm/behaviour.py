@@ -32,6 +32,7 @@ from markovmotion.algorithms.vector_quantisation import (
     nearest_prototype,
 )
 from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
@@ -39,6 +40,15 @@ from markovmotion.features.heading import RemoveHeading
 from markovmotion.features.select import DropStaticColumns
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
+from markovmotion.state import (
+    StateError,
+    check_index,
+    check_lengths,
+    check_shape,
+    is_fitted,
+    require,
+    require_types,
+)
 
 CONFIGURATIONS = ("rotations", "positions")
 QUANTISERS = ("kmeans", "competitive")
@@ -187,6 +197,25 @@ class BehaviourModel(Model):
             self.token_sequences(), n_symbols=self.n_prototypes
         )
         return self
+
+    def check_state(self) -> None:
+        """The learnt parts a model file must hold, and that they fit: one prototype per
+        symbol of vlmm_, of the pipeline's width; training tokens prototype ids, their
+        lengths summing to their count; eval_joints_ joints of skeleton_."""
+        if not is_fitted(self):
+            return
+        require(self, "train_files_", "prototypes_", "eval_joints_", "train_tokens_")
+        require(self, "train_lengths_")
+        require_types(self, skeleton_=Skeleton, pipeline_=FeaturePipeline, vlmm_=VLMM)
+        width = self.pipeline_.output_width()
+        k = len(check_shape("prototypes_", self.prototypes_, (None, width)))
+        if self.vlmm_.n_symbols_ != k:
+            raise StateError(f"prototypes_: {k} prototypes, vlmm_ has {self.vlmm_.n_symbols_}")
+        tokens = check_index(
+            "train_tokens_", check_shape("train_tokens_", self.train_tokens_, (None,)), k
+        )
+        check_lengths("train_lengths_", self.train_lengths_, len(tokens))
+        check_index("eval_joints_", self.eval_joints_, self.skeleton_.n_joints)
 
     def token_sequences(self) -> list[np.ndarray]:
         """The collapsed prototype sequences of the training motions."""

@@ -30,7 +30,17 @@ from collections.abc import Sequence
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from markovmotion.state import register
+from markovmotion.state import (
+    StateError,
+    check_count,
+    check_distribution_rows,
+    check_index,
+    check_indptr,
+    check_shape,
+    is_fitted,
+    register,
+    require,
+)
 
 
 def _lookup(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
@@ -119,6 +129,22 @@ def prediction_suffix_tree(
         child_parents = levels[length].parent[kept[length]]
         kept[length - 1][child_parents] = True
     return levels, kept, np.concatenate(gains[1:]) if len(gains) > 1 else np.zeros(0)
+
+
+#: What a fitted VLMM holds (``check_state``).
+_LEARNT = (
+    "n_symbols_",
+    "n_tokens_",
+    "memories_",
+    "memory_lengths_",
+    "suffix_parents_",
+    "in_suffix_tree_",
+    "out_indptr_",
+    "out_symbols_",
+    "out_probs_",
+    "next_state_",
+    "start_probs_",
+)
 
 
 @register
@@ -256,6 +282,37 @@ class VLMM(BaseEstimator):
             self._child_keys, self._child_ids = keys[order], np.arange(1, q)[order]
         hit = _lookup(self._child_keys, states * k + symbols)
         return np.where(hit >= 0, self._child_ids[np.maximum(hit, 0)], -1)
+
+    def check_state(self) -> None:
+        """The automaton fits together: Q states with memories of symbols in
+        [0, n_symbols_) (-1 padding) no longer than their rows, suffix parents and next
+        states in [0, Q), gamma a CSR matrix of symbols in range whose rows are
+        distributions, start_probs_ a distribution over the states."""
+        if not is_fitted(self):
+            return
+        require(self, *_LEARNT)
+        k = check_count("n_symbols_", self.n_symbols_)
+        check_count("n_tokens_", self.n_tokens_, 0)
+        q = len(check_shape("memory_lengths_", self.memory_lengths_, (None,)))
+        mem = check_shape("memories_", self.memories_, (q, None))
+        check_index("memories_", mem, k, low=-1)
+        check_index("memory_lengths_", self.memory_lengths_, mem.shape[1] + 1)
+        check_shape("in_suffix_tree_", self.in_suffix_tree_, (q,))
+        check_index(
+            "suffix_parents_", check_shape("suffix_parents_", self.suffix_parents_, (q,))[1:], q
+        )
+        if q < 1 or self.suffix_parents_[0] != -1 or self.memory_lengths_[0] != 0:
+            raise StateError("memories_: state 0 must be the empty memory (the root)")
+        nnz = len(check_shape("out_symbols_", self.out_symbols_, (None,)))
+        check_indptr("out_indptr_", self.out_indptr_, q, nnz)
+        check_index("out_symbols_", self.out_symbols_, k)
+        check_index("next_state_", check_shape("next_state_", self.next_state_, (nnz,)), q)
+        check_distribution_rows(
+            "out_probs_", check_shape("out_probs_", self.out_probs_, (nnz,)), self.out_indptr_
+        )
+        check_distribution_rows(
+            "start_probs_", check_shape("start_probs_", self.start_probs_, (q,))
+        )
 
     # ---------------------------------------------------------------- queries
     @property

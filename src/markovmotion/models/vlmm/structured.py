@@ -34,6 +34,16 @@ from markovmotion.errors import ModelFormatError
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.behaviour import BehaviourModel, call_rng
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
+from markovmotion.state import (
+    StateError,
+    check_distribution_rows,
+    check_index,
+    check_lengths,
+    check_shape,
+    is_fitted,
+    require,
+    require_types,
+)
 
 
 def key_prototypes(
@@ -205,6 +215,40 @@ class StructuredBehaviourModel(Model):
         self.template_tokens_lengths_ = np.array(lengths)
         self.template_pairs_ = np.array(pairs)
         self.template_probs_ = np.array(probs)
+
+    def check_state(self) -> None:
+        """The learnt parts a model file must hold, and that they fit: keys_ prototype ids
+        of prototype_model_, one symbol of vlmm_ each; training keys key indices; templates
+        prototype ids, one (i, j) key pair each, P(template | a_ij) summing to 1 per pair."""
+        if not is_fitted(self):
+            return
+        require(self, "train_files_", "train_keys_", "train_key_lengths_", "template_tokens_")
+        require(self, "template_tokens_lengths_", "template_pairs_", "template_probs_")
+        require_types(self, prototype_model_=BehaviourModel, vlmm_=VLMM)
+        k = len(self.prototype_model_.prototypes_)
+        n_keys = len(check_index("keys_", check_shape("keys_", self.keys_, (None,)), k))
+        if self.vlmm_.n_symbols_ != n_keys:
+            raise StateError(f"keys_: {n_keys} keys, vlmm_ has {self.vlmm_.n_symbols_} symbols")
+        keys = check_shape("train_keys_", self.train_keys_, (None,))
+        check_lengths(
+            "train_key_lengths_",
+            self.train_key_lengths_,
+            len(check_index("train_keys_", keys, n_keys)),
+        )
+        tokens = check_shape("template_tokens_", self.template_tokens_, (None,))
+        check_lengths(
+            "template_tokens_lengths_",
+            self.template_tokens_lengths_,
+            len(check_index("template_tokens_", tokens, k)),
+        )
+        n = len(self.template_tokens_lengths_)
+        pairs = check_index(
+            "template_pairs_", check_shape("template_pairs_", self.template_pairs_, (n, 2)), n_keys
+        )
+        probs = check_shape("template_probs_", self.template_probs_, (n,))
+        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+        _, starts = np.unique(pairs[order], axis=0, return_index=True)
+        check_distribution_rows("template_probs_", probs[order], np.r_[starts, n])
 
     def key_sequences(self) -> list[np.ndarray]:
         """The key-index sequences of the training motions."""
