@@ -62,7 +62,7 @@ def load_npz(
     Everything is checked before any array is used: the file is a regular
     file; every member's size (from the zip directory, before decompressing)
     is within :data:`markovmotion.limits.MAX_BYTES`; every member is a plain
-    ``.npy`` array of numbers or booleans (never a pickle); the header is a
+    ``.npy`` array of numbers or booleans (never pickled); the header is a
     JSON object of this format and version (an integer); and every estimator
     state in the header restores (:func:`markovmotion.state.restore_estimator`:
     classes, parameter types, arrays present and finite, the class's own

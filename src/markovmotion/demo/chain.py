@@ -9,13 +9,12 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.demo.scene import partner_scene
 from markovmotion.evaluate.chain import pose_error_mm
 from markovmotion.features.joint_shape import person_from_motion
-from markovmotion.io import write_motion
 from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.models.online import run
 from markovmotion.progress import track
-from markovmotion.viz import render
 
 LABEL = "salsa"
 TRAIN_TAKES = 4  # about ten seconds: four takes, 40 + 40 prototypes, two passes each
@@ -48,13 +47,13 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         f"{online:.0f} mm, mean-shape baseline {baseline:.0f} mm (pose error; lag "
         f"{partner.lag} frames)"
     )
-    bvh = out / "chain-partner.bvh"
-    write_motion(virtual, bvh)
-    a.name, b.name, virtual.name = "A (real leader)", "B (real partner)", "B (behaviour chain)"
-    gif = render(
-        [a, b, virtual],
+    return partner_scene(
+        a,
+        b,
+        virtual,
+        out / "chain-partner.bvh",
         out / "chain-partner.gif",
+        "behaviour chain",
+        f"salsa {test[0].trial}: real and virtual partner (behaviour chain)",
         max_seconds=8.0,
-        title=f"salsa {test[0].trial}: real and virtual partner (behaviour chain)",
     )
-    return [bvh, gif]

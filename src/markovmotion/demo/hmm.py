@@ -8,11 +8,10 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.demo.scene import partner_scene
 from markovmotion.evaluate.hmm import evaluate_pair, plot_pair
-from markovmotion.io import write_motion
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.progress import track
-from markovmotion.viz import render
 
 LABEL = "salsa"
 TRAIN_TAKES = 4  # a minute at most: four takes, 16 states
@@ -39,14 +38,14 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         f"{errors['standard']:.0f} mm, mean-pose baseline {errors['mean_pose']:.0f} mm "
         f"(lag {model.window - 1} frames)"
     )
-    bvh = out / "partner-virtual.bvh"
-    write_motion(virtual, bvh)
-    a.name, b.name, virtual.name = "A (real leader)", "B (real partner)", "B (virtual partner)"
-    gif = render(
-        [a, b, virtual],
+    written = partner_scene(
+        a,
+        b,
+        virtual,
+        out / "partner-virtual.bvh",
         out / "partner.gif",
+        "virtual partner",
+        f"salsa {test[0].trial}: real and virtual partner (windowed Viterbi)",
         max_seconds=10.0,
-        title=f"salsa {test[0].trial}: real and virtual partner (windowed Viterbi)",
     )
-    plot = plot_pair(result, out / "partner-error.png")
-    return [bvh, gif, plot]
+    return [*written, plot_pair(result, out / "partner-error.png")]

@@ -4,7 +4,7 @@ scikit-learn's conventions (``sklearn/base.py``), turned into a model file:
 
 - the constructor stores hyper-parameters only, unchanged; ``fit`` does the
   work and returns ``self``; everything learnt ends in ``_``;
-- ``save(path)`` writes an ``.npz`` with a JSON header (never a pickle) from
+- ``save(path)`` writes an ``.npz`` with a JSON header (never pickled) from
   the constructor's parameters and the ``_`` attributes (:mod:`markovmotion.state`);
   ``Model.load(path)`` (or ``DualHMM.load(path)``) returns the model alone,
   whatever its kind, found through the ``KIND`` each class registers once;
