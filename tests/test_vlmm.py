@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 
@@ -289,6 +290,39 @@ def test_prediction_beats_nothing_silly_on_held_out_dance(behaviour_model, exerc
     assert vlmm.at(2.0) < first.at(2.0) * 1.1
     pred = m.predict(exercise[1][0].trim(0, 60), 1.0)
     assert pred.n_frames == 60 + 15
+
+
+def test_smooth_join_blends_the_paper_curve_with_the_observed_pose(behaviour_model, exercise):
+    """continuation = w C0 + (1 - w) H with w = exp(-T / (join fps)); join 0 is the paper's H."""
+    m = behaviour_model
+    feats = m.observe(exercise[1])[0]
+    c0, dc0 = m.start_knots(feats, np.array([20, 40]), 1)
+    tokens = np.tile(m.generate_tokens(4.0, np.random.default_rng(3)), (2, 1))
+    paper = m.continuation(tokens, c0, dc0, 30)
+    joined = copy.copy(m)
+    joined.join = 1.0
+    w = np.exp(-np.arange(1, 31) / m.fps)[None, :, None]
+    assert np.allclose(joined.continuation(tokens, c0, dc0, 30), w * c0[:, None] + (1 - w) * paper)
+    assert np.array_equal(m.join_weights(30), np.zeros(30))
+    with pytest.raises(ValueError, match="join"):
+        BehaviourModel(join=-1.0).fit(exercise[0][:1])
+
+
+def test_joined_prediction_beats_holding_still_on_held_out_dance(exercise):
+    """The cross-validated settings (body-centred positions, lambda 100, join 2 s) predict
+    a held-out take better than holding the last pose at 1, 2 and 3 s, and better than a
+    first-order Markov model with the same join at 2 and 3 s."""
+    train, test = exercise
+    m = BehaviourModel(40, fps=15.0, configuration="positions", lam=100.0, join=2.0).fit(train)
+    feats = m.observe(test)
+    kw = dict(horizon=45, fps=m.fps, n_samples=10, stride=5)
+    vlmm = evaluate_horizon(m, feats, **kw)
+    zero = evaluate_horizon(ZeroVelocity(m), feats, **kw)
+    first = evaluate_horizon(m.with_vlmm(1, 0.0), feats, **kw)
+    for s in (1.0, 2.0, 3.0):
+        assert vlmm.at(s) < zero.at(s)
+    for s in (2.0, 3.0):
+        assert vlmm.at(s) < first.at(s)
 
 
 def test_score_is_the_vlmm_likelihood_of_the_prototype_sequences(behaviour_model, exercise):

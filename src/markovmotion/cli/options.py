@@ -90,6 +90,8 @@ RANGES: dict[str, Range] = {
     "states": Range(1, 1024),
     # prediction horizons in seconds
     "horizon": Range(0, 600, lo_open=True, unit="s"),
+    # time constants in seconds (0: none)
+    "time_constant": Range(0, 600, unit="s"),
     # lengths of generated or rendered motion in seconds
     "seconds": Range(0, 3600, lo_open=True, unit="s"),
     # walking steps to synthesize or adapt on

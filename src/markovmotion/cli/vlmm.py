@@ -57,6 +57,12 @@ def train(
         "kmeans", callback=choice(("kmeans", "competitive")), help="kmeans or competitive."
     ),
     fps: float = ranged("fps", 30.0, min=1.0, help="Frame rate for modelling."),
+    join: float = ranged(
+        "time_constant",
+        0.0,
+        help="Time constant (s) of the smooth join of predictions to the observed pose "
+        "(0: the paper's; 2 chosen by cross-validation, docs/vlmm.md).",
+    ),
     hold_out: bool = typer.Option(
         True, "--hold-out/--no-hold-out", help="Keep the last trial of each label for testing."
     ),
@@ -76,6 +82,7 @@ def train(
         configuration=configuration,
         fps=fps,
         quantiser=quantiser,
+        join=join,
         random_state=seed,
     )
     if structured:

@@ -47,6 +47,23 @@ def held_out_last(entries: Sequence[Entry]) -> tuple[list[Entry], list[Entry]]:
     return [e for e in entries if e not in test], test
 
 
+def validation_folds(
+    entries: Sequence[Entry], n_folds: int
+) -> list[tuple[list[Entry], list[Entry]]]:
+    """Cross-validation folds inside a training set: fold f (1-based) holds out the f-th
+    take from the end (in INDEX.csv order) of every label, as :func:`held_out_last` applied
+    f times; labels that run out of takes stay in training. Returns (train, validation) pairs.
+    """
+    folds, rest = [], list(entries)
+    for _ in range(n_folds):
+        _, val = held_out_last(rest)
+        if not val:
+            break
+        folds.append(([e for e in entries if e not in val], val))
+        rest = [e for e in rest if e not in val]
+    return folds
+
+
 def held_out_every(
     entries: Sequence[Entry], every: int = TEST_EVERY
 ) -> tuple[list[Entry], list[Entry]]:

@@ -128,6 +128,9 @@ class BehaviourModel(Model):
         quantiser: ``"kmeans"`` or ``"competitive"`` (robust competitive learning).
         time_scale: factor on the eq. 8 intervals (1: the paper's).
         max_interval: longest interval between two prototypes, in seconds.
+        join: time constant in seconds of the smooth join of a prediction to the observed
+            configuration (:meth:`continuation`); 0 (the paper's join) starts the curve at
+            the observed configuration and nothing more.
         random_state: seed of the vector quantisation, and of :meth:`generate`
             and :meth:`predict` when they are stochastic and given no ``rng``.
 
@@ -152,6 +155,7 @@ class BehaviourModel(Model):
         quantiser: str = "kmeans",
         time_scale: float = 1.0,
         max_interval: float = 1.0,
+        join: float = 0.0,
         random_state: int | None = 0,
     ):
         self.n_prototypes = n_prototypes
@@ -163,6 +167,7 @@ class BehaviourModel(Model):
         self.quantiser = quantiser
         self.time_scale = time_scale
         self.max_interval = max_interval
+        self.join = join
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
@@ -179,6 +184,8 @@ class BehaviourModel(Model):
         """Learn prototypes and the VLMM from motions (resampled to ``fps``); returns self."""
         if self.quantiser not in QUANTISERS:
             raise ValueError(f"quantiser must be one of {QUANTISERS}")
+        if not self.join >= 0:
+            raise ValueError(f"join must be a time constant >= 0 s, got {self.join}")
         self.record_training(motions)
         motions = [m.resample(self.fps) for m in motions]
         self.skeleton_ = motions[0].skeleton
@@ -398,6 +405,16 @@ class BehaviourModel(Model):
         """(P, horizon, d) curves from (C0, dC0) through the prototypes ``tokens`` (P, R).
 
         Frames 1..horizon after the start; the prototypes must span the horizon.
+        The curve is the cubic Hermite interpolant of eq. 8 with its first knot
+        replaced by the observed (C0, dC0), as the interaction paper's smooth join
+        replaces the first extrapolated state by the current one (§4 there). With
+        ``join`` > 0 the curve is further blended with the observed configuration,
+
+            C(T) = w(T) C0 + (1 - w(T)) H(T),   w(T) = exp(-T / (join fps)),
+
+        so the prediction leaves the observed pose gradually rather than snapping
+        to the prototypes (whose quantisation error, on unseen takes, is larger
+        than a short horizon's motion).
         """
         c, dc = self.knots(tokens)
         c = np.concatenate([c0[:, None], c], axis=1)
@@ -405,7 +422,17 @@ class BehaviourModel(Model):
         times = np.concatenate(
             [np.zeros((len(c), 1)), np.cumsum(self.intervals(c, dc), axis=1)], axis=1
         )
-        return hermite_sample(c, dc, times, np.arange(1, horizon + 1))
+        out = hermite_sample(c, dc, times, np.arange(1, horizon + 1))
+        w = self.join_weights(horizon)[:, None]
+        return w * c0[:, None] + (1.0 - w) * out
+
+    def join_weights(self, horizon: int) -> np.ndarray:
+        """(horizon,) weight of the observed configuration at frames 1..horizon ahead:
+        exp(-T / (join fps)), zero when ``join`` is 0 (:meth:`continuation`)."""
+        join = getattr(self, "join", 0.0)
+        if join <= 0:
+            return np.zeros(horizon)
+        return np.exp(-np.arange(1, horizon + 1) / (join * self.fps))
 
     def predict(
         self,
