@@ -1,0 +1,150 @@
+"""Common body points of any skeleton, found by joint names.
+
+Different captures name and build their skeletons differently: CMU's salsa
+BVH (``hip``, ``lShldr``, ``lForeArm`` ...), cgspeed's conversion of CMU
+(``Hips``, ``LeftArm``, ``LeftForeArm`` ...), CMU's ASF (``root``,
+``lhumerus``, ``lradius`` ...), Bandai's (``Hips``, ``UpperArm_L`` ...),
+Mixamo's (``mixamorig:LeftArm``). Models that learn from one person and
+answer another, or evaluation that compares a generated person with a real
+one on another skeleton, need the same points on both: the pelvis, spine,
+head, shoulders, elbows, wrists, hips, knees, ankles and toes
+(:data:`BODY_POINTS`; the VLMM paper's 13 markers are :data:`MARKER_POINTS`).
+
+Each point is a joint's position (a BVH joint sits where its segment
+starts: ``LeftForeArm`` is the elbow). A point is found by the first of its
+synonyms (:data:`SYNONYMS`) that names a joint, compared after
+normalisation: lower case, a namespace prefix (``mixamorig:``) dropped,
+separators dropped, and the side written either way (``left``/``l`` before
+or after the part's name). The synonyms are ordered so that a more
+specific name wins (``LeftArm``, the shoulder joint, before
+``LeftShoulder``, which in cgspeed's skeleton is the collar bone).
+Written here because no maintained library does this across these naming
+schemes (retargeting tools map by hand-written per-rig tables, as this is).
+"""
+
+from __future__ import annotations
+
+import re
+import weakref
+from collections.abc import Sequence
+
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
+from markovmotion.errors import SkeletonMismatchError
+
+#: Parts of the body found on either side, with their names in the skeletons we know,
+#: most specific first.
+_SIDED: dict[str, tuple[str, ...]] = {
+    "shoulder": ("arm", "upperarm", "humerus", "shldr", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "radius", "elbow"),
+    "wrist": ("wrist", "hand"),
+    "hip": ("upleg", "upperleg", "thigh", "femur", "hip"),
+    "knee": ("leg", "lowerleg", "shin", "tibia", "knee", "calf"),
+    "ankle": ("foot", "ankle"),
+    "toe": ("toebase", "toes", "toe", "footend", "toeend"),
+}
+
+#: Points on the body's midline and their names.
+_MIDDLE: dict[str, tuple[str, ...]] = {
+    "pelvis": ("hips", "hip", "pelvis", "root"),
+    "spine": ("spine", "abdomen", "lowerback", "spine1"),
+    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2"),
+    "neck": ("neck", "lowerneck", "neck1"),
+    "head": ("head",),
+}
+
+
+def _sided(side: str, parts: tuple[str, ...]) -> tuple[str, ...]:
+    words = ("left", "l") if side == "left" else ("right", "r")
+    return tuple(f for p in parts for w in words for f in (w + p, p + w))
+
+
+#: Per body point, the normalised joint names it is found by, in order of preference.
+SYNONYMS: dict[str, tuple[str, ...]] = {
+    **_MIDDLE,
+    **{
+        f"{side}_{part}": _sided(side, names)
+        for side in ("left", "right")
+        for part, names in _SIDED.items()
+    },
+}
+
+#: The points every model and evaluation works with (19: midline, arms, legs).
+BODY_POINTS: tuple[str, ...] = (
+    "pelvis",
+    "spine",
+    "chest",
+    "neck",
+    "head",
+    *(f"{s}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "wrist")),
+    *(f"{s}_{p}" for s in ("left", "right") for p in ("hip", "knee", "ankle", "toe")),
+)
+
+#: The VLMM paper's 13 markers (§2.1.2): head, shoulders, elbows, wrists, hips, knees, ankles.
+MARKER_POINTS: tuple[str, ...] = (
+    "head",
+    *(f"{s}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "wrist")),
+    *(f"{s}_{p}" for s in ("left", "right") for p in ("hip", "knee", "ankle")),
+)
+
+_CACHE: weakref.WeakKeyDictionary[Skeleton, dict[tuple[str, ...], np.ndarray]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def normalise(name: str) -> str:
+    """A joint name as compared with :data:`SYNONYMS`: lower case, no namespace, no separators."""
+    return re.sub(r"[^a-z0-9]", "", name.rsplit(":", 1)[-1].lower())
+
+
+def body_point_index(
+    skeleton: Skeleton, points: Sequence[str] = BODY_POINTS, what: str = "skeleton"
+) -> np.ndarray:
+    """Indices (P,) of the joints of ``skeleton`` that are ``points``.
+
+    Raises:
+        SkeletonMismatchError: some points match no joint; the message (naming
+            ``what``) lists them and the joint names looked for.
+        KeyError: a point that is not in :data:`SYNONYMS`.
+    """
+    points = tuple(points)
+    known = _CACHE.setdefault(skeleton, {})
+    if points in known:
+        return known[points]
+    unknown = [p for p in points if p not in SYNONYMS]
+    if unknown:
+        raise KeyError(f"unknown body points {unknown}; known: {', '.join(SYNONYMS)}")
+    names = {}
+    for j, n in enumerate(skeleton.names):
+        names.setdefault(normalise(n), j)
+    found, missing = [], []
+    for p in points:
+        j = next((names[s] for s in SYNONYMS[p] if s in names), None)
+        (missing.append(p) if j is None else found.append(j))
+    if missing:
+        detail = "; ".join(f"{p} (looked for {', '.join(SYNONYMS[p][:4])} ...)" for p in missing)
+        raise SkeletonMismatchError(
+            f"{what}: cannot find these body points among its joints: {detail}"
+        )
+    out = np.array(found, dtype=np.intp)
+    known[points] = out
+    return out
+
+
+def body_points(
+    motion: Motion,
+    points: Sequence[str] = BODY_POINTS,
+    positions: np.ndarray | None = None,
+    body_centred: bool = False,
+) -> np.ndarray:
+    """(F, P, 3) positions in mm of ``points`` over ``motion`` (world or body-centred).
+
+    ``positions``: the motion's world (or, with ``body_centred``, body-centred)
+    joint positions, if already computed.
+    """
+    idx = body_point_index(motion.skeleton, points, motion.name or "motion")
+    if positions is None:
+        positions = motion.body_centred_positions() if body_centred else motion.positions()
+    return positions[:, idx]

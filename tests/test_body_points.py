@@ -1,0 +1,77 @@
+"""Common body points found by joint names on every skeleton the data holds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from markovmotion.core.skeleton import Skeleton
+from markovmotion.errors import SkeletonMismatchError
+from markovmotion.features.body_points import (
+    BODY_POINTS,
+    MARKER_POINTS,
+    body_point_index,
+    body_points,
+    normalise,
+)
+from markovmotion.io.asfamc import read_asf
+from markovmotion.io.bvh import read_bvh
+
+EXPECTED = {
+    # file: joints for pelvis, left elbow, right wrist, left knee, right toe
+    "cmu/bvh/cmu_18_01.bvh.gz": ("Hips", "LeftForeArm", "RightHand", "LeftLeg", "RightToeBase"),
+    "cmu/bvh/salsa_01.bvh.gz": ("hip", "lForeArm", "rHand", "lShin", "rFoot_end"),
+    "bandai/dataset-2/walk_active_001.bvh.gz": (
+        "Hips",
+        "LowerArm_L",
+        "Hand_R",
+        "LowerLeg_L",
+        "Toes_R",
+    ),
+}
+CHECKED = ("pelvis", "left_elbow", "right_wrist", "left_knee", "right_toe")
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_points_found_by_name_on_each_skeleton(mocap, name):
+    motion = read_bvh(mocap.root / name)
+    idx = body_point_index(motion.skeleton, CHECKED)
+    assert tuple(motion.skeleton.names[i] for i in idx) == EXPECTED[name]
+    assert len(set(body_point_index(motion.skeleton).tolist())) == len(BODY_POINTS)
+
+
+def test_asf_skeleton_maps_shoulder_not_collar(mocap):
+    asf = next((mocap.root / "cmu" / "asfamc").glob("*/*.asf"))
+    sk = read_asf(asf)
+    idx = body_point_index(sk, ("left_shoulder", "left_wrist", "chest", "spine"))
+    assert [sk.names[i] for i in idx] == ["lhumerus", "lwrist", "thorax", "lowerback"]
+
+
+def test_cgspeed_shoulder_is_the_arm_joint_not_the_collar(mocap):
+    sk = read_bvh(mocap.root / "cmu/bvh/cmu_18_01.bvh.gz").skeleton
+    assert sk.names[body_point_index(sk, ("left_shoulder",))[0]] == "LeftArm"
+
+
+def test_namespaces_and_sides_written_either_way():
+    assert normalise("mixamorig:LeftForeArm") == "leftforearm"
+    names = ("mixamorig:Hips", "Elbow_L", "mixamorig:RightForeArm")
+    sk = Skeleton(names, [-1, 0, 0], np.zeros((3, 3)), [("Xrotation",)] * 3)
+    assert body_point_index(sk, ("pelvis", "left_elbow", "right_elbow")).tolist() == [0, 1, 2]
+
+
+def test_missing_points_named_in_one_error():
+    names = ("Hips", "LeftArm", "LeftForeArm")
+    sk = Skeleton(names, [-1, 0, 1], np.zeros((3, 3)), [("Xrotation",)] * 3)
+    with pytest.raises(SkeletonMismatchError, match=r"mine: .*left_wrist.*right_elbow") as err:
+        body_point_index(sk, MARKER_POINTS, what="mine")
+    assert "\n" not in str(err.value)
+    with pytest.raises(KeyError, match="nose"):
+        body_point_index(sk, ("nose",))
+
+
+def test_positions_are_the_joints_positions(mocap):
+    motion = read_bvh(mocap.root / "cmu/bvh/cmu_18_01.bvh.gz")
+    pts = body_points(motion, MARKER_POINTS)
+    idx = body_point_index(motion.skeleton, MARKER_POINTS)
+    np.testing.assert_allclose(pts, motion.positions()[:, idx])
+    assert pts.shape == (motion.n_frames, 13, 3)
