@@ -15,7 +15,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError
 from markovmotion.io.asfamc import read_amc, read_asf
 from markovmotion.io.bvh import read_bvh, write_bvh
-from markovmotion.io.c3d import read_c3d
+from markovmotion.io.c3d import read_c3d, write_c3d
 from markovmotion.io.files import base_suffix
 
 MOTION_SUFFIXES = (".bvh", ".amc")
@@ -66,5 +66,6 @@ __all__ = [
     "read_c3d",
     "read_motion",
     "write_bvh",
+    "write_c3d",
     "write_motion",
 ]

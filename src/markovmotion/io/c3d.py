@@ -137,3 +137,34 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
         positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
     positions[data[..., 3] < 0] = np.nan
     return Markers(names, positions, float(rate), name=os.path.basename(path))
+
+
+def write_c3d(markers: Markers, path: str | os.PathLike[str]) -> None:
+    """Write ``markers`` to a C3D file, atomically, through the ``c3d`` package.
+
+    Floating-point points in mm, stored Y up with ``POINT:X_SCREEN`` = ``+X`` and
+    ``POINT:Y_SCREEN`` = ``+Y`` (so :func:`read_c3d` gives back the same axes); a NaN
+    (occluded) marker is written as an invalid sample (residual -1).
+
+    Raises:
+        MotionFormatError: ``path`` does not end in ``.c3d``.
+    """
+    import c3d
+
+    from markovmotion.io.files import atomic_write, base_suffix
+
+    if base_suffix(path) != ".c3d":
+        raise MotionFormatError(path, "markers are written as C3D: use a .c3d name")
+    pos = np.asarray(markers.positions, dtype=float)
+    points = np.zeros((*pos.shape[:2], 5), dtype=np.float32)
+    seen = ~np.isnan(pos).any(axis=-1)
+    points[..., :3] = np.where(seen[..., None], pos, 0.0)
+    points[..., 3] = np.where(seen, 0.0, -1.0)
+    writer = c3d.Writer(point_rate=float(markers.fps), point_scale=-1.0)
+    writer.set_point_labels([n[:30] for n in markers.names])
+    writer.set_screen_axis("+X", "+Y")
+    no_analog = np.zeros((0, 0), dtype=np.float32)
+    writer.add_frames([(p, no_analog) for p in points])
+    with warnings.catch_warnings(), atomic_write(path, "wb") as handle:
+        warnings.simplefilter("ignore")
+        writer.write(handle)
