@@ -406,3 +406,38 @@ def test_cli_evaluate_test_index_leaves_out_training_takes_by_content(
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "trained on: a.bvh.gz, b.bvh.gz" in err
+
+
+def test_markers_source_learns_13_points_and_writes_c3d_and_point_lights(tmp_path, mocap, capsys):
+    """--source markers: the paper's 13 body points from a skeleton, generation and prediction
+    as C3D (read back: 13 named markers) or a point-light GIF, E_T in mm and in
+    configuration space (eq. 9); a BVH output for a markers model is one line, exit 2."""
+    from markovmotion.cli import main
+    from markovmotion.features.body_points import MARKER_POINTS
+    from markovmotion.io import read_c3d
+
+    model = tmp_path / "m.npz"
+    main(["vlmm", "train", "--source", "markers", "--label", "indian_dance", "--prototypes",
+          "20", "--max-memory", "3", "--fps", "10", "--lam", "30", "--out", str(model)])  # fmt: skip
+    main(["vlmm", "generate", "--model", str(model), "--seconds", "2", "--stochastic",
+          "--out", str(tmp_path / "g.c3d")])  # fmt: skip
+    markers = read_c3d(tmp_path / "g.c3d")
+    assert markers.names == MARKER_POINTS and markers.n_frames == 21 and markers.fps == 10
+    assert np.isfinite(markers.positions).all() and markers.positions[..., 1].min() >= -1e-3
+    # head above the ankles, shoulders wider apart than nothing: a human-shaped cloud
+    assert (markers.positions[:, 0, 1] > markers.positions[:, -1, 1] + 500).all()
+    take = mocap.find("cmu/bvh/indian_14.bvh.gz").path
+    main(["vlmm", "predict", "--model", str(model), "--input", str(take), "--horizon", "1",
+          "--out", str(tmp_path / "p.gif")])  # fmt: skip
+    assert (tmp_path / "p.gif").stat().st_size > 1000
+    capsys.readouterr()
+    for space in ("mm", "configuration"):
+        main(["vlmm", "evaluate", "--model", str(model), "--samples", "3", "--stride", "40",
+              "--space", space, "--json"])  # fmt: skip
+        result = json.loads(capsys.readouterr().out)
+        assert all(result[f"E_T_{space}.{n}.1"] > 0 for n in ("vlmm", "zero_velocity"))
+    assert result["E_T_configuration.vlmm.1"] < 39**0.5  # within the diagonal of [0, 1]^39
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "generate", "--model", str(model), "--out", str(tmp_path / "g.bvh")])
+    assert info.value.code == 2
+    assert "C3D" in capsys.readouterr().err

@@ -11,10 +11,12 @@ from rich.table import Table
 
 from markovmotion.cli.options import choice, ranged
 from markovmotion.cli.tables import print_table
+from markovmotion.core.markers import Markers
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
-from markovmotion.errors import SkeletonMismatchError
-from markovmotion.io import check_motion_output, write_motion
+from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
+from markovmotion.io import check_motion_output, write_c3d, write_motion
+from markovmotion.io.files import base_suffix
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -40,6 +42,38 @@ def _memory_table(title: str, vlmm) -> Table:
     return table
 
 
+def _is_markers(behaviour) -> bool:
+    base = getattr(behaviour, "prototype_model_", behaviour)
+    return base.configuration == "markers"
+
+
+def _check_output(behaviour, out: Path) -> None:
+    """``out`` suits what the model writes: BVH for a skeleton, C3D or an animation for markers."""
+    if not _is_markers(behaviour):
+        check_motion_output(out)
+    elif base_suffix(out) != ".c3d":
+        from markovmotion.viz.animation import check_output
+
+        try:
+            check_output(out)
+        except MarkovMotionError:
+            raise MotionFormatError(
+                out, "a markers model writes C3D (.c3d) or a point-light animation (.gif, .mp4)"
+            ) from None
+
+
+def _write(result, out: Path) -> None:
+    """Write a generated motion (BVH) or markers (C3D, or a point-light GIF/MP4)."""
+    if not isinstance(result, Markers):
+        write_motion(result, out)
+    elif base_suffix(out) == ".c3d":
+        write_c3d(result, out)
+    else:
+        from markovmotion.viz.animation import render
+
+        render(result, out, fps=min(result.fps, 25.0))
+
+
 @app.command()
 def train(
     out: Path = typer.Option(..., help="Model file to write (.npz)."),
@@ -50,8 +84,15 @@ def train(
     max_memory: int = typer.Option(5, min=0, help="Maximum memory length N of the VLMM."),
     epsilon: float = typer.Option(1e-4, min=0.0, help="KL threshold (eq. 5)."),
     lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC/dt (eq. 2)."),
+    source: str = typer.Option(
+        "skeleton",
+        callback=choice(("skeleton", "markers")),
+        help="skeleton (joints, --configuration) or markers (the paper's 13 body points).",
+    ),
     configuration: str = typer.Option(
-        "rotations", callback=choice(("rotations", "positions")), help="rotations or positions."
+        "rotations",
+        callback=choice(("rotations", "positions")),
+        help="For --source skeleton: rotations or positions.",
     ),
     quantiser: str = typer.Option(
         "kmeans", callback=choice(("kmeans", "competitive")), help="kmeans or competitive."
@@ -79,7 +120,7 @@ def train(
         max_memory=max_memory,
         epsilon=epsilon,
         lam=lam,
-        configuration=configuration,
+        configuration="markers" if source == "markers" else configuration,
         fps=fps,
         quantiser=quantiser,
         join=join,
@@ -116,7 +157,9 @@ def train(
 @app.command()
 def generate(
     model: Path = typer.Option(..., help="Model file from 'vlmm train'."),
-    out: Path = typer.Option(..., help="Motion to write (.bvh or .bvh.gz)."),
+    out: Path = typer.Option(
+        ..., help="Motion to write (.bvh or .bvh.gz; a markers model: .c3d or .gif)."
+    ),
     seconds: float = ranged("seconds", 20.0, min=0.1, help="Length of the routine."),
     stochastic: bool = typer.Option(
         False, "--stochastic/--ml", help="Sample transitions (default: most likely ones)."
@@ -127,8 +170,9 @@ def generate(
     from markovmotion.models.vlmm.structured import load_behaviour
 
     behaviour = load_behaviour(model)
+    _check_output(behaviour, out)
     motion = behaviour.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
-    write_motion(motion, out)
+    _write(motion, out)
     err_console.print(f"wrote {out}: {motion.n_frames} frames at {motion.fps:g} fps")
 
 
@@ -136,7 +180,9 @@ def generate(
 def predict(
     model: Path = typer.Option(..., help="Model file from 'vlmm train'."),
     input: Path = typer.Option(..., help="Observed motion (BVH or ASF/AMC)."),
-    out: Path = typer.Option(..., help="Observed motion plus prediction (.bvh)."),
+    out: Path = typer.Option(
+        ..., help="Observed motion plus prediction (.bvh; a markers model: .c3d or .gif)."
+    ),
     horizon: float = ranged("horizon", 3.0, min=0.05, help="Seconds to predict."),
     fps: float = ranged(
         "fps",
@@ -149,15 +195,15 @@ def predict(
     """Recognise the observed motion's state and predict how it continues (§3.2.2, §4.4)."""
     from markovmotion.models.vlmm.structured import load_behaviour
 
-    check_motion_output(out)
     behaviour = load_behaviour(model)
+    _check_output(behaviour, out)
     motion = read_listed_motion(input, fps=fps)
     try:
         behaviour.skeleton_.check_compatible(motion.skeleton, "input")
     except SkeletonMismatchError as exc:
         raise SkeletonMismatchError(f"{input}: {exc}") from None
     result = behaviour.predict(motion, horizon, np.random.default_rng(seed), stochastic=stochastic)
-    write_motion(result, out)
+    _write(result, out)
     observed = result.n_frames - int(round(horizon * behaviour.fps))
     err_console.print(
         f"wrote {out}: {observed} observed frames then {result.n_frames - observed} predicted, "
@@ -180,6 +226,11 @@ def evaluate(
         "", help="Also VLMMs of these maximum memories on the same prototypes, e.g. '5,20'."
     ),
     plot: Path = typer.Option(None, help="Write E_T curves (paper Fig. 4) to this PNG."),
+    space: str = typer.Option(
+        "mm",
+        callback=choice(("mm", "configuration")),
+        help="E_T in mm, or in configuration space [0, 1]^d (eq. 9).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print E_T as JSON on stdout."),
     seed: int = ranged("seed", 0, help="Seed of the Monte Carlo predictions."),
 ) -> None:
@@ -213,6 +264,7 @@ def evaluate(
         stride=stride,
         memories=depths,
         seed=seed,
+        space=space,
     )
     if result.takes.left_out:
         err_console.print(
@@ -231,12 +283,13 @@ def evaluate(
         typer.echo(json.dumps(result.result(), indent=2))
         return
     table = Table(
-        title=f"E_T (mm) on {', '.join(m.name for m in result.motions)}, "
+        title=f"E_T ({'mm' if space == 'mm' else 'configuration space'}) on {', '.join(m.name for m in result.motions)}, "
         f"{samples} predictions per frame, stride {stride}"
     )
     table.add_column("model")
     for s in result.seconds:
         table.add_column(f"{s:g} s", justify="right")
     for name, c in result.curves.items():
-        table.add_row(name, *(f"{c.at(s):.1f}" for s in result.seconds))
+        fmt = ".1f" if space == "mm" else ".4f"
+        table.add_row(name, *(f"{c.at(s):{fmt}}" for s in result.seconds))
     print_table(table)

@@ -39,6 +39,8 @@ from markovmotion.viz.plots import new_figure, save_figure
 
 #: Horizons reported by ``vlmm evaluate`` (seconds).
 REPORT_SECONDS = (0.5, 1.0, 2.0, 3.0)
+#: Where E_T is measured: joint (or marker) positions in mm, or configurations (eq. 9).
+SPACES = ("mm", "configuration")
 #: The first-order Markov model: memory 1, every context kept.
 FIRST_ORDER = (1, 0.0)
 
@@ -92,6 +94,26 @@ class ZeroVelocity:
         return self.model.configuration_positions(configs)
 
 
+class ConfigurationSpace:
+    """Another predictor measured in its configuration space: eq. 9 literally, the
+    Euclidean distance between predicted and true configurations C in [0, 1]^d
+    (the paper's Figs. 4 and 10), instead of joint positions in mm."""
+
+    def __init__(self, predictor):
+        self.predictor = predictor
+
+    def prepare(self, features: np.ndarray):
+        return self.predictor.prepare(features)
+
+    def predict_configurations(self, features, prepared, frames, horizon, n_samples, rng):
+        return self.predictor.predict_configurations(
+            features, prepared, frames, horizon, n_samples, rng
+        )
+
+    def configuration_positions(self, configs: np.ndarray) -> np.ndarray:
+        return np.asarray(configs)[:, None, :]
+
+
 def evaluate_horizon(
     predictor,
     sequences: Sequence[np.ndarray],
@@ -137,7 +159,10 @@ def evaluate_horizon(
 
 
 def plot_horizon_curves(
-    curves: Sequence[HorizonCurve], path: str | os.PathLike[str], title: str = ""
+    curves: Sequence[HorizonCurve],
+    path: str | os.PathLike[str],
+    title: str = "",
+    ylabel: str = "mean joint error E_T (mm)",
 ) -> None:
     """E_T against horizon in seconds, error bars mean +- MAD (paper Figs. 4 and 10), as a PNG."""
     fig, ax = new_figure(7.0, 4.5)
@@ -148,7 +173,7 @@ def plot_horizon_curves(
             t, c.mean, yerr=c.mad, errorevery=(k % every, every), capsize=2, label=c.name, lw=1.4
         )
     ax.set_xlabel("prediction horizon T (s)")
-    ax.set_ylabel("mean joint error E_T (mm)")
+    ax.set_ylabel(ylabel)
     ax.set_title(title or "Prediction error against horizon (mean ± MAD)")
     ax.grid(alpha=0.3)
     ax.legend()
@@ -173,6 +198,7 @@ class VlmmEvaluation:
     samples: int
     stride: int
     other_skeleton: list[Entry] = field(default_factory=list)
+    space: str = "mm"
 
     @property
     def seconds(self) -> list[float]:
@@ -185,10 +211,13 @@ class VlmmEvaluation:
         return sum(m.n_frames for m in self.motions)
 
     def result(self) -> dict[str, Any]:
-        """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm, the
-        test files, the training files left out and (if any) those of another skeleton."""
+        """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm (or
+        ``E_T_configuration.<model>.<seconds>``, eq. 9 in configuration space, to 4
+        decimals), the test files, the training files left out and (if any) those of
+        another skeleton."""
+        digits = 2 if self.space == "mm" else 4
         out: dict[str, Any] = {
-            f"E_T_mm.{name}.{s:g}": round(c.at(s), 2)
+            f"E_T_{self.space}.{name}.{s:g}": round(c.at(s), digits)
             for name, c in self.curves.items()
             for s in self.seconds
         }
@@ -201,7 +230,10 @@ class VlmmEvaluation:
         """E_T curves (paper Fig. 4) as a PNG."""
         unique = list({id(c): c for c in self.curves.values()}.values())
         plot_horizon_curves(
-            unique, path, f"E_T on {len(self.motions)} test takes ({self.n_frames} frames)"
+            unique,
+            path,
+            f"E_T on {len(self.motions)} test takes ({self.n_frames} frames)",
+            "mean joint error E_T (mm)" if self.space == "mm" else "E_T, configuration (eq. 9)",
         )
 
 
@@ -250,6 +282,7 @@ def evaluate_model(
     stride: int = 1,
     memories: Sequence[int] = (),
     seed: int = 0,
+    space: str = "mm",
 ) -> VlmmEvaluation:
     """E_T (eq. 9) of a behaviour model on the takes of ``index`` that fit it.
 
@@ -259,7 +292,8 @@ def evaluate_model(
     ``first_order`` (a first-order Markov model over the same prototypes),
     ``zero_velocity``, ``vlmm_N<n>`` for each of ``memories`` and, for a
     structured model, ``structured``. ``samples`` Monte Carlo predictions from
-    every ``stride``-th frame, up to ``horizon`` seconds.
+    every ``stride``-th frame, up to ``horizon`` seconds. ``space``: ``"mm"`` (joint or
+    marker positions) or ``"configuration"`` (eq. 9 on C in [0, 1]^d, :class:`ConfigurationSpace`).
 
     Raises:
         DataNotFoundError: no take fits, or every one that does is a training take.
@@ -295,10 +329,13 @@ def evaluate_model(
     n_frames = int(round(horizon * base.fps))
     curves: dict[str, HorizonCurve] = {}
     by_model: dict[int, HorizonCurve] = {}
+    if space not in SPACES:
+        raise ValueError(f"space must be one of {SPACES}")
     for name, p in predictors.items():  # a model asked for twice is evaluated once
         if id(p) not in by_model:
+            measured = p if space == "mm" else ConfigurationSpace(p)
             by_model[id(p)] = evaluate_horizon(
-                p, features, n_frames, base.fps, samples, stride, seed=seed, name=name
+                measured, features, n_frames, base.fps, samples, stride, seed=seed, name=name
             )
         curves[name] = by_model[id(p)]
-    return VlmmEvaluation(curves, takes, motions, horizon, samples, stride, other)
+    return VlmmEvaluation(curves, takes, motions, horizon, samples, stride, other, space)

@@ -8,11 +8,16 @@ prototypes' configurations by cubic Hermite interpolation with the time
 intervals of eq. 8, sampled at the frame rate; prediction first recognises
 the state from the observed prototypes (§3.2.2).
 
-Configuration C is either the joint rotations (exponential maps of the
-moving joints plus the pelvis height, with each frame's heading removed) or
-body-centred joint positions; either way generated motion goes back to a
-:class:`Motion` (rotations directly, positions through an inverse-kinematics
-fit to the training skeleton).
+Configuration C is the joint rotations (exponential maps of the moving
+joints plus the pelvis height, with each frame's heading removed),
+body-centred joint positions, or the paper's 13 markers (§2.1.2: head,
+shoulders, elbows, wrists, hips, knees, ankles, found on any skeleton by
+joint names, :mod:`markovmotion.features.body_points`), object-centred; each
+component is scaled to [0, 1] (eq. 4). Generated rotations or positions go
+back to a :class:`Motion` (rotations directly, positions through an
+inverse-kinematics fit to the training skeleton); markers come out as
+:class:`~markovmotion.core.markers.Markers` (written as C3D or a point-light
+animation).
 """
 
 from __future__ import annotations
@@ -31,11 +36,13 @@ from markovmotion.algorithms.vector_quantisation import (
     kmeans_prototypes,
     nearest_prototype,
 )
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
+from markovmotion.features.body_points import MARKER_POINTS, body_point_index
 from markovmotion.features.heading import RemoveHeading
 from markovmotion.features.select import DropStaticColumns
 from markovmotion.models.base import Model
@@ -50,7 +57,7 @@ from markovmotion.state import (
     require_types,
 )
 
-CONFIGURATIONS = ("rotations", "positions")
+CONFIGURATIONS = ("rotations", "positions", "markers")
 QUANTISERS = ("kmeans", "competitive")
 
 
@@ -122,8 +129,9 @@ class BehaviourModel(Model):
         max_memory: N of the VLMM.
         epsilon: KL threshold of the VLMM (eq. 5).
         lam: weight of the derivative in F = [C, lam dC] (eq. 2).
-        configuration: ``"rotations"`` (exponential maps + pelvis height) or
-            ``"positions"`` (body-centred joint positions in mm).
+        configuration: ``"rotations"`` (exponential maps + pelvis height),
+            ``"positions"`` (body-centred joint positions in mm) or ``"markers"``
+            (the 13 body points of §2.1.2, body-centred).
         fps: frame rate the motion is resampled to for modelling.
         quantiser: ``"kmeans"`` or ``"competitive"`` (robust competitive learning).
         time_scale: factor on the eq. 8 intervals (1: the paper's).
@@ -171,11 +179,14 @@ class BehaviourModel(Model):
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
-    def _make_pipeline(self) -> FeaturePipeline:
+    def _make_pipeline(self, skeleton: Skeleton) -> FeaturePipeline:
         if self.configuration == "rotations":
             first = [RemoveHeading(), ExpMaps(root_position="height")]
         elif self.configuration == "positions":
             first = [JointPositions(body_centred=True)]
+        elif self.configuration == "markers":
+            points = body_point_index(skeleton, MARKER_POINTS, "the training skeleton")
+            first = [JointPositions(body_centred=True, joints=[skeleton.names[j] for j in points])]
         else:
             raise ValueError(f"configuration must be one of {CONFIGURATIONS}")
         return FeaturePipeline([*first, DropStaticColumns(), AugmentedConfiguration(self.lam)])
@@ -189,7 +200,7 @@ class BehaviourModel(Model):
         self.record_training(motions)
         motions = [m.resample(self.fps) for m in motions]
         self.skeleton_ = motions[0].skeleton
-        self.pipeline_ = self._make_pipeline()
+        self.pipeline_ = self._make_pipeline(self.skeleton_)
         feats = self.pipeline_.fit_transform(motions)
         x = np.vstack(feats)
         if self.quantiser == "kmeans":
@@ -199,7 +210,10 @@ class BehaviourModel(Model):
         runs = [collapse_repeats(nearest_prototype(f, self.prototypes_)) for f in feats]
         self.train_tokens_ = np.concatenate([r[0] for r in runs])
         self.train_lengths_ = np.array([len(r[0]) for r in runs])
-        self.eval_joints_ = evaluation_joints(motions)
+        if self.configuration == "markers":
+            self.eval_joints_ = body_point_index(self.skeleton_, MARKER_POINTS)
+        else:
+            self.eval_joints_ = evaluation_joints(motions)
         self.vlmm_ = VLMM(self.max_memory, self.epsilon).fit(
             self.token_sequences(), n_symbols=self.n_prototypes
         )
@@ -275,11 +289,15 @@ class BehaviourModel(Model):
         times = np.r_[0.0, np.cumsum(self.intervals(c, dc))]
         return hermite_sample(c, dc, times, np.arange(int(np.floor(times[-1])) + 1))
 
-    def to_motion(self, configs: np.ndarray) -> Motion:
-        """Scaled configurations (F, d) back to a motion on the training skeleton."""
+    def to_motion(self, configs: np.ndarray) -> Motion | Markers:
+        """Scaled configurations (F, d) back to a motion on the training skeleton, or for
+        ``configuration="markers"`` to the 13 markers (mm, lowest marker on the floor)."""
         out = self.pipeline_.inverse_transform([configs])[0]
         if isinstance(out, Motion):
             return out
+        if self.configuration == "markers":
+            out = out - np.array([0.0, 1.0, 0.0]) * np.nanmin(out[..., 1])
+            return Markers(MARKER_POINTS, out, self.fps, name="vlmm")
         # positions: fit rotations to the skeleton, feet on the floor
         pos = out - np.array([0.0, 1.0, 0.0]) * out[..., 1].min(axis=1)[:, None, None]
         return fit_rotations(self.skeleton_, pos, fps=self.fps)
@@ -290,6 +308,8 @@ class BehaviourModel(Model):
         raw = self.pipeline_.steps[-2].inverse_transform([raw])[0]
         if self.configuration == "positions":
             return raw.reshape(len(raw), -1, 3)[:, self.eval_joints_]
+        if self.configuration == "markers":
+            return raw.reshape(len(raw), -1, 3)
         expmaps = self.pipeline_.steps[1]
         sk = expmaps.skeleton_
         n_rot = 3 * len(expmaps.joint_index_)
