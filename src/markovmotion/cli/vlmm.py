@@ -48,8 +48,14 @@ def _is_markers(behaviour) -> bool:
 
 
 def _check_output(behaviour, out: Path) -> None:
-    """``out`` suits what the model writes: BVH for a skeleton, C3D or an animation for markers."""
-    if not _is_markers(behaviour):
+    """``out`` suits what the model writes: BVH for a skeleton, C3D or an animation for markers;
+    with ``behaviour`` None (before the model is read), one of those."""
+    if behaviour is None:
+        from markovmotion.viz.animation import OUTPUT_SUFFIXES
+
+        if base_suffix(out) not in (".c3d", *OUTPUT_SUFFIXES):
+            check_motion_output(out)
+    elif not _is_markers(behaviour):
         check_motion_output(out)
     elif base_suffix(out) != ".c3d":
         from markovmotion.viz.animation import check_output
@@ -169,6 +175,7 @@ def generate(
     """Synthesize a new routine by traversing the automaton (§3.2.1, §4.3)."""
     from markovmotion.models.vlmm.structured import load_behaviour
 
+    _check_output(None, out)
     behaviour = load_behaviour(model)
     _check_output(behaviour, out)
     motion = behaviour.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
@@ -195,6 +202,7 @@ def predict(
     """Recognise the observed motion's state and predict how it continues (§3.2.2, §4.4)."""
     from markovmotion.models.vlmm.structured import load_behaviour
 
+    _check_output(None, out)
     behaviour = load_behaviour(model)
     _check_output(behaviour, out)
     motion = read_listed_motion(input, fps=fps)
