@@ -351,12 +351,21 @@ def _print_table(report: dict) -> None:
 
     from markovmotion.cli.tables import print_table
 
-    table = Table(title="dual HMM: mean per-frame error of B (mm)")
+    table = Table(
+        title="dual HMM: mean per-frame error of B (mm) and jumps (p90 of frame steps, mm)"
+    )
     cols = ("standard_mm", "windowed_mm", "mean_pose_mm", "nearest_neighbour_mm")
-    for c in ("group", *cols, "latency median/p99 (µs)"):
+    jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
+    for c in ("group", *cols, "paper trellis std/win", *jumps, "latency median/p99 (µs)"):
         table.add_column(c)
     rows = {"overall": report["overall"], **report["per_label"], **report["per_pair"]}
     for name, r in rows.items():
-        lat = r["latency_us"]
-        table.add_row(name, *(f"{r[c]:.1f}" for c in cols), f"{lat['median']:.0f}/{lat['p99']:.0f}")
+        lat, paper = r["latency_us"], r["trellis"]["paper"]
+        table.add_row(
+            name,
+            *(f"{r[c]:.1f}" for c in cols),
+            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}",
+            *(f"{r[c]:.1f}" for c in jumps),
+            f"{lat['median']:.0f}/{lat['p99']:.0f}",
+        )
     print_table(table)

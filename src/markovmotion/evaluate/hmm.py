@@ -1,11 +1,17 @@
 """Accuracy of a virtual partner against the real one (dual-HMM paper §4.1, Figs. 6-8).
 
 For every two-person take of a test set, B is generated from A by standard
-and by windowed Viterbi, and each frame's error is the Euclidean distance
-between generated and real joint positions, in mm, averaged over B's joints
-after forward kinematics -- world positions, B being placed through A's
-real ground frame, so the error counts both B's pose and where B stands
-relative to A. Two baselines: B's mean pose (the mean of B's training joint
+and by windowed Viterbi, through each trellis (``"path"``, ours, and
+``"paper"``, §3.2 as printed), and each frame's error is the Euclidean
+distance between generated and real positions, in mm, averaged over the
+common body points (:mod:`markovmotion.features.body_points`, so the real B
+may come on another skeleton than the model's) after forward kinematics --
+world positions, B being placed through A's real ground frame, so the error
+counts both B's pose and where B stands relative to A. How much B jumps:
+per frame step, how far the median body point moves (:func:`jump_sizes`);
+the JSON gives the 90th percentile of these steps (``*_jump_p90_mm``) and
+the fraction over 100 mm (``*_jump_over_100mm``) for standard, windowed
+and the real B. Two baselines: B's mean pose (the mean of B's training joint
 positions in A's ground frame) and nearest-neighbour retrieval (the B frame
 whose A frame is nearest in A's feature space). The same four are also given
 for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares

@@ -252,6 +252,7 @@ class DualHMM(Model):
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
+        _check_one_skeleton_b(pairs, labels)
         a_list, b_rel = [], []
         for a, b in pairs:
             if a.n_frames != b.n_frames:
@@ -469,6 +470,33 @@ class DualHMM(Model):
             self.trellis,
         )
         return self._trellis_cache
+
+
+def _check_one_skeleton_b(
+    pairs: Sequence[tuple[Motion, Motion]], labels: Sequence[str] | None
+) -> None:
+    """Raise :class:`SkeletonMismatchError` naming the groups (by label, else by take)
+    unless person B has one skeleton in every take: B's output frames are B's own
+    training frames, so they must share one skeleton (A may vary: body points)."""
+    groups: dict[int, tuple[Skeleton, list[str]]] = {}
+    for i, (_, b) in enumerate(pairs):
+        name = labels[i] if labels is not None else (b.name or f"take {i}")
+        for sk, names in groups.values():
+            if sk.same_topology(b.skeleton):
+                if name not in names:
+                    names.append(name)
+                break
+        else:
+            groups[len(groups)] = (b.skeleton, [name])
+    if len(groups) > 1:
+        detail = "; ".join(
+            f"{sk.n_joints} joints ({sk.names[0]} ...): {', '.join(names)}"
+            for sk, names in groups.values()
+        )
+        raise SkeletonMismatchError(
+            f"person B comes on {len(groups)} skeletons ({detail}); B's output frames are "
+            "B's training frames, so train on takes of one of them (--labels)"
+        )
 
 
 def _sharing_chain(

@@ -126,7 +126,7 @@ class Partner:
         its blended rotations (over the frames shown last and the path ahead)."""
         shown = list(self._history)
         roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :])
-        rots = self._trellis.blend(path, self._blend, shown[len(shown) - self._blend :])
+        rots = self._trellis.blend(path, self._blend, shown[len(shown) - self._blend :], count)
         self._history.extend(int(i) for i in path[:count])
         return list(zip(path[:count].tolist(), roots[:count], rots[:count], strict=True))
 

@@ -145,24 +145,27 @@ class Trellis:
             pick = lowest_error_path(cost, d4, steps)
         return np.array([c[0][j] for c, j in zip(cols, pick, strict=True)], dtype=int)
 
-    def blend(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
+    def blend(
+        self, path: np.ndarray, half: int, before: Sequence[int] = (), count: int | None = None
+    ) -> np.ndarray:
         """(F, J, 4) B's joint rotations along ``path``, each frame's the normalised mean of
         the quaternions of frames t - half .. t + half (those that exist; ``before``: frames
         shown before the path's first), each turned to the hemisphere of frame t's: a cut
         between two training frames becomes a blend over ``2 half + 1`` frames, and a
         sequence of consecutive training frames stays close to itself. ``half = 0``: the
-        frames' own rotations."""
+        frames' own rotations. ``count``: only the path's first ``count`` frames (online,
+        the one frame shown)."""
         frames = np.concatenate([before, path]).astype(int)
-        quats = self.motion_b.rotations[frames]
-        t = np.arange(len(before), len(frames))
+        t = np.arange(len(before), len(frames))[:count]
+        quats = self.motion_b.rotations
         if half <= 0:
-            return quats[t]
-        out = np.zeros((len(t), *quats.shape[1:]))
-        for d in range(-half, half + 1):
-            q = quats[np.clip(t + d, 0, len(frames) - 1)]
-            inside = ((t + d >= 0) & (t + d < len(frames)))[:, None, None]
-            sign = np.where((q * quats[t]).sum(axis=-1, keepdims=True) < 0, -1.0, 1.0)
-            out += np.where(inside, sign * q, 0.0)
+            return quats[frames[t]]
+        near = t[:, None] + np.arange(-half, half + 1)[None, :]  # (F, W)
+        inside = (near >= 0) & (near < len(frames))
+        q = quats[frames[np.clip(near, 0, len(frames) - 1)]]  # (F, W, J, 4)
+        centre = quats[frames[t]][:, None]
+        sign = np.where((q * centre).sum(axis=-1) < 0, -1.0, 1.0) * inside[:, :, None]
+        out = (q * sign[..., None]).sum(axis=1)
         return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
     def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
