@@ -33,19 +33,68 @@ def _pairs(values: list[str], what: str) -> dict[str, Path]:
     return out
 
 
+STUDIES = ("gait", "interaction")
+
+
+def _study(value: str) -> str:
+    if value not in STUDIES:
+        raise typer.BadParameter(f"{value!r}: must be one of {', '.join(STUDIES)}")
+    return value
+
+
 @app.command()
 def stimuli(
-    out: Path = typer.Argument(..., help="Folder to write the stimuli and manifest.csv into."),
-    real: list[str] = typer.Option([], help="STYLE=FILE of an original walk (repeat)."),
+    out_arg: Path = typer.Argument(
+        None, metavar="[OUT]", help="Folder to write the stimuli into (or --out)."
+    ),
+    out: Path = typer.Option(None, "--out", help="Folder to write the stimuli into."),
+    study: str = typer.Option(
+        "gait",
+        callback=_study,
+        help="gait: the walks of the gait paper (§6.1); interaction: the dual-HMM "
+        "paper's observer study (§4.2) from --model.",
+    ),
+    real: list[str] = typer.Option([], help="STYLE=FILE of an original walk (repeat; gait)."),
     synthetic: list[str] = typer.Option(
-        [], help="STYLE=FILE of a synthesized walk (repeat; style 'average' for the average model)."
+        [],
+        help="STYLE=FILE of a synthesized walk (repeat; style 'average' for the average model; "
+        "gait).",
+    ),
+    model: Path = typer.Option(None, help="The dual-HMM model (.npz) generating B (interaction)."),
+    test: Path = typer.Option(
+        None,
+        help="INDEX.csv (or its folder) whose two-person takes to show (interaction; default: "
+        "the model's held-out takes). Takes the model trained on are left out.",
     ),
 ) -> None:
-    """Write each walk with and without root displacement, anonymised, with a manifest (§6.1)."""
+    """Gait: each walk with and without root displacement (§6.1). Interaction: per test take,
+    the real clip and one with B generated from A. Anonymised, with a manifest."""
+    if out is not None and out_arg is not None and out != out_arg:
+        raise typer.BadParameter("give the folder once, as OUT or --out", param_hint="--out")
+    folder = out or out_arg
+    if folder is None:
+        raise typer.BadParameter("where to write the stimuli: give --out DIR", param_hint="--out")
+    if study == "interaction":
+        if real or synthetic:
+            raise typer.BadParameter("--real/--synthetic are walks: for --study gait")
+        if model is None:
+            raise typer.BadParameter("--study interaction needs --model M.npz (a dual HMM)")
+        from markovmotion.evaluate.interaction import write_interaction_stimuli
+
+        made = write_interaction_stimuli(folder, model, test)
+        counts = {k: sum(c.kind == k for c in made.clips) for k in ("real", "generated")}
+        Console(stderr=True).print(
+            f"wrote {counts['real']} real and {counts['generated']} generated clips "
+            f"({', '.join(made.labels)}) and {folder / 'interaction.json'}",
+            highlight=False,
+        )
+        return
+    if model is not None or test is not None:
+        raise typer.BadParameter("--model/--test build interaction clips: add --study interaction")
     from markovmotion.evaluate.stimuli import write_stimuli
 
-    written = write_stimuli(out, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))
-    Console(stderr=True).print(f"wrote {len(written)} stimuli and {out / 'manifest.csv'}")
+    written = write_stimuli(folder, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))
+    Console(stderr=True).print(f"wrote {len(written)} stimuli and {folder / 'manifest.csv'}")
 
 
 @app.command()
