@@ -122,7 +122,9 @@ def read_interaction_manifest(folder: str | os.PathLike[str]) -> InteractionStim
         raise MotionFormatError(path, "two clips have the same id")
     for c in clips:
         if c.kind not in CLIP_KINDS:
-            raise MotionFormatError(path, f"clip {c.id}: kind {c.kind!r} is not one of {CLIP_KINDS}")
+            raise MotionFormatError(
+                path, f"clip {c.id}: kind {c.kind!r} is not one of {CLIP_KINDS}"
+            )
         if c.label not in labels:
             raise MotionFormatError(path, f"clip {c.id}: label {c.label!r} is not one offered")
         for file in (c.file_a, c.file_b):
@@ -283,4 +285,3 @@ def summarise_interaction(
         "overall": {kind: _cell([i for i in rows if i.kind == kind]) for kind in CLIP_KINDS},
         "clips": per_clip,
     }
-

@@ -185,7 +185,10 @@ class EvaluationStore:
                 )
                 c.executemany(
                     "INSERT OR REPLACE INTO clips VALUES (?, ?, ?, ?, ?, ?)",
-                    [(k.id, k.file_a, k.file_b, k.label, k.kind, k.take) for k in interaction.clips],
+                    [
+                        (k.id, k.file_a, k.file_b, k.label, k.kind, k.take)
+                        for k in interaction.clips
+                    ],
                 )
         self.interaction = interaction or self._stored_interaction()
 
@@ -226,7 +229,9 @@ class EvaluationStore:
         """The studies this database has stimuli for, of :data:`STUDIES`."""
         return [
             s
-            for s, ok in zip(STUDIES, (bool(self.stimuli), self.interaction is not None), strict=True)
+            for s, ok in zip(
+                STUDIES, (bool(self.stimuli), self.interaction is not None), strict=True
+            )
             if ok
         ]
 

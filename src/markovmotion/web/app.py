@@ -45,6 +45,7 @@ from markovmotion.evaluate.perceptual import (
 )
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
+from markovmotion.viz.point_light import point_lights
 from markovmotion.web.library import (
     LibraryPathError,
     MotionLibrary,
@@ -57,7 +58,6 @@ from markovmotion.web.library import (
 )
 from markovmotion.web.live import PartnerFactory, live_session
 from markovmotion.web.security import UPLOAD_SLACK, Guard
-from markovmotion.viz.point_light import point_lights
 
 HERE = Path(__file__).parent
 PAGES_DIR = HERE / "pages"
@@ -152,7 +152,11 @@ def create_app(
         clips = None
         if (Path(stimuli) / INTERACTION_MANIFEST).is_file():
             clips = read_interaction_manifest(stimuli)
-        gait = read_manifest(stimuli) if clips is None or (Path(stimuli) / MANIFEST).is_file() else None
+        gait = (
+            read_manifest(stimuli)
+            if clips is None or (Path(stimuli) / MANIFEST).is_file()
+            else None
+        )
         store = EvaluationStore(db or "results.sqlite", gait, clips)
     elif db is not None and Path(db).is_file():
         store = EvaluationStore(db)
@@ -327,7 +331,7 @@ def create_app(
                     ],
                 }
                 for test in TESTS
-            ]
+            ],
         }
 
     @lru_cache(maxsize=64)
