@@ -1,4 +1,4 @@
-"""``evaluation``: build the stimuli of the perceptual tests and analyse their answers."""
+"""``evaluation``: build the stimuli of the perceptual studies and analyse their answers."""
 
 from __future__ import annotations
 
@@ -10,12 +10,15 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.cli.tables import print_table
-from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, answers_csv, summarise
+from markovmotion.evaluate.interaction import summarise_interaction
+from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, TESTS, answers_csv, summarise
 from markovmotion.evaluate.store import open_results
 from markovmotion.io.files import atomic_write
 
 app = typer.Typer(
-    help="Perceptual evaluation of synthesized walks (gait paper §6).", no_args_is_help=True
+    help="Perceptual evaluation: synthesized walks (gait paper §6), generated interactions "
+    "(dual-HMM paper §4.2).",
+    no_args_is_help=True,
 )
 
 
@@ -106,8 +109,60 @@ def report(
     """Recompute the figures of the paper's §6 from the answers in DB."""
     store = open_results(db)
     items = store.answered()
-    rep = summarise(items, store.styles)
+    rep = summarise([i for i in items if i.test in TESTS], store.styles)
     console = Console()
+    if store.stimuli or store.interaction is None:
+        _print_gait(store, rep, console)
+    figures = rep.to_dict()
+    if store.interaction is not None:
+        figures["interaction"] = inter = summarise_interaction(
+            items, store.interaction.labels, store.interaction.clips
+        )
+        _print_interaction(inter, console)
+    if csv:
+        with atomic_write(csv) as fh:
+            fh.write(answers_csv(items))
+    if json_out:
+        with atomic_write(json_out) as fh:
+            fh.write(json.dumps(figures, indent=1))
+
+
+def _print_interaction(s: dict, console: Console) -> None:
+    """The observer study's tables (dual-HMM paper §4.2, Tables 1-2)."""
+    console.print(
+        f"Interactions: {s['observers']} observers, {s['answers']} answers", highlight=False
+    )
+    t = Table(title="Identification of the action, % (correct/answers); noticed something unusual")
+    t.add_column("behaviour")
+    for kind in s["kinds"]:
+        t.add_column(f"identified, {kind}", justify="right")
+        t.add_column(f"unusual, {kind}", justify="right")
+    rows = [(label, s["rates"][label]) for label in s["labels"]] + [("all", s["overall"])]
+    for label, row in rows:
+        cells = []
+        for kind in s["kinds"]:
+            c = row[kind]
+            rate = "–" if c["rate"] is None else f"{c['rate']:.1f}"
+            cells += [f"{rate} ({c['correct']}/{c['n']})", f"{c['unusual']}/{c['n']}"]
+        t.add_row(label, *cells)
+    print_table(t, console)
+    t = Table(title="Comments per video")
+    for col in ("video", "behaviour", "kind", "take", "unusual", "comments"):
+        t.add_column(col)
+    for c in s["clips"]:
+        t.add_row(
+            c["clip"],
+            c["label"],
+            c["kind"],
+            c["take"],
+            f"{c['unusual']}/{c['n']}",
+            " | ".join(c["comments"]) or "–",
+        )
+    print_table(t, console)
+
+
+def _print_gait(store, rep, console: Console) -> None:
+    """The gait study's tables (gait paper §6)."""
     console.print(
         f"{store.count_evaluators()} evaluators registered, {rep.evaluators} answered; "
         f"answers: {rep.answers['naturalness']} naturalness, {rep.answers['recognition']} style, "
@@ -155,9 +210,3 @@ def report(
     for level in range(len(RESEMBLANCE) - 1, -1, -1):
         t.add_row(f"{level} {RESEMBLANCE[level]}", str(rep.resemblance_histogram[level]))
     print_table(t, console)
-    if csv:
-        with atomic_write(csv) as fh:
-            fh.write(answers_csv(items))
-    if json_out:
-        with atomic_write(json_out) as fh:
-            fh.write(json.dumps(rep.to_dict(), indent=1))
