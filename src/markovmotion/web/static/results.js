@@ -28,12 +28,19 @@ function card(title, value, id) {
 }
 
 function render(r) {
+  const gait = (r.studies || ["gait"]).includes("gait");
   $("counts").replaceChildren(
     card("evaluators registered", String(r.registered), "n-registered"),
-    card("evaluators who answered", String(r.evaluators), "n-evaluators"),
-    card("naturalness answers", String(r.answers.naturalness), "n-naturalness"),
-    card("style answers", String(r.answers.recognition), "n-recognition"),
-    card("resemblance answers", String(r.answers.resemblance), "n-resemblance"),
+    ...(gait ? [
+      card("evaluators who answered", String(r.evaluators), "n-evaluators"),
+      card("naturalness answers", String(r.answers.naturalness), "n-naturalness"),
+      card("style answers", String(r.answers.recognition), "n-recognition"),
+      card("resemblance answers", String(r.answers.resemblance), "n-resemblance"),
+    ] : []),
+    ...(r.interaction ? [
+      card("observers of interactions", String(r.interaction.observers), "n-observers"),
+      card("interaction answers", String(r.interaction.answers), "n-interaction"),
+    ] : []),
   );
 
   const nat = $("naturalness");
@@ -105,7 +112,6 @@ function render(r) {
       ` over ${hist.reduce((a, b) => a + b, 0)} comparisons.`),
     bars,
   );
-  const gait = (r.studies || ["gait"]).includes("gait");
   document.querySelectorAll("section.gait").forEach((s) => { s.hidden = !gait; });
   renderInteraction(r.interaction);
   document.body.dataset.loaded = "yes";

@@ -1,0 +1,332 @@
+"""The observer study of the dual-HMM paper (§4.2, Tables 1-2), end to end.
+
+A small dual HMM is trained on the real two-person takes of the collection (the
+first take of every label of the subject pair with the most interaction
+labels); ``markovmotion evaluation stimuli --study interaction`` builds the
+point-light clips of the other takes (real, and B generated from A); an observer
+answers in headless Chromium, one answer wrong, one with a comment; the results
+page shows the rates computed from the answers stored, and the comment under its
+video. Also: the analysis on hand-made answers, the command's option checks,
+and bad requests (4xx, one line).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+
+import numpy as np
+import pytest
+from test_web import CHROMIUM, CHROMIUM_ARGS, SHOTS, ensure_chromium, fetch, post_json
+
+from markovmotion.cli import main
+from markovmotion.evaluate.interaction import (
+    INTERACTION,
+    INTERACTION_MANIFEST,
+    OTHER,
+    Clip,
+    read_interaction_manifest,
+    summarise_interaction,
+)
+from markovmotion.evaluate.store import Item, open_results
+from markovmotion.io import read_motion
+from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.web import create_app
+from markovmotion.web.server import running
+
+ADMIN = "admin-token-for-the-interaction-study"
+COMMENT = "the second person's arm floats <b>oddly</b>"
+
+
+def study_takes(mocap) -> tuple[list, list]:
+    """Training and test takes: of the subject pair with the most interaction labels, the
+    first take of every label trains, the others are shown (nothing named in the code)."""
+    by_subject: dict[str, list] = defaultdict(list)
+    for a, b in mocap.pairs():
+        by_subject[a.subject].append((a, b))
+    pairs = max(by_subject.values(), key=lambda ps: len({a.label for a, _ in ps}))
+    train, test, seen = [], [], set()
+    for a, b in pairs:
+        (test if a.label in seen else train).append((a, b))
+        seen.add(a.label)
+    assert len({a.label for a, _ in pairs}) >= 2 and test, (
+        "the study needs two labels and a test take"
+    )
+    return train, test
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory, mocap):
+    """A dual HMM trained on real takes, and the stimuli built from it by the command line."""
+    root = tmp_path_factory.mktemp("interaction")
+    train, test = study_takes(mocap)
+    model = DualHMM(n_states=8, n_iter=5).fit(
+        [mocap.load_pair(a, b) for a, b in train], [a.label for a, _ in train]
+    )
+    model.save(root / "dual.npz")
+    args = ["evaluation", "stimuli", "--study", "interaction", "--model", str(root / "dual.npz")]
+    main([*args, "--test", str(mocap.root / "INDEX.csv"), "--out", str(root / "stimuli")])
+    return root, model, train, test
+
+
+@pytest.fixture(scope="module")
+def server(study):
+    root, *_ = study
+    app = create_app(root, root / "results.sqlite", stimuli=root / "stimuli", admin_token=ADMIN)
+    with running(app) as url:
+        yield url
+
+
+# ---------------------------------------------------------------- stimuli
+
+
+def test_stimuli_are_a_real_and_a_generated_clip_of_every_test_take(study, mocap):
+    root, model, train, test = study
+    s = read_interaction_manifest(root / "stimuli")
+    assert s.labels == model.labels_ == sorted({a.label for a, _ in train})
+    trained = {f"{a.name}+{b.name}" for a, b in train}
+    takes = {f"{a.name}+{b.name}": a.label for a, b in test}
+    assert {c.take for c in s.clips} == set(takes) and not trained & set(takes)
+    assert s.left_out["left_out_training_files"] == [e.file for p in train for e in p]
+    for take, label in takes.items():
+        real, generated = (
+            next(c for c in s.clips if c.take == take and c.kind == k)
+            for k in ("real", "generated")
+        )
+        assert real.label == generated.label == label
+        a_real, a_gen = (read_motion(root / "stimuli" / c.file_a) for c in (real, generated))
+        b_real, b_gen = (read_motion(root / "stimuli" / c.file_b) for c in (real, generated))
+        assert a_real.n_frames == a_gen.n_frames == b_real.n_frames == b_gen.n_frames > 30
+        assert np.isclose(a_real.fps, model.fps) and np.isclose(b_gen.fps, model.fps)
+        np.testing.assert_allclose(a_real.positions(), a_gen.positions(), atol=1e-3)
+        assert not np.allclose(b_real.positions(), b_gen.positions(), atol=10.0)
+    names = sorted(p.name for p in (root / "stimuli").iterdir())
+    assert all(n.startswith("interaction_") or n == INTERACTION_MANIFEST for n in names)
+
+
+def test_summary_counts_the_answers():
+    clips = [Clip("c1", "a", "b", "pull", "real"), Clip("c2", "a", "b", "pull", "generated")]
+
+    def item(token, clip, answer, unusual=False, comment=""):
+        return Item(
+            token,
+            INTERACTION,
+            0,
+            clip.id,
+            clip.label,
+            clip.kind,
+            False,
+            None,
+            answer,
+            unusual,
+            comment,
+        )
+
+    items = [
+        item("t1", clips[0], "pull"),
+        item("t2", clips[0], "pull"),
+        item("t1", clips[1], "pull", True, "floaty"),
+        item("t2", clips[1], OTHER, True, ""),
+        item("t3", clips[1], "handshake"),
+        Item("t3", "naturalness", 0, "x.bvh", "active", "real", True, None, "real"),
+    ]
+    s = summarise_interaction(items, ["handshake", "pull"], clips)
+    assert s["observers"] == 3 and s["answers"] == 5
+    assert s["rates"]["pull"]["real"] == {"n": 2, "correct": 2, "rate": 100.0, "unusual": 0}
+    gen = s["rates"]["pull"]["generated"]
+    assert (gen["n"], gen["correct"], gen["unusual"]) == (3, 1, 2)
+    assert gen["rate"] == pytest.approx(100 / 3)
+    assert s["rates"]["handshake"]["real"]["rate"] is None
+    assert [c["comments"] for c in s["clips"]] == [[], ["floaty"]]
+
+
+# ---------------------------------------------------------------- command line
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (["--study", "walks", "--out", "x"], "--study"),
+        (["--study", "interaction", "--out", "x"], "--model"),
+        (["--model", "m.npz", "--out", "x"], "--study interaction"),
+        (["--study", "interaction", "--model", "m.npz", "--real", "a=b", "--out", "x"], "--real"),
+        (["one", "--out", "two"], "--out"),
+        (["--study", "interaction", "--model", "no-such-model.npz", "--out", "x"], "no-such-model"),
+    ],
+)
+def test_bad_options_are_one_line_exit_2(args, problem, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluation", "stimuli", *args])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and problem in err and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_gait_stimuli_as_before(mocap, tmp_path, capsys):
+    walks = [e for e in mocap.query(category="style_walk") if "dataset-2" in e.file][:2]
+    main(
+        [
+            "evaluation",
+            "stimuli",
+            str(tmp_path / "gait"),
+            "--real",
+            f"{walks[0].label}={walks[0].path}",
+        ]
+    )
+    assert (tmp_path / "gait" / "manifest.csv").is_file()
+    assert not (tmp_path / "gait" / INTERACTION_MANIFEST).exists()
+
+
+# ---------------------------------------------------------------- API
+
+
+def test_bad_requests_are_4xx_with_one_line(server):
+    assert json.loads(fetch(server + "/api/studies")[1]) == {"studies": ["interaction"]}
+    assert post_json(server + "/api/evaluation?study=gait")[0] == 404  # not on this server
+    status, body = post_json(server + "/api/evaluation?study=<script>")
+    assert status == 422 and "\n" not in body["detail"]
+    token = post_json(server + "/api/evaluation?study=interaction")[1]["token"]
+    state = json.loads(fetch(f"{server}/api/evaluation/{token}")[1])
+    test = state["tests"][0]
+    base = f"{server}/api/evaluation/{token}/{INTERACTION}"
+    assert fetch(f"{base}/0/1")[0] == 404
+    assert fetch(f"{base}/{len(test['items'])}/0")[0] == 404
+    assert fetch(f"{server}/api/evaluation/{token}/naturalness/0/0")[0] == 404
+    assert fetch(f"{base}/-1/0")[0] == 422
+    for body, code in (
+        ({"answer": "salsa-or-anything"}, 422),
+        ({"answer": test["choices"][0][0], "comment": "x" * 2001}, 422),
+        ({"answer": test["choices"][0][0], "unusual": [1, 2]}, 422),
+        ({"unusual": True}, 422),
+        ({"answer": test["choices"][0][0]}, 200),
+    ):
+        status, reply = post_json(f"{base}/0", body)
+        assert status == code, reply
+        assert code == 200 or ("detail" in reply and "\n" not in reply["detail"])
+    status, reply = post_json(f"{base}/99", {"answer": test["choices"][0][0]})
+    assert status == 422 and "no item" in reply["detail"]
+    points = json.loads(fetch(f"{base}/0/0")[1])
+    assert points["name"] == "" and set(points["parents"]) == {-1} and len(points["joints"]) == 26
+    assert all(not j.startswith(("cmu", "interaction")) for j in points["joints"])
+
+
+# ---------------------------------------------------------------- browser
+
+
+@pytest.fixture(scope="module")
+def browser():
+    ensure_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture()
+def page(browser):
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    pg = context.new_page()
+    errors = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    yield pg
+    context.close()
+    assert not errors, errors
+
+
+def light_pixels(page) -> tuple[int, int]:
+    """(white, other non-black) pixels of the point-light canvas."""
+    return tuple(
+        page.evaluate(
+            """() => {
+            const c = document.querySelector('canvas.stage');
+            const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+            let white = 0, other = 0;
+            for (let i = 0; i < d.length; i += 4) {
+              const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
+              if (r > 200 && g > 200 && b > 200) white++;
+              else if (r > 40 || g > 40 || b > 40) other++;
+            }
+            return [white, other];
+        }"""
+        )
+    )
+
+
+def test_observer_answers_and_the_results_page_shows_rates_and_comments(study, server, page):
+    root, *_ = study
+    clips = {c.id: c for c in read_interaction_manifest(root / "stimuli").clips}
+    page.goto(f"{server}/evaluation")
+    page.wait_for_function("() => document.body.dataset.studies === 'interaction'")
+    assert not page.is_visible("#begin") and page.is_visible("#begin-interaction")
+    page.screenshot(path=SHOTS / "interaction-start.png")
+    page.click("#begin-interaction")
+    page.wait_for_url("**/evaluation/*")
+    token = page.url.rsplit("/", 1)[1]
+    store = open_results(root / "results.sqlite")
+    drawn = {i.position: clips[i.file] for i in store.items(token)}
+    assert sorted(c.id for c in drawn.values()) == sorted(clips)  # every clip once
+
+    given: dict[str, tuple[str, bool, str]] = {}
+    for n in range(len(clips)):
+        page.wait_for_function(f"() => document.body.dataset.position === '{n}'")
+        clip = drawn[n]
+        if n == 0:
+            page.click(".play")
+            page.wait_for_function("() => Number(document.body.dataset.frame) > 5")
+            white, other = light_pixels(page)
+            assert white > 20 and other < white * 3  # white dots on black, nothing else
+            page.screenshot(path=SHOTS / "interaction-clip.png")
+        wrong = n == 1
+        answer = next(
+            c
+            for c in (*read_interaction_manifest(root / "stimuli").labels, OTHER)
+            if (c != clip.label) == wrong
+        )
+        assert page.is_disabled("#submit")
+        page.click(f"#choices button[data-value='{answer}']")
+        unusual, comment = False, ""
+        if n == 0:
+            page.fill("#comment", COMMENT)  # writing ticks "noticed something unusual"
+            unusual, comment = True, COMMENT
+        elif n == 2:
+            page.check("#unusual")
+            unusual = True
+        page.click("#submit")
+        given[clip.id] = (answer, unusual, comment)
+    page.wait_for_selector("#done", state="visible")
+    page.screenshot(path=SHOTS / "interaction-done.png")
+
+    stored = {i.file: (i.answer, i.unusual, i.comment) for i in store.items(token)}
+    assert stored == given  # every answer committed as given
+
+    page.goto(f"{server}/results?token={ADMIN}")
+    page.wait_for_function("() => document.body.dataset.loaded === 'yes'")
+    assert page.is_visible("#interaction") and not page.is_visible("#naturalness")
+    assert page.text_content("#n-interaction .big") == str(
+        sum(i.test == INTERACTION for i in store.answered())
+    )
+    labels = read_interaction_manifest(root / "stimuli").labels
+    answers = [i for i in store.answered() if i.test == INTERACTION]  # every observer's
+    assert {i.token for i in answers} >= {token}
+    for label in labels:
+        for kind in ("real", "generated"):
+            mine = [i for i in answers if (i.style, i.kind) == (label, kind)]
+            correct = sum(i.answer == label for i in mine)
+            row = f"#interaction-rates tr[data-label='{label}']"
+            cell = page.text_content(f"{row} td[data-kind='{kind}'][data-what='rate']")
+            rate = "–" if not mine else f"{100 * correct / len(mine):.1f} %"
+            assert cell == f"{rate} ({correct}/{len(mine)})"
+            noticed = page.text_content(f"{row} td[data-kind='{kind}'][data-what='unusual']")
+            assert noticed == f"{sum(bool(i.unusual) for i in mine)}/{len(mine)}"
+    wrong_clip = drawn[1]
+    cell = page.text_content(
+        f"#interaction-rates tr[data-label='{wrong_clip.label}'] td[data-kind='{wrong_clip.kind}'][data-what='rate']"
+    )
+    assert not cell.startswith("100.0")  # the wrong answer lowered it
+    assert page.locator(f"#clip-{drawn[0].id} .comment").all_text_contents() == [COMMENT]
+    assert page.locator(".comment").count() == 1
+    page.screenshot(path=SHOTS / "interaction-results.png", full_page=True)
