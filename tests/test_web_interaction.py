@@ -20,6 +20,7 @@ import pytest
 from test_web import CHROMIUM, CHROMIUM_ARGS, SHOTS, ensure_chromium, fetch, post_json
 
 from markovmotion.cli import main
+from markovmotion.errors import MarkovMotionError
 from markovmotion.evaluate.interaction import (
     INTERACTION,
     INTERACTION_MANIFEST,
@@ -152,16 +153,38 @@ def test_summary_counts_the_answers():
         (["--study", "interaction", "--model", "m.npz", "--real", "a=b", "--out", "x"], "--real"),
         (["one", "--out", "two"], "--out"),
         (["--study", "interaction", "--model", "no-such-model.npz", "--out", "x"], "no-such-model"),
+        (["--study", "interaction", "--model", "m.npz", "--out", "afile"], "not a folder"),
     ],
 )
 def test_bad_options_are_one_line_exit_2(args, problem, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("")
     with pytest.raises(SystemExit) as exc:
         main(["evaluation", "stimuli", *args])
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and problem in err and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "not json",
+        "[1, 2]",
+        '{"labels": "pull", "clips": []}',
+        '{"labels": ["pull"], "clips": [{"id": "x", "file_a": "../../etc/passwd", '
+        '"file_b": "x.bvh", "label": "pull", "kind": "real"}]}',
+        '{"labels": ["pull"], "clips": [{"id": "x", "file_a": "a.bvh", "file_b": "a.bvh", '
+        '"label": "pull", "kind": "fake"}]}',
+    ],
+)
+def test_a_damaged_manifest_is_one_line(text, tmp_path):
+    (tmp_path / "a.bvh").write_text("x")
+    (tmp_path / INTERACTION_MANIFEST).write_text(text)
+    with pytest.raises(MarkovMotionError) as exc:
+        read_interaction_manifest(tmp_path)
+    assert INTERACTION_MANIFEST in str(exc.value) and "\n" not in str(exc.value)
 
 
 def test_gait_stimuli_as_before(mocap, tmp_path, capsys):

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionFormatError
 from markovmotion.io import write_motion
 from markovmotion.io.files import atomic_write, read_text
 
@@ -112,8 +112,12 @@ def read_interaction_manifest(folder: str | os.PathLike[str]) -> InteractionStim
             )
             for c in data["clips"]
         ]
-    except (ValueError, KeyError, TypeError) as exc:
+        model, fps = str(data.get("model", "")), float(data.get("fps", 30.0))
+        left_out = {str(k): [str(f) for f in v] for k, v in dict(data.get("left_out", {})).items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise MotionFormatError(path, f"not an interaction manifest ({exc!r})") from None
+    if not isinstance(data["labels"], list) or not isinstance(data["clips"], list):
+        raise MotionFormatError(path, "labels and clips must be lists")
     if not labels or any(not label for label in labels) or OTHER in labels:
         raise MotionFormatError(path, "labels: expected a list of action names")
     if not clips:
@@ -131,13 +135,7 @@ def read_interaction_manifest(folder: str | os.PathLike[str]) -> InteractionStim
             target = (root / file).resolve()
             if not target.is_relative_to(root) or not target.is_file():
                 raise MotionFormatError(path, f"clip {c.id}: {file!r} is not a file inside {root}")
-    return InteractionStimuli(
-        labels,
-        clips,
-        str(data.get("model", "")),
-        float(data.get("fps", 30.0)),
-        {str(k): [str(f) for f in v] for k, v in dict(data.get("left_out", {})).items()},
-    )
+    return InteractionStimuli(labels, clips, model, fps, left_out)
 
 
 def write_interaction_stimuli(
@@ -161,6 +159,9 @@ def write_interaction_stimuli(
     from markovmotion.evaluate.hmm import evaluation_pairs
     from markovmotion.models.hmm.dual import DualHMM
 
+    root = Path(folder)
+    if root.exists() and not root.is_dir():
+        raise MarkovMotionError(f"{root}: not a folder to write the stimuli into")
     model = DualHMM.load(model_path)
     index, takes = evaluation_pairs(model, test)
     made: list[tuple[str, str, Any, Any, Any]] = []
@@ -181,7 +182,6 @@ def write_interaction_stimuli(
     labels = list(getattr(model, "labels_", None) or []) or sorted({m[1] for m in made})
     labels += sorted({m[1] for m in made} - set(labels))
     order = (rng or np.random.default_rng()).permutation(2 * len(made))
-    root = Path(folder)
     root.mkdir(parents=True, exist_ok=True)
     clips: list[Clip] = []
     for i, (take, label, a, b, generated) in enumerate(made):

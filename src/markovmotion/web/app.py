@@ -352,6 +352,8 @@ def create_app(
                 return Response(clip_json(clip.file_a, clip.file_b), media_type="application/json")
             except LibraryPathError as exc:
                 raise HTTPException(404, str(exc)) from None
+            except (RecursionError, MemoryError, ValueError):
+                raise HTTPException(422, f"clip {shown(clip.id)}: cannot be read") from None
         files = (item.file, item.file_b) if item is not None else ()
         if side not in range(len(files)) or files[side] is None:
             raise HTTPException(404, "no such stimulus")
