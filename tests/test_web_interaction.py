@@ -17,6 +17,7 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from PIL import Image
 from test_web import CHROMIUM, CHROMIUM_ARGS, SHOTS, ensure_chromium, fetch, post_json
 
 from markovmotion.cli import main
@@ -30,8 +31,11 @@ from markovmotion.evaluate.interaction import (
     summarise_interaction,
 )
 from markovmotion.evaluate.store import Item, open_results
+from markovmotion.features.body_points import MARKER_POINTS
 from markovmotion.io import read_motion
 from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.viz import render
+from markovmotion.viz.point_light import point_lights
 from markovmotion.web import create_app
 from markovmotion.web.server import running
 
@@ -66,7 +70,9 @@ def study(tmp_path_factory, mocap):
     )
     model.save(root / "dual.npz")
     args = ["evaluation", "stimuli", "--study", "interaction", "--model", str(root / "dual.npz")]
-    main([*args, "--test", str(mocap.root / "INDEX.csv"), "--out", str(root / "stimuli")])
+    main(
+        [*args, "--test", str(mocap.root / "INDEX.csv"), "--out", str(root / "stimuli"), "--videos"]
+    )
     return root, model, train, test
 
 
@@ -103,6 +109,21 @@ def test_stimuli_are_a_real_and_a_generated_clip_of_every_test_take(study, mocap
         assert not np.allclose(b_real.positions(), b_gen.positions(), atol=10.0)
     names = sorted(p.name for p in (root / "stimuli").iterdir())
     assert all(n.startswith("interaction_") or n == INTERACTION_MANIFEST for n in names)
+    for c in s.clips:  # --videos: each clip also as a point-light MP4
+        assert (root / "stimuli" / f"{c.id}.mp4").stat().st_size > 1000
+
+
+def test_point_light_strip_is_white_dots_on_black(study, tmp_path):
+    root, *_ = study
+    clip = read_interaction_manifest(root / "stimuli").clips[0]
+    people = [read_motion(root / "stimuli" / f) for f in (clip.file_a, clip.file_b)]
+    cloud = point_lights(people)
+    assert cloud.positions.shape == (people[0].n_frames, 2 * len(MARKER_POINTS), 3)
+    render(cloud, tmp_path / "strip.png", point_light=True, strip_frames=3)
+    rgb = np.asarray(Image.open(tmp_path / "strip.png").convert("RGB")).astype(int)
+    black, white = (rgb.max(-1) < 30), (rgb.min(-1) > 200)
+    assert black.mean() > 0.9 and white.sum() > 100
+    assert (black | white).mean() > 0.99  # nothing but the points (and their edges)
 
 
 def test_summary_counts_the_answers():
@@ -150,6 +171,7 @@ def test_summary_counts_the_answers():
         (["--study", "walks", "--out", "x"], "--study"),
         (["--study", "interaction", "--out", "x"], "--model"),
         (["--model", "m.npz", "--out", "x"], "--study interaction"),
+        (["--videos", "--out", "x"], "--study interaction"),
         (["--study", "interaction", "--model", "m.npz", "--real", "a=b", "--out", "x"], "--real"),
         (["one", "--out", "two"], "--out"),
         (["--study", "interaction", "--model", "no-such-model.npz", "--out", "x"], "no-such-model"),

@@ -69,6 +69,9 @@ def stimuli(
         help="INDEX.csv (or its folder) whose two-person takes to show (interaction; default: "
         "the model's held-out takes). Takes the model trained on are left out.",
     ),
+    videos: bool = typer.Option(
+        False, "--videos", help="Also render each clip as a point-light MP4 (interaction)."
+    ),
 ) -> None:
     """Gait: each walk with and without root displacement (§6.1). Interaction: per test take,
     the real clip and one with B generated from A. Anonymised, with a manifest."""
@@ -84,7 +87,7 @@ def stimuli(
             raise typer.BadParameter("--study interaction needs --model M.npz (a dual HMM)")
         from markovmotion.evaluate.interaction import write_interaction_stimuli
 
-        made = write_interaction_stimuli(folder, model, test)
+        made = write_interaction_stimuli(folder, model, test, videos=videos)
         counts = {k: sum(c.kind == k for c in made.clips) for k in ("real", "generated")}
         Console(stderr=True).print(
             f"wrote {counts['real']} real and {counts['generated']} generated clips "
@@ -92,8 +95,10 @@ def stimuli(
             highlight=False,
         )
         return
-    if model is not None or test is not None:
-        raise typer.BadParameter("--model/--test build interaction clips: add --study interaction")
+    if model is not None or test is not None or videos:
+        raise typer.BadParameter(
+            "--model/--test/--videos build interaction clips: add --study interaction"
+        )
     from markovmotion.evaluate.stimuli import write_stimuli
 
     written = write_stimuli(folder, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))

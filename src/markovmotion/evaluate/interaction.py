@@ -143,13 +143,16 @@ def write_interaction_stimuli(
     model_path: str | os.PathLike[str],
     test: str | os.PathLike[str] | None = None,
     rng: np.random.Generator | None = None,
+    videos: bool = False,
 ) -> InteractionStimuli:
     """Build the observer study's clips from the dual HMM in ``model_path`` (see the module).
 
     ``test``: an index (folder or INDEX.csv) to take the two-person takes from
     (default: the model's own held-out takes, as ``dualhmm evaluate``). Takes the
     model trained on, and takes whose person A has another skeleton, are left out
-    and listed in the manifest. Clips are numbered in a random order.
+    and listed in the manifest. Clips are numbered in a random order. With ``videos``,
+    each clip is also rendered as a point-light MP4 (``interaction_NNN.mp4``, white dots
+    on black) for showing outside the browser.
 
     Raises:
         ModelFormatError: not a dual-HMM model file.
@@ -190,6 +193,16 @@ def write_interaction_stimuli(
             write_motion(a, root / f"{cid}_a.bvh")
             write_motion(person_b, root / f"{cid}_b.bvh")
             clips.append(Clip(cid, f"{cid}_a.bvh", f"{cid}_b.bvh", label, kind, take))
+            if videos:
+                from markovmotion.viz import render
+                from markovmotion.viz.point_light import point_lights
+
+                render(
+                    point_lights([a, person_b]),
+                    root / f"{cid}.mp4",
+                    fps=model.fps,
+                    point_light=True,
+                )
     clips.sort(key=lambda c: c.id)
     stimuli = InteractionStimuli(
         labels,
