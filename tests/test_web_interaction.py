@@ -13,6 +13,7 @@ and bad requests (4xx, one line).
 from __future__ import annotations
 
 import json
+import shutil
 from collections import defaultdict
 
 import numpy as np
@@ -30,6 +31,7 @@ from markovmotion.evaluate.interaction import (
     read_interaction_manifest,
     summarise_interaction,
 )
+from markovmotion.evaluate.stimuli import write_stimuli
 from markovmotion.evaluate.store import Item, open_results
 from markovmotion.features.body_points import MARKER_POINTS
 from markovmotion.io import read_motion
@@ -255,6 +257,40 @@ def test_bad_requests_are_4xx_with_one_line(server):
     points = json.loads(fetch(f"{base}/0/0")[1])
     assert points["name"] == "" and set(points["parents"]) == {-1} and len(points["joints"]) == 26
     assert all(not j.startswith(("cmu", "interaction")) for j in points["joints"])
+
+
+def test_both_studies_from_one_folder(study, mocap, tmp_path):
+    """Gait stimuli and interaction clips side by side: each evaluator gets one study, and
+    the gait figures count only gait answers."""
+    root, *_ = study
+    folder = tmp_path / "both"
+    shutil.copytree(root / "stimuli", folder)
+    walks = [e for e in mocap.query(category="style_walk") if "dataset-2" in e.file][:2]
+    write_stimuli(folder, {w.label: w.path for w in walks}, {})
+    app = create_app(tmp_path, tmp_path / "both.sqlite", stimuli=folder, admin_token=ADMIN)
+    with running(app) as url:
+        assert json.loads(fetch(url + "/api/studies")[1]) == {"studies": ["gait", "interaction"]}
+        gait = post_json(url + "/api/evaluation")[1]["token"]  # the default, as before
+        inter = post_json(url + "/api/evaluation?study=interaction")[1]["token"]
+        g = json.loads(fetch(f"{url}/api/evaluation/{gait}")[1])
+        i = json.loads(fetch(f"{url}/api/evaluation/{inter}")[1])
+        assert [t["name"] for t in g["tests"]] == ["naturalness", "recognition", "resemblance"]
+        assert [t["name"] for t in i["tests"]] == [INTERACTION]
+        assert "interaction.js" in fetch(f"{url}/evaluation/{inter}")[1].decode()
+        assert "evaluation.js" in fetch(f"{url}/evaluation/{gait}")[1].decode()
+        label = i["tests"][0]["choices"][0][0]
+        assert (
+            post_json(f"{url}/api/evaluation/{inter}/{INTERACTION}/0", {"answer": label})[0] == 200
+        )
+        assert post_json(f"{url}/api/evaluation/{gait}/naturalness/0", {"answer": "real"})[0] == 200
+        # an answer of one study is not one of the other
+        assert (
+            post_json(f"{url}/api/evaluation/{gait}/{INTERACTION}/0", {"answer": label})[0] == 422
+        )
+        r = json.loads(fetch(f"{url}/api/results?token={ADMIN}")[1])
+    assert r["studies"] == ["gait", "interaction"] and r["registered"] == 2
+    assert r["evaluators"] == 1 and r["answers"]["naturalness"] == 1
+    assert r["interaction"]["observers"] == 1 and r["interaction"]["answers"] == 1
 
 
 # ---------------------------------------------------------------- browser
