@@ -147,6 +147,7 @@ def create_app(
     ):
         stimuli = lib.root / "stimuli"
     store = stim_lib = None
+    offered: list[str] = []  # the studies of the stimuli folder (the database may hold more)
     if stimuli is not None:
         stim_lib = MotionLibrary(stimuli, anonymous=True)
         clips = None
@@ -158,6 +159,7 @@ def create_app(
             else None
         )
         store = EvaluationStore(db or "results.sqlite", gait, clips)
+        offered = [s for s, given in (("gait", gait), ("interaction", clips)) if given is not None]
     elif db is not None and Path(db).is_file():
         store = EvaluationStore(db)
 
@@ -284,12 +286,12 @@ def create_app(
     # ------------------------------------------------------------ evaluation
     @app.get("/api/studies")
     def studies() -> dict:
-        return {"studies": store.studies() if store is not None and stim_lib is not None else []}
+        return {"studies": offered}
 
     @app.post("/api/evaluation")
     def new_evaluator(study: Literal["gait", "interaction"] = "gait") -> dict:
         s = need_store()
-        if study not in s.studies():
+        if study not in offered:
             raise HTTPException(404, f"no {study} study on this server")
         return {"token": s.create_evaluator(study=study)}
 
