@@ -39,6 +39,21 @@ CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = ranged(
     "window", 19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
+BLEND_WINDOW = ranged(
+    "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
+)
+TRELLIS = typer.Option(
+    "path",
+    callback=choice(("path", "paper")),
+    help="Trellis of §3.2: 'path' (lowest-error path, following recordings) or 'paper' "
+    "(E = (D1 + ... + DK) x D4 per column, as printed).",
+)
+POINTS = typer.Option(
+    "body",
+    callback=choice(("body", "all")),
+    help="See people as 'body' points found by joint names (any skeleton) or 'all' joints "
+    "of the training skeleton.",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
@@ -59,6 +74,9 @@ def new_model(
     observation: str,
     candidates: int,
     placement_window: int,
+    blend_window: int,
+    trellis: str,
+    points: str,
     fps: float,
     window: int,
     n_iter: int,
@@ -73,6 +91,9 @@ def new_model(
         observation=observation,
         candidates=candidates,
         placement_window=placement_window,
+        blend_window=blend_window,
+        trellis=trellis,
+        points=points,
         fps=fps,
         window=window,
         n_iter=n_iter,
@@ -93,6 +114,9 @@ def train(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    blend_window: int = BLEND_WINDOW,
+    trellis: str = TRELLIS,
+    points: str = POINTS,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -107,7 +131,18 @@ def train(
     check_model_output(out)
     start = time.perf_counter()
     model = new_model(
-        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+        states,
+        mode,
+        observation,
+        candidates,
+        placement_window,
+        blend_window,
+        trellis,
+        points,
+        fps,
+        window,
+        n_iter,
+        seed,
     )
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
@@ -151,6 +186,9 @@ def respond(
         "window", None, help="Windowed-Viterbi slice length (default: the model's)."
     ),
     standard: bool = typer.Option(False, help="Standard Viterbi over the whole input instead."),
+    trellis: str = typer.Option(
+        None, callback=choice(("path", "paper")), help="Trellis (default: the model's)."
+    ),
     realtime: bool = typer.Option(
         False, help="Replay A as a stream at its frame rate; report per-frame latency."
     ),
@@ -172,6 +210,7 @@ def respond(
     if animation is not None:
         check_output(animation)
     dual = DualHMM.load(model)
+    dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
     if not np.isclose(motion.fps, dual.fps):
@@ -253,6 +292,9 @@ def crossval(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    blend_window: int = BLEND_WINDOW,
+    trellis: str = TRELLIS,
+    points: str = POINTS,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -272,7 +314,18 @@ def crossval(
     from markovmotion.evaluate.hmm import crossval_index
 
     model = new_model(
-        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+        states,
+        mode,
+        observation,
+        candidates,
+        placement_window,
+        blend_window,
+        trellis,
+        points,
+        fps,
+        window,
+        n_iter,
+        seed,
     )
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
