@@ -54,6 +54,7 @@ POINTS = typer.Option(
     help="See people as 'body' points found by joint names (any skeleton) or 'all' joints "
     "of the training skeleton.",
 )
+ENERGY = ranged("fraction", 0.99, help="PCA energy kept per person (the paper's 0.95).")
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
@@ -77,6 +78,7 @@ def new_model(
     blend_window: int,
     trellis: str,
     points: str,
+    energy: float,
     fps: float,
     window: int,
     n_iter: int,
@@ -94,6 +96,7 @@ def new_model(
         blend_window=blend_window,
         trellis=trellis,
         points=points,
+        energy=energy,
         fps=fps,
         window=window,
         n_iter=n_iter,
@@ -117,6 +120,7 @@ def train(
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
+    energy: float = ENERGY,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -139,6 +143,7 @@ def train(
         blend_window,
         trellis,
         points,
+        energy,
         fps,
         window,
         n_iter,
@@ -295,6 +300,7 @@ def crossval(
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
+    energy: float = ENERGY,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -322,6 +328,7 @@ def crossval(
         blend_window,
         trellis,
         points,
+        energy,
         fps,
         window,
         n_iter,
