@@ -221,3 +221,13 @@ def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes,
     report = json.loads(capsys.readouterr().out)
     assert report["overall"]["frames"] == FRAMES // 4
     assert report["overall"]["standard_mm"] < report["overall"]["mean_pose_mm"] * 2
+
+
+def test_the_live_page_draws_a_marker_partner_as_points(model, takes):
+    from markovmotion.web.live import ModelPartner
+
+    a = model._rate(takes[0][0])
+    live = ModelPartner(model, a)
+    assert live.parents == [-1] * 30 and live.lag == model.window - 1
+    shown = [live.step(a.trim(t, t + 1)) for t in range(live.lag + 2)]
+    assert shown[0] is None and shown[-1].shape == (30, 3)
