@@ -187,6 +187,12 @@ def test_bad_inputs_are_one_line(model, marker_takes, takes, tmp_path, capsys):
             main([*args, "--out", str(tmp_path / out)])
         err = capsys.readouterr().err.strip()
         assert exc.value.code == 2 and message in err and "\n" not in err, err
+    # a BVH given to a model on virtual markers: its markers are placed first
+    main(
+        ["dualhmm", "respond", "--model", str(path), "--input", str(a_bvh)]
+        + ["--out", str(tmp_path / "b.c3d")]
+    )
+    assert read_c3d(tmp_path / "b.c3d").names == virtual_marker_names(30)
     # a model learnt from C3D markers has no virtual markers to place on a BVH
     c3d_model = DualHMM(n_states=4, n_iter=3).fit(marker_takes[:1])
     assert not c3d_model.markers and c3d_model.uses_markers
