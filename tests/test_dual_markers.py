@@ -237,3 +237,24 @@ def test_the_live_page_draws_a_marker_partner_as_points(model, takes):
     assert live.parents == [-1] * 30 and live.lag == model.window - 1
     shown = [live.step(a.trim(t, t + 1)) for t in range(live.lag + 2)]
     assert shown[0] is None and shown[-1].shape == (30, 3)
+
+
+def test_heading_from_named_markers_or_the_markers_spread():
+    left, right = heading_markers(["LASI", "RASI", "LSHO", "RSHO", "CLAV", "LKNE"])
+    assert left.tolist() == [0, 2] and right.tolist() == [1, 3]
+    left, right = heading_markers(["ShoulderLeft", "ShoulderRight", "HipLeft"])
+    assert left.tolist() == [0] and right.tolist() == [1]  # hips only on one side: not used
+    # no names to go by: a body 400 mm wide and 200 mm deep, turning slowly
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0, 1, (5, 3)) * [200.0, 800.0, 100.0]
+    body = np.concatenate([base * [sx, 1, sz] for sx in (-1, 1) for sz in (-1, 1)])  # symmetric
+    yaw = np.linspace(0.2, 2.5, 30)
+    s, c = np.sin(yaw)[:, None], np.cos(yaw)[:, None]
+    x, z = body[None, :, 0], body[None, :, 2]
+    pos = np.stack([c * x + s * z, np.broadcast_to(body[:, 1], (30, 20)), c * z - s * x], -1)
+    markers = Markers([f"m{k}" for k in range(20)], pos + [500.0, 0.0, -300.0], 30.0)
+    step = MarkerFeatures().fit([markers])
+    assert len(step.left_) == 0
+    origin, found = step.place(markers.positions)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (found - yaw))), 0.0, atol=1e-9)
+    np.testing.assert_allclose(origin[:, [0, 2]], pos.mean(axis=1)[:, [0, 2]] + [500, -300])
