@@ -54,6 +54,12 @@ POINTS = typer.Option(
     help="See people as 'body' points found by joint names (any skeleton) or 'all' joints "
     "of the training skeleton.",
 )
+FRAME = typer.Option(
+    "auto",
+    callback=choice(("auto", "heading", "world")),
+    help="B's place measured in A's facing ('heading'), along the world's axes from A "
+    "('world'), or whichever varies less on the training takes ('auto').",
+)
 ENERGY = ranged("fraction", 0.99, help="PCA energy kept per person (the paper's 0.95).")
 MARKERS = typer.Option(
     0,
@@ -87,6 +93,7 @@ def new_model(
     trellis: str,
     points: str,
     energy: float,
+    frame: str,
     fps: float,
     window: int,
     n_iter: int,
@@ -108,6 +115,7 @@ def new_model(
         trellis=trellis,
         points=points,
         energy=energy,
+        frame=frame,
         markers=markers,
         fps=fps,
         window=window,
@@ -133,6 +141,7 @@ def train(
     trellis: str = TRELLIS,
     points: str = POINTS,
     energy: float = ENERGY,
+    frame: str = FRAME,
     markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
@@ -157,6 +166,7 @@ def train(
         trellis,
         points,
         energy,
+        frame,
         fps,
         window,
         n_iter,
@@ -361,6 +371,7 @@ def crossval(
     trellis: str = TRELLIS,
     points: str = POINTS,
     energy: float = ENERGY,
+    frame: str = FRAME,
     markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
@@ -390,6 +401,7 @@ def crossval(
         trellis,
         points,
         energy,
+        frame,
         fps,
         window,
         n_iter,

@@ -216,6 +216,7 @@ def describe(model: DualHMM) -> dict:
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
+        out["frame"] = getattr(model, "frame_", "heading")
     return out
 
 

@@ -100,6 +100,7 @@ __all__ = ["DualHMM", "Partner", "finite_frames", "into_frame", "out_of_frame"]
 MODES = ("paper", "joint")
 OBSERVATIONS = ("pose", "motion")
 POINTS = ("body", "all")
+FRAMES = ("auto", "heading", "world")
 METHODS = ("standard", "windowed")
 
 
@@ -209,6 +210,14 @@ class DualHMM(Model):
             on skeleton takes (:func:`~markovmotion.features.markers.virtual_markers`),
             on which the model then learns and answers (module docstring, "Markers").
             Pairs of Markers (C3D) make a marker model whatever this says.
+        frame: how B's place relative to A is measured: ``"heading"``, in A's ground
+            frame (A's pelvis on the floor, A's facing: right for partners who turn
+            with each other, as in salsa, and for A captured in any room);
+            ``"world"``, from A's pelvis along the world's axes (right when the
+            training and test takes share one room and B does not turn with A: in
+            CMU's pulls A turns side-on while B stays in front); ``"auto"`` (the
+            default) picks, on the training takes, the one in which B's place
+            varies less (:func:`choose_frame`), kept in ``frame_``.
         n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -239,6 +248,7 @@ class DualHMM(Model):
         blend_window: int = 9,
         trellis: str = "path",
         points: str = "body",
+        frame: str = "auto",
         markers: int = 0,
         n_iter: int = 50,
         tol: float = 1e-2,
@@ -258,6 +268,7 @@ class DualHMM(Model):
         self.blend_window = blend_window
         self.trellis = trellis
         self.points = points
+        self.frame = frame
         self.markers = markers
         self.n_iter = n_iter
         self.tol = tol
@@ -288,6 +299,8 @@ class DualHMM(Model):
             raise ValueError(f"points must be one of {POINTS}, got {self.points!r}")
         if self.trellis not in TRELLISES:
             raise ValueError(f"trellis must be one of {TRELLISES}, got {self.trellis!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"frame must be one of {FRAMES}, got {self.frame!r}")
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
@@ -320,16 +333,22 @@ class DualHMM(Model):
         for a, b in pairs:
             if not isinstance(a, Motion) or not isinstance(b, Motion):
                 raise TypeError("a dual HMM learns from pairs of all Motions or all Markers")
-            a, b = self._rate(a), self._rate(b)
-            a_list.append(a)
-            b_rel.append(into_frame(b, *ground_frame(a)))
+            a_list.append(self._rate(a))
+            b_rel.append(self._rate(b))
+        points = BODY_POINTS if self.points == "body" else None
+        grounds = [ground_frame(a) for a in a_list]
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_rel, grounds, points)
+        turn = self.frame_ == "heading"
+        b_rel = [
+            into_frame(b, origin, yaw if turn else np.zeros_like(yaw))
+            for b, (origin, yaw) in zip(b_rel, grounds, strict=True)
+        ]
         self.skeleton_a_ = a_list[0].skeleton
         self.skeleton_b_ = b_rel[0].skeleton
-        points = BODY_POINTS if self.points == "body" else None
         first = (
-            BodyMotion(points=points)
+            BodyMotion(points=points, turn=turn)
             if self.observation == "motion"
-            else JointPositions(points=points)
+            else JointPositions(points=points, turn=turn)
         )
         self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
         self.pipeline_b_ = FeaturePipeline(
@@ -430,6 +449,8 @@ class DualHMM(Model):
         M the marker_names_b_ the B pipeline's markers, A's marker features those given."""
         if not is_fitted(self):
             return
+        if getattr(self, "frame_", "heading") not in ("heading", "world"):
+            raise StateError(f"frame_: must be heading or world, got {self.frame_!r}")
         on_markers = hasattr(self, "markers_b_")
         if on_markers:
             require(self, *_LEARNT_MARKERS)
@@ -520,7 +541,15 @@ class DualHMM(Model):
         if self.uses_markers:
             first = self.pipeline_a_.steps[0]
             return first.place(self.input_markers(x).positions)
-        return ground_frame(x)
+        return self.ground(x)
+
+    def ground(self, motion: Motion, positions: np.ndarray | None = None):
+        """A's ground frame (origin (F, 3), heading (F,)) as the model places B: A's own
+        facing, or with ``frame_ == "world"`` the world's axes (heading 0) at A's place."""
+        origin, yaw = ground_frame(motion, positions)
+        if getattr(self, "frame_", "heading") == "world":
+            yaw = np.zeros_like(yaw)
+        return origin, yaw
 
     def training_b(self) -> Motion | Markers:
         """B's training frames in A's ground frame, as the model outputs them."""
@@ -664,6 +693,27 @@ class DualHMM(Model):
             self.trellis,
         )
         return self._trellis_cache
+
+
+def choose_frame(
+    b_list: Sequence[Motion],
+    grounds: Sequence[tuple[np.ndarray, np.ndarray]],
+    points: Sequence[str] | None,
+) -> str:
+    """``"heading"`` or ``"world"``: the frame of A (``grounds``, A's per-frame origin and
+    heading) in which B's body points (``points``; None: every joint) lie closer to their
+    mean over the training takes ``b_list``, i.e. the one where the mean-pose baseline is
+    better on the training data: B's place is then easier to tell from A's."""
+    spread = {}
+    for frame in ("heading", "world"):
+        where = []
+        for b, (origin, yaw) in zip(b_list, grounds, strict=True):
+            rel = into_frame(b, origin, yaw if frame == "heading" else np.zeros_like(yaw))
+            pos = rel.positions()
+            where.append(pos if points is None else pos[:, body_point_index(b.skeleton, points)])
+        where = np.concatenate(where)
+        spread[frame] = float(np.linalg.norm(where - where.mean(axis=0), axis=-1).mean())
+    return min(spread, key=spread.get)
 
 
 def _check_one_skeleton_b(

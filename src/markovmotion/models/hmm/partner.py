@@ -25,7 +25,6 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
-from markovmotion.features.body_motion import ground_frame
 from markovmotion.features.markers import MarkerFeatures
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import smooth_place
@@ -192,7 +191,7 @@ class Partner:
                 self.model.check_input(frame)
                 self._checked = frame.skeleton
             pos = frame.positions()
-            origin, yaw = ground_frame(frame, pos)
+            origin, yaw = self.model.ground(frame, pos)
         self._place = (origin[0], float(yaw[0]))
         return self._motion(
             self.step_features(self._features(frame, pos, origin, yaw), self._place)
