@@ -321,6 +321,8 @@ class MarkerFeatures(FeatureStep):
         motion: also their change and the body's travel (:meth:`BodyMotion.rows`):
             (F, 6M + 3).
         horizon, travel_horizon: as :class:`~markovmotion.features.BodyMotion`'s.
+        turn: whether the ground frame turns with the person's heading (else the
+            world's axes at the person's centroid: :class:`DualHMM`'s ``frame``).
 
     Learnt: ``names_`` (the markers, in order: others' markers are picked by name),
     ``left_`` / ``right_`` (the markers the heading is taken from; empty: the principal
@@ -333,11 +335,13 @@ class MarkerFeatures(FeatureStep):
         motion: bool = False,
         horizon: float = 1 / 6,
         travel_horizon: float = 2 / 3,
+        turn: bool = True,
     ):
         self.body_centred = body_centred
         self.motion = motion
         self.horizon = horizon
         self.travel_horizon = travel_horizon
+        self.turn = turn
 
     def fit(self, sequences: Sequence[Markers]) -> MarkerFeatures:
         self.names_ = list(sequences[0].names)
@@ -384,6 +388,8 @@ class MarkerFeatures(FeatureStep):
             else:
                 yaw = principal_heading(positions)
         origin[:, 1] = 0.0
+        if not getattr(self, "turn", True):
+            yaw = np.where(np.isnan(yaw), np.nan, 0.0)
         return origin, yaw
 
     def pose(self, markers: Markers, positions: np.ndarray | None = None) -> np.ndarray:

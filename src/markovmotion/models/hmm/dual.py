@@ -53,7 +53,7 @@ are filled by interpolation (:func:`~markovmotion.features.markers.fill_gaps`).
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -337,7 +337,15 @@ class DualHMM(Model):
             b_rel.append(self._rate(b))
         points = BODY_POINTS if self.points == "body" else None
         grounds = [ground_frame(a) for a in a_list]
-        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_rel, grounds, points)
+
+        def b_in(frame: str) -> np.ndarray:
+            where = []
+            for b, (origin, yaw) in zip(b_rel, grounds, strict=True):
+                rel = into_frame(b, origin, yaw if frame == "heading" else np.zeros_like(yaw))
+                where.append(self.body_positions(rel))
+            return np.concatenate(where)
+
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in)
         turn = self.frame_ == "heading"
         b_rel = [
             into_frame(b, origin, yaw if turn else np.zeros_like(yaw))
@@ -373,6 +381,18 @@ class DualHMM(Model):
             a_list.append(fill_gaps(self._rate(a)))
             b_list.append(fill_gaps(self._rate(b)))
         first = MarkerFeatures(motion=self.observation == "motion").fit(a_list)
+        grounds = [first.place(first.select(a).positions) for a in a_list]
+
+        def b_in(frame: str) -> np.ndarray:
+            return np.concatenate(
+                [
+                    into_marker_frame(b, o, y if frame == "heading" else 0 * y).positions
+                    for b, (o, y) in zip(b_list, grounds, strict=True)
+                ]
+            )
+
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in)
+        first.turn = self.frame_ == "heading"
         b_rel = []
         for a, b in zip(a_list, b_list, strict=True):
             b_rel.append(into_marker_frame(b, *first.place(first.select(a).positions)))
@@ -695,24 +715,17 @@ class DualHMM(Model):
         return self._trellis_cache
 
 
-def choose_frame(
-    b_list: Sequence[Motion],
-    grounds: Sequence[tuple[np.ndarray, np.ndarray]],
-    points: Sequence[str] | None,
-) -> str:
-    """``"heading"`` or ``"world"``: the frame of A (``grounds``, A's per-frame origin and
-    heading) in which B's body points (``points``; None: every joint) lie closer to their
-    mean over the training takes ``b_list``, i.e. the one where the mean-pose baseline is
-    better on the training data: B's place is then easier to tell from A's."""
+def choose_frame(b_in: Callable[[str], np.ndarray]) -> str:
+    """``"heading"`` or ``"world"``: the frame of A in which B's training positions
+    (``b_in(frame)``: (frames, points, 3), NaN for unseen markers) lie closer to their mean,
+    i.e. the one where the mean-pose baseline is better on the training data: B's place
+    is then easier to tell from A's."""
     spread = {}
     for frame in ("heading", "world"):
-        where = []
-        for b, (origin, yaw) in zip(b_list, grounds, strict=True):
-            rel = into_frame(b, origin, yaw if frame == "heading" else np.zeros_like(yaw))
-            pos = rel.positions()
-            where.append(pos if points is None else pos[:, body_point_index(b.skeleton, points)])
-        where = np.concatenate(where)
-        spread[frame] = float(np.linalg.norm(where - where.mean(axis=0), axis=-1).mean())
+        where = b_in(frame)
+        spread[frame] = float(
+            np.nanmean(np.linalg.norm(where - np.nanmean(where, axis=0), axis=-1))
+        )
     return min(spread, key=spread.get)
 
 
