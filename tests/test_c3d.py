@@ -123,20 +123,3 @@ def test_markers_validate_shapes():
         Markers(("a",), np.zeros((3, 2, 3)), 100.0)
     with pytest.raises(ValueError):
         Markers(("a",), np.full((3, 1, 3), np.inf), 100.0)
-
-
-def test_write_c3d_round_trip(tmp_path):
-    """write_c3d then read_c3d gives the same markers, names, rate and occlusions."""
-    from markovmotion.io import write_c3d as write_markers
-
-    rng = np.random.default_rng(0)
-    pos = rng.normal(0, 500, (12, 3, 3))
-    pos[4, 1] = np.nan
-    m = Markers(("head", "left_wrist", "right_ankle"), pos, 50.0)
-    write_markers(m, tmp_path / "m.c3d")
-    back = read_c3d(tmp_path / "m.c3d")
-    assert back.names == m.names and back.fps == 50.0
-    assert np.array_equal(np.isnan(back.positions), np.isnan(pos))
-    assert np.allclose(back.positions, pos, atol=1e-3, equal_nan=True)
-    with pytest.raises(MotionFormatError, match="C3D"):
-        write_markers(m, tmp_path / "m.bvh")

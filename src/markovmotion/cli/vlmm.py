@@ -16,6 +16,7 @@ from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
 from markovmotion.io import check_motion_output, write_c3d, write_motion
+from markovmotion.io.c3d import check_c3d_output
 from markovmotion.io.files import base_suffix
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -57,7 +58,9 @@ def _check_output(behaviour, out: Path) -> None:
             check_motion_output(out)
     elif not _is_markers(behaviour):
         check_motion_output(out)
-    elif base_suffix(out) != ".c3d":
+    elif base_suffix(out) == ".c3d":
+        check_c3d_output(out)
+    else:
         from markovmotion.viz.animation import check_output
 
         try:

@@ -1,11 +1,17 @@
 """Accuracy of a virtual partner against the real one (dual-HMM paper §4.1, Figs. 6-8).
 
 For every two-person take of a test set, B is generated from A by standard
-and by windowed Viterbi, and each frame's error is the Euclidean distance
-between generated and real joint positions, in mm, averaged over B's joints
-after forward kinematics -- world positions, B being placed through A's
-real ground frame, so the error counts both B's pose and where B stands
-relative to A. Two baselines: B's mean pose (the mean of B's training joint
+and by windowed Viterbi, through each trellis (``"path"``, ours, and
+``"paper"``, §3.2 as printed), and each frame's error is the Euclidean
+distance between generated and real positions, in mm, averaged over the
+common body points (:mod:`markovmotion.features.body_points`, so the real B
+may come on another skeleton than the model's) after forward kinematics --
+world positions, B being placed through A's real ground frame, so the error
+counts both B's pose and where B stands relative to A. How much B jumps:
+per frame step, how far the median body point moves (:func:`jump_sizes`);
+the JSON gives the 90th percentile of these steps (``*_jump_p90_mm``) and
+the fraction over 100 mm (``*_jump_over_100mm``) for standard, windowed
+and the real B. Two baselines: B's mean pose (the mean of B's training joint
 positions in A's ground frame) and nearest-neighbour retrieval (the B frame
 whose A frame is nearest in A's feature space). The same four are also given
 for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares
@@ -41,7 +47,7 @@ from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.models.base import file_sha256
-from markovmotion.models.hmm.dual import DualHMM, ground_frame
+from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
@@ -70,7 +76,7 @@ class _Baselines:
 
     def __init__(self, model: DualHMM):
         self.model = model
-        train_b = model.expmaps_b_.inverse_transform([model.frames_b_.astype(float)])[0]
+        train_b = model.training_b()
         self.mean_rel = model.body_positions(train_b).mean(axis=0)
         self.mean_pose = model.body_positions(train_b, body_centred=True).mean(axis=0)
         self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
@@ -115,7 +121,7 @@ def evaluate_pair(
     each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
     baselines = baselines or _Baselines(model)
     a, b = model._rate(a), model._rate(b)
-    origin, yaw = ground_frame(a)
+    origin, yaw = model.place(a)
     xa, _ = model.features_a(a)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     own = model.trellis
@@ -210,6 +216,7 @@ def describe(model: DualHMM) -> dict:
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
+        out["frame"] = getattr(model, "frame_", "heading")
     return out
 
 
