@@ -92,16 +92,18 @@ def train(
     prototypes: int = ranged("states", 100, min=2, help="Number of prototypes K."),
     max_memory: int = typer.Option(5, min=0, help="Maximum memory length N of the VLMM."),
     epsilon: float = typer.Option(1e-4, min=0.0, help="KL threshold (eq. 5)."),
-    lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC/dt (eq. 2)."),
+    lam: float = typer.Option(
+        100.0, min=0.0, help="Weight lambda of dC/dt (eq. 2; the paper's 10 or 30)."
+    ),
     source: str = typer.Option(
         "skeleton",
         callback=choice(("skeleton", "markers")),
         help="skeleton (joints, --configuration) or markers (the paper's 13 body points).",
     ),
     configuration: str = typer.Option(
-        "rotations",
+        "positions",
         callback=choice(("rotations", "positions")),
-        help="For --source skeleton: rotations or positions.",
+        help="For --source skeleton: positions or rotations (the paper's).",
     ),
     quantiser: str = typer.Option(
         "kmeans", callback=choice(("kmeans", "competitive")), help="kmeans or competitive."
@@ -109,7 +111,7 @@ def train(
     fps: float = ranged("fps", 30.0, min=1.0, help="Frame rate for modelling."),
     join: float = ranged(
         "time_constant",
-        0.0,
+        2.0,
         help="Time constant (s) of the smooth join of predictions to the observed pose "
         "(0: the paper's; 2 chosen by cross-validation, docs/vlmm.md).",
     ),

@@ -128,7 +128,10 @@ class BehaviourModel(Model):
         n_prototypes: number of prototypes (alphabet size).
         max_memory: N of the VLMM.
         epsilon: KL threshold of the VLMM (eq. 5).
-        lam: weight of the derivative in F = [C, lam dC] (eq. 2).
+        lam: weight of the derivative in F = [C, lam dC] (eq. 2). The defaults here
+            are the paper's (``rotations``, lambda 10, join 0); ``vlmm train``'s are
+            those chosen for prediction by cross-validation on the training takes
+            (``positions``, lambda 100, join 2 s: docs/vlmm.md).
         configuration: ``"rotations"`` (exponential maps + pelvis height),
             ``"positions"`` (body-centred joint positions in mm) or ``"markers"``
             (the 13 body points of §2.1.2, body-centred).
