@@ -170,13 +170,7 @@ class Trellis:
         quats = self.motion_b.rotations
         if half <= 0:
             return quats[frames[t]]
-        near = t[:, None] + np.arange(-half, half + 1)[None, :]  # (F, W)
-        inside = (near >= 0) & (near < len(frames))
-        q = quats[frames[np.clip(near, 0, len(frames) - 1)]]  # (F, W, J, 4)
-        centre = quats[frames[t]][:, None]
-        sign = np.where((q * centre).sum(axis=-1) < 0, -1.0, 1.0) * inside[:, :, None]
-        out = (q * sign[..., None]).sum(axis=1)
-        return out / np.linalg.norm(out, axis=-1, keepdims=True)
+        return blend_quaternions(np.ascontiguousarray(quats, dtype=float), frames, t, half)
 
     def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
         """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
@@ -204,10 +198,7 @@ def smooth_place(origin: np.ndarray, yaw: np.ndarray, half: int) -> tuple[np.nda
     if half <= 0 or len(yaw) < 2:
         return origin, yaw
     values = np.column_stack([origin, np.cos(yaw), np.sin(yaw)])
-    csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
-    t = np.arange(len(yaw))
-    lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(yaw))
-    mean = (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+    mean = _window_mean(values, np.arange(len(yaw)), half)
     return mean[:, :3], np.arctan2(mean[:, 4], mean[:, 3])
 
 
@@ -274,3 +265,29 @@ def lowest_error_path(cost, d4, steps):  # pragma: no cover - numba
     for t in range(n - 1, 0, -1):
         path[t - 1] = back[t, path[t]]
     return path
+
+
+@numba.njit(cache=True)
+def blend_quaternions(quats, frames, t, half):  # pragma: no cover - numba
+    """(len(t), J, 4) for each t, the normalised sum of the quaternions ``quats[frames[k]]``
+    (quats (N, J, 4)) for k = t - half .. t + half within ``frames``, each turned to the
+    hemisphere of ``quats[frames[t]]``'s (:meth:`Trellis.blend`). Compiled: online it runs
+    once per frame on one frame, where NumPy's calls cost more than the sums."""
+    n_out, n_joints, n_frames = len(t), quats.shape[1], len(frames)
+    out = np.zeros((n_out, n_joints, 4))
+    for a in range(n_out):
+        centre = frames[t[a]]
+        for k in range(max(t[a] - half, 0), min(t[a] + half + 1, n_frames)):
+            f = frames[k]
+            for j in range(n_joints):
+                dot = 0.0
+                for x in range(4):
+                    dot += quats[f, j, x] * quats[centre, j, x]
+                sign = -1.0 if dot < 0.0 else 1.0
+                for x in range(4):
+                    out[a, j, x] += sign * quats[f, j, x]
+        for j in range(n_joints):
+            norm = np.sqrt((out[a, j] ** 2).sum())
+            for x in range(4):
+                out[a, j, x] /= norm
+    return out
