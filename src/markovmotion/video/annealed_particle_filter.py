@@ -52,7 +52,7 @@ from markovmotion.video.render import read_frames
 #: Foreground threshold on the largest channel difference to the background (grey levels).
 FG_LOW, FG_HIGH = 30.0, 60.0
 #: Foreground pixels sampled per view for the coverage cost.
-COVER_SAMPLES = 120
+COVER_SAMPLES = 80
 EDGE_WEIGHT = 0.5
 #: Sobel response of an image edge counted as certain (a 30-grey-level step at sigma 1).
 EDGE_CONTRAST = 100.0
@@ -137,6 +137,8 @@ def view_features(
 # ----------------------------------------------------------------------------- the weighting function
 _T_CAPSULE = np.array([0.1, 0.3, 0.5, 0.7, 0.9])
 _ACROSS = np.array([-0.6, 0.0, 0.6])
+_BALL_COS = np.cos(np.pi / 4 + np.arange(4) * np.pi / 2)
+_BALL_SIN = np.sin(np.pi / 4 + np.arange(4) * np.pi / 2)
 
 
 @numba.njit(cache=True)
@@ -148,7 +150,7 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
     return img[v, yi, xi]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=True)
 def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
@@ -157,6 +159,11 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
     """
     m_n, v_n = pix.shape[0], pix.shape[1]
     s_n = seg.shape[0]
+    n_t = _T_CAPSULE.shape[0]
+    n_o = _ACROSS.shape[0]
+    geo = np.empty((s_n, 10))  # ax, ay, dx, dy, l2, ra, rb, x0, x1, y0 ... per capsule
+    ylo = np.empty(s_n)
+    yhi = np.empty(s_n)
     for m in range(m_n):
         total = 0.0
         for v in range(v_n):
@@ -169,29 +176,45 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                 ay = pix[m, v, seg[s, 0], 1]
                 dx = pix[m, v, seg[s, 1], 0] - ax
                 dy = pix[m, v, seg[s, 1], 1] - ay
-                length = math.sqrt(dx * dx + dy * dy)
                 ra = rad[m, v, s, 0]
                 rb = rad[m, v, s, 1]
-                if length > 1e-6:
+                l2 = dx * dx + dy * dy
+                rmax = max(ra, rb)
+                geo[s, 0] = ax
+                geo[s, 1] = ay
+                geo[s, 2] = dx
+                geo[s, 3] = dy
+                geo[s, 4] = l2
+                geo[s, 5] = ra
+                geo[s, 6] = rb
+                geo[s, 7] = min(ax, ax + dx) - rmax
+                geo[s, 8] = max(ax, ax + dx) + rmax
+                ylo[s] = min(ay, ay + dy) - rmax
+                yhi[s] = max(ay, ay + dy) + rmax
+                if l2 > 1e-12:
+                    length = math.sqrt(l2)
                     nx = -dy / length
                     ny = dx / length
-                    for t in _T_CAPSULE:
+                    for ti in range(n_t):
+                        t = _T_CAPSULE[ti]
                         cx = ax + t * dx
                         cy = ay + t * dy
                         r = ra + t * (rb - ra)
-                        for o in _ACROSS:
+                        for oi in range(n_o):
+                            o = _ACROSS[oi]
                             e_in += 1.0 - _lookup(fg, v, cx + o * r * nx, cy + o * r * ny)
-                            n_in += 1
-                        e_ed += 1.0 - _lookup(edge, v, cx + r * nx, cy + r * ny)
-                        e_ed += 1.0 - _lookup(edge, v, cx - r * nx, cy - r * ny)
+                        n_in += n_o
+                        e_ed += 2.0 - _lookup(edge, v, cx + r * nx, cy + r * ny)
+                        e_ed -= _lookup(edge, v, cx - r * nx, cy - r * ny)
                         n_ed += 2
                 else:  # a ball
                     e_in += 1.0 - _lookup(fg, v, ax, ay)
                     n_in += 1
                     for k in range(4):
-                        a = k * 0.5 * math.pi + 0.25 * math.pi
-                        e_in += 1.0 - _lookup(fg, v, ax + 0.6 * ra * math.cos(a), ay + 0.6 * ra * math.sin(a))
-                        e_ed += 1.0 - _lookup(edge, v, ax + ra * math.cos(a), ay + ra * math.sin(a))
+                        c = _BALL_COS[k]
+                        sn = _BALL_SIN[k]
+                        e_in += 1.0 - _lookup(fg, v, ax + 0.6 * ra * c, ay + 0.6 * ra * sn)
+                        e_ed += 1.0 - _lookup(edge, v, ax + ra * c, ay + ra * sn)
                         n_in += 1
                         n_ed += 1
             miss = 0
@@ -200,18 +223,20 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                 py = samples[v, k, 1]
                 covered = False
                 for s in range(s_n):
-                    ax = pix[m, v, seg[s, 0], 0]
-                    ay = pix[m, v, seg[s, 0], 1]
-                    dx = pix[m, v, seg[s, 1], 0] - ax
-                    dy = pix[m, v, seg[s, 1], 1] - ay
-                    l2 = dx * dx + dy * dy
+                    if px < geo[s, 7] or px > geo[s, 8] or py < ylo[s] or py > yhi[s]:
+                        continue
+                    ax = geo[s, 0]
+                    ay = geo[s, 1]
+                    dx = geo[s, 2]
+                    dy = geo[s, 3]
+                    l2 = geo[s, 4]
                     t = 0.0
                     if l2 > 1e-12:
                         t = ((px - ax) * dx + (py - ay) * dy) / l2
                         t = min(max(t, 0.0), 1.0)
                     ex = ax + t * dx - px
                     ey = ay + t * dy - py
-                    r = rad[m, v, s, 0] + t * (rad[m, v, s, 1] - rad[m, v, s, 0])
+                    r = geo[s, 5] + t * (geo[s, 6] - geo[s, 5])
                     if ex * ex + ey * ey <= r * r:
                         covered = True
                         break
@@ -357,12 +382,17 @@ class AnnealedParticleFilter:
     spread: float = 3.0
     recover_cost: float = 0.45
     seed: int = 0
+    adaptive: bool = False
+    momentum: float = 0.0
+    arms_again: bool = True
     evaluations: int = 0
     recoveries: int = 0
 
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
         self.x: np.ndarray | None = None
+        self.last: list[np.ndarray] = []
+        self.second_pass = self.body.limb_mask(("elbow", "wrist")) if self.arms_again else None
         step = self.body.speed / self.fps
         floor = np.full(self.body.n_dof, 0.02)
         floor[:3] = 10.0
@@ -376,7 +406,13 @@ class AnnealedParticleFilter:
         """Anneal particles ``x`` over ``layers``; the estimate and its cost."""
         shrink = math.sqrt(self.survival)
         for m in range(layers):
-            x = x + self.rng.normal(size=x.shape) * std * shrink**m
+            if m == 0 or not self.adaptive:
+                sd = std * shrink**m
+                if self.second_pass is not None and m >= layers // 2:
+                    sd = np.where(self.second_pass, std * shrink ** (m - layers // 2), sd)
+            else:  # Deutscher et al.: diffusion follows the spread of the surviving particles
+                sd = np.clip(shrink * x.std(axis=0), 0.05 * std, std * shrink**m)
+            x = x + self.rng.normal(size=x.shape) * sd
             self.body.clip(x)
             e = self._score(x, feats)
             beta = survival_beta(e, self.survival)
@@ -427,8 +463,13 @@ class AnnealedParticleFilter:
     def step(self, feats: ViewFeatures) -> tuple[np.ndarray, float]:
         """Track one frame: the pose (D,) and the best particle's cost."""
         if self.x is None:
-            return self.initialise(feats)
-        est, best = self._anneal(self.x, feats, self.layers, self.step_std)
+            est, best = self.initialise(feats)
+            self.last = [est]
+            return est, best
+        x = self.x
+        if len(self.last) == 2 and self.momentum:  # constant velocity, damped
+            x = x + self.momentum * (self.last[1] - self.last[0])
+        est, best = self._anneal(x, feats, self.layers, self.step_std)
         if best > self.recover_cost:
             self.recoveries += 1
             prev = est
@@ -437,6 +478,7 @@ class AnnealedParticleFilter:
                 self.x = np.tile(prev, (self.particles, 1))
             else:
                 est, best = est2, best2
+        self.last = [*self.last[-1:], est]
         return est, best
 
 
@@ -474,19 +516,26 @@ def track_video(
     max_frames: int | None = None,
     seed: int = 0,
 ) -> TrackResult:
-    """Track the person of a multi-view video (a folder with ``cameras.json``, or that file).
+    """Track the person of a multi-view video (a folder with ``cameras.json``, or that file),
+    or of one video file seen by the first camera of ``cameras_file``.
 
     ``views`` uses only the first cameras. Raises :class:`MotionFormatError` for
     a missing or malformed camera file or a missing video.
     """
     cams_path = Path(cameras_file) if cameras_file is not None else Path(video)
     cameras, doc = load_cameras(cams_path)
-    videos = camera_videos(cams_path, cameras)
+    single = Path(video).is_file() and Path(video).suffix.lower() != ".json"
+    if single:  # one camera's video, the first camera of the file
+        cameras, videos = cameras[:1], [Path(video)]
+    else:
+        videos = camera_videos(cams_path, cameras)
     if views is not None:
         cameras, videos = cameras[:views], videos[:views]
     backgrounds = [
         estimate_background(v) if b is None else read_image(b, (c.width, c.height))
-        for v, b, c in zip(videos, camera_videos(cams_path, cameras, "background"), cameras, strict=True)
+        for v, b, c in zip(
+            videos, camera_videos(cams_path, cameras, "background"), cameras, strict=True
+        )
     ]
     fps = float(doc["fps"])
     apf = AnnealedParticleFilter(body, cameras, particles, layers, fps=fps, seed=seed)

@@ -208,6 +208,22 @@ class BodyModel:
         height = float(np.concatenate(pos)[:, 1].mean())
         return cls(skeleton, points, mean, joints, bases, lower, upper, speed, height)
 
+    def limb_mask(self, points: Sequence[str]) -> np.ndarray:
+        """(D,) bool: the state values of joints that move the body points named like ``points``
+        (e.g. ``("elbow", "wrist")``: the arms)."""
+        names = [BODY_POINTS[i] for i in range(len(BODY_POINTS))]
+        wanted = [self.points[i] for i, n in enumerate(names) if any(w in n for w in points)]
+        movers = set()
+        for p in wanted:
+            j = self.skeleton.parents[p]
+            if j >= 0:
+                movers.add(int(j))
+        mask = np.zeros(self.n_dof, bool)
+        for j, sl in zip(self.joints, self.slices, strict=True):
+            if j in movers:
+                mask[sl] = True
+        return mask
+
     # ------------------------------------------------------------------ poses
     def standing(self, position: np.ndarray, yaw: float = 0.0) -> np.ndarray:
         """The state (D,) of the mean pose with the root at ``position`` (mm) facing ``yaw``."""
