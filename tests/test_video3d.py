@@ -141,7 +141,10 @@ def test_tracker_converges_on_a_known_pose(body, take):
     pts = body_points(motion)[:4]
     cams = _cameras(pts, 3, (240, 180))
     bgs = [background((c.width, c.height), k) for k, c in enumerate(cams)]
-    videos = [list(shaded_frames([pts], c, bg, 2.0, k)) for k, (c, bg) in enumerate(zip(cams, bgs, strict=True))]
+    videos = [
+        list(shaded_frames([pts], c, bg, 2.0, k))
+        for k, (c, bg) in enumerate(zip(cams, bgs, strict=True))
+    ]
     apf = AnnealedParticleFilter(body, cams, particles=150, layers=8, fps=30.0, seed=1)
     errors, costs = [], []
     for t in range(len(pts)):

@@ -184,7 +184,9 @@ def respond(
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
     if video is not None:
-        _respond_video(model, video, out, cameras, view, particles, layers, max_frames, data, standard)
+        _respond_video(
+            model, video, out, cameras, view, particles, layers, max_frames, data, standard
+        )
         return
     check_motion_output(out)
     if animation is not None:

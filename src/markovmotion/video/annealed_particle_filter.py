@@ -60,7 +60,9 @@ BACKGROUND_FRAMES = 31
 
 
 # ----------------------------------------------------------------------------- image features
-def estimate_background(video: str | os.PathLike[str], frames: int = BACKGROUND_FRAMES) -> np.ndarray:
+def estimate_background(
+    video: str | os.PathLike[str], frames: int = BACKGROUND_FRAMES
+) -> np.ndarray:
     """(H, W, 3) uint8 per-pixel median of up to ``frames`` frames spread over the video."""
     from markovmotion.video.render import frame_count
 
@@ -78,13 +80,17 @@ def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
     if img is None:
         raise MotionFormatError(path, "not an image")
     if (img.shape[1], img.shape[0]) != tuple(size):
-        raise MotionFormatError(path, f"background is {img.shape[1]}x{img.shape[0]}, camera {size[0]}x{size[1]}")
+        raise MotionFormatError(
+            path, f"background is {img.shape[1]}x{img.shape[0]}, camera {size[0]}x{size[1]}"
+        )
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
 def _gradient(img: np.ndarray, sigma: float) -> np.ndarray:
     g = cv2.GaussianBlur(img, (0, 0), sigma)
-    return np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3))
+    return np.hypot(
+        cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    )
 
 
 @dataclass
@@ -150,7 +156,7 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
     return img[v, yi, xi]
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True, fastmath=True, parallel=True)
 def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
@@ -161,10 +167,10 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
     s_n = seg.shape[0]
     n_t = _T_CAPSULE.shape[0]
     n_o = _ACROSS.shape[0]
-    geo = np.empty((s_n, 10))  # ax, ay, dx, dy, l2, ra, rb, x0, x1, y0 ... per capsule
-    ylo = np.empty(s_n)
-    yhi = np.empty(s_n)
-    for m in range(m_n):
+    for m in numba.prange(m_n):
+        geo = np.empty((s_n, 9))  # per capsule: ax, ay, dx, dy, l2, ra, rb, x range
+        ylo = np.empty(s_n)
+        yhi = np.empty(s_n)
         total = 0.0
         for v in range(v_n):
             e_in = 0.0
@@ -299,7 +305,9 @@ def model_coverage(joints: np.ndarray, camera: CalibratedCamera) -> np.ndarray:
     return _coverage(pix[0, 0], rad[0, 0], seg, camera.width, camera.height)
 
 
-def costs(body: BodyModel, states: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures) -> np.ndarray:
+def costs(
+    body: BodyModel, states: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
+) -> np.ndarray:
     """E(x) (M,) in [0, 1] of particles (M, D) against one frame's features."""
     seg, _ = BODY_SHAPE.segments()
     pix, rad, _ = project_model(body.joint_positions(states), cameras)
@@ -334,7 +342,9 @@ def survival_beta(cost: np.ndarray, survival: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def triangulate(cameras: Sequence[CalibratedCamera], pixels: Sequence[np.ndarray | None]) -> np.ndarray | None:
+def triangulate(
+    cameras: Sequence[CalibratedCamera], pixels: Sequence[np.ndarray | None]
+) -> np.ndarray | None:
     """Least-squares meeting point (3,) of the rays through ``pixels`` (None: view not used)."""
     a = np.zeros((3, 3))
     b = np.zeros(3)
@@ -385,6 +395,7 @@ class AnnealedParticleFilter:
     adaptive: bool = False
     momentum: float = 0.0
     arms_again: bool = True
+    refine: int = 30
     evaluations: int = 0
     recoveries: int = 0
 
@@ -393,6 +404,15 @@ class AnnealedParticleFilter:
         self.x: np.ndarray | None = None
         self.last: list[np.ndarray] = []
         self.second_pass = self.body.limb_mask(("elbow", "wrist")) if self.arms_again else None
+        self.limbs = [
+            m
+            for m in (
+                self.body.limb_mask((f"{side}_{a}", f"{side}_{b}"))
+                for side in ("right", "left")
+                for a, b in (("elbow", "wrist"), ("knee", "ankle"))
+            )
+            if m.any()
+        ]
         step = self.body.speed / self.fps
         floor = np.full(self.body.n_dof, 0.02)
         floor[:3] = 10.0
@@ -402,7 +422,9 @@ class AnnealedParticleFilter:
         self.evaluations += len(x)
         return costs(self.body, x, self.cameras, feats)
 
-    def _anneal(self, x: np.ndarray, feats: ViewFeatures, layers: int, std: np.ndarray) -> tuple[np.ndarray, float]:
+    def _anneal(
+        self, x: np.ndarray, feats: ViewFeatures, layers: int, std: np.ndarray
+    ) -> tuple[np.ndarray, float]:
         """Anneal particles ``x`` over ``layers``; the estimate and its cost."""
         shrink = math.sqrt(self.survival)
         for m in range(layers):
@@ -426,7 +448,30 @@ class AnnealedParticleFilter:
             x = x[self.rng.choice(len(x), len(x), p=w)]
         raise AssertionError("unreachable")
 
-    def initialise(self, feats: ViewFeatures, start: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    def _refine_limbs(self, est: np.ndarray, feats: ViewFeatures) -> tuple[np.ndarray, float]:
+        """Search each limb alone around the estimate (the weighting function is nearly a sum
+        over body parts, so limbs can be searched one at a time, as partitioned sampling does);
+        the particles follow the estimate's change."""
+        cur = float(self._score(est[None], feats)[0])
+        start = est.copy()
+        for scale in (2.0, 0.7):
+            for mask in self.limbs:
+                cand = np.tile(est, (self.refine, 1))
+                cand[:, mask] += self.rng.normal(size=(self.refine, int(mask.sum()))) * (
+                    scale * self.step_std[mask]
+                )
+                self.body.clip(cand)
+                e = self._score(cand, feats)
+                k = int(np.argmin(e))
+                if e[k] < cur:
+                    est, cur = cand[k], float(e[k])
+        if self.x is not None:
+            self.x = self.body.clip(self.x + (est - start))
+        return est, cur
+
+    def initialise(
+        self, feats: ViewFeatures, start: np.ndarray | None = None
+    ) -> tuple[np.ndarray, float]:
         """Coarse search from the standing pose (or around ``start``, a state) on one frame.
 
         Two stages of annealing with twice the particles: first the root alone
@@ -470,6 +515,8 @@ class AnnealedParticleFilter:
         if len(self.last) == 2 and self.momentum:  # constant velocity, damped
             x = x + self.momentum * (self.last[1] - self.last[0])
         est, best = self._anneal(x, feats, self.layers, self.step_std)
+        if self.refine:
+            est, best = self._refine_limbs(est, feats)
         if best > self.recover_cost:
             self.recoveries += 1
             prev = est
@@ -495,7 +542,9 @@ class TrackResult:
     recoveries: int
 
 
-def multiview_frames(videos: Sequence[Path], max_frames: int | None = None) -> Iterator[list[np.ndarray]]:
+def multiview_frames(
+    videos: Sequence[Path], max_frames: int | None = None
+) -> Iterator[list[np.ndarray]]:
     """One frame per camera at a time, until the shortest video ends."""
     readers = [read_frames(v) for v in videos]
     n = 0
@@ -504,6 +553,78 @@ def multiview_frames(videos: Sequence[Path], max_frames: int | None = None) -> I
             break
         n += 1
         yield list(frames)
+
+
+@dataclass
+class MultiviewVideo:
+    """The cameras, frame rate and per-frame features of a (multi-view) video."""
+
+    cameras: list[CalibratedCamera]
+    fps: float
+    doc: dict
+    features: Iterator[ViewFeatures]
+
+
+def open_video(
+    video: str | os.PathLike[str],
+    cameras_file: str | os.PathLike[str] | None = None,
+    views: int | None = None,
+    max_frames: int | None = None,
+    seed: int = 0,
+) -> MultiviewVideo:
+    """A folder with ``cameras.json`` (or that file), or one camera's video file with
+    ``cameras_file``, ready to track: frames are read and turned into features as they are
+    consumed. ``views`` keeps only the first cameras.
+
+    Raises:
+        MotionFormatError: a missing or malformed camera file, a missing video or
+            background, or frames of another size than their camera's.
+    """
+    cams_path = Path(cameras_file) if cameras_file is not None else Path(video)
+    cameras, doc = load_cameras(cams_path)
+    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+        cameras, videos = cameras[:1], [Path(video)]  # one camera's video: the file's first
+    else:
+        videos = camera_videos(cams_path, cameras)
+    if views is not None:
+        cameras, videos = cameras[:views], videos[:views]
+    images = camera_videos(cams_path, cameras, "background")
+    backgrounds = [
+        estimate_background(v) if b is None else read_image(b, (c.width, c.height))
+        for v, b, c in zip(videos, images, cameras, strict=True)
+    ]
+
+    def features() -> Iterator[ViewFeatures]:
+        for i, frames in enumerate(multiview_frames(videos, max_frames)):
+            for c, f in zip(cameras, frames, strict=True):
+                if f.shape[:2] != (c.height, c.width):
+                    raise MotionFormatError(
+                        cams_path,
+                        f"camera {c.name} is {c.width}x{c.height} but its video is "
+                        f"{f.shape[1]}x{f.shape[0]}",
+                    )
+            yield view_features(frames, backgrounds, seed + i)
+
+    return MultiviewVideo(cameras, float(doc["fps"]), doc, features())
+
+
+def track_features(
+    features: Iterator[ViewFeatures] | Sequence[ViewFeatures],
+    apf: AnnealedParticleFilter,
+) -> TrackResult:
+    """Run the filter over every frame's features; the wall time includes making them."""
+    states, conf = [], []
+    t0 = time.perf_counter()
+    for feats in features:
+        x, best = apf.step(feats)
+        states.append(x)
+        conf.append(1.0 - best)
+    seconds = time.perf_counter() - t0
+    if not states:
+        raise MotionFormatError("video", "no frames in this video")
+    return TrackResult(
+        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries
+    )
 
 
 def track_video(
@@ -516,39 +637,7 @@ def track_video(
     max_frames: int | None = None,
     seed: int = 0,
 ) -> TrackResult:
-    """Track the person of a multi-view video (a folder with ``cameras.json``, or that file),
-    or of one video file seen by the first camera of ``cameras_file``.
-
-    ``views`` uses only the first cameras. Raises :class:`MotionFormatError` for
-    a missing or malformed camera file or a missing video.
-    """
-    cams_path = Path(cameras_file) if cameras_file is not None else Path(video)
-    cameras, doc = load_cameras(cams_path)
-    single = Path(video).is_file() and Path(video).suffix.lower() != ".json"
-    if single:  # one camera's video, the first camera of the file
-        cameras, videos = cameras[:1], [Path(video)]
-    else:
-        videos = camera_videos(cams_path, cameras)
-    if views is not None:
-        cameras, videos = cameras[:views], videos[:views]
-    backgrounds = [
-        estimate_background(v) if b is None else read_image(b, (c.width, c.height))
-        for v, b, c in zip(
-            videos, camera_videos(cams_path, cameras, "background"), cameras, strict=True
-        )
-    ]
-    fps = float(doc["fps"])
-    apf = AnnealedParticleFilter(body, cameras, particles, layers, fps=fps, seed=seed)
-    states, conf = [], []
-    t0 = time.perf_counter()
-    for i, frames in enumerate(multiview_frames(videos, max_frames)):
-        for c, f in zip(cameras, frames, strict=True):
-            if f.shape[:2] != (c.height, c.width):
-                raise MotionFormatError(cams_path, f"camera {c.name} is {c.width}x{c.height} but its video is {f.shape[1]}x{f.shape[0]}")
-        feats = view_features(frames, backgrounds, seed + i)
-        x, best = apf.step(feats)
-        states.append(x)
-        conf.append(1.0 - best)
-    if not states:
-        raise MotionFormatError(video, "no frames in this video")
-    return TrackResult(np.array(states), np.array(conf), fps, time.perf_counter() - t0, len(cameras), apf.recoveries)
+    """Track the person of a video (see :func:`open_video`) with the annealed particle filter."""
+    mv = open_video(video, cameras_file, views, max_frames, seed)
+    apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps, seed=seed)
+    return track_features(mv.features, apf)

@@ -149,9 +149,7 @@ class BodyModel:
         return out
 
     @classmethod
-    def fit(
-        cls, motions: Sequence[Motion], max_dof: int = 28, margin: float = 0.15
-    ) -> BodyModel:
+    def fit(cls, motions: Sequence[Motion], max_dof: int = 28, margin: float = 0.15) -> BodyModel:
         """Learn degrees of freedom and joint limits from motions of one skeleton (the first's).
 
         The ``max_dof - 4`` rotation axes (besides root position and heading) are

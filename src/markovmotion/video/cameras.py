@@ -132,9 +132,7 @@ def ring_of_cameras(
     out = []
     for k in range(views):
         a = first_azimuth + 2 * math.pi * k / views
-        pos = np.array(
-            [centre[0] + radius * math.sin(a), height, centre[2] + radius * math.cos(a)]
-        )
+        pos = np.array([centre[0] + radius * math.sin(a), height, centre[2] + radius * math.cos(a)])
         cam = look_at(pos, target, width, h, focal, f"cam{k}", f"cam{k}.mp4")
         out.append(replace(cam, background=f"cam{k}_background.png"))
     return out
@@ -196,14 +194,18 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
             raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
         k = _matrix(path, f"{where}.K", c.get("K"), (3, 3))
         if not (k[0, 0] > 0 and k[1, 1] > 0) or not np.allclose(k[2], [0, 0, 1]):
-            raise MotionFormatError(path, f"{where}.K: focal lengths must be positive, last row 0 0 1")
+            raise MotionFormatError(
+                path, f"{where}.K: focal lengths must be positive, last row 0 0 1"
+            )
         r = _matrix(path, f"{where}.R", c.get("R"), (3, 3))
         if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
             raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
         t = _matrix(path, f"{where}.t", c.get("t"), (3,))
         dist = c.get("distortion", [])
         if dist and any(not isinstance(d, (int, float)) or d != 0 for d in dist):
-            raise MotionFormatError(path, f"{where}: lens distortion is not supported (undistort first)")
+            raise MotionFormatError(
+                path, f"{where}: lens distortion is not supported (undistort first)"
+            )
         video = c.get("video", "")
         if not isinstance(video, str) or len(video) > 255:
             raise MotionFormatError(path, f"{where}.video must be a file name")

@@ -37,12 +37,14 @@ def composite_frames(
 ) -> Iterator[np.ndarray]:
     """``frames`` with B (body points (F, 19, 3)) drawn shaded where it is in front of A's model.
 
-    Frames beyond either motion pass through unchanged.
+    Stops with A's tracked frames; frames beyond B's motion pass through unchanged.
     """
     colours = capsule_colours(BODY_SHAPE, BODY_POINTS, CLOTHES["b"])
     hidden = np.zeros((len(BODY_SHAPE.segments()[0]), 3))
     for t, frame in enumerate(frames):
-        if t >= len(a_points) or t >= len(b_points) or not np.isfinite(b_points[t]).all():
+        if t >= len(a_points):
+            return
+        if t >= len(b_points) or not np.isfinite(b_points[t]).all():
             yield frame
             continue
         canvas = DepthCanvas(camera.width, camera.height)
@@ -74,9 +76,7 @@ def respond_in_video(
     if not 0 <= view < len(cams):
         raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
     start = time.perf_counter()
-    a, result, summary = track_take(
-        video, body, cameras, None, particles, layers, None, max_frames
-    )
+    a, result, summary = track_take(video, body, cameras, None, particles, layers, None, max_frames)
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
     video_path = Path(video) if Path(video).is_file() else camera_videos(where, cams)[view]

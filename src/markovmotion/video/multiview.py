@@ -152,7 +152,9 @@ def tracking_errors(tracked: Motion, truth: Motion) -> dict:
     err = np.linalg.norm(body_points(tracked)[:n] - body_points(truth)[:n], axis=-1)  # (F, 19)
     return {
         "mpjpe_mm": round(float(err.mean()), 1),
-        "per_joint_mm": {p: round(float(e), 1) for p, e in zip(BODY_POINTS, err.mean(0), strict=True)},
+        "per_joint_mm": {
+            p: round(float(e), 1) for p, e in zip(BODY_POINTS, err.mean(0), strict=True)
+        },
         "per_frame_mm": [round(float(e), 1) for e in err.mean(1)],
         "frames_compared": n,
     }

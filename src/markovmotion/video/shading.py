@@ -36,7 +36,9 @@ CLOTHES = {
 
 
 @numba.njit(cache=True)
-def _raster(pix, depth, rad, rad_mm, seg, colours, light, ambient, scale, zbuf, rgb, ident, who):  # pragma: no cover
+def _raster(
+    pix, depth, rad, rad_mm, seg, colours, light, ambient, scale, zbuf, rgb, ident, who
+):  # pragma: no cover
     h, w = zbuf.shape
     for s in range(seg.shape[0]):
         ax = pix[seg[s, 0], 0] * scale
@@ -116,7 +118,9 @@ class DepthCanvas:
         self.rgb = np.zeros((height * scale, width * scale, 3))
         self.ident = np.full((height * scale, width * scale), -1, np.int8)
 
-    def body(self, joints: np.ndarray, camera, shape: BodyShape, colours: np.ndarray, who: int = 0) -> None:
+    def body(
+        self, joints: np.ndarray, camera, shape: BodyShape, colours: np.ndarray, who: int = 0
+    ) -> None:
         """Draw a body (joints (P, 3) mm) with ``colours`` (S, 3); ``who`` labels its pixels."""
         seg, radii = shape.segments()
         pix, depth = camera.project(shape.points(joints))
@@ -130,7 +134,9 @@ class DepthCanvas:
         """``image`` (H, W, 3) uint8 with the drawn bodies (or only body ``only``) over it."""
         hit = (self.ident >= 0) if only is None else (self.ident == only)
         fine = np.where(hit[..., None], self.rgb, 0.0).astype(np.float32)
-        alpha = cv2.resize(hit.astype(np.float32), (self.width, self.height), interpolation=cv2.INTER_AREA)
+        alpha = cv2.resize(
+            hit.astype(np.float32), (self.width, self.height), interpolation=cv2.INTER_AREA
+        )
         colour = cv2.resize(fine, (self.width, self.height), interpolation=cv2.INTER_AREA)
         colour = colour / np.maximum(alpha[..., None], 1e-6)
         out = image.astype(np.float32)
