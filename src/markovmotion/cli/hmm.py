@@ -165,7 +165,9 @@ def respond(
     ),
     standard: bool = typer.Option(False, help="Standard Viterbi over the whole input instead."),
     realtime: bool = typer.Option(
-        False, help="Replay A as a stream at its frame rate; report per-frame latency."
+        False,
+        help="Replay A as a stream at its frame rate (with --video: track frames as they "
+        "arrive, skipping those it cannot keep up with); report per-frame latency.",
     ),
     fps: float = ranged(
         "fps",
@@ -185,8 +187,9 @@ def respond(
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
     if video is not None:
         _respond_video(
-            model, video, out, cameras, view, particles, layers, max_frames, data, standard
-        )
+            model, video, out, cameras, view, particles, layers, max_frames, data, standard,
+            realtime,
+        )  # fmt: skip
         return
     check_motion_output(out)
     if animation is not None:
@@ -227,10 +230,13 @@ def respond(
         console.print(f"wrote {animation}")
 
 
-def _respond_video(model, video, out, cameras, view, particles, layers, max_frames, data, standard):
-    """``respond --video``: track A, generate B, composite B into the video."""
+def _respond_video(
+    model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime
+):
+    """``respond --video``: track A, generate B, composite B into the video (live with
+    ``realtime``)."""
     from markovmotion.video.cameras import camera_videos, load_cameras
-    from markovmotion.video.composite import respond_in_video
+    from markovmotion.video.composite import respond_in_video, respond_in_video_live
     from markovmotion.video.multiview import training_body_model
 
     if out.suffix.lower() != ".mp4":
@@ -239,6 +245,19 @@ def _respond_video(model, video, out, cameras, view, particles, layers, max_fram
     cams, _ = load_cameras(where)
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work
+    if realtime:
+        live = respond_in_video_live(
+            model, video, out, training_body_model(data), cameras, view, particles, layers,
+            max_frames,
+        )  # fmt: skip
+        err_console.print(
+            f"live: {live['frames']} frames at the video's rate, {live['tracked']} tracked, "
+            f"{live['skipped']} skipped; latency per frame median {live['latency_ms_median']} ms, "
+            f"p99 {live['latency_ms_p99']} ms; partner lag {live['lag_frames']} frames; "
+            f"wrote {live['out']}",
+            highlight=False,
+        )
+        return
     summary = respond_in_video(
         model, video, out, training_body_model(data), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed",

@@ -156,7 +156,7 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
     return img[v, yi, xi]
 
 
-@numba.njit(cache=True, fastmath=True, parallel=True)
+@numba.njit(cache=True, fastmath=True)
 def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
@@ -505,8 +505,8 @@ class AnnealedParticleFilter:
         self.x = self.x[: self.particles]
         return est, best
 
-    def step(self, feats: ViewFeatures) -> tuple[np.ndarray, float]:
-        """Track one frame: the pose (D,) and the best particle's cost."""
+    def step(self, feats: ViewFeatures, gap: int = 1) -> tuple[np.ndarray, float]:
+        """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost."""
         if self.x is None:
             est, best = self.initialise(feats)
             self.last = [est]
@@ -514,7 +514,7 @@ class AnnealedParticleFilter:
         x = self.x
         if len(self.last) == 2 and self.momentum:  # constant velocity, damped
             x = x + self.momentum * (self.last[1] - self.last[0])
-        est, best = self._anneal(x, feats, self.layers, self.step_std)
+        est, best = self._anneal(x, feats, self.layers, self.step_std * max(gap, 1))
         if self.refine:
             est, best = self._refine_limbs(est, feats)
         if best > self.recover_cost:
@@ -532,7 +532,7 @@ class AnnealedParticleFilter:
 # ----------------------------------------------------------------------------- whole videos
 @dataclass
 class TrackResult:
-    """States (F, D), per-frame confidence (1 - best cost), frame rate, wall time (s)."""
+    """States (F, D), per-frame confidence (1 - best cost), frame rate, wall and CPU time (s)."""
 
     states: np.ndarray
     confidence: np.ndarray
@@ -540,6 +540,7 @@ class TrackResult:
     seconds: float
     views: int
     recoveries: int
+    cpu_seconds: float = 0.0
 
 
 def multiview_frames(
@@ -557,12 +558,30 @@ def multiview_frames(
 
 @dataclass
 class MultiviewVideo:
-    """The cameras, frame rate and per-frame features of a (multi-view) video."""
+    """The cameras, frame rate, background and frames (one per camera at a time) of a video."""
 
     cameras: list[CalibratedCamera]
     fps: float
     doc: dict
-    features: Iterator[ViewFeatures]
+    backgrounds: list[np.ndarray]
+    frames: Iterator[list[np.ndarray]]
+    source: Path
+
+    def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
+        """The features of one frame per camera (checked against the cameras' sizes)."""
+        for c, f in zip(self.cameras, frames, strict=True):
+            if f.shape[:2] != (c.height, c.width):
+                raise MotionFormatError(
+                    self.source,
+                    f"camera {c.name} is {c.width}x{c.height} but its video is "
+                    f"{f.shape[1]}x{f.shape[0]}",
+                )
+        return view_features(frames, self.backgrounds, seed + index)
+
+    def features(self, seed: int = 0) -> Iterator[ViewFeatures]:
+        """Every frame's features, made as they are consumed."""
+        for i, frames in enumerate(self.frames):
+            yield self.features_of(frames, i, seed)
 
 
 def open_video(
@@ -570,11 +589,10 @@ def open_video(
     cameras_file: str | os.PathLike[str] | None = None,
     views: int | None = None,
     max_frames: int | None = None,
-    seed: int = 0,
 ) -> MultiviewVideo:
     """A folder with ``cameras.json`` (or that file), or one camera's video file with
-    ``cameras_file``, ready to track: frames are read and turned into features as they are
-    consumed. ``views`` keeps only the first cameras.
+    ``cameras_file``, ready to track: frames are decoded as they are consumed (no queue).
+    ``views`` keeps only the first cameras.
 
     Raises:
         MotionFormatError: a missing or malformed camera file, a missing video or
@@ -593,19 +611,8 @@ def open_video(
         estimate_background(v) if b is None else read_image(b, (c.width, c.height))
         for v, b, c in zip(videos, images, cameras, strict=True)
     ]
-
-    def features() -> Iterator[ViewFeatures]:
-        for i, frames in enumerate(multiview_frames(videos, max_frames)):
-            for c, f in zip(cameras, frames, strict=True):
-                if f.shape[:2] != (c.height, c.width):
-                    raise MotionFormatError(
-                        cams_path,
-                        f"camera {c.name} is {c.width}x{c.height} but its video is "
-                        f"{f.shape[1]}x{f.shape[0]}",
-                    )
-            yield view_features(frames, backgrounds, seed + i)
-
-    return MultiviewVideo(cameras, float(doc["fps"]), doc, features())
+    frames = multiview_frames(videos, max_frames)
+    return MultiviewVideo(cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path)
 
 
 def track_features(
@@ -614,16 +621,16 @@ def track_features(
 ) -> TrackResult:
     """Run the filter over every frame's features; the wall time includes making them."""
     states, conf = [], []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for feats in features:
         x, best = apf.step(feats)
         states.append(x)
         conf.append(1.0 - best)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     if not states:
         raise MotionFormatError("video", "no frames in this video")
     return TrackResult(
-        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries
+        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries, cpu
     )
 
 
@@ -638,6 +645,6 @@ def track_video(
     seed: int = 0,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter."""
-    mv = open_video(video, cameras_file, views, max_frames, seed)
+    mv = open_video(video, cameras_file, views, max_frames)
     apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps, seed=seed)
-    return track_features(mv.features, apf)
+    return track_features(mv.features(seed), apf)

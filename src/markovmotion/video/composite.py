@@ -22,6 +22,7 @@ import numpy as np
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
 from markovmotion.video.cameras import CalibratedCamera, camera_videos, load_cameras
 from markovmotion.video.multiview import track_take
@@ -93,6 +94,114 @@ def respond_in_video(
         }
     )
     return summary
+
+
+def respond_in_video_live(
+    model: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    body: BodyModel,
+    cameras: str | os.PathLike[str] | None = None,
+    view: int = 0,
+    particles: int = 200,
+    layers: int = 10,
+    max_frames: int | None = None,
+) -> dict:
+    """:func:`respond_in_video` live: frames arrive at the video's rate, each tracked and
+    handed to the dual HMM's online partner as it comes.
+
+    A frame is decoded only when the tracker is ready for it (no queue); a frame
+    whose successor is already due is skipped (counted; the partner is told, and
+    the tracker widens its search by the frames it missed). B's frames come
+    ``lag`` frames late, as the windowed Viterbi decides them; the composite is
+    written at the end, B drawn over the frames it answers. The first frame's
+    search for the person (and the partner's first step) happen before the
+    clock starts.
+    """
+    from markovmotion.models.hmm.dual import DualHMM
+    from markovmotion.models.online import concatenate
+
+    dual = DualHMM.load(model)
+    mv = open_video(video, cameras, None, max_frames)
+    if not 0 <= view < len(mv.cameras):
+        raise MotionFormatError(mv.source, f"no camera {view}: the video has {len(mv.cameras)}")
+    partner = dual.partner()
+    if not np.isclose(mv.fps, partner.fps):
+        raise MotionFormatError(
+            mv.source,
+            f"live tracking needs the video at the model's {partner.fps:g} fps, not {mv.fps:g}",
+        )
+    apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps)
+    period = 1.0 / mv.fps
+    states: list[np.ndarray | None] = []
+    shown: list[np.ndarray] = []
+    b_frames, times = [], []
+    skipped, gap = 0, 1
+    first = next(mv.frames, None)
+    if first is None:
+        raise MotionFormatError(mv.source, "no frames in this video")
+    # before the clock starts: the tracker's initial search and the partner's first step
+    x, _ = apf.step(mv.features_of(first, 0))
+    dual.partner().step(body.motion(x[None], mv.fps))  # loads compiled kernels
+    states.append(x)
+    shown.append(first[view])
+    if (b := partner.step(body.motion(x[None], mv.fps))) is not None:
+        b_frames.append(b)
+    start = time.perf_counter() - period
+    for i, frames in enumerate(mv.frames, start=1):
+        due = start + i * period
+        now = time.perf_counter()
+        if now < due:
+            time.sleep(due - now)
+        tick = time.perf_counter()
+        shown.append(frames[view])
+        if tick > due + period:  # the next frame is already here: drop this one
+            skipped += 1
+            gap += 1
+            states.append(None)
+            b = partner.skip()
+        else:
+            x, _ = apf.step(mv.features_of(frames, i), gap)
+            gap = 1
+            states.append(x)
+            b = partner.step(body.motion(x[None], mv.fps))
+            times.append(time.perf_counter() - tick)
+        if b is not None:
+            b_frames.append(b)
+    b_frames.extend(partner.finish())
+    if not states or all(s is None for s in states):
+        raise MotionFormatError(mv.source, "no frames tracked")
+    filled = _fill_forward(states)
+    a = body.motion(filled, mv.fps)
+    b = concatenate(b_frames, partner.fps)
+    written = write_video(
+        composite_frames(iter(shown), mv.cameras[view], body_points(a), body_points(b)),
+        out,
+        mv.fps,
+    )
+    ms = np.array(times or [0.0]) * 1e3
+    return {
+        "frames": len(states),
+        "tracked": len(states) - skipped,
+        "skipped": skipped,
+        "latency_ms_median": round(float(np.median(ms)), 1),
+        "latency_ms_p99": round(float(np.percentile(ms, 99)), 1),
+        "lag_frames": int(partner.lag),
+        "views": len(mv.cameras),
+        "partner_frames": b.n_frames,
+        "out": str(written),
+        "view": view,
+    }
+
+
+def _fill_forward(states: list[np.ndarray | None]) -> np.ndarray:
+    """States with each missing one replaced by the last known (the first known at the start)."""
+    first = next(s for s in states if s is not None)
+    out, last = [], first
+    for s in states:
+        last = s if s is not None else last
+        out.append(last)
+    return np.array(out)
 
 
 def _respond(dual, a: Motion, method: str) -> Motion:

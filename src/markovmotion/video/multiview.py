@@ -183,6 +183,7 @@ def track_take(
     summary = {
         "frames": len(result.states),
         "fps": round(len(result.states) / max(result.seconds, 1e-9), 2),
+        "fps_cpu": round(len(result.states) / max(result.cpu_seconds, 1e-9), 2),
         "video_fps": result.fps,
         "views": result.views,
         "particles": particles,
