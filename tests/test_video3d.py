@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from markovmotion import read_motion
 from markovmotion.cli import main
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import body_points
@@ -19,7 +20,7 @@ from markovmotion.video.annealed_particle_filter import (
 from markovmotion.video.body_model import BODY_SHAPE
 from markovmotion.video.cameras import load_cameras, look_at, ring_of_cameras, save_cameras
 from markovmotion.video.multiview import shaded_frames, training_body_model
-from markovmotion.video.render import background, silhouette_mask
+from markovmotion.video.render import background, read_frames, silhouette_mask
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
 
 
@@ -157,22 +158,73 @@ def test_tracker_converges_on_a_known_pose(body, take):
     assert all(0.0 <= c < 0.5 for c in costs)
 
 
-def test_video_render_and_track_commands(tmp_path, take, capsys):
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory, take):
+    """Two cameras, 0.1 s of the held-out take at 30 fps, 96x72, by the command line."""
     _, path = take
-    out = tmp_path / "video"
-    main(["video", "render", str(path), "--out", str(out), "--views", "2", "--seconds", "0.2",
-          "--fps", "10", "--width", "96", "--height", "72"])  # fmt: skip
-    cams, doc = load_cameras(out)
-    assert len(cams) == 2 and doc["fps"] == 10.0
-    assert all((out / c.video).is_file() and (out / c.background).is_file() for c in cams)
+    out = tmp_path_factory.mktemp("video") / "take"
+    main(["video", "render", str(path), "--out", str(out), "--views", "2", "--seconds", "0.1",
+          "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
+    return out
+
+
+def test_video_render_writes_videos_and_cameras(rendered):
+    cams, doc = load_cameras(rendered)
+    assert len(cams) == 2 and doc["fps"] == 30.0 and doc["people"] == "a"
+    assert all((rendered / c.video).is_file() and (rendered / c.background).is_file() for c in cams)
+    assert all((c.width, c.height) == (96, 72) for c in cams)
+
+
+def test_track_command_reports_error_against_truth(rendered, take, tmp_path, capsys):
+    _, path = take
     capsys.readouterr()
-    main(["track", "--video", str(out), "--truth", str(path), "--json", "--particles", "20",
+    main(["track", "--video", str(rendered), "--truth", str(path), "--json", "--particles", "20",
           "--layers", "2", "--out", str(tmp_path / "a.bvh")])  # fmt: skip
     summary = json.loads(capsys.readouterr().out)
-    assert summary["views"] == 2 and summary["frames"] == 2
-    assert {"mpjpe_mm", "per_joint_mm", "fps"} <= summary.keys()
+    assert summary["views"] == 2 and summary["frames"] == 3
+    assert {"mpjpe_mm", "per_joint_mm", "fps", "confidence"} <= summary.keys()
     assert summary["mpjpe_mm"] > 0 and len(summary["per_joint_mm"]) == 19
-    assert (tmp_path / "a.bvh").is_file()
+    tracked = read_motion(tmp_path / "a.bvh")
+    assert tracked.n_frames == 3 and body_points(tracked).shape == (3, 19, 3)
+
+
+@pytest.fixture(scope="module")
+def dual_model(mocap, tmp_path_factory):
+    """A small dual HMM on the training handshake and pull takes (A's skeleton: the template's)."""
+    from markovmotion.data.splits import held_out_pairs
+    from markovmotion.models.hmm.dual import DualHMM
+
+    train, _ = held_out_pairs(mocap.pairs(label=["handshake", "pull"]))
+    pairs = [mocap.load_pair(a, b) for a, b in train]
+    model = DualHMM(n_states=4, n_iter=3, window=4, placement_window=3).fit(pairs)
+    path = tmp_path_factory.mktemp("model") / "dual.npz"
+    model.save(path)
+    return path
+
+
+@pytest.mark.parametrize("live", [False, True])
+def test_respond_draws_the_partner_into_the_video(rendered, dual_model, tmp_path, capsys, live):
+    out = tmp_path / "composite.mp4"
+    args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+            "--out", str(out), "--particles", "20", "--layers", "2", "--view", "1"]  # fmt: skip
+    main(args + (["--realtime"] if live else []))
+    frames = list(read_frames(out))
+    original = list(read_frames(rendered / "cam1.mp4"))
+    assert len(frames) == len(original) == 3
+    assert frames[0].shape == original[0].shape
+    changed = [
+        np.abs(f.astype(int) - o).max(axis=2) > 60 for f, o in zip(frames, original, strict=True)
+    ]
+    assert sum(c.sum() for c in changed) > 0  # the partner is drawn somewhere
+    err = capsys.readouterr().err
+    assert ("skipped" in err) == live
+
+
+def test_respond_needs_one_source_of_a(dual_model, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(dual_model), "--out", str(tmp_path / "c.mp4")])
+    assert exc.value.code == 2
+    assert "--input" in capsys.readouterr().err
 
 
 def test_missing_or_bad_camera_file_exits_2(tmp_path, capsys):
