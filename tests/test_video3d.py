@@ -241,3 +241,18 @@ def test_missing_or_bad_camera_file_exits_2(tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "not a JSON camera file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_lone_video_uses_its_camera(rendered, tmp_path, capsys):
+    """One camera's video is tracked with the camera naming it; without a camera file: exit 2."""
+    capsys.readouterr()
+    main(["track", "--video", str(rendered / "cam1.mp4"), "--json", "--particles", "10",
+          "--layers", "1", "--max-frames", "1"])  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["views"] == 1
+    lone = tmp_path / "lone.mp4"
+    lone.write_bytes((rendered / "cam1.mp4").read_bytes())
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(lone)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "no camera file" in err and len(err.strip().splitlines()) == 1

@@ -235,13 +235,13 @@ def _respond_video(
 ):
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``)."""
-    from markovmotion.video.cameras import camera_videos, load_cameras
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.composite import respond_in_video, respond_in_video_live
     from markovmotion.video.multiview import training_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
-    where = cameras if cameras is not None else video
+    where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work

@@ -48,8 +48,12 @@ def register(root: typer.Typer) -> None:
 
 
 def track(
-    video: Path = typer.Option(..., help="Folder with cameras.json and the videos it names."),
-    cameras: Path = typer.Option(None, help="Camera file (default: VIDEO/cameras.json)."),
+    video: Path = typer.Option(
+        ..., help="Folder with cameras.json and the videos it names, or one camera's video."
+    ),
+    cameras: Path = typer.Option(
+        None, help="Camera file (default: VIDEO/cameras.json); a lone video is its first camera."
+    ),
     out: Path = typer.Option(None, help="Person A's tracked motion (.bvh)."),
     truth: Path = typer.Option(None, help="The true motion (BVH): report the error in mm."),
     json_out: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
@@ -62,13 +66,15 @@ def track(
 ) -> None:
     """Track person A in multi-view video by annealed particle filtering; write A as BVH."""
     from markovmotion.io import check_motion_output, write_motion
-    from markovmotion.video.cameras import camera_videos, load_cameras
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.multiview import track_take, training_body_model
 
     if out is not None:
         check_motion_output(out)
-    where = cameras if cameras is not None else video
-    camera_videos(where, load_cameras(where)[0])  # a bad camera file or video: fail first
+    where = camera_file(video, cameras)
+    cams, _ = load_cameras(where)  # a bad camera file or a missing video: fail first
+    if not video.is_file():
+        camera_videos(where, cams)
     body = training_body_model(data)
     motion, _, summary = track_take(
         video, body, cameras, truth, particles, layers, views, max_frames, seed

@@ -46,7 +46,13 @@ import numpy as np
 
 from markovmotion.errors import MotionFormatError
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
-from markovmotion.video.cameras import CalibratedCamera, camera_videos, load_cameras
+from markovmotion.video.cameras import (
+    CalibratedCamera,
+    camera_file,
+    camera_of_video,
+    camera_videos,
+    load_cameras,
+)
 from markovmotion.video.render import read_frames
 
 #: Foreground threshold on the largest channel difference to the background (grey levels).
@@ -566,6 +572,7 @@ class MultiviewVideo:
     backgrounds: list[np.ndarray]
     frames: Iterator[list[np.ndarray]]
     source: Path
+    videos: list[Path]
 
     def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
         """The features of one frame per camera (checked against the cameras' sizes)."""
@@ -590,18 +597,20 @@ def open_video(
     views: int | None = None,
     max_frames: int | None = None,
 ) -> MultiviewVideo:
-    """A folder with ``cameras.json`` (or that file), or one camera's video file with
-    ``cameras_file``, ready to track: frames are decoded as they are consumed (no queue).
+    """A folder with ``cameras.json`` (or that file), or one camera's video file (with
+    ``cameras_file``, or ``cameras.json`` beside it: the camera naming the file, else the
+    first), ready to track: frames are decoded as they are consumed (no queue).
     ``views`` keeps only the first cameras.
 
     Raises:
         MotionFormatError: a missing or malformed camera file, a missing video or
             background, or frames of another size than their camera's.
     """
-    cams_path = Path(cameras_file) if cameras_file is not None else Path(video)
+    cams_path = camera_file(video, cameras_file)
     cameras, doc = load_cameras(cams_path)
     if Path(video).is_file() and Path(video).suffix.lower() != ".json":
-        cameras, videos = cameras[:1], [Path(video)]  # one camera's video: the file's first
+        k = camera_of_video(cameras, video)  # one camera's video
+        cameras, videos = [cameras[k]], [Path(video)]
     else:
         videos = camera_videos(cams_path, cameras)
     if views is not None:
@@ -612,7 +621,9 @@ def open_video(
         for v, b, c in zip(videos, images, cameras, strict=True)
     ]
     frames = multiview_frames(videos, max_frames)
-    return MultiviewVideo(cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path)
+    return MultiviewVideo(
+        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos)
+    )
 
 
 def track_features(

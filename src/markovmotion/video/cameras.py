@@ -159,6 +159,23 @@ def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray
     return a
 
 
+def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
+    """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
+    ``video`` or beside the video file ``video``."""
+    if cameras is not None:
+        return Path(cameras)
+    video = Path(video)
+    if video.is_file() and video.suffix.lower() != ".json":
+        return video.parent / CAMERAS_FILE
+    return video
+
+
+def camera_of_video(cameras: list[CalibratedCamera], video: str | os.PathLike[str]) -> int:
+    """Which camera a lone video file is: the one naming it, else the first."""
+    name = Path(video).name
+    return next((k for k, c in enumerate(cameras) if Path(c.video).name == name), 0)
+
+
 def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], dict]:
     """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document.
 

@@ -24,7 +24,13 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
-from markovmotion.video.cameras import CalibratedCamera, camera_videos, load_cameras
+from markovmotion.video.cameras import (
+    CalibratedCamera,
+    camera_file,
+    camera_of_video,
+    camera_videos,
+    load_cameras,
+)
 from markovmotion.video.multiview import track_take
 from markovmotion.video.render import read_frames, write_video
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
@@ -72,15 +78,18 @@ def respond_in_video(
     from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
-    where = Path(cameras) if cameras is not None else Path(video)
+    where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
+    single = Path(video).is_file()
+    if single:  # one camera's video: that camera
+        view = camera_of_video(cams, video)
     if not 0 <= view < len(cams):
         raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
     start = time.perf_counter()
     a, result, summary = track_take(video, body, cameras, None, particles, layers, None, max_frames)
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
-    video_path = Path(video) if Path(video).is_file() else camera_videos(where, cams)[view]
+    video_path = Path(video) if single else camera_videos(where, cams)[view]
     frames = read_frames(video_path)
     written = write_video(
         composite_frames(frames, cams[view], body_points(a), body_points(b)), out, result.fps
@@ -123,6 +132,8 @@ def respond_in_video_live(
 
     dual = DualHMM.load(model)
     mv = open_video(video, cameras, None, max_frames)
+    if Path(video).is_file():
+        view = 0
     if not 0 <= view < len(mv.cameras):
         raise MotionFormatError(mv.source, f"no camera {view}: the video has {len(mv.cameras)}")
     partner = dual.partner()
@@ -134,7 +145,6 @@ def respond_in_video_live(
     apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps)
     period = 1.0 / mv.fps
     states: list[np.ndarray | None] = []
-    shown: list[np.ndarray] = []
     b_frames, times = [], []
     skipped, gap = 0, 1
     first = next(mv.frames, None)
@@ -144,7 +154,6 @@ def respond_in_video_live(
     x, _ = apf.step(mv.features_of(first, 0))
     dual.partner().step(body.motion(x[None], mv.fps))  # loads compiled kernels
     states.append(x)
-    shown.append(first[view])
     if (b := partner.step(body.motion(x[None], mv.fps))) is not None:
         b_frames.append(b)
     start = time.perf_counter() - period
@@ -154,7 +163,6 @@ def respond_in_video_live(
         if now < due:
             time.sleep(due - now)
         tick = time.perf_counter()
-        shown.append(frames[view])
         if tick > due + period:  # the next frame is already here: drop this one
             skipped += 1
             gap += 1
@@ -174,10 +182,9 @@ def respond_in_video_live(
     filled = _fill_forward(states)
     a = body.motion(filled, mv.fps)
     b = concatenate(b_frames, partner.fps)
+    frames = read_frames(mv.videos[view])  # decoded again: no frame is kept in memory
     written = write_video(
-        composite_frames(iter(shown), mv.cameras[view], body_points(a), body_points(b)),
-        out,
-        mv.fps,
+        composite_frames(frames, mv.cameras[view], body_points(a), body_points(b)), out, mv.fps
     )
     ms = np.array(times or [0.0]) * 1e3
     return {

@@ -176,7 +176,7 @@ def track_take(
     With ``truth`` (the take's BVH), the summary has ``mpjpe_mm`` and per-joint
     errors, the truth aligned by the ``start_frame`` the renderer recorded.
     """
-    from markovmotion.video.cameras import load_cameras
+    from markovmotion.video.cameras import camera_file, load_cameras
 
     result = track_video(video, body, cameras, particles, layers, views, max_frames, seed)
     motion = body.motion(result.states, result.fps, name=Path(video).name)
@@ -193,7 +193,7 @@ def track_take(
         "confidence": [round(float(c), 3) for c in result.confidence],
     }
     if truth is not None:
-        _, doc = load_cameras(Path(cameras) if cameras is not None else Path(video))
+        _, doc = load_cameras(camera_file(video, cameras))
         true = read_listed_motion(truth)
         if not np.isclose(true.fps, result.fps):
             true = true.resample(result.fps)
