@@ -63,6 +63,8 @@ EDGE_WEIGHT = 0.5
 #: Sobel response of an image edge counted as certain (a 30-grey-level step at sigma 1).
 EDGE_CONTRAST = 100.0
 BACKGROUND_FRAMES = 31
+#: Height (mm) of a standing person, for the first guess of depth from one view.
+STATURE = 1700.0
 
 
 # ----------------------------------------------------------------------------- image features
@@ -108,6 +110,7 @@ class ViewFeatures:
     samples: np.ndarray
     n_samples: np.ndarray
     centroids: list[np.ndarray | None] = field(default_factory=list)
+    heights: list[float] = field(default_factory=list)
 
 
 def view_features(
@@ -122,7 +125,7 @@ def view_features(
     edge = np.zeros((v, h, w), np.float32)
     samples = np.zeros((v, COVER_SAMPLES, 2))
     n_samples = np.zeros(v, np.intp)
-    centroids = []
+    centroids, heights = [], []
     for k, (frame, bg) in enumerate(zip(frames, backgrounds, strict=True)):
         diff = np.abs(frame.astype(np.int16) - bg.astype(np.int16)).max(axis=2).astype(np.float32)
         diff = cv2.GaussianBlur(diff, (0, 0), 1.0)
@@ -141,9 +144,11 @@ def view_features(
             samples[k, : len(pick)] = np.stack([xs[pick], ys[pick]], axis=1)
             n_samples[k] = len(pick)
             centroids.append(np.array([xs.mean(), ys.mean()]))
+            heights.append(float(ys.max() - ys.min() + 1))
         else:
             centroids.append(None)
-    return ViewFeatures(fg, edge, samples, n_samples, centroids)
+            heights.append(0.0)
+    return ViewFeatures(fg, edge, samples, n_samples, centroids, heights)
 
 
 # ----------------------------------------------------------------------------- the weighting function
@@ -349,27 +354,35 @@ def survival_beta(cost: np.ndarray, survival: float) -> float:
 
 
 def triangulate(
-    cameras: Sequence[CalibratedCamera], pixels: Sequence[np.ndarray | None]
+    cameras: Sequence[CalibratedCamera],
+    pixels: Sequence[np.ndarray | None],
+    heights: Sequence[float] | None = None,
+    stature: float = STATURE,
 ) -> np.ndarray | None:
-    """Least-squares meeting point (3,) of the rays through ``pixels`` (None: view not used)."""
+    """Least-squares meeting point (3,) of the rays through ``pixels`` (None: view not used).
+
+    With one view, the point on its ray at the depth where a person of ``stature``
+    (mm) is as tall as the foreground's ``heights`` (pixels) in that view.
+    """
+    used = [
+        (c, p, h)
+        for c, p, h in zip(cameras, pixels, heights or [0.0] * len(cameras), strict=True)
+        if p is not None
+    ]
+    if not used:
+        return None
+    if len(used) == 1:
+        c, p, h = used[0]
+        d = c.ray(p)
+        depth = c.focal * stature / h if h > 0 else 4000.0  # along the optical axis
+        return c.centre + d * depth / max(float(c.R[2] @ d), 1e-3)
     a = np.zeros((3, 3))
     b = np.zeros(3)
-    used = 0
-    for c, p in zip(cameras, pixels, strict=True):
-        if p is None:
-            continue
+    for c, p, _ in used:
         d = c.ray(p)
         proj = np.eye(3) - np.outer(d, d)
         a += proj
         b += proj @ c.centre
-        used += 1
-    if used == 0:
-        return None
-    if used == 1:  # one view: the ray's point at the distance of a standing person's size
-        c, p = next((c, p) for c, p in zip(cameras, pixels, strict=True) if p is not None)
-        d = c.ray(p)  # where the ray comes down to pelvis height, else 4 m away
-        t = (900.0 - c.centre[1]) / d[1] if d[1] < -1e-3 else 4000.0
-        return c.centre + d * min(t, 20000.0)
     return np.linalg.solve(a + 1e-9 * np.eye(3), b)
 
 
@@ -491,7 +504,7 @@ class AnnealedParticleFilter:
             root[self.body.slices[0]] = True
         std = self.step_std * 2.0
         if start is None:
-            centre = triangulate(self.cameras, feats.centroids)
+            centre = triangulate(self.cameras, feats.centroids, feats.heights)
             if centre is None:
                 centre = np.zeros(3)
             centre[1] = self.body.height
