@@ -400,6 +400,8 @@ class AnnealedParticleFilter:
         spread: diffusion of the first layer, in multiples of a frame's typical motion.
         recover_cost: cost of the best particle above which the filter starts again.
         seed: random seed.
+        arms_again: restart the arms' diffusion half way through the layers.
+        refine: candidates per limb of the limb search after annealing (0: none).
     """
 
     body: BodyModel
@@ -411,17 +413,14 @@ class AnnealedParticleFilter:
     spread: float = 3.0
     recover_cost: float = 0.45
     seed: int = 0
-    adaptive: bool = False
-    momentum: float = 0.0
     arms_again: bool = True
     refine: int = 30
-    evaluations: int = 0
-    recoveries: int = 0
+    evaluations: int = field(default=0, init=False)
+    recoveries: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
         self.x: np.ndarray | None = None
-        self.last: list[np.ndarray] = []
         self.second_pass = self.body.limb_mask(("elbow", "wrist")) if self.arms_again else None
         self.limbs = [
             m
@@ -447,12 +446,9 @@ class AnnealedParticleFilter:
         """Anneal particles ``x`` over ``layers``; the estimate and its cost."""
         shrink = math.sqrt(self.survival)
         for m in range(layers):
-            if m == 0 or not self.adaptive:
-                sd = std * shrink**m
-                if self.second_pass is not None and m >= layers // 2:
-                    sd = np.where(self.second_pass, std * shrink ** (m - layers // 2), sd)
-            else:  # Deutscher et al.: diffusion follows the spread of the surviving particles
-                sd = np.clip(shrink * x.std(axis=0), 0.05 * std, std * shrink**m)
+            sd = std * shrink**m
+            if self.second_pass is not None and m >= layers // 2:
+                sd = np.where(self.second_pass, std * shrink ** (m - layers // 2), sd)
             x = x + self.rng.normal(size=x.shape) * sd
             self.body.clip(x)
             e = self._score(x, feats)
@@ -527,12 +523,8 @@ class AnnealedParticleFilter:
     def step(self, feats: ViewFeatures, gap: int = 1) -> tuple[np.ndarray, float]:
         """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost."""
         if self.x is None:
-            est, best = self.initialise(feats)
-            self.last = [est]
-            return est, best
+            return self.initialise(feats)
         x = self.x
-        if len(self.last) == 2 and self.momentum:  # constant velocity, damped
-            x = x + self.momentum * (self.last[1] - self.last[0])
         est, best = self._anneal(x, feats, self.layers, self.step_std * max(gap, 1))
         if self.refine:
             est, best = self._refine_limbs(est, feats)
@@ -544,7 +536,6 @@ class AnnealedParticleFilter:
                 self.x = np.tile(prev, (self.particles, 1))
             else:
                 est, best = est2, best2
-        self.last = [*self.last[-1:], est]
         return est, best
 
 

@@ -199,7 +199,7 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
     if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
         raise MotionFormatError(path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras")
     fps = doc.get("fps", 25.0)
-    if not isinstance(fps, (int, float)) or not (0 < fps <= 1000):
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000):
         raise MotionFormatError(path, "'fps' must be a number above 0 and at most 1000")
     out = []
     for i, c in enumerate(cams):
@@ -253,5 +253,7 @@ def camera_videos(
         v = (folder / name).resolve()
         if not v.exists():
             raise MotionFormatError(v, f"no {what} for camera {c.name}")
+        if not (v.is_file() or v.is_dir()):  # a device or a pipe would never end
+            raise MotionFormatError(v, f"the {what} of camera {c.name} is not a regular file")
         out.append(v)
     return out
