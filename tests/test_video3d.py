@@ -256,3 +256,11 @@ def test_lone_video_uses_its_camera(rendered, tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "no camera file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_given_start_pose_must_be_on_the_body_models_skeleton(rendered, mocap, capsys):
+    salsa = mocap.root / mocap.pairs(label="salsa")[0][0].file
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(rendered), "--start", str(salsa), "--max-frames", "1"])
+    assert exc.value.code == 2
+    assert "not the body model's skeleton" in capsys.readouterr().err

@@ -63,6 +63,9 @@ def track(
     max_frames: int = ranged("count", None, max=1_000_000, help="Only the first frames."),
     data: Path = typer.Option(None, help="Motion capture for the body model (default: README)."),
     seed: int = ranged("seed", 0, help="Random seed."),
+    start: Path = typer.Option(
+        None, help="First frame's pose (BVH on the body model's skeleton); default: searched."
+    ),
 ) -> None:
     """Track person A in multi-view video by annealed particle filtering; write A as BVH."""
     from markovmotion.io import check_motion_output, write_motion
@@ -77,7 +80,7 @@ def track(
         camera_videos(where, cams)
     body = training_body_model(data)
     motion, _, summary = track_take(
-        video, body, cameras, truth, particles, layers, views, max_frames, seed
+        video, body, cameras, truth, particles, layers, views, max_frames, seed, start
     )
     if out is not None:
         write_motion(motion, out)

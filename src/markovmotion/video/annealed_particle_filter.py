@@ -402,6 +402,7 @@ class AnnealedParticleFilter:
         seed: random seed.
         arms_again: restart the arms' diffusion half way through the layers.
         refine: candidates per limb of the limb search after annealing (0: none).
+        start: the first frame's pose (a state), if known; else a coarse search finds it.
     """
 
     body: BodyModel
@@ -415,6 +416,7 @@ class AnnealedParticleFilter:
     seed: int = 0
     arms_again: bool = True
     refine: int = 30
+    start: np.ndarray | None = None
     evaluations: int = field(default=0, init=False)
     recoveries: int = field(default=0, init=False)
 
@@ -523,7 +525,7 @@ class AnnealedParticleFilter:
     def step(self, feats: ViewFeatures, gap: int = 1) -> tuple[np.ndarray, float]:
         """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost."""
         if self.x is None:
-            return self.initialise(feats)
+            return self.initialise(feats, self.start)
         x = self.x
         est, best = self._anneal(x, feats, self.layers, self.step_std * max(gap, 1))
         if self.refine:
@@ -658,8 +660,12 @@ def track_video(
     views: int | None = None,
     max_frames: int | None = None,
     seed: int = 0,
+    start: np.ndarray | None = None,
 ) -> TrackResult:
-    """Track the person of a video (see :func:`open_video`) with the annealed particle filter."""
+    """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
+    from the pose ``start`` (a state) if given."""
     mv = open_video(video, cameras_file, views, max_frames)
-    apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps, seed=seed)
+    apf = AnnealedParticleFilter(
+        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start
+    )
     return track_features(mv.features(seed), apf)

@@ -170,15 +170,21 @@ def track_take(
     views: int | None = None,
     max_frames: int | None = None,
     seed: int = 0,
+    start: str | os.PathLike[str] | None = None,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
     With ``truth`` (the take's BVH), the summary has ``mpjpe_mm`` and per-joint
-    errors, the truth aligned by the ``start_frame`` the renderer recorded.
+    errors, the truth aligned by the ``start_frame`` the renderer recorded. ``start``
+    (a motion of the body model's skeleton) gives the first frame's pose instead of
+    the coarse search.
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
-    result = track_video(video, body, cameras, particles, layers, views, max_frames, seed)
+    first = None
+    if start is not None:  # the first frame's pose, on the body model's skeleton
+        first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
+    result = track_video(video, body, cameras, particles, layers, views, max_frames, seed, first)
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {
         "frames": len(result.states),
