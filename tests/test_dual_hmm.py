@@ -51,6 +51,10 @@ def motion_of(poses: np.ndarray, states: np.ndarray, roots: np.ndarray, noise: f
     return Motion.from_rotations(sk, quats, roots, fps=30.0, name=f"synthetic{seed}")
 
 
+#: The toy skeleton has no body points to find: the toy models see every joint, unblended.
+TOY = {"points": "all", "blend_window": 1}
+
+
 def synthetic_pair(n_frames: int, seed: int) -> tuple[Motion, Motion, np.ndarray]:
     """A cycles through noisy poses; B's pose and place are a fixed function of A's pose."""
     states = state_sequence(n_frames, seed)
@@ -66,13 +70,14 @@ def training() -> list[tuple[Motion, Motion]]:
 
 @pytest.fixture(scope="module")
 def model(training) -> DualHMM:
-    return DualHMM(n_states=N_POSES, n_iter=20, window=6, placement_window=1).fit(training)
+    return DualHMM(n_states=N_POSES, n_iter=20, window=6, placement_window=1, **TOY).fit(training)
 
 
 @pytest.mark.parametrize("observation", ["pose", "motion"])
 @pytest.mark.parametrize("mode", ["paper", "joint"])
 def test_generated_b_recovers_the_known_function_of_a_state(training, mode, observation):
     dual = DualHMM(
+        **TOY,
         n_states=N_POSES,
         mode=mode,
         observation=observation,
@@ -145,7 +150,7 @@ def test_nested_cross_validation_picks_the_placement_window_on_the_other_takes()
         (f"t{seed}", "toy", *synthetic_pair(n, seed)[:2])
         for n, seed in ((200, 1), (220, 2), (180, 3))
     ]
-    model = DualHMM(n_states=N_POSES, n_iter=10, window=6)
+    model = DualHMM(n_states=N_POSES, n_iter=10, window=6, **TOY)
     results, _ = cross_validate(takes, model, placement_windows=[9, 1])
     assert [r.chosen["placement_window"] for r in results] == [1] * 3
     chosen = summarise(results, model)["per_pair"]["t2"]["chosen"]
@@ -235,10 +240,12 @@ def test_dual_hmm_follows_the_model_contract(model, training, tmp_path):
     assert not hasattr(DualHMM, "generate")
     # Both people of every take are training files (in memory: hashed by their arrays).
     assert len(model.train_files_) == 2 * len(training)
-    labelled = DualHMM(n_states=N_POSES, n_iter=2, window=6).fit(training, ["toy", "b", "toy"])
+    labelled = DualHMM(n_states=N_POSES, n_iter=2, window=6, **TOY).fit(
+        training, ["toy", "b", "toy"]
+    )
     assert labelled.labels_ == ["b", "toy"] and model.labels_ == []
     with pytest.raises(ValueError, match="2 labels for 3"):
-        DualHMM(n_states=N_POSES).fit(training, ["toy", "b"])
+        DualHMM(n_states=N_POSES, **TOY).fit(training, ["toy", "b"])
     labelled.save(tmp_path / "m.npz", source="toy data")
     loaded = Model.load(tmp_path / "m.npz")
     assert isinstance(loaded, DualHMM) and loaded.source_ == "toy data"
@@ -307,6 +314,7 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
     (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
     model = tmp_path / "m.npz"
     args = ["dualhmm", "train", "--data", str(data), "--test-trials", "4"]
+    args += ["--points", "all", "--blend-window", "1"]
     main([*args, "--states", "4", "--window", "6", "--placement-window", "1", "--out", str(model)])
     assert model.exists()
 
@@ -348,7 +356,7 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
 
     main(
         ["dualhmm", "crossval", "--data", str(data), "--states", "4", "--window", "6"]
-        + ["--n-iter", "5", "--placement-window", "1", "--json"]
+        + ["--n-iter", "5", "--placement-window", "1", "--points", "all", "--json"]
     )
     folds = json.loads(capsys.readouterr().out)
     assert folds["overall"]["pairs"] == 4 and len(folds["test_files"]) == 8

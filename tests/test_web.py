@@ -397,10 +397,13 @@ def test_live_session_with_the_dual_hmm(dual_server, dual, site):
     b = np.array([f["b"] for f in frames[lag:]]).reshape(60 - lag, -1, 3)
     # what the page is streamed is what the model generates with windowed Viterbi
     np.testing.assert_allclose(b, expected[: 60 - lag], atol=0.051)
-    with connect(ws_url(dual_server)) as ws:  # a person the model does not know
+    with connect(ws_url(dual_server)) as ws:  # another skeleton: matched by body points
         ws.send(json.dumps({"path": "walk_active.bvh.gz"}))
+        assert json.loads(ws.recv(10))["type"] == "start"
+    with connect(ws_url(dual_server)) as ws:  # a skeleton without the body points
+        ws.send(json.dumps({"path": "short.bvh"}))
         msg = json.loads(ws.recv(10))
-        assert msg["type"] == "error" and "skeleton" in msg["message"]
+        assert msg["type"] == "error" and "body points" in msg["message"]
 
 
 def test_live_session_from_an_uploaded_bvh(server):

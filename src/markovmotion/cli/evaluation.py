@@ -1,4 +1,4 @@
-"""``evaluation``: build the stimuli of the perceptual tests and analyse their answers."""
+"""``evaluation``: build the stimuli of the perceptual studies and analyse their answers."""
 
 from __future__ import annotations
 
@@ -10,12 +10,15 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.cli.tables import print_table
-from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, answers_csv, summarise
+from markovmotion.evaluate.interaction import summarise_interaction
+from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, TESTS, answers_csv, summarise
 from markovmotion.evaluate.store import open_results
 from markovmotion.io.files import atomic_write
 
 app = typer.Typer(
-    help="Perceptual evaluation of synthesized walks (gait paper §6).", no_args_is_help=True
+    help="Perceptual evaluation: synthesized walks (gait paper §6), generated interactions "
+    "(dual-HMM paper §4.2).",
+    no_args_is_help=True,
 )
 
 
@@ -33,19 +36,73 @@ def _pairs(values: list[str], what: str) -> dict[str, Path]:
     return out
 
 
+STUDIES = ("gait", "interaction")
+
+
+def _study(value: str) -> str:
+    if value not in STUDIES:
+        raise typer.BadParameter(f"{value!r}: must be one of {', '.join(STUDIES)}")
+    return value
+
+
 @app.command()
 def stimuli(
-    out: Path = typer.Argument(..., help="Folder to write the stimuli and manifest.csv into."),
-    real: list[str] = typer.Option([], help="STYLE=FILE of an original walk (repeat)."),
+    out_arg: Path = typer.Argument(
+        None, metavar="[OUT]", help="Folder to write the stimuli into (or --out)."
+    ),
+    out: Path = typer.Option(None, "--out", help="Folder to write the stimuli into."),
+    study: str = typer.Option(
+        "gait",
+        callback=_study,
+        help="gait: the walks of the gait paper (§6.1); interaction: the dual-HMM "
+        "paper's observer study (§4.2) from --model.",
+    ),
+    real: list[str] = typer.Option([], help="STYLE=FILE of an original walk (repeat; gait)."),
     synthetic: list[str] = typer.Option(
-        [], help="STYLE=FILE of a synthesized walk (repeat; style 'average' for the average model)."
+        [],
+        help="STYLE=FILE of a synthesized walk (repeat; style 'average' for the average model; "
+        "gait).",
+    ),
+    model: Path = typer.Option(None, help="The dual-HMM model (.npz) generating B (interaction)."),
+    test: Path = typer.Option(
+        None,
+        help="INDEX.csv (or its folder) whose two-person takes to show (interaction; default: "
+        "the model's held-out takes). Takes the model trained on are left out.",
+    ),
+    videos: bool = typer.Option(
+        False, "--videos", help="Also render each clip as a point-light MP4 (interaction)."
     ),
 ) -> None:
-    """Write each walk with and without root displacement, anonymised, with a manifest (§6.1)."""
+    """Gait: each walk with and without root displacement (§6.1). Interaction: per test take,
+    the real clip and one with B generated from A. Anonymised, with a manifest."""
+    if out is not None and out_arg is not None and out != out_arg:
+        raise typer.BadParameter("give the folder once, as OUT or --out", param_hint="--out")
+    folder = out or out_arg
+    if folder is None:
+        raise typer.BadParameter("where to write the stimuli: give --out DIR", param_hint="--out")
+    if study == "interaction":
+        if real or synthetic:
+            raise typer.BadParameter("--real/--synthetic are walks: for --study gait")
+        if model is None:
+            raise typer.BadParameter("--study interaction needs --model M.npz (a dual HMM)")
+        from markovmotion.evaluate.interaction import write_interaction_stimuli
+
+        made = write_interaction_stimuli(folder, model, test, videos=videos)
+        counts = {k: sum(c.kind == k for c in made.clips) for k in ("real", "generated")}
+        Console(stderr=True).print(
+            f"wrote {counts['real']} real and {counts['generated']} generated clips "
+            f"({', '.join(made.labels)}) and {folder / 'interaction.json'}",
+            highlight=False,
+        )
+        return
+    if model is not None or test is not None or videos:
+        raise typer.BadParameter(
+            "--model/--test/--videos build interaction clips: add --study interaction"
+        )
     from markovmotion.evaluate.stimuli import write_stimuli
 
-    written = write_stimuli(out, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))
-    Console(stderr=True).print(f"wrote {len(written)} stimuli and {out / 'manifest.csv'}")
+    written = write_stimuli(folder, _pairs(real, "--real"), _pairs(synthetic, "--synthetic"))
+    Console(stderr=True).print(f"wrote {len(written)} stimuli and {folder / 'manifest.csv'}")
 
 
 @app.command()
@@ -57,8 +114,60 @@ def report(
     """Recompute the figures of the paper's §6 from the answers in DB."""
     store = open_results(db)
     items = store.answered()
-    rep = summarise(items, store.styles)
+    rep = summarise([i for i in items if i.test in TESTS], store.styles)
     console = Console()
+    if store.stimuli or store.interaction is None:
+        _print_gait(store, rep, console)
+    figures = rep.to_dict()
+    if store.interaction is not None:
+        figures["interaction"] = inter = summarise_interaction(
+            items, store.interaction.labels, store.interaction.clips
+        )
+        _print_interaction(inter, console)
+    if csv:
+        with atomic_write(csv) as fh:
+            fh.write(answers_csv(items))
+    if json_out:
+        with atomic_write(json_out) as fh:
+            fh.write(json.dumps(figures, indent=1))
+
+
+def _print_interaction(s: dict, console: Console) -> None:
+    """The observer study's tables (dual-HMM paper §4.2, Tables 1-2)."""
+    console.print(
+        f"Interactions: {s['observers']} observers, {s['answers']} answers", highlight=False
+    )
+    t = Table(title="Identification of the action, % (correct/answers); noticed something unusual")
+    t.add_column("behaviour")
+    for kind in s["kinds"]:
+        t.add_column(f"identified, {kind}", justify="right")
+        t.add_column(f"unusual, {kind}", justify="right")
+    rows = [(label, s["rates"][label]) for label in s["labels"]] + [("all", s["overall"])]
+    for label, row in rows:
+        cells = []
+        for kind in s["kinds"]:
+            c = row[kind]
+            rate = "–" if c["rate"] is None else f"{c['rate']:.1f}"
+            cells += [f"{rate} ({c['correct']}/{c['n']})", f"{c['unusual']}/{c['n']}"]
+        t.add_row(label, *cells)
+    print_table(t, console)
+    t = Table(title="Comments per video")
+    for col in ("video", "behaviour", "kind", "take", "unusual", "comments"):
+        t.add_column(col)
+    for c in s["clips"]:
+        t.add_row(
+            c["clip"],
+            c["label"],
+            c["kind"],
+            c["take"],
+            f"{c['unusual']}/{c['n']}",
+            " | ".join(c["comments"]) or "–",
+        )
+    print_table(t, console)
+
+
+def _print_gait(store, rep, console: Console) -> None:
+    """The gait study's tables (gait paper §6)."""
     console.print(
         f"{store.count_evaluators()} evaluators registered, {rep.evaluators} answered; "
         f"answers: {rep.answers['naturalness']} naturalness, {rep.answers['recognition']} style, "
@@ -106,9 +215,3 @@ def report(
     for level in range(len(RESEMBLANCE) - 1, -1, -1):
         t.add_row(f"{level} {RESEMBLANCE[level]}", str(rep.resemblance_histogram[level]))
     print_table(t, console)
-    if csv:
-        with atomic_write(csv) as fh:
-            fh.write(answers_csv(items))
-    if json_out:
-        with atomic_write(json_out) as fh:
-            fh.write(json.dumps(rep.to_dict(), indent=1))

@@ -39,6 +39,22 @@ CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = ranged(
     "window", 19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
+BLEND_WINDOW = ranged(
+    "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
+)
+TRELLIS = typer.Option(
+    "path",
+    callback=choice(("path", "paper")),
+    help="Trellis of §3.2: 'path' (lowest-error path, following recordings) or 'paper' "
+    "(E = (D1 + ... + DK) x D4 per column, as printed).",
+)
+POINTS = typer.Option(
+    "body",
+    callback=choice(("body", "all")),
+    help="See people as 'body' points found by joint names (any skeleton) or 'all' joints "
+    "of the training skeleton.",
+)
+ENERGY = ranged("fraction", 0.99, help="PCA energy kept per person (the paper's 0.95).")
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
@@ -59,6 +75,10 @@ def new_model(
     observation: str,
     candidates: int,
     placement_window: int,
+    blend_window: int,
+    trellis: str,
+    points: str,
+    energy: float,
     fps: float,
     window: int,
     n_iter: int,
@@ -73,6 +93,10 @@ def new_model(
         observation=observation,
         candidates=candidates,
         placement_window=placement_window,
+        blend_window=blend_window,
+        trellis=trellis,
+        points=points,
+        energy=energy,
         fps=fps,
         window=window,
         n_iter=n_iter,
@@ -93,6 +117,10 @@ def train(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    blend_window: int = BLEND_WINDOW,
+    trellis: str = TRELLIS,
+    points: str = POINTS,
+    energy: float = ENERGY,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -107,7 +135,19 @@ def train(
     check_model_output(out)
     start = time.perf_counter()
     model = new_model(
-        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+        states,
+        mode,
+        observation,
+        candidates,
+        placement_window,
+        blend_window,
+        trellis,
+        points,
+        energy,
+        fps,
+        window,
+        n_iter,
+        seed,
     )
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
@@ -164,6 +204,9 @@ def respond(
         "window", None, help="Windowed-Viterbi slice length (default: the model's)."
     ),
     standard: bool = typer.Option(False, help="Standard Viterbi over the whole input instead."),
+    trellis: str = typer.Option(
+        None, callback=choice(("path", "paper")), help="Trellis (default: the model's)."
+    ),
     realtime: bool = typer.Option(
         False,
         help="Replay A as a stream at its frame rate (with --video: track frames as they "
@@ -195,6 +238,7 @@ def respond(
     if animation is not None:
         check_output(animation)
     dual = DualHMM.load(model)
+    dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
     if not np.isclose(motion.fps, dual.fps):
@@ -316,6 +360,10 @@ def crossval(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    blend_window: int = BLEND_WINDOW,
+    trellis: str = TRELLIS,
+    points: str = POINTS,
+    energy: float = ENERGY,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -335,7 +383,19 @@ def crossval(
     from markovmotion.evaluate.hmm import crossval_index
 
     model = new_model(
-        states, mode, observation, candidates, placement_window, fps, window, n_iter, seed
+        states,
+        mode,
+        observation,
+        candidates,
+        placement_window,
+        blend_window,
+        trellis,
+        points,
+        energy,
+        fps,
+        window,
+        n_iter,
+        seed,
     )
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
@@ -361,12 +421,21 @@ def _print_table(report: dict) -> None:
 
     from markovmotion.cli.tables import print_table
 
-    table = Table(title="dual HMM: mean per-frame error of B (mm)")
+    table = Table(
+        title="dual HMM: mean per-frame error of B (mm) and jumps (p90 of frame steps, mm)"
+    )
     cols = ("standard_mm", "windowed_mm", "mean_pose_mm", "nearest_neighbour_mm")
-    for c in ("group", *cols, "latency median/p99 (µs)"):
+    jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
+    for c in ("group", *cols, "paper trellis std/win", *jumps, "latency median/p99 (µs)"):
         table.add_column(c)
     rows = {"overall": report["overall"], **report["per_label"], **report["per_pair"]}
     for name, r in rows.items():
-        lat = r["latency_us"]
-        table.add_row(name, *(f"{r[c]:.1f}" for c in cols), f"{lat['median']:.0f}/{lat['p99']:.0f}")
+        lat, paper = r["latency_us"], r["trellis"]["paper"]
+        table.add_row(
+            name,
+            *(f"{r[c]:.1f}" for c in cols),
+            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}",
+            *(f"{r[c]:.1f}" for c in jumps),
+            f"{lat['median']:.0f}/{lat['p99']:.0f}",
+        )
     print_table(table)

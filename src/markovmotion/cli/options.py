@@ -100,6 +100,8 @@ RANGES: dict[str, Range] = {
     "iterations": Range(1, 100_000),
     # trellis candidates and similar small counts
     "count": Range(1, 10_000),
+    # fractions of variance (PCA energy) kept
+    "fraction": Range(0, 1, lo_open=True),
     # titles and labels drawn on pictures
     "title": Range(0, None, max_length=200),
 }

@@ -14,7 +14,9 @@ def serve(
     port: int = typer.Option(8000, help="Port to listen on."),
     db: Path = typer.Option(Path("results.sqlite"), help="SQLite file of the evaluation answers."),
     stimuli: Path = typer.Option(
-        None, help="Folder of evaluation stimuli with manifest.csv (default: LIBRARY/stimuli)."
+        None,
+        help="Folder of evaluation stimuli: manifest.csv (walks) and/or interaction.json "
+        "(interactions) (default: LIBRARY/stimuli).",
     ),
     partner: Path = typer.Option(
         None,

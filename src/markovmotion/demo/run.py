@@ -88,6 +88,13 @@ def dual_hmm_partner(out: Path, index: MocapIndex, console: Console) -> list[Pat
     return demo_step(out, index, console)
 
 
+def dual_hmm_handshake(out: Path, index: MocapIndex, console: Console) -> list[Path]:
+    """A virtual partner shaking hands (dual HMM on the two-person CMU interactions)."""
+    from markovmotion.demo.hmm import handshake_step
+
+    return handshake_step(out, index, console)
+
+
 def vlmm_routine(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Routines synthesized by VLMMs of CMU dance and martial arts (VLMM paper Figs. 3, 9)."""
     from markovmotion.demo.vlmm import demo_step
@@ -113,6 +120,7 @@ STEPS: list[Step] = [
     captured_walk,
     pca_energy,
     dual_hmm_partner,
+    dual_hmm_handshake,
     chain_partner,
     vlmm_routine,
     stylized_walk,

@@ -1,11 +1,17 @@
 """Accuracy of a virtual partner against the real one (dual-HMM paper §4.1, Figs. 6-8).
 
 For every two-person take of a test set, B is generated from A by standard
-and by windowed Viterbi, and each frame's error is the Euclidean distance
-between generated and real joint positions, in mm, averaged over B's joints
-after forward kinematics -- world positions, B being placed through A's
-real ground frame, so the error counts both B's pose and where B stands
-relative to A. Two baselines: B's mean pose (the mean of B's training joint
+and by windowed Viterbi, through each trellis (``"path"``, ours, and
+``"paper"``, §3.2 as printed), and each frame's error is the Euclidean
+distance between generated and real positions, in mm, averaged over the
+common body points (:mod:`markovmotion.features.body_points`, so the real B
+may come on another skeleton than the model's) after forward kinematics --
+world positions, B being placed through A's real ground frame, so the error
+counts both B's pose and where B stands relative to A. How much B jumps:
+per frame step, how far the median body point moves (:func:`jump_sizes`);
+the JSON gives the 90th percentile of these steps (``*_jump_p90_mm``) and
+the fraction over 100 mm (``*_jump_over_100mm``) for standard, windowed
+and the real B. Two baselines: B's mean pose (the mean of B's training joint
 positions in A's ground frame) and nearest-neighbour retrieval (the B frame
 whose A frame is nearest in A's feature space). The same four are also given
 for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares
@@ -42,10 +48,13 @@ from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.dual import DualHMM, ground_frame
+from markovmotion.models.hmm.trellis import TRELLISES
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 
 METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour")
+#: A step of the median body point larger than this between frames is a jump (mm).
+JUMP_MM = 100.0
 
 
 @dataclass
@@ -58,6 +67,7 @@ class PairResult:
     errors: dict[str, np.ndarray] = field(default_factory=dict)
     pose_errors: dict[str, np.ndarray] = field(default_factory=dict)
     latencies_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    jumps: dict[str, np.ndarray] = field(default_factory=dict)  # per frame step (mm)
     chosen: dict = field(default_factory=dict)  # settings picked on inner folds, if any
 
 
@@ -67,8 +77,8 @@ class _Baselines:
     def __init__(self, model: DualHMM):
         self.model = model
         train_b = model.expmaps_b_.inverse_transform([model.frames_b_.astype(float)])[0]
-        self.mean_rel = train_b.positions().mean(axis=0)
-        self.mean_pose = train_b.body_centred_positions().mean(axis=0)
+        self.mean_rel = model.body_positions(train_b).mean(axis=0)
+        self.mean_pose = model.body_positions(train_b, body_centred=True).mean(axis=0)
         self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
 
     def mean_world(self, origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -78,6 +88,12 @@ class _Baselines:
     def nearest(self, xa: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
         idx = self.nn.kneighbors(xa, return_distance=False)[:, 0]
         return self.model.frames_to_motion(idx, origin, yaw)
+
+
+def jump_sizes(points: np.ndarray) -> np.ndarray:
+    """(F - 1,) how far the median body point moves between consecutive frames (mm), from
+    positions (F, P, 3): a cut between two unrelated poses is a large step."""
+    return np.median(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1)
 
 
 def step_latencies(model: DualHMM, xa: np.ndarray) -> np.ndarray:
@@ -100,25 +116,36 @@ def evaluate_pair(
     label: str,
     baselines: _Baselines | None = None,
 ) -> PairResult:
-    """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take."""
+    """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take; standard
+    and windowed through the model's trellis, and (keys ``"<trellis>/standard"`` ...) through
+    each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
     baselines = baselines or _Baselines(model)
     a, b = model._rate(a), model._rate(b)
     origin, yaw = ground_frame(a)
     xa, _ = model.features_a(a)
-    generated = {
-        "standard": model.respond(a, "standard"),
-        "windowed": model.respond(a, "windowed"),
-        "nearest_neighbour": baselines.nearest(xa, origin, yaw),
-    }
-    truth, truth_pose = b.positions(), b.body_centred_positions()
+    generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
+    own = model.trellis
+    try:
+        for kind in TRELLISES:
+            model.set_params(trellis=kind)
+            for method in ("standard", "windowed"):
+                generated[f"{kind}/{method}"] = model.respond(a, method)
+    finally:
+        model.set_params(trellis=own)
+    for method in ("standard", "windowed"):
+        generated[method] = generated[f"{own}/{method}"]
+    truth, truth_pose = model.body_positions(b), model.body_positions(b, body_centred=True)
     res = PairResult(name, label, model.fps)
+    res.jumps["real"] = jump_sizes(truth)
     for k, m in generated.items():
-        res.errors[k] = trial_errors(m.positions(), truth)
-        res.pose_errors[k] = trial_errors(m.body_centred_positions(), truth_pose)
+        where = model.body_positions(m)
+        res.errors[k] = trial_errors(where, truth)
+        res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)
+        res.jumps[k] = jump_sizes(where)
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
     lag = model.window - 1
-    shown = generated["windowed"].positions()[: len(truth) - lag]
+    shown = model.body_positions(generated["windowed"])[: len(truth) - lag]
     res.errors["windowed_as_shown"] = trial_errors(shown, truth[lag:])
     res.latencies_us = step_latencies(model, xa)
     return res
@@ -147,6 +174,12 @@ def _summary(results: Sequence[PairResult]) -> dict:
     lat = np.concatenate([r.latencies_us for r in results])
     out = {f"{k}_mm": mean(k) for k in METHODS}
     out["windowed_as_shown_mm"] = mean("windowed_as_shown")
+    out.update(_jumps(results, ("standard", "windowed", "real")))
+    out["trellis"] = {
+        kind: {f"{m}_mm": mean(f"{kind}/{m}") for m in ("standard", "windowed")}
+        | _jumps(results, (f"{kind}/standard", f"{kind}/windowed"))
+        for kind in TRELLISES
+    }
     out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in METHODS}
     out["latency_us"] = {
         "median": round(float(np.median(lat)), 1),
@@ -154,6 +187,18 @@ def _summary(results: Sequence[PairResult]) -> dict:
     }
     out["frames"] = int(sum(len(r.errors["standard"]) for r in results))
     out["pairs"] = len(results)
+    return out
+
+
+def _jumps(results: Sequence[PairResult], keys: Sequence[str]) -> dict:
+    """``<key>_jump_p90_mm`` (90th percentile of :func:`jump_sizes` over every frame step)
+    and ``<key>_jump_over_100mm`` (the fraction of steps over :data:`JUMP_MM`) per key."""
+    out = {}
+    for k in keys:
+        steps = np.concatenate([r.jumps[k] for r in results])
+        name = k.split("/")[-1]
+        out[f"{name}_jump_p90_mm"] = round(float(np.percentile(steps, 90)), 1)
+        out[f"{name}_jump_over_100mm"] = round(float((steps > JUMP_MM).mean()), 4)
     return out
 
 
@@ -165,6 +210,9 @@ def describe(model: DualHMM) -> dict:
         "fps": model.fps,
         "window": model.window,
         "lag_frames": model.window - 1,
+        "trellis": model.trellis,
+        "blend_window": model.blend_window,
+        "placement_window": model.placement_window,
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
@@ -197,10 +245,10 @@ def choose_placement(
     errors, frames = np.zeros(len(windows)), 0
     for i, (_, _, a, b) in enumerate(takes):
         fold = _fit_on(model, [t for j, t in enumerate(takes) if j != i])
-        truth = model._rate(b).positions()
+        truth = model.body_positions(model._rate(b))
         for k, w in enumerate(windows):
             generated = fold.set_params(placement_window=w).respond(a, "standard")
-            errors[k] += trial_errors(generated.positions(), truth).sum()
+            errors[k] += trial_errors(model.body_positions(generated), truth).sum()
         frames += len(truth)
     mean = errors / frames
     return {

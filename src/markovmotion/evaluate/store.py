@@ -5,6 +5,12 @@ from the stimuli (gait paper §6.1); answers are kept whether or not the tests
 are finished, and an evaluator coming back with the token resumes. Item rows
 copy the stimulus labels (style, kind, displacement) so that the analysis
 needs nothing but the database.
+
+An observer of the interaction study (dual-HMM paper §4.2,
+:mod:`markovmotion.evaluate.interaction`) gets every clip once, in a random
+order, as items of the test ``interaction`` (``file`` the clip's id, ``style``
+its label, ``kind`` real or generated); with each answer go whether they
+noticed something unusual and their comment (table ``remarks``).
 """
 
 from __future__ import annotations
@@ -22,6 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from markovmotion.errors import MarkovMotionError
+from markovmotion.evaluate.interaction import (
+    INTERACTION,
+    MAX_COMMENT,
+    Clip,
+    InteractionStimuli,
+)
 from markovmotion.evaluate.perceptual import ITEMS_PER_TEST, TESTS, choices
 from markovmotion.evaluate.stimuli import AVERAGE, Stimulus
 
@@ -40,7 +52,18 @@ CREATE TABLE IF NOT EXISTS answers (
     answer TEXT NOT NULL, answered REAL NOT NULL,
     PRIMARY KEY (token, test, position),
     FOREIGN KEY (token, test, position) REFERENCES items(token, test, position));
+CREATE TABLE IF NOT EXISTS clips (
+    id TEXT PRIMARY KEY, file_a TEXT NOT NULL, file_b TEXT NOT NULL, label TEXT NOT NULL,
+    kind TEXT NOT NULL, take TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS clip_labels (position INTEGER PRIMARY KEY, label TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS remarks (
+    token TEXT NOT NULL, test TEXT NOT NULL, position INTEGER NOT NULL,
+    unusual INTEGER NOT NULL, comment TEXT NOT NULL,
+    PRIMARY KEY (token, test, position),
+    FOREIGN KEY (token, test, position) REFERENCES items(token, test, position));
 """
+STUDIES = ("gait", "interaction")
+"""The studies an evaluator may take part in: the gait paper's three tests, the observer study."""
 
 
 class EvaluationError(MarkovMotionError):
@@ -52,7 +75,9 @@ class Item:
     """One video (or, in the resemblance test, pair of videos) shown to one evaluator.
 
     For a resemblance pair, ``file`` is shown on the left and ``file_b`` on the
-    right; ``kind`` is the kind of the left one.
+    right; ``kind`` is the kind of the left one. An interaction clip's item has
+    its id in ``file``, its label in ``style``, and with its answer ``unusual``
+    (the observer noticed something strange) and ``comment``.
     """
 
     token: str
@@ -64,6 +89,8 @@ class Item:
     displacement: bool
     file_b: str | None = None
     answer: str | None = None
+    unusual: bool | None = None
+    comment: str | None = None
 
 
 def _sample(pool: list, n: int, rng: np.random.Generator) -> list:
@@ -110,14 +137,31 @@ def draw_items(
     return items
 
 
+def draw_clips(token: str, clips: list[Clip], rng: np.random.Generator) -> list[Item]:
+    """Every clip of the interaction study once, in a random order (paper §4.2)."""
+    return [
+        Item(token, INTERACTION, pos, c.id, c.label, c.kind, False)
+        for pos, c in enumerate(_sample(clips, len(clips), rng))
+    ]
+
+
+ALL_TESTS = (*TESTS, INTERACTION)
+
+
 class EvaluationStore:
     """The evaluation database: evaluators, their drawn items and their answers.
 
     Safe to share between threads (one connection per thread); every write is
-    its own committed transaction.
+    its own committed transaction. ``interaction`` (the observer study's clips and
+    labels) replaces those stored before; without it they are read from the database.
     """
 
-    def __init__(self, path: str | os.PathLike[str], stimuli: list[Stimulus] | None = None):
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        stimuli: list[Stimulus] | None = None,
+        interaction: InteractionStimuli | None = None,
+    ):
         self.path = Path(path)
         self._local = threading.local()
         # one writer at a time in this process: threads queue on the lock instead
@@ -133,6 +177,20 @@ class EvaluationStore:
                     [(s.file, s.style, s.kind, int(s.displacement)) for s in stimuli],
                 )
         self.stimuli = stimuli or self._stored_stimuli()
+        if interaction is not None:
+            with self._transaction() as c:
+                c.execute("DELETE FROM clip_labels")
+                c.executemany(
+                    "INSERT INTO clip_labels VALUES (?, ?)", list(enumerate(interaction.labels))
+                )
+                c.executemany(
+                    "INSERT OR REPLACE INTO clips VALUES (?, ?, ?, ?, ?, ?)",
+                    [
+                        (k.id, k.file_a, k.file_b, k.label, k.kind, k.take)
+                        for k in interaction.clips
+                    ],
+                )
+        self.interaction = interaction or self._stored_interaction()
 
     def _con(self) -> sqlite3.Connection:
         con = getattr(self._local, "con", None)
@@ -161,17 +219,38 @@ class EvaluationStore:
         )
         return [Stimulus(f, s, k, bool(d)) for f, s, k, d in rows]
 
+    def _stored_interaction(self) -> InteractionStimuli | None:
+        con = self._con()
+        labels = [r[0] for r in con.execute("SELECT label FROM clip_labels ORDER BY position")]
+        clips = [Clip(*row) for row in con.execute("SELECT * FROM clips ORDER BY id")]
+        return InteractionStimuli(labels, clips) if labels and clips else None
+
+    def studies(self) -> list[str]:
+        """The studies this database has stimuli for, of :data:`STUDIES`."""
+        return [
+            s
+            for s, ok in zip(
+                STUDIES, (bool(self.stimuli), self.interaction is not None), strict=True
+            )
+            if ok
+        ]
+
     @property
     def styles(self) -> list[str]:
         """The walk styles of the stimuli, sorted, without the average walk."""
         return sorted({s.style for s in self.stimuli} - {AVERAGE})
 
-    def create_evaluator(self, rng: np.random.Generator | None = None) -> str:
-        """A new evaluator with its items drawn; returns the evaluator's token."""
-        if not self.stimuli:
-            raise EvaluationError(f"{self.path}: no stimuli to evaluate")
+    def create_evaluator(self, rng: np.random.Generator | None = None, study: str = "gait") -> str:
+        """A new evaluator of ``study`` (gait or interaction) with their items drawn; returns
+        the evaluator's token."""
+        rng = rng or np.random.default_rng()
         token = secrets.token_urlsafe(16)
-        items = draw_items(token, self.stimuli, rng or np.random.default_rng())
+        if study == "interaction" and self.interaction is not None:
+            items = draw_clips(token, self.interaction.clips, rng)
+        elif study == "gait" and self.stimuli:
+            items = draw_items(token, self.stimuli, rng)
+        else:
+            raise EvaluationError(f"{self.path}: no stimuli for the {study} study")
         with self._transaction() as c:
             c.execute("INSERT INTO evaluators VALUES (?, ?)", (token, time.time()))
             c.executemany(
@@ -187,6 +266,13 @@ class EvaluationStore:
         row = self._con().execute("SELECT 1 FROM evaluators WHERE token = ?", (token,)).fetchone()
         return row is not None
 
+    def study(self, token: str) -> str:
+        """The study the evaluator takes part in."""
+        row = self._con().execute(
+            "SELECT 1 FROM items WHERE token = ? AND test = ? LIMIT 1", (token, INTERACTION)
+        )
+        return "interaction" if row.fetchone() is not None else "gait"
+
     def items(self, token: str) -> list[Item]:
         """The evaluator's items in test order, each with its answer (``None`` if unanswered)."""
         return self._items("WHERE i.token = ?", (token,))
@@ -198,13 +284,19 @@ class EvaluationStore:
     def _items(self, where: str, args: tuple) -> list[Item]:
         rows = self._con().execute(
             "SELECT i.token, i.test, i.position, i.file, i.style, i.kind, i.displacement, "
-            "i.file_b, a.answer FROM items i LEFT JOIN answers a "
+            "i.file_b, a.answer, r.unusual, r.comment FROM items i LEFT JOIN answers a "
             "ON a.token = i.token AND a.test = i.test AND a.position = i.position "
+            "LEFT JOIN remarks r "
+            "ON r.token = i.token AND r.test = i.test AND r.position = i.position "
             f"{where} ORDER BY i.token, i.test, i.position",
             args,
         )
-        out = [Item(t, te, p, f, s, k, bool(d), fb, a) for t, te, p, f, s, k, d, fb, a in rows]
-        return sorted(out, key=lambda i: (i.token, TESTS.index(i.test), i.position))
+        out = [
+            Item(t, te, p, f, s, k, bool(d), fb, a, None if u is None else bool(u), c)
+            for t, te, p, f, s, k, d, fb, a, u, c in rows
+        ]
+        order = {t: n for n, t in enumerate(ALL_TESTS)}
+        return sorted(out, key=lambda i: (i.token, order.get(i.test, len(order)), i.position))
 
     def item(self, token: str, test: str, position: int) -> Item | None:
         found = self._items(
@@ -212,12 +304,28 @@ class EvaluationStore:
         )
         return found[0] if found else None
 
-    def answer(self, token: str, test: str, position: int, answer: str) -> None:
-        """Record (or change) an answer, committed at once."""
-        if test not in TESTS:
-            raise EvaluationError(f"unknown test {test!r}; expected one of {TESTS}")
-        if answer not in choices(test, self.styles):
+    def answer(
+        self,
+        token: str,
+        test: str,
+        position: int,
+        answer: str,
+        unusual: bool = False,
+        comment: str | None = None,
+    ) -> None:
+        """Record (or change) an answer, committed at once; in the interaction study with
+        whether the observer noticed something unusual and their comment (stripped)."""
+        if test == INTERACTION:
+            offered = self.interaction.choices() if self.interaction else ()
+        elif test in TESTS:
+            offered = choices(test, self.styles)
+        else:
+            raise EvaluationError(f"unknown test {test!r}; expected one of {ALL_TESTS}")
+        if answer not in offered:
             raise EvaluationError(f"{answer!r} is not a choice of the {test} test")
+        text = (comment or "").strip()
+        if len(text) > MAX_COMMENT:
+            raise EvaluationError(f"the comment is longer than {MAX_COMMENT} characters")
         try:
             with self._transaction() as con:
                 con.execute(
@@ -225,6 +333,13 @@ class EvaluationStore:
                     "ON CONFLICT (token, test, position) DO UPDATE SET answer = excluded.answer, answered = excluded.answered",
                     (token, test, position, answer, time.time()),
                 )
+                if test == INTERACTION:
+                    con.execute(
+                        "INSERT INTO remarks VALUES (?, ?, ?, ?, ?) "
+                        "ON CONFLICT (token, test, position) DO UPDATE SET "
+                        "unusual = excluded.unusual, comment = excluded.comment",
+                        (token, test, position, int(bool(unusual)), text),
+                    )
         except sqlite3.IntegrityError:  # the foreign key: no such item
             raise EvaluationError(f"no item {test} #{position} for this evaluator") from None
 

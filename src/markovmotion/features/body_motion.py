@@ -8,6 +8,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
+from markovmotion.features.body_points import body_point_index
 from markovmotion.state import register
 
 
@@ -56,24 +57,46 @@ class BodyMotion(FeatureStep):
     The dual-HMM paper describes A by its pose alone; on CMU's salsa the
     partner's response depends on where A is going as much as on A's pose, so
     the model sees both (README, "Virtual partner").
+
+    ``points``: body point names (:mod:`~markovmotion.features.body_points`):
+    the joints kept, found by name on each motion's skeleton, so motions of
+    any skeleton that has them go through; default: every joint of the
+    training skeleton (and only that skeleton).
     """
 
-    def __init__(self, horizon: float = 1 / 6, travel_horizon: float = 2 / 3):
+    def __init__(
+        self,
+        horizon: float = 1 / 6,
+        travel_horizon: float = 2 / 3,
+        points: Sequence[str] | None = None,
+    ):
         self.horizon = horizon
         self.travel_horizon = travel_horizon
+        self.points = points
 
     def fit(self, sequences: Sequence[Motion]) -> BodyMotion:
         self.skeleton_ = sequences[0].skeleton
-        for m in sequences[1:]:
-            self.skeleton_.check_compatible(m.skeleton)
+        for m in sequences:
+            self._index(m)
         return self
+
+    def _index(self, motion: Motion) -> np.ndarray | slice:
+        """The joints of ``motion`` the features hold."""
+        if self.points is None:
+            self.skeleton_.check_compatible(motion.skeleton)
+            return slice(None)
+        return body_point_index(motion.skeleton, self.points, motion.name or "motion")
+
+    def pose(self, motion: Motion, positions: np.ndarray | None = None) -> np.ndarray:
+        """(F, J, 3) body-centred positions of the joints (or body points) the features
+        hold, from the motion's world ``positions`` if already computed."""
+        return motion.body_centred_positions(positions)[:, self._index(motion)]
 
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []
         for m in sequences:
-            self.skeleton_.check_compatible(m.skeleton)
             pos = m.positions()
-            out.append(self.rows(m.body_centred_positions(pos), *ground_frame(m, pos), m.fps))
+            out.append(self.rows(self.pose(m, pos), *ground_frame(m, pos), m.fps))
         return out
 
     def rows(self, pose: np.ndarray, origin: np.ndarray, yaw: np.ndarray, fps: float) -> np.ndarray:
@@ -91,7 +114,5 @@ class BodyMotion(FeatureStep):
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         """(F, J, 3) body-centred positions (the changes are dropped)."""
-        return [
-            np.asarray(x)[:, : self.skeleton_.n_joints * 3].reshape(len(x), -1, 3)
-            for x in sequences
-        ]
+        n = self.skeleton_.n_joints if self.points is None else len(self.points)
+        return [np.asarray(x)[:, : n * 3].reshape(len(x), -1, 3) for x in sequences]

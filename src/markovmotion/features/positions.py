@@ -8,6 +8,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
+from markovmotion.features.body_points import body_point_index
 from markovmotion.state import check_joint_index, register
 
 
@@ -19,25 +20,46 @@ class JointPositions(FeatureStep):
         body_centred: positions relative to the pelvis with each frame's heading
             removed (:meth:`Motion.body_centred_positions`); otherwise global.
         joints: names of the joints to keep (default: all, end sites included).
+        points: body point names instead (:mod:`~markovmotion.features.body_points`),
+            found by name on each motion's skeleton, so that motions of any
+            skeleton that has them go through.
 
     ``inverse_transform`` gives (F, J, 3) positions: turning positions back into
     joint rotations needs inverse kinematics, which the position-based models
     do on their own skeleton.
     """
 
-    def __init__(self, body_centred: bool = True, joints: list[str] | None = None):
+    def __init__(
+        self,
+        body_centred: bool = True,
+        joints: list[str] | None = None,
+        points: Sequence[str] | None = None,
+    ):
         self.body_centred = body_centred
         self.joints = joints
+        self.points = points
 
     def fit(self, sequences: Sequence[Motion]) -> JointPositions:
         sk = sequences[0].skeleton
+        self.skeleton_ = sk
+        if self.points is not None:
+            for m in sequences:
+                self._index(m)
+            self.joint_index_ = self._index(sequences[0])
+            return self
         for m in sequences[1:]:
             sk.check_compatible(m.skeleton)
-        self.skeleton_ = sk
         self.joint_index_ = np.array(
             [sk.index(n) for n in self.joints] if self.joints else np.arange(sk.n_joints)
         )
         return self
+
+    def _index(self, motion: Motion) -> np.ndarray:
+        """The joints of ``motion`` the features hold."""
+        if self.points is not None:
+            return body_point_index(motion.skeleton, self.points, motion.name or "motion")
+        self.skeleton_.check_compatible(motion.skeleton)
+        return self.joint_index_
 
     def check_state(self) -> None:
         """skeleton_ a Skeleton, joint_index_ joints of it."""
@@ -49,9 +71,9 @@ class JointPositions(FeatureStep):
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []
         for m in sequences:
-            self.skeleton_.check_compatible(m.skeleton)
+            idx = self._index(m)
             pos = m.body_centred_positions() if self.body_centred else m.positions()
-            out.append(pos[:, self.joint_index_].reshape(len(pos), -1))
+            out.append(pos[:, idx].reshape(len(pos), -1))
         return out
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:

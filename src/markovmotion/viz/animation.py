@@ -49,6 +49,8 @@ COLOURS = (
     "#e377c2",
     "#17becf",
 )
+POINT_LIGHT_BACKGROUND = "black"
+POINT_LIGHT_COLOUR = "white"
 UP = np.array([0.0, 1.0, 0.0])
 ELEVATION = np.radians(18.0)
 QUARTER_TRAVEL = np.radians(20.0)
@@ -260,6 +262,7 @@ def _figure(
     title: str | None,
     height: float,
     max_height: float = np.inf,
+    background: str = "white",
 ):
     """A figure of equal panels (``aspect`` = width / height) and its axes, row by row.
 
@@ -272,7 +275,7 @@ def _figure(
     fig_h = panel_h * n_rows + band
     # even pixel sizes for H.264
     w_px, h_px = 2 * round(width * DPI / 2), 2 * round(fig_h * DPI / 2)
-    fig = Figure(figsize=(w_px / DPI, h_px / DPI), dpi=DPI, facecolor="white")
+    fig = Figure(figsize=(w_px / DPI, h_px / DPI), dpi=DPI, facecolor=background)
     FigureCanvasAgg(fig)
     axes = []
     for r in range(n_rows):
@@ -283,7 +286,15 @@ def _figure(
             ax.set_axis_off()
             axes.append(ax)
     if title:
-        text = fig.text(0.5, 1 - band / 2 / fig_h, title, ha="center", va="center", fontsize=13)
+        text = fig.text(
+            0.5,
+            1 - band / 2 / fig_h,
+            title,
+            ha="center",
+            va="center",
+            fontsize=13,
+            color="0.6" if background == POINT_LIGHT_BACKGROUND else "black",
+        )
         renderer = fig.canvas.get_renderer()
         # a title wider than a narrow figure shrinks rather than being cut off (hinting makes
         # the width not quite proportional to the size: measure again)
@@ -292,11 +303,13 @@ def _figure(
     return fig, axes
 
 
-def _draw_floor(ax, panel: _Panel, caption: str) -> None:
-    ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
+def _draw_floor(ax, panel: _Panel, caption: str, floor: bool = True) -> None:
     ax.set_xlim(panel.centre[0] - panel.half[0], panel.centre[0] + panel.half[0])
     ax.set_ylim(panel.centre[1] - panel.half[1], panel.centre[1] + panel.half[1])
     ax.set_aspect("equal", adjustable="box")
+    if not floor:  # a point-light display: nothing but the points
+        return
+    ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
     ax.text(0.01, 0.01, f"grid {_label_step(panel.step)}", transform=ax.transAxes, fontsize=8)
     if caption:
         ax.text(0.01, 0.985, caption, transform=ax.transAxes, va="top", fontsize=10)
@@ -337,16 +350,19 @@ class _Stage:
     panels: list[_Panel]
     camera: _Camera
     ground: float
+    point_light: bool = False
 
     @classmethod
-    def build(cls, tracks: list[_Track], side_by_side: bool, end: float) -> _Stage:
+    def build(
+        cls, tracks: list[_Track], side_by_side: bool, end: float, point_light: bool = False
+    ) -> _Stage:
         """The stage of ``tracks`` from time 0 to ``end`` seconds."""
         tracks = [t.until(end) for t in tracks]
         heights = np.concatenate([t.positions[..., 1].ravel() for t in tracks])
         ground = float(np.nanmin(heights))
         cam = _camera(tracks)
         groups = [[i] for i in range(len(tracks))] if side_by_side else [list(range(len(tracks)))]
-        return cls(tracks, _panels(tracks, groups, cam, ground), cam, ground)
+        return cls(tracks, _panels(tracks, groups, cam, ground), cam, ground, point_light)
 
     @property
     def aspect(self) -> float:
@@ -360,21 +376,25 @@ class _Stage:
         self, ax, panel: _Panel, animated: bool, caption: bool = True, legend: bool = True
     ) -> list[tuple[int, _Actor]]:
         """Floor and per-track artists of ``panel`` on ``ax``, optionally with names."""
-        _draw_floor(ax, panel, self.caption(panel) if caption else "")
+        light = self.point_light
+        _draw_floor(ax, panel, self.caption(panel) if caption and not light else "", not light)
         figs = [
             (
                 i,
                 _Actor(
                     ax,
-                    COLOURS[i % len(COLOURS)],
-                    len(self.tracks[i].bones) > 0,
+                    POINT_LIGHT_COLOUR if light else COLOURS[i % len(COLOURS)],
+                    len(self.tracks[i].bones) > 0 and not light,
                     animated,
                     self.tracks[i].name,
                 ),
             )
             for i in panel.tracks
         ]
-        if legend and len(panel.tracks) > 1:
+        for _, f in figs if light else ():
+            f.shadow.set_visible(False)
+            f.bones.set_visible(False)
+        if legend and len(panel.tracks) > 1 and not light:
             ax.legend(
                 handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
                 loc="lower right",
@@ -410,12 +430,15 @@ def _frames(stage: _Stage, times: np.ndarray, title: str | None, label: str) -> 
     """RGBA frames (H, W, 4) of ``stage`` at ``times``, drawn by blitting."""
     n = len(stage.panels)
     rows, cols = (n, 1) if stage.aspect > STACK_ASPECT else (1, n)  # wide views one above another
-    fig, axes = _figure(rows, cols, stage.aspect, title, PANEL_HEIGHT, MAX_HEIGHT)
+    fig, axes = _figure(
+        rows, cols, stage.aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage)
+    )
     drawn = []
     for ax, panel in zip(axes, stage.panels, strict=True):
         figs = stage.populate(ax, panel, animated=True)
         clock = ax.text(0.99, 0.985, "", transform=ax.transAxes, ha="right", va="top")
         clock.set_animated(True)
+        clock.set_visible(not stage.point_light)
         poses = {i: stage.pose(i, times) for i, _ in figs}
         drawn.append((ax, figs, clock, poses))
     canvas = fig.canvas
@@ -473,6 +496,7 @@ def render(
     title: str | None = None,
     names: Sequence[str] | None = None,
     strip_frames: int = 6,
+    point_light: bool = False,
 ) -> Path:
     """Animate motions (or marker clouds) to ``path``: ``.gif``, ``.mp4`` or a ``.png`` strip.
 
@@ -487,6 +511,8 @@ def render(
         max_seconds: render at most this much from the start.
         title: text above the picture.
         names: one label per item (default: each item's ``name``).
+        point_light: Johansson's display: white points on black, no bones, floor, names or
+            clock (give marker clouds, e.g. :func:`markovmotion.viz.point_light.point_lights`).
 
     Returns the path written (atomically).
     """
@@ -496,8 +522,8 @@ def render(
     times = _sample_times(tracks, fps, max_seconds)
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
-        return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title)
-    stage = _Stage.build(tracks, side_by_side, times[-1])
+        return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
+    stage = _Stage.build(tracks, side_by_side, times[-1], point_light)
     frames = _frames(stage, times, title, f"rendering {path.name}")
     (_write_gif if suffix == ".gif" else write_mp4)(frames, path, fps)
     return path
@@ -525,16 +551,27 @@ def render_frames(
     return _strip(tracks, times, Path(path), side_by_side, title)
 
 
+def _background(stage: _Stage) -> str:
+    return POINT_LIGHT_BACKGROUND if stage.point_light else "white"
+
+
 def _strip(
-    tracks: list[_Track], times: np.ndarray, path: Path, side_by_side: bool, title: str | None
+    tracks: list[_Track],
+    times: np.ndarray,
+    path: Path,
+    side_by_side: bool,
+    title: str | None,
+    point_light: bool = False,
 ) -> Path:
-    stage = _Stage.build(tracks, side_by_side, times.max())
+    stage = _Stage.build(tracks, side_by_side, times.max(), point_light)
     height = PANEL_HEIGHT * 0.6
     most = int(np.clip(MAX_WIDTH // (height * stage.aspect), 1, len(times)))
     wraps = -(-len(times) // most)
     cols = -(-len(times) // wraps)  # rows as full as possible
     n_panels = len(stage.panels)
-    fig, axes = _figure(wraps * n_panels, cols, stage.aspect, title, height)
+    fig, axes = _figure(
+        wraps * n_panels, cols, stage.aspect, title, height, np.inf, _background(stage)
+    )
     for r, panel in enumerate(stage.panels):
         for c, t in enumerate(times):
             ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
@@ -542,7 +579,10 @@ def _strip(
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
             # bottom right: the top left holds the name caption, which a narrow panel overlaps
-            ax.text(0.99, 0.015, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="bottom")
+            if not point_light:
+                ax.text(
+                    0.99, 0.015, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="bottom"
+                )
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=DPI)
     return path

@@ -13,8 +13,9 @@ import os
 import secrets
 import tempfile
 from collections.abc import AsyncIterator, Iterable
+from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, BinaryIO
+from typing import Annotated, BinaryIO, Literal
 
 from fastapi import FastAPI, HTTPException, Request, WebSocket
 from fastapi import Path as PathParam
@@ -22,11 +23,20 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 
 from markovmotion.errors import MarkovMotionError
+from markovmotion.evaluate.interaction import (
+    INTERACTION,
+    INTERACTION_MANIFEST,
+    MAX_COMMENT,
+    QUESTION,
+    read_interaction_manifest,
+    summarise_interaction,
+)
+from markovmotion.evaluate.interaction import choice_labels as interaction_choices
 from markovmotion.evaluate.perceptual import (
     TESTS,
     answers_csv,
@@ -35,10 +45,12 @@ from markovmotion.evaluate.perceptual import (
 )
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
+from markovmotion.viz.point_light import point_lights
 from markovmotion.web.library import (
     LibraryPathError,
     MotionLibrary,
     UploadTooLargeError,
+    markers_payload,
     max_upload_bytes,
     motion_payload,
     read_upload,
@@ -58,6 +70,8 @@ QUESTIONS = {
 
 class Answer(BaseModel):
     answer: str
+    unusual: bool = False  # the interaction study: noticed something strange or unusual
+    comment: str = Field("", max_length=MAX_COMMENT)
 
 
 Position = Annotated[int, PathParam(ge=0, le=1_000_000)]
@@ -119,6 +133,8 @@ def create_app(
 ) -> FastAPI:
     """The app serving ``library``; the evaluation runs when a stimuli folder is given
     (default: ``library/stimuli`` if it holds a manifest) and stores answers in ``db``.
+    The folder's ``manifest.csv`` gives the gait study, its ``interaction.json`` the
+    interaction observer study (:mod:`markovmotion.evaluate.interaction`); either or both.
 
     ``admin_token`` guards the results (a random one if omitted: read it from
     ``app.state.admin_token``); ``partner`` builds the live partner of a session.
@@ -126,12 +142,24 @@ def create_app(
     (the bound address, ``serve --allow-host``): see :mod:`markovmotion.web.security`.
     """
     lib = library if isinstance(library, MotionLibrary) else MotionLibrary(library)
-    if stimuli is None and (lib.root / "stimuli" / MANIFEST).is_file():
+    if stimuli is None and any(
+        (lib.root / "stimuli" / name).is_file() for name in (MANIFEST, INTERACTION_MANIFEST)
+    ):
         stimuli = lib.root / "stimuli"
     store = stim_lib = None
+    offered: list[str] = []  # the studies of the stimuli folder (the database may hold more)
     if stimuli is not None:
         stim_lib = MotionLibrary(stimuli, anonymous=True)
-        store = EvaluationStore(db or "results.sqlite", read_manifest(stimuli))
+        clips = None
+        if (Path(stimuli) / INTERACTION_MANIFEST).is_file():
+            clips = read_interaction_manifest(stimuli)
+        gait = (
+            read_manifest(stimuli)
+            if clips is None or (Path(stimuli) / MANIFEST).is_file()
+            else None
+        )
+        store = EvaluationStore(db or "results.sqlite", gait, clips)
+        offered = [s for s, given in (("gait", gait), ("interaction", clips)) if given is not None]
     elif db is not None and Path(db).is_file():
         store = EvaluationStore(db)
 
@@ -186,6 +214,8 @@ def create_app(
     def evaluation(token: str) -> HTMLResponse:
         if store is None or not store.exists(token):
             return _page("not-found", "Unknown link", status=404)
+        if store.study(token) == "interaction":
+            return _page("interaction", "Evaluation", "/evaluation")
         return _page("evaluation", "Evaluation", "/evaluation")
 
     @app.get("/results", response_class=HTMLResponse)
@@ -254,15 +284,43 @@ def create_app(
         await live_session(ws, lib, partner)
 
     # ------------------------------------------------------------ evaluation
+    @app.get("/api/studies")
+    def studies() -> dict:
+        return {"studies": offered}
+
     @app.post("/api/evaluation")
-    def new_evaluator() -> dict:
-        return {"token": need_store().create_evaluator()}
+    def new_evaluator(study: Literal["gait", "interaction"] = "gait") -> dict:
+        s = need_store()
+        if study not in offered:
+            raise HTTPException(404, f"no {study} study on this server")
+        return {"token": s.create_evaluator(study=study)}
 
     @app.get("/api/evaluation/{token}")
     def evaluator_state(token: str) -> dict:
         s = need_evaluator(token)
         items = s.items(token)
+        if s.study(token) == "interaction" and s.interaction is not None:
+            return {
+                "study": "interaction",
+                "tests": [
+                    {
+                        "name": INTERACTION,
+                        "question": QUESTION,
+                        "choices": interaction_choices(s.interaction.labels),
+                        "items": [
+                            {
+                                "position": i.position,
+                                "answer": i.answer,
+                                "unusual": i.unusual,
+                                "comment": i.comment,
+                            }
+                            for i in items
+                        ],
+                    }
+                ],
+            }
         return {
+            "study": "gait",
             "tests": [
                 {
                     "name": test,
@@ -275,12 +333,29 @@ def create_app(
                     ],
                 }
                 for test in TESTS
-            ]
+            ],
         }
+
+    @lru_cache(maxsize=64)
+    def clip_json(file_a: str, file_b: str) -> bytes:
+        """Both people of a clip as one point-light figure (anonymous), encoded."""
+        cloud = point_lights([stim_lib.motion(file_a), stim_lib.motion(file_b)])
+        return json.dumps(markers_payload(cloud), separators=(",", ":")).encode()
 
     @app.get("/api/evaluation/{token}/{test}/{position}/{side}")
     def stimulus(token: str, test: str, position: Position, side: Position) -> Response:
-        item = need_evaluator(token).item(token, test, position)
+        s = need_evaluator(token)
+        item = s.item(token, test, position)
+        if test == INTERACTION:
+            clip = s.interaction.clip(item.file) if item and s.interaction else None
+            if clip is None or side != 0:
+                raise HTTPException(404, "no such stimulus")
+            try:
+                return Response(clip_json(clip.file_a, clip.file_b), media_type="application/json")
+            except LibraryPathError as exc:
+                raise HTTPException(404, str(exc)) from None
+            except (RecursionError, MemoryError, ValueError):
+                raise HTTPException(422, f"clip {shown(clip.id)}: cannot be read") from None
         files = (item.file, item.file_b) if item is not None else ()
         if side not in range(len(files)) or files[side] is None:
             raise HTTPException(404, "no such stimulus")
@@ -292,7 +367,9 @@ def create_app(
     @app.post("/api/evaluation/{token}/{test}/{position}")
     def answer(token: str, test: str, position: Position, body: Answer) -> dict:
         try:
-            need_evaluator(token).answer(token, test, position, body.answer)
+            need_evaluator(token).answer(
+                token, test, position, body.answer, body.unusual, body.comment
+            )
         except EvaluationError as exc:
             raise HTTPException(422, shown(str(exc), 300)) from None
         return {"ok": True}
@@ -301,8 +378,15 @@ def create_app(
     @app.get("/api/results")
     def results_json(token: str | None = None) -> Response:
         s = need_admin(token)
-        report = summarise(s.answered(), s.styles).to_dict()
+        answered = s.answered()
+        report = summarise([i for i in answered if i.test in TESTS], s.styles).to_dict()
         report["registered"] = s.count_evaluators()
+        report["studies"] = s.studies()
+        report["interaction"] = (
+            summarise_interaction(answered, s.interaction.labels, s.interaction.clips)
+            if s.interaction is not None
+            else None
+        )
         return Response(json.dumps(report), media_type="application/json")
 
     @app.get("/api/results.csv")

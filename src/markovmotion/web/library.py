@@ -19,6 +19,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import INDEX_NAME, MocapIndex
@@ -79,23 +80,27 @@ def motion_payload(motion: Motion) -> dict:
     }
 
 
-def _markers_payload(path: Path) -> dict:
-    """C3D markers as a skeleton-less figure (every parent -1); missing samples are ``null``."""
-    from markovmotion.io.c3d import read_c3d
-
-    markers = read_c3d(path)
+def markers_payload(markers: Markers) -> dict:
+    """Markers as a skeleton-less figure (every parent -1); missing samples are ``null``."""
     pos = np.round(np.asarray(markers.positions, dtype=float), 1)
     flat: list = pos.ravel().tolist()
     if np.isnan(pos).any():
         flat = [None if v != v else v for v in flat]
     return {
-        "name": path.name,
+        "name": markers.name,
         "fps": float(markers.fps),
         "frames": int(pos.shape[0]),
         "joints": list(markers.names),
         "parents": [-1] * pos.shape[1],
         "positions": flat,
     }
+
+
+def _markers_payload(path: Path) -> dict:
+    """A C3D file's markers (:func:`markers_payload`)."""
+    from markovmotion.io.c3d import read_c3d
+
+    return {**markers_payload(read_c3d(path)), "name": path.name}
 
 
 class MotionLibrary:

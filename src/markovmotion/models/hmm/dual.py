@@ -50,10 +50,17 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_motion import ground_frame
+from markovmotion.features.body_points import BODY_POINTS, body_point_index, body_points
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner, finite_frames
-from markovmotion.models.hmm.trellis import Trellis, build_trellis
+from markovmotion.models.hmm.trellis import (
+    TRELLISES,
+    Trellis,
+    build_trellis,
+    smooth_place,
+    successors,
+)
 from markovmotion.state import (
     StateError,
     check_index,
@@ -67,6 +74,7 @@ __all__ = ["DualHMM", "Partner", "finite_frames", "into_frame", "out_of_frame"]
 
 MODES = ("paper", "joint")
 OBSERVATIONS = ("pose", "motion")
+POINTS = ("body", "all")
 METHODS = ("standard", "windowed")
 
 
@@ -140,7 +148,8 @@ class DualHMM(Model):
         observation: what A's observations hold: ``"pose"``, body-centred joint
             positions as in the paper, or ``"motion"``, those plus their change
             and A's travel (:class:`~markovmotion.features.BodyMotion`).
-        energy: PCA energy kept per person (the paper's 95 %).
+        energy: PCA energy kept per person (the paper's 95 %; default 99 %, chosen by
+            leave-one-pair-out on the CMU 18/19 interactions: docs/hmm.md).
         fps: the model's frame rate; motions at other rates are resampled.
         window: windowed-Viterbi slice length T (the paper's 10).
         initial: first slice's pi, ``"middle"`` (eq. 3) or ``"prior"`` (learnt pi).
@@ -152,12 +161,27 @@ class DualHMM(Model):
             ``2 * lag + 1`` frames: the slice the decoder looks ahead anyway.
             The default, 2 x 9 + 1 for the paper's window, was chosen by
             nested leave-one-pair-out on salsa (README).
+        blend_window: B's joint rotations are blended over this many frames of
+            the chosen path, centred on the frame (:meth:`Trellis.blend`; 1:
+            none), so that a cut between training frames becomes a short
+            transition; online, at most ``2 * lag + 1`` frames, no added lag.
+            The default 9 was chosen by leave-one-pair-out on the interaction
+            and salsa takes (docs/hmm.md, "Smooth partner").
+        trellis: ``"path"`` (ours: the lowest-error path through the columns,
+            each step measured from the training frame that followed the one
+            before) or ``"paper"`` (§3.2 as printed: E = (D1 + ... + DK) x D4,
+            the lowest per column); :mod:`.trellis`.
+        points: what both people are seen as: ``"body"``, the common body points
+            found by joint names (:data:`~markovmotion.features.body_points.BODY_POINTS`),
+            so A may come on any skeleton that has them; or ``"all"``, every
+            joint of the training skeleton (A must then come on that skeleton).
         n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
     and T), ``pipeline_a_`` / ``pipeline_b_`` (features), ``expmaps_b_`` and
     ``frames_b_`` (B's training frames), ``train_a_`` / ``train_b_`` (their
-    features), ``train_states_``, ``skeleton_a_`` / ``skeleton_b_``,
+    features), ``train_states_``, ``train_lengths_`` (frames per training
+    take, so the trellis knows which frame follows which), ``skeleton_a_`` / ``skeleton_b_``,
     ``labels_`` (the training takes' labels, if given), ``train_files_``
     (both people's files, :meth:`Model.record_training`).
     """
@@ -170,12 +194,15 @@ class DualHMM(Model):
         n_states: int = 32,
         mode: str = "paper",
         observation: str = "motion",
-        energy: float = 0.95,
+        energy: float = 0.99,
         fps: float = 30.0,
         window: int = 10,
         initial: str = "middle",
         candidates: int = 10,
         placement_window: int = 19,
+        blend_window: int = 9,
+        trellis: str = "path",
+        points: str = "body",
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -191,6 +218,9 @@ class DualHMM(Model):
         self.initial = initial
         self.candidates = candidates
         self.placement_window = placement_window
+        self.blend_window = blend_window
+        self.trellis = trellis
+        self.points = points
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -215,10 +245,15 @@ class DualHMM(Model):
             raise ValueError(f"observation must be one of {OBSERVATIONS}, got {self.observation!r}")
         if self.initial not in INITIAL:
             raise ValueError(f"initial must be one of {INITIAL}, got {self.initial!r}")
+        if self.points not in POINTS:
+            raise ValueError(f"points must be one of {POINTS}, got {self.points!r}")
+        if self.trellis not in TRELLISES:
+            raise ValueError(f"trellis must be one of {TRELLISES}, got {self.trellis!r}")
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
+        _check_one_skeleton_b(pairs, labels)
         a_list, b_rel = [], []
         for a, b in pairs:
             if a.n_frames != b.n_frames:
@@ -228,9 +263,16 @@ class DualHMM(Model):
             b_rel.append(into_frame(b, *ground_frame(a)))
         self.skeleton_a_ = a_list[0].skeleton
         self.skeleton_b_ = b_rel[0].skeleton
-        first = BodyMotion() if self.observation == "motion" else JointPositions()
+        points = BODY_POINTS if self.points == "body" else None
+        first = (
+            BodyMotion(points=points)
+            if self.observation == "motion"
+            else JointPositions(points=points)
+        )
         self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
-        self.pipeline_b_ = FeaturePipeline([JointPositions(body_centred=False), PCA(self.energy)])
+        self.pipeline_b_ = FeaturePipeline(
+            [JointPositions(body_centred=False, points=points), PCA(self.energy)]
+        )
         self.expmaps_b_ = ExpMaps(root_position="full")
         xa, lengths = check_sequences(
             np.vstack(self.pipeline_a_.fit_transform(a_list)), [len(m) for m in a_list]
@@ -238,6 +280,7 @@ class DualHMM(Model):
         xb = np.vstack(self.pipeline_b_.fit_transform(b_rel))
         self.frames_b_ = np.vstack(self.expmaps_b_.fit_transform(b_rel)).astype(np.float32)
         self.train_a_, self.train_b_ = xa, xb
+        self.train_lengths_ = np.asarray(lengths, dtype=np.int64)
         hmm = GaussianHMM(
             self.n_states,
             self.n_iter,
@@ -299,14 +342,27 @@ class DualHMM(Model):
 
     # ---------------------------------------------------------------- responding
     def check_input(self, motion: Motion, source: str | os.PathLike[str] | None = None) -> None:
-        """Raise :class:`SkeletonMismatchError` (naming ``source``) unless A's skeleton is the model's."""
+        """Raise :class:`SkeletonMismatchError` (naming ``source``) unless A's skeleton has
+        the body points the model sees (by joint names; any skeleton that has them), or,
+        for a model that sees every joint (files of older versions), is the model's."""
+        points = getattr(self.pipeline_a_.steps[0], "points", None)
         try:
-            self.skeleton_a_.check_compatible(motion.skeleton, "input")
+            if points is None:
+                self.skeleton_a_.check_compatible(motion.skeleton, "input")
+            else:
+                body_point_index(motion.skeleton, points, "its skeleton")
         except SkeletonMismatchError as exc:
             where = source or motion.name or "input motion"
             raise SkeletonMismatchError(
-                f"{where}: person A's skeleton is not the model's ({exc})"
+                f"{where}: person A's skeleton does not fit the model ({exc})"
             ) from None
+
+    def body_positions(self, motion: Motion, body_centred: bool = False) -> np.ndarray:
+        """(F, P, 3) the positions (mm) people are compared by: the body points (world or
+        body-centred), or every joint with ``points="all"``."""
+        if self.points == "all":
+            return motion.body_centred_positions() if body_centred else motion.positions()
+        return body_points(motion, BODY_POINTS, body_centred=body_centred)
 
     def features_a(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
         """A's model features (F, Da) at the model's rate and which frames are missing (NaN)."""
@@ -347,15 +403,20 @@ class DualHMM(Model):
             states = self.decode(log_b)
             idx = trellis.best_path(states, trellis.columns(states, seen))
             root = trellis.placement(idx, self.placement_window // 2)
+            rot = trellis.blend(idx, self.blend_window // 2)
         else:
             partner = self.partner()
             chosen = [
                 partner.step_log_frameprob(row, x) for row, x in zip(log_b, seen, strict=True)
             ]
             chosen = [c for c in chosen if c is not None] + partner.finish_frames()
-            idx = np.array([i for i, _ in chosen], dtype=int)
-            root = np.array([r for _, r in chosen])
-        return self.frames_to_motion(idx, *ground_frame(_fill_missing(motion_a, missing)), root)
+            idx = np.array([c[0] for c in chosen], dtype=int)
+            root = np.array([c[1] for c in chosen])
+            rot = np.array([c[2] for c in chosen])
+        where = ground_frame(_fill_missing(motion_a, missing))
+        half = self.placement_window // 2
+        where = smooth_place(*where, half if method == "standard" else min(half, self.window - 1))
+        return self.frames_to_motion(idx, *where, root, rot)
 
     def decode(self, log_frameprob: np.ndarray) -> np.ndarray:
         """Standard Viterbi states of A's frames from their log emission probabilities."""
@@ -368,13 +429,17 @@ class DualHMM(Model):
         origin: np.ndarray,
         yaw: np.ndarray,
         root: np.ndarray | None = None,
+        rotations: np.ndarray | None = None,
     ) -> Motion:
         """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw);
-        ``root`` (F, 3): B's root positions in A's ground frame instead of the frames' own."""
+        ``root`` (F, 3): B's root positions in A's ground frame instead of the frames' own;
+        ``rotations`` (F, J, 4): B's joint rotations instead (blended, :meth:`Trellis.blend`)."""
         frames = self._trellis().motion_b
         rel = Motion(self.skeleton_b_, frames.rotations[idx], frames.translations[idx], self.fps)
         if root is not None:
             rel.translations[:, 0] = root
+        if rotations is not None:
+            rel.rotations = np.asarray(rotations, dtype=float)
         out = out_of_frame(rel, origin, yaw)
         out.fps = self.fps
         return out
@@ -388,6 +453,7 @@ class DualHMM(Model):
         """The §3.2 trellis over the training frames (:mod:`.trellis`), built once."""
         cache = getattr(self, "_trellis_cache", None)
         if cache is not None:
+            cache.kind = self.trellis  # a hyper-parameter, set_params may change it
             return cache
         prec_a, _ = precision_cholesky(self.lambda_a_.covars_)
         prec_b, _ = precision_cholesky(self.lambda_b_.covars_)
@@ -401,8 +467,37 @@ class DualHMM(Model):
             prec_b,
             self.candidates,
             motion_b,
+            successors(getattr(self, "train_lengths_", [len(self.train_a_)])),
+            self.trellis,
         )
         return self._trellis_cache
+
+
+def _check_one_skeleton_b(
+    pairs: Sequence[tuple[Motion, Motion]], labels: Sequence[str] | None
+) -> None:
+    """Raise :class:`SkeletonMismatchError` naming the groups (by label, else by take)
+    unless person B has one skeleton in every take: B's output frames are B's own
+    training frames, so they must share one skeleton (A may vary: body points)."""
+    groups: dict[int, tuple[Skeleton, list[str]]] = {}
+    for i, (_, b) in enumerate(pairs):
+        name = labels[i] if labels is not None else (b.name or f"take {i}")
+        for sk, names in groups.values():
+            if sk.same_topology(b.skeleton):
+                if name not in names:
+                    names.append(name)
+                break
+        else:
+            groups[len(groups)] = (b.skeleton, [name])
+    if len(groups) > 1:
+        detail = "; ".join(
+            f"{sk.n_joints} joints ({sk.names[0]} ...): {', '.join(names)}"
+            for sk, names in groups.values()
+        )
+        raise SkeletonMismatchError(
+            f"person B comes on {len(groups)} skeletons ({detail}); B's output frames are "
+            "B's training frames, so train on takes of one of them (--labels)"
+        )
 
 
 def _sharing_chain(

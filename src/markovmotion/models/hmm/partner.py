@@ -26,6 +26,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.models.hmm.gaussian import safe_log
+from markovmotion.models.hmm.trellis import smooth_place
 from markovmotion.progress import err_console
 
 if TYPE_CHECKING:
@@ -72,9 +73,13 @@ class Partner:
         prec, log_det = precision_cholesky(hmm.covars_)
         self._emission = (hmm.means_, prec, log_det)
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
-        self._places: deque = deque(maxlen=window)  # where A stood in the slice's frames
         self._half = min(model.placement_window // 2, self.lag)
-        self._history: deque = deque(maxlen=max(self._half, 1))  # B's training frames shown
+        # where A stood in the slice's frames and the ``half`` before
+        self._places: deque = deque(maxlen=window + self._half)
+        self._shown_count = 0
+        self._blend = min(getattr(model, "blend_window", 1) // 2, self.lag)
+        keep = max(self._half, self._blend, 1)
+        self._history: deque = deque(maxlen=keep)  # B's training frames shown
         self._frames_in = 0
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton, once checked against the model's
@@ -87,7 +92,7 @@ class Partner:
 
     def step_features(
         self, xa: np.ndarray | None, place: tuple[np.ndarray, float]
-    ) -> tuple[int, np.ndarray] | None:
+    ) -> tuple[int, np.ndarray, np.ndarray] | None:
         """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
         frames ago, once one is due, B's training frame and B's root in A's ground frame."""
         if xa is None:
@@ -99,7 +104,7 @@ class Partner:
 
     def step_log_frameprob(
         self, log_b: np.ndarray, xa: np.ndarray | None
-    ) -> tuple[int, np.ndarray] | None:
+    ) -> tuple[int, np.ndarray, np.ndarray] | None:
         """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
         self._slice.append((xa, {}))
         self.decoder.push(log_b)
@@ -116,14 +121,16 @@ class Partner:
         """B's training frame shown last."""
         return self._history[-1] if self._history else None
 
-    def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray]]:
-        """Show the first ``count`` B frames of ``path``, each with its averaged place."""
-        before = list(self._history) if self._half else []  # the last ``half`` shown
-        roots = self._trellis.placement(path, self._half, before)[:count]
+    def _show(self, path: np.ndarray, count: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Show the first ``count`` B frames of ``path``, each with its averaged place and
+        its blended rotations (over the frames shown last and the path ahead)."""
+        shown = list(self._history)
+        roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :])
+        rots = self._trellis.blend(path, self._blend, shown[len(shown) - self._blend :], count)
         self._history.extend(int(i) for i in path[:count])
-        return [(int(i), r) for i, r in zip(path[:count], roots, strict=True)]
+        return list(zip(path[:count].tolist(), roots[:count], rots[:count], strict=True))
 
-    def finish_frames(self) -> list[tuple[int, np.ndarray]]:
+    def finish_frames(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """B's training frames and places still owed at the end of the stream."""
         if self._frames_in == 0:
             return []
@@ -184,7 +191,7 @@ class Partner:
         first, *rest = self.model.pipeline_a_.steps
         if not isinstance(first, BodyMotion):
             return self.model.features_a(frame)[0][-1]
-        now = (frame.body_centred_positions(pos), origin, yaw)
+        now = (first.pose(frame, pos), origin, yaw)
         last, self._last = self._last, now
         if last is not None:
             now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
@@ -199,18 +206,27 @@ class Partner:
 
     def finish(self) -> list[Motion]:
         """B's frames still owed at the end of the stream."""
-        frames = self.finish_frames()
-        places = list(self._places)[len(self._places) - len(frames) :]
-        return [self._motion(i, p) for i, p in zip(frames, places, strict=True)]
+        return [self._motion(shown) for shown in self.finish_frames()]
 
-    def _motion(
-        self, shown: tuple[int, np.ndarray] | None, place: tuple[np.ndarray, float] | None = None
-    ) -> Motion | None:
-        """B's frame ``shown`` (training frame, root) placed by A's place for it (default: the
-        slice's first)."""
+    def _place_of(self, frame: int) -> tuple[np.ndarray, float]:
+        """A's place for B's frame ``frame`` of the stream, averaged over the frames around it
+        that have arrived (:func:`~markovmotion.models.hmm.trellis.smooth_place`, as
+        :meth:`DualHMM.respond` does)."""
+        first = self._frames_in - len(self._places)  # stream frame of self._places[0]
+        lo = max(frame - self._half, first)
+        hi = min(frame + self._half, self._frames_in - 1)
+        near = [self._places[f - first] for f in range(lo, hi + 1)]
+        origin, yaw = smooth_place(
+            np.array([p[0] for p in near]), np.array([p[1] for p in near]), self._half
+        )
+        return origin[frame - lo], float(yaw[frame - lo])
+
+    def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | None:
+        """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""
         if shown is None:
             return None
-        origin, yaw = place or self._places[0]
+        origin, yaw = self._place_of(self._shown_count)
+        self._shown_count += 1
         return self.model.frames_to_motion(
-            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None]
+            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None], shown[2][None]
         )

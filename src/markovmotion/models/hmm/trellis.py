@@ -15,7 +15,23 @@ Behaviours" (after Cosker et al., 2004), Fig. 2:
 - Once the errors are known, one works backwards through the trellis and
   picks, per column, B's motion data with the lowest error.
 
-What we do (and where it differs):
+Two trellises, chosen by ``DualHMM(trellis=...)`` (``--trellis``):
+
+- ``"paper"``: §3.2 as printed. E = D4 in the first column; afterwards
+  E_t(j) = (D1 + ... + DK) x D4, the distances from candidate j to *every*
+  candidate of the column before, and each column's lowest-error entry is
+  picked. The pick in a column does not depend on the picks around it, so
+  consecutive frames may come from anywhere in the training data.
+- ``"path"`` (the default, ours): a lowest-error path by dynamic
+  programming, as Viterbi: a step from candidate j of column t - 1 into
+  candidate i of column t costs D_t(i, j') x D4_t(i), where j' is the
+  training frame that *followed* j in its recording (:func:`successors`), and
+  E_t(i) = min_j E_{t-1}(j) + D_t(i, j') D4_t(i), from E_1 = D4
+  (:func:`lowest_error_path`); the path is back-tracked from the last column.
+  Going on with the same recording costs nothing, a cut costs how far B's
+  pose jumps, so the chosen frames follow each other as the real B's did.
+
+Common to both:
 
 - Column t holds ``size`` (K, default 10, not 3) training frames of B taken
   from the training frames decoded to A's state q_t: the K whose paired A
@@ -23,19 +39,15 @@ What we do (and where it differs):
   covariance; a missing A frame gives D4 = 1 for all). A state no training
   frame decodes to uses the frames nearest its mean.
 - D between two candidates is the Mahalanobis distance under B_B of q_t
-  between B's features (joint positions in A's ground frame + PCA).
-- The path is found by dynamic programming, as Viterbi does: a step from
-  candidate j of column t - 1 into candidate i of column t costs
-  D_t(i, j) x D4_t(i), and E_t(i) = min_j E_{t-1}(j) + D_t(i, j) D4_t(i),
-  from E_1 = D4 (:func:`lowest_error_path`); the lowest-error path is
-  back-tracked from the last column. The paper's (D1 + D2 + D3) x D4 sums
-  the distances to *every* candidate before; ours keeps the one the path
-  comes from, so the chosen frames follow each other.
+  between B's features (body points in A's ground frame + PCA).
 - Online (:mod:`.partner`), the trellis runs over each slice of the windowed
   decoder, starting from the B frame already shown (E_1 = D x D4 from it),
   and only its first step is shown.
-- B's place relative to A is then the mean of the path's root positions over
-  ``placement_window`` frames (:meth:`Trellis.placement`; our addition).
+- B's place relative to A is the mean of the path's root positions over
+  ``placement_window`` frames (:meth:`Trellis.placement`), and B's joint
+  rotations are blended over ``blend_window`` frames (:meth:`Trellis.blend`):
+  a cut between two training frames becomes a short transition instead of a
+  jump (our additions; online both look no further ahead than the slice).
 """
 
 from __future__ import annotations
@@ -47,6 +59,9 @@ import numba
 import numpy as np
 
 from markovmotion.core.motion import Motion
+
+#: The trellis costs: ``"path"`` (a lowest-error path, ours) and ``"paper"`` (§3.2 as printed).
+TRELLISES = ("path", "paper")
 
 
 @dataclass
@@ -61,6 +76,9 @@ class Trellis:
         train_b: (frames, Db) B's training features.
         size: candidates per column K.
         motion_b: B's training frames relative to A, decoded once.
+        successor: (frames,) the training frame after each in its recording
+            (:func:`successors`); None: D measured from the frame itself.
+        kind: ``"path"`` or ``"paper"`` (module docstring).
     """
 
     members: list[np.ndarray]
@@ -70,6 +88,8 @@ class Trellis:
     train_b: np.ndarray
     size: int
     motion_b: Motion
+    successor: np.ndarray | None = None
+    kind: str = "path"
 
     def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
@@ -83,8 +103,13 @@ class Trellis:
         return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
 
     def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
-        """(K, K') Mahalanobis distances D1..DK' between B candidates, under B_B of ``state``."""
+        """(K, K') Mahalanobis distances D1..DK' between B candidates and those of the column
+        before, under B_B of ``state``. The ``"path"`` trellis measures from the training
+        frame that *followed* each earlier candidate (:attr:`successor`), so that going on
+        with the same recording costs nothing and a cut costs how far B's pose jumps."""
         p = self.prec_b[state]
+        if self.kind == "path" and self.successor is not None:
+            prev = self.successor[prev]
         return np.linalg.norm(
             (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
         )
@@ -112,8 +137,36 @@ class Trellis:
             ]
         k = len(idx)  # every column holds K = min(size, training frames) (see build_trellis)
         d4 = np.array([c[1] for c in cols[1:]]).reshape(-1, k)
-        pick = lowest_error_path(cost, d4, np.array(steps).reshape(-1, k, k))
+        steps = np.array(steps).reshape(-1, k, k)
+        if self.kind == "paper":
+            # E = (D1 + ... + DK) x D4 per column, the lowest per column (§3.2 as printed)
+            pick = np.concatenate([[np.argmin(cost)], np.argmin(steps.sum(axis=2) * d4, axis=1)])
+        else:
+            pick = lowest_error_path(cost, d4, steps)
         return np.array([c[0][j] for c, j in zip(cols, pick, strict=True)], dtype=int)
+
+    def blend(
+        self, path: np.ndarray, half: int, before: Sequence[int] = (), count: int | None = None
+    ) -> np.ndarray:
+        """(F, J, 4) B's joint rotations along ``path``, each frame's the normalised mean of
+        the quaternions of frames t - half .. t + half (those that exist; ``before``: frames
+        shown before the path's first), each turned to the hemisphere of frame t's: a cut
+        between two training frames becomes a blend over ``2 half + 1`` frames, and a
+        sequence of consecutive training frames stays close to itself. ``half = 0``: the
+        frames' own rotations. ``count``: only the path's first ``count`` frames (online,
+        the one frame shown)."""
+        frames = np.concatenate([before, path]).astype(int)
+        t = np.arange(len(before), len(frames))[:count]
+        quats = self.motion_b.rotations
+        if half <= 0:
+            return quats[frames[t]]
+        near = t[:, None] + np.arange(-half, half + 1)[None, :]  # (F, W)
+        inside = (near >= 0) & (near < len(frames))
+        q = quats[frames[np.clip(near, 0, len(frames) - 1)]]  # (F, W, J, 4)
+        centre = quats[frames[t]][:, None]
+        sign = np.where((q * centre).sum(axis=-1) < 0, -1.0, 1.0) * inside[:, :, None]
+        out = (q * sign[..., None]).sum(axis=1)
+        return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
     def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
         """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
@@ -125,6 +178,30 @@ class Trellis:
         return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
 
 
+def smooth_place(origin: np.ndarray, yaw: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """A's ground frame (origin (F, 3), yaw (F,)) averaged over frames t - half .. t + half
+    (those that exist): origins by their mean, headings by the direction of their mean unit
+    vector. B is placed through it, so that A's heading, which wobbles from frame to frame
+    with the hips, does not swing B around A (B stands a metre away: 3 degrees are 50 mm)."""
+    if half <= 0 or len(yaw) < 2:
+        return origin, yaw
+    values = np.column_stack([origin, np.cos(yaw), np.sin(yaw)])
+    csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
+    t = np.arange(len(yaw))
+    lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(yaw))
+    mean = (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+    return mean[:, :3], np.arctan2(mean[:, 4], mean[:, 3])
+
+
+def successors(lengths: Sequence[int]) -> np.ndarray:
+    """(T,) the training frame that follows each one in its recording (the last frame of a
+    recording: itself), for training sequences of ``lengths``."""
+    out = np.arange(int(np.sum(lengths))) + 1
+    ends = np.cumsum(lengths) - 1
+    out[ends] = ends
+    return out
+
+
 def build_trellis(
     train_a: np.ndarray,
     train_b: np.ndarray,
@@ -134,6 +211,8 @@ def build_trellis(
     prec_b: np.ndarray,
     size: int,
     motion_b: Motion,
+    successor: np.ndarray | None = None,
+    kind: str = "path",
 ) -> Trellis:
     """A :class:`Trellis` over training frames (A's and B's features, their states).
 
@@ -149,7 +228,9 @@ def build_trellis(
             idx = np.argsort(d)[:size]
         members.append(idx)
         white.append(train_a[idx] @ prec_a[k])
-    return Trellis(members, white, prec_a, prec_b, train_b, size, motion_b)
+    if kind not in TRELLISES:
+        raise ValueError(f"trellis must be one of {TRELLISES}, got {kind!r}")
+    return Trellis(members, white, prec_a, prec_b, train_b, size, motion_b, successor, kind)
 
 
 @numba.njit(cache=True)

@@ -28,12 +28,19 @@ function card(title, value, id) {
 }
 
 function render(r) {
+  const gait = (r.studies || ["gait"]).includes("gait");
   $("counts").replaceChildren(
     card("evaluators registered", String(r.registered), "n-registered"),
-    card("evaluators who answered", String(r.evaluators), "n-evaluators"),
-    card("naturalness answers", String(r.answers.naturalness), "n-naturalness"),
-    card("style answers", String(r.answers.recognition), "n-recognition"),
-    card("resemblance answers", String(r.answers.resemblance), "n-resemblance"),
+    ...(gait ? [
+      card("evaluators who answered", String(r.evaluators), "n-evaluators"),
+      card("naturalness answers", String(r.answers.naturalness), "n-naturalness"),
+      card("style answers", String(r.answers.recognition), "n-recognition"),
+      card("resemblance answers", String(r.answers.resemblance), "n-resemblance"),
+    ] : []),
+    ...(r.interaction ? [
+      card("observers of interactions", String(r.interaction.observers), "n-observers"),
+      card("interaction answers", String(r.interaction.answers), "n-interaction"),
+    ] : []),
   );
 
   const nat = $("naturalness");
@@ -105,7 +112,46 @@ function render(r) {
       ` over ${hist.reduce((a, b) => a + b, 0)} comparisons.`),
     bars,
   );
+  document.querySelectorAll("section.gait").forEach((s) => { s.hidden = !gait; });
+  renderInteraction(r.interaction);
   document.body.dataset.loaded = "yes";
+}
+
+// The observer study (dual-HMM paper §4.2): identification per behaviour, real vs generated,
+// how many noticed something unusual (Tables 1-2), and each video's comments.
+function renderInteraction(s) {
+  $("interaction").hidden = !s;
+  if (!s) return;
+  const KINDS = { real: "real", generated: "generated" };
+  const ratio = (c) => `${c.correct}/${c.n}`;
+  const noticed = (c) => `${c.unusual}/${c.n}`;
+  const t = table(
+    ["behaviour", ...s.kinds.flatMap((k) => [`identified, ${KINDS[k]}`, `noticed something unusual, ${KINDS[k]}`])],
+    [...s.labels.map((l) => [l, s.rates[l]]), ["all", s.overall]].map(([label, row]) => [
+      label, ...s.kinds.flatMap((k) => [`${pct(row[k].rate)} (${ratio(row[k])})`, noticed(row[k])]),
+    ]),
+  );
+  t.id = "interaction-rates";
+  t.querySelectorAll("tr").forEach((tr, i) => {
+    if (i === 0) return;
+    const label = i <= s.labels.length ? s.labels[i - 1] : "all";
+    tr.dataset.label = label;
+    tr.querySelectorAll("td").forEach((td, j) => {
+      td.dataset.kind = s.kinds[Math.floor(j / 2)];
+      td.dataset.what = j % 2 ? "unusual" : "rate";
+    });
+  });
+  $("interaction-summary").replaceChildren(
+    el("p", { class: "muted" }, `${s.observers} observers, ${s.answers} answers.`), t);
+  $("interaction-clips").replaceChildren(...s.clips.map((c) => {
+    const box = el("div", { class: "clip", id: `clip-${c.clip}` },
+      el("h4", {}, `${c.clip} · ${c.label} · ${KINDS[c.kind] || c.kind}${c.take ? ` (${c.take})` : ""}`),
+      el("p", { class: "muted" }, `identified ${ratio(c)} (${pct(c.rate)}); noticed something unusual ${noticed(c)}`));
+    box.append(c.comments.length
+      ? el("ul", { class: "comments" }, ...c.comments.map((text) => el("li", { class: "comment" }, text)))
+      : el("p", { class: "muted" }, "no comments"));
+    return box;
+  }));
 }
 
 async function load() {

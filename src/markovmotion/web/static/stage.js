@@ -64,6 +64,7 @@ export class Stage {
     this.follow = false; // keep the figures' centroid in the middle (horizontally)
     this.figures = [];
     this.label = "";
+    this.pointLight = false; // Johansson's display: dots on black, no floor
     this._listen();
     new ResizeObserver(() => this.draw()).observe(canvas);
   }
@@ -190,10 +191,10 @@ export class Stage {
     const sky = ctx.createLinearGradient(0, 0, 0, H);
     sky.addColorStop(0, "#f7f9fc");
     sky.addColorStop(1, "#e4e9f1");
-    ctx.fillStyle = sky;
+    ctx.fillStyle = this.pointLight ? "#000" : sky;
     ctx.fillRect(0, 0, W, H);
 
-    const g = this.grid;
+    const g = this.pointLight ? { x0: 1, x1: 0, z0: 1, z1: 0, step: 1 } : this.grid; // no floor
     ctx.lineWidth = 1 * dpr;
     for (let x = g.x0; x <= g.x1 + 1e-6; x += g.step) {
       const s = clip(view([x, g.y, g.z0]), view([x, g.y, g.z1]));
@@ -245,7 +246,7 @@ export class Stage {
       }
     }
     if (this.label) {
-      ctx.fillStyle = "#44506a";
+      ctx.fillStyle = this.pointLight ? "#8a93a6" : "#44506a";
       ctx.font = `${13 * dpr}px system-ui, sans-serif`;
       ctx.fillText(this.label, 10 * dpr, 20 * dpr);
     }
