@@ -173,3 +173,32 @@ def test_the_online_partner_is_smooth_and_identical_to_respond(interactions):
     online = np.concatenate([f.positions() for f in frames])
     np.testing.assert_allclose(online, model.respond(a, "windowed").positions(), atol=1e-6)
     assert isinstance(frames[0], Motion)
+
+
+def test_heading_of_a_skeleton_whose_hip_joints_sit_at_the_pelvis(interactions):
+    """cgspeed's CMU skeleton hangs the legs from LHipJoint / RHipJoint at the pelvis itself:
+    the hips are their children, and the heading follows the shoulders' facing."""
+    a = interactions[0][2]
+    left, right = a.hip_joints()
+    assert np.any(a.skeleton.offsets[left]) and np.any(a.skeleton.offsets[right])
+    pos = a.positions()
+    sk = a.skeleton
+    across = pos[:, sk.index("LeftArm")] - pos[:, sk.index("RightArm")]
+    shoulders = np.arctan2(-across[:, 2], across[:, 0])
+    gap = np.angle(np.exp(1j * (a.heading(pos) - shoulders)))
+    assert np.median(np.abs(gap)) < np.radians(30) and np.ptp(a.heading(pos)) > np.radians(20)
+
+
+def test_b_place_frame_is_chosen_on_the_training_takes(interactions, mocap):
+    """CMU's pulls: B stays in front while A turns side-on, so B's place varies less along
+    the world's axes; salsa partners turn together, so it varies less in A's facing."""
+    pairs = [(a, b) for _, _, a, b in interactions]
+    model = DualHMM(n_states=4, n_iter=2).fit(pairs)
+    assert model.frame_ == "world"
+    salsa = [mocap.load_pair(*p) for p in mocap.pairs(label=["salsa"])[:2]]
+    salsa = [(a.trim(0, 600), b.trim(0, 600)) for a, b in salsa]
+    assert DualHMM(n_states=4, n_iter=2).fit(salsa).frame_ == "heading"
+    fixed = DualHMM(n_states=4, n_iter=2, frame="heading").fit(pairs)
+    a = pairs[0][0].resample(30)
+    assert fixed.frame_ == "heading" and np.ptp(fixed.ground(a)[1]) > 0
+    assert np.all(model.ground(a)[1] == 0) and np.allclose(model.ground(a)[0], fixed.ground(a)[0])

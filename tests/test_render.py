@@ -197,6 +197,7 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     # the trained models' outputs: motions that read back, animations that move
     bvhs = (
         "partner-virtual.bvh",
+        "handshake-virtual.bvh",
         "vlmm-routine.bvh",
         "gait-elderly-synthesized.bvh",
         "chain-partner.bvh",
@@ -204,7 +205,8 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     for name in bvhs:
         motion = read_motion(out / name)
         assert motion.n_frames > 30 and np.isfinite(motion.positions()).all()
-    for name in ("partner.gif", "vlmm-routine.gif", "gait-elderly.gif", "chain-partner.gif"):
+    gifs = ("partner.gif", "handshake.gif", "vlmm-routine.gif", "gait-elderly.gif")
+    for name in (*gifs, "chain-partner.gif"):
         frames = gif_frames(out / name)
         assert len(frames) > 10 and not np.array_equal(frames[0], frames[-1])
 

@@ -54,7 +54,21 @@ POINTS = typer.Option(
     help="See people as 'body' points found by joint names (any skeleton) or 'all' joints "
     "of the training skeleton.",
 )
+FRAME = typer.Option(
+    "auto",
+    callback=choice(("auto", "heading", "world")),
+    help="B's place measured in A's facing ('heading'), along the world's axes from A "
+    "('world'), or whichever varies less on the training takes ('auto').",
+)
 ENERGY = ranged("fraction", 0.99, help="PCA energy kept per person (the paper's 0.95).")
+MARKERS = typer.Option(
+    0,
+    "--markers",
+    min=0,
+    max=200,
+    help="Learn on N virtual markers placed on each person's skeleton (13-200; the paper's "
+    "suit has 30); 0: skeletons (takes listed as .c3d files are markers anyway).",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
@@ -79,14 +93,18 @@ def new_model(
     trellis: str,
     points: str,
     energy: float,
+    frame: str,
     fps: float,
     window: int,
     n_iter: int,
     seed: int,
+    markers: int = 0,
 ):
     """An unfitted DualHMM with the settings that ``train`` and ``crossval`` share."""
     from markovmotion.models.hmm.dual import DualHMM
 
+    if 0 < markers < 13:
+        raise typer.BadParameter("--markers: 0 (skeletons) or 13 to 200 virtual markers")
     return DualHMM(
         n_states=states,
         mode=mode,
@@ -97,6 +115,8 @@ def new_model(
         trellis=trellis,
         points=points,
         energy=energy,
+        frame=frame,
+        markers=markers,
         fps=fps,
         window=window,
         n_iter=n_iter,
@@ -121,6 +141,8 @@ def train(
     trellis: str = TRELLIS,
     points: str = POINTS,
     energy: float = ENERGY,
+    frame: str = FRAME,
+    markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -144,17 +166,20 @@ def train(
         trellis,
         points,
         energy,
+        frame,
         fps,
         window,
         n_iter,
         seed,
+        markers,
     )
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
     model.save(out, **extras)
     hmm = model.lambda_a_
+    seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
     err_console.print(
-        f"wrote {out}: {len(pairs)} takes, {len(model.train_a_)} frames at {fps:g} fps, "
+        f"wrote {out}: {len(pairs)} takes, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
         f"{hmm.n_iter_} EM iterations, log-likelihood {model.history_[-1]:.1f}, "
         f"{time.perf_counter() - start:.1f} s",
@@ -165,13 +190,20 @@ def train(
 def read_stream(path: Path, fps: float | None = None):
     """A BVH replayed as a stream: (Motion, broken) with ``broken`` (F,) marking frames whose
     line has NaN or missing values; their rotations are NaN, so the partner skips them.
+    A C3D file: (Markers, frames with a marker unseen).
 
     A file of the collection is read as INDEX.csv says (true frame rate, CMU's reference
     frame dropped) unless ``fps`` overrides the file's rate.
     """
     from markovmotion.io.bvh import read_bvh_stream
+    from markovmotion.io.c3d import read_c3d
     from markovmotion.io.files import base_suffix
 
+    if base_suffix(path) == ".c3d":  # markers: unseen samples are NaN, their frames missing
+        markers = read_c3d(path)
+        if fps is not None:
+            markers.fps = float(fps)
+        return markers, ~markers.visible().all(axis=1)
     if base_suffix(path) != ".bvh":  # ASF/AMC: no frame lines to repair
         motion = read_listed_motion(path, fps=fps)
         return motion, np.zeros(motion.n_frames, dtype=bool)
@@ -185,9 +217,15 @@ def read_stream(path: Path, fps: float | None = None):
 @app.command()
 def respond(
     model: Path = typer.Option(..., help="Dual-HMM model file (.npz)."),
-    input: Path = typer.Option(None, help="Person A's motion (BVH); or --video."),
+    input: Path = typer.Option(
+        None,
+        help="Person A's motion (BVH), or markers (C3D) for a model trained on markers; "
+        "or --video.",
+    ),
     out: Path = typer.Option(
-        ..., help="Person B's generated motion (.bvh); with --video the composite (.mp4)."
+        ...,
+        help="Person B's generated motion (.bvh), or markers (.c3d) from a marker model; "
+        "with --video the composite (.mp4).",
     ),
     video: Path = typer.Option(
         None,
@@ -219,8 +257,11 @@ def respond(
     ),
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
 ) -> None:
-    """Generate person B's response to person A's motion."""
+    """Generate person B's response to person A's motion (or markers, for a marker model:
+    a C3D file, or a BVH with the model's virtual markers placed on it; B comes out as C3D)."""
     from markovmotion.io import check_motion_output, write_motion
+    from markovmotion.io.c3d import check_c3d_output, write_c3d
+    from markovmotion.io.files import base_suffix
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.viz import check_output, render
 
@@ -234,10 +275,12 @@ def respond(
             realtime,
         )  # fmt: skip
         return
-    check_motion_output(out)
+    as_c3d = base_suffix(out) == ".c3d"
+    (check_c3d_output if as_c3d else check_motion_output)(out)
     if animation is not None:
         check_output(animation)
     dual = DualHMM.load(model)
+    _check_combination(dual, input, out, as_c3d, realtime)
     dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
@@ -265,11 +308,12 @@ def respond(
             )
         dual.window = window
         b = dual.respond(motion, "standard" if standard else "windowed")
-    write_motion(b, out)
+    (write_c3d if as_c3d else write_motion)(b, out)
     console.print(f"wrote {out} ({b.n_frames} frames at {b.fps:g} fps)")
     if animation is not None:
         shown = motion.copy()
-        shown.rotations[~np.isfinite(shown.rotations).all(axis=(1, 2))] = [0, 0, 0, 1]
+        if hasattr(shown, "rotations"):
+            shown.rotations[~np.isfinite(shown.rotations).all(axis=(1, 2))] = [0, 0, 0, 1]
         render([shown, b], animation, names=["A (real)", "B (virtual partner)"])
         console.print(f"wrote {animation}")
 
@@ -314,8 +358,36 @@ def _respond_video(
     )
 
 
+def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: bool) -> None:
+    """One line (exit 2) for a model and files that do not go together: markers in or out
+    of a skeleton model, a skeleton's output from a marker model, a BVH given to a model
+    learnt from C3D markers (no virtual markers to place), or --realtime on markers."""
+    from markovmotion.errors import MotionFormatError, SkeletonMismatchError
+    from markovmotion.io.files import base_suffix
+
+    c3d_in = base_suffix(input) == ".c3d"
+    if not dual.uses_markers and (c3d_in or as_c3d):
+        raise SkeletonMismatchError(
+            f"{input if c3d_in else out}: the model was trained on skeletons; it takes and "
+            "gives motions (BVH), not markers (C3D)"
+        )
+    if dual.uses_markers and not as_c3d:
+        raise MotionFormatError(out, "the model was trained on markers: write B to a .c3d file")
+    if dual.uses_markers and not c3d_in and not dual.markers:
+        raise SkeletonMismatchError(
+            f"{input}: the model learnt markers from C3D files (no virtual markers to place "
+            "on a skeleton): give a .c3d file"
+        )
+    if dual.uses_markers and realtime:
+        raise SkeletonMismatchError(
+            f"{input}: --realtime replays skeleton models only (this one is on markers)"
+        )
+
+
 def _resample_stream(motion, broken: np.ndarray, fps: float):
     """Resample a stream whose broken frames are NaN; a new frame is broken if it touches one."""
+    if not hasattr(motion, "rotations"):  # markers: a sample next to an unseen one is unseen
+        return motion.resample(fps)
     clean = motion.copy()
     clean.rotations[broken] = [0.0, 0.0, 0.0, 1.0]
     out = clean.resample(fps)
@@ -364,6 +436,8 @@ def crossval(
     trellis: str = TRELLIS,
     points: str = POINTS,
     energy: float = ENERGY,
+    frame: str = FRAME,
+    markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
     n_iter: int = N_ITER,
@@ -392,10 +466,12 @@ def crossval(
         trellis,
         points,
         energy,
+        frame,
         fps,
         window,
         n_iter,
         seed,
+        markers,
     )
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):

@@ -16,12 +16,14 @@ class Markers:
         positions: (F, M, 3) in mm, Y up; NaN where a marker was not seen.
         fps: frames per second.
         name: where it came from (file name), for messages.
+        source: the path it was read from, if any (what a model records it trained on).
     """
 
     names: tuple[str, ...]
     positions: np.ndarray
     fps: float
     name: str = ""
+    source: str = ""
 
     def __post_init__(self) -> None:
         self.names = tuple(self.names)
@@ -52,6 +54,40 @@ class Markers:
 
     def __len__(self) -> int:
         return self.n_frames
+
+    def copy(self) -> Markers:
+        """A deep copy."""
+        return Markers(self.names, self.positions.copy(), self.fps, self.name, self.source)
+
+    def trim(self, start: int = 0, stop: int | None = None) -> Markers:
+        """Frames ``start:stop`` as new markers."""
+        pos = self.positions[start:stop].copy()
+        return Markers(self.names, pos, self.fps, self.name, self.source)
+
+    def select(self, names: tuple[str, ...] | list[str]) -> Markers:
+        """Only the markers ``names``, in that order (KeyError naming those not found)."""
+        where = {n: i for i, n in enumerate(self.names)}
+        missing = [n for n in names if n not in where]
+        if missing:
+            raise KeyError(f"markers not found: {', '.join(missing)}")
+        idx = [where[n] for n in names]
+        return Markers(tuple(names), self.positions[:, idx], self.fps, self.name, self.source)
+
+    def resample(self, fps: float) -> Markers:
+        """The same trajectories sampled at ``fps`` (linear; a new sample next to an unseen
+        one is unseen, NaN)."""
+        from markovmotion.limits import check_rate
+
+        fps = check_rate(fps, "resampling frame rate")
+        if self.n_frames < 2 or np.isclose(fps, self.fps):
+            return Markers(self.names, self.positions, float(fps), self.name, self.source)
+        n = max(1, int(np.floor((self.n_frames - 1) * fps / self.fps + 1e-9)) + 1)
+        src = np.arange(n) * self.fps / fps
+        lo = np.clip(np.floor(src).astype(int), 0, self.n_frames - 1)
+        hi = np.minimum(lo + 1, self.n_frames - 1)
+        w = (src - lo)[:, None, None]
+        pos = (1 - w) * self.positions[lo] + w * self.positions[hi]
+        return Markers(self.names, pos, float(fps), self.name, self.source)
 
     def visible(self) -> np.ndarray:
         """(F, M) whether each marker was seen in each frame."""

@@ -139,9 +139,9 @@ class Motion:
             if ca != cb:
                 pair = (ca.lower(), cb.lower())
                 if pair == ("l", "r"):
-                    return a, b
+                    return _off_pelvis(sk, a), _off_pelvis(sk, b)
                 if pair == ("r", "l"):
-                    return b, a
+                    return _off_pelvis(sk, b), _off_pelvis(sk, a)
                 return None
         return None
 
@@ -277,6 +277,16 @@ def _chain(local, trans, parents):  # pragma: no cover - compiled
 
 
 _HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int] | None] = weakref.WeakKeyDictionary()
+
+
+def _off_pelvis(sk: Skeleton, j: int) -> int:
+    """The first joint at or below ``j`` on a chain of single children that does not sit
+    where its parent does: cgspeed's CMU skeleton has ``LHipJoint`` at the pelvis itself
+    (a zero offset) and the hip at its child ``LeftUpLeg``; two hips at one point tell no
+    direction."""
+    while not np.any(sk.offsets[j]) and len(sk.children(j)) == 1:
+        j = sk.children(j)[0]
+    return j
 
 
 def _subtree(sk: Skeleton, root: int) -> list[int]:

@@ -14,9 +14,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import DataNotFoundError, MotionFormatError
-from markovmotion.io import read_motion
+from markovmotion.io import read_c3d, read_motion
 from markovmotion.io.files import base_suffix, read_text
 from markovmotion.limits import MAX_FRAMES, check_rate, exceeded, max_frames
 
@@ -221,9 +222,18 @@ class MocapIndex:
             out.append((e, partner))
         return out
 
-    def load_pair(self, a: Entry, b: Entry) -> tuple[Motion, Motion]:
-        """Both people of a take, at the same frame rate and cut to the same frames."""
-        ma, mb = self.load_motion(a), self.load_motion(b)
+    def load_pair(self, a: Entry, b: Entry) -> tuple[Motion, Motion] | tuple[Markers, Markers]:
+        """Both people of a take, at the same frame rate and cut to the same frames: Motions,
+        or Markers when both files are C3D (at INDEX.csv's rate)."""
+        c3d = [base_suffix(e.file) == ".c3d" for e in (a, b)]
+        if any(c3d):
+            if not all(c3d):
+                raise MotionFormatError(
+                    self.root / INDEX_NAME, f"{a.file} and {b.file}: one C3D, one skeleton"
+                )
+            ma, mb = (_read_markers(e) for e in (a, b))
+        else:
+            ma, mb = self.load_motion(a), self.load_motion(b)
         if not ma.fps == mb.fps:
             mb = mb.resample(ma.fps)
         n = min(ma.n_frames, mb.n_frames)
@@ -245,3 +255,10 @@ def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -
     rate, CMU's reference frame dropped) unless ``fps`` overrides the file's rate."""
     entry = None if fps is not None else listed_entry(path)
     return entry.read() if entry is not None else read_motion(path, fps=fps)
+
+
+def _read_markers(entry: Entry) -> Markers:
+    """A C3D entry's markers at INDEX.csv's frame rate."""
+    markers = read_c3d(entry.path)
+    markers.fps = entry.fps
+    return markers

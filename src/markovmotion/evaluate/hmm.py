@@ -47,7 +47,7 @@ from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.models.base import file_sha256
-from markovmotion.models.hmm.dual import DualHMM, ground_frame
+from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
@@ -76,7 +76,7 @@ class _Baselines:
 
     def __init__(self, model: DualHMM):
         self.model = model
-        train_b = model.expmaps_b_.inverse_transform([model.frames_b_.astype(float)])[0]
+        train_b = model.training_b()
         self.mean_rel = model.body_positions(train_b).mean(axis=0)
         self.mean_pose = model.body_positions(train_b, body_centred=True).mean(axis=0)
         self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
@@ -121,7 +121,7 @@ def evaluate_pair(
     each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
     baselines = baselines or _Baselines(model)
     a, b = model._rate(a), model._rate(b)
-    origin, yaw = ground_frame(a)
+    origin, yaw = model.place(a)
     xa, _ = model.features_a(a)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     own = model.trellis
@@ -216,6 +216,7 @@ def describe(model: DualHMM) -> dict:
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
+        out["frame"] = getattr(model, "frame_", "heading")
     return out
 
 

@@ -25,6 +25,16 @@ def ground_frame(
     return origin, motion.heading(pos)
 
 
+def pelvis_centred(motion: Motion, positions: np.ndarray | None = None, turn: bool = True):
+    """(F, J, 3) joint positions about the pelvis: turned to face +Z
+    (:meth:`Motion.body_centred_positions`) or, with ``turn=False``, in the world's axes."""
+    if turn:
+        return motion.body_centred_positions(positions)
+    pos = motion.positions() if positions is None else positions
+    root = motion.skeleton.body_root
+    return pos - pos[:, root : root + 1]
+
+
 def ground_travel(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """(F, 3) per-frame travel in the body's own frame: sideways and forward step (mm), turn (rad).
 
@@ -61,7 +71,10 @@ class BodyMotion(FeatureStep):
     ``points``: body point names (:mod:`~markovmotion.features.body_points`):
     the joints kept, found by name on each motion's skeleton, so motions of
     any skeleton that has them go through; default: every joint of the
-    training skeleton (and only that skeleton).
+    training skeleton (and only that skeleton). ``turn``: with False, the pose
+    keeps the person's facing (positions about the pelvis in the world's
+    axes) and the travel is in the world's axes: for data whose world axes
+    mean something (one capture room), see :class:`DualHMM`'s ``frame``.
     """
 
     def __init__(
@@ -69,10 +82,12 @@ class BodyMotion(FeatureStep):
         horizon: float = 1 / 6,
         travel_horizon: float = 2 / 3,
         points: Sequence[str] | None = None,
+        turn: bool = True,
     ):
         self.horizon = horizon
         self.travel_horizon = travel_horizon
         self.points = points
+        self.turn = turn
 
     def fit(self, sequences: Sequence[Motion]) -> BodyMotion:
         self.skeleton_ = sequences[0].skeleton
@@ -90,13 +105,18 @@ class BodyMotion(FeatureStep):
     def pose(self, motion: Motion, positions: np.ndarray | None = None) -> np.ndarray:
         """(F, J, 3) body-centred positions of the joints (or body points) the features
         hold, from the motion's world ``positions`` if already computed."""
-        return motion.body_centred_positions(positions)[:, self._index(motion)]
+        return pelvis_centred(motion, positions, getattr(self, "turn", True))[
+            :, self._index(motion)
+        ]
 
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []
         for m in sequences:
             pos = m.positions()
-            out.append(self.rows(self.pose(m, pos), *ground_frame(m, pos), m.fps))
+            origin, yaw = ground_frame(m, pos)
+            if not getattr(self, "turn", True):
+                yaw = np.zeros_like(yaw)
+            out.append(self.rows(self.pose(m, pos), origin, yaw, m.fps))
         return out
 
     def rows(self, pose: np.ndarray, origin: np.ndarray, yaw: np.ndarray, fps: float) -> np.ndarray:

@@ -8,6 +8,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.features.base import FeatureStep
+from markovmotion.features.body_motion import pelvis_centred
 from markovmotion.features.body_points import body_point_index
 from markovmotion.state import check_joint_index, register
 
@@ -23,6 +24,8 @@ class JointPositions(FeatureStep):
         points: body point names instead (:mod:`~markovmotion.features.body_points`),
             found by name on each motion's skeleton, so that motions of any
             skeleton that has them go through.
+        turn: with ``body_centred``, whether each frame is turned to face +Z (else
+            the positions about the pelvis keep the world's axes).
 
     ``inverse_transform`` gives (F, J, 3) positions: turning positions back into
     joint rotations needs inverse kinematics, which the position-based models
@@ -34,10 +37,12 @@ class JointPositions(FeatureStep):
         body_centred: bool = True,
         joints: list[str] | None = None,
         points: Sequence[str] | None = None,
+        turn: bool = True,
     ):
         self.body_centred = body_centred
         self.joints = joints
         self.points = points
+        self.turn = turn
 
     def fit(self, sequences: Sequence[Motion]) -> JointPositions:
         sk = sequences[0].skeleton
@@ -72,7 +77,8 @@ class JointPositions(FeatureStep):
         out = []
         for m in sequences:
             idx = self._index(m)
-            pos = m.body_centred_positions() if self.body_centred else m.positions()
+            turn = getattr(self, "turn", True)
+            pos = pelvis_centred(m, None, turn) if self.body_centred else m.positions()
             out.append(pos[:, idx].reshape(len(pos), -1))
         return out
 

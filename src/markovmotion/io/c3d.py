@@ -1,4 +1,4 @@
-"""C3D reading (marker trajectories) through the maintained ``c3d`` package.
+"""C3D reading and writing (marker trajectories) through the maintained ``c3d`` package.
 
 Units: ``POINT:UNITS`` (``mm``, ``cm`` or ``m``; ``mm`` when absent) is
 converted to millimetres.
@@ -10,6 +10,11 @@ the lab is taken as Z up with X to the right (``+X``, ``+Z``), so a lab point
 (x, y, z) becomes (x, z, -y): a -90 degree turn about X.
 
 Samples the file marks invalid (negative residual, or NaN coordinates) are NaN.
+
+Writing (:func:`write_c3d`): float32 coordinates in mm, ``POINT:X_SCREEN`` =
+``+X`` and ``POINT:Y_SCREEN`` = ``+Y`` (so our axes are the file's and a
+reader turns nothing), unseen (NaN) samples with a negative residual, the
+labels in ``POINT:LABELS``; written atomically, no analog channels.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import numpy as np
 
 from markovmotion.core.markers import Markers
 from markovmotion.errors import MotionFormatError
-from markovmotion.io.files import open_regular
+from markovmotion.io.files import atomic_write, base_suffix, open_regular
 from markovmotion.limits import (
     MAX_BYTES,
     MAX_CHANNELS,
@@ -136,4 +141,48 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     with np.errstate(all="ignore"):
         positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
     positions[data[..., 3] < 0] = np.nan
-    return Markers(names, positions, float(rate), name=os.path.basename(path))
+    return Markers(names, positions, float(rate), name=os.path.basename(path), source=path)
+
+
+#: Longest marker label C3D's ``POINT:LABELS`` holds.
+MAX_LABEL = 32
+
+
+def check_c3d_output(path: str | os.PathLike[str]) -> None:
+    """Raise :class:`MotionFormatError` unless ``path`` names a ``.c3d`` file."""
+    if base_suffix(path) != ".c3d" or str(path).endswith(".gz"):
+        raise MotionFormatError(path, "markers are written as C3D: use a .c3d name")
+
+
+def write_c3d(markers: Markers, path: str | os.PathLike[str]) -> None:
+    """Write ``markers`` to ``path`` as C3D (module docstring), atomically: a failure
+    part-way leaves any previous file untouched. :func:`read_c3d` gives back the same
+    names, frame rate and positions to float32 precision (NaN where unseen).
+
+    Raises:
+        MotionFormatError: not a ``.c3d`` name, no frames or markers, or a label
+            longer than :data:`MAX_LABEL` characters.
+    """
+    import c3d
+
+    check_c3d_output(path)
+    if markers.n_frames == 0 or markers.n_markers == 0:
+        raise MotionFormatError(path, "cannot write markers with zero frames or markers")
+    long = [n for n in markers.names if len(n) > MAX_LABEL or not n.isascii()]
+    if long:
+        raise MotionFormatError(path, f"marker labels must be ASCII of <= {MAX_LABEL}: {long[0]!r}")
+    writer = c3d.Writer(point_rate=float(markers.fps), point_scale=-1.0, point_units="mm  ")
+    writer.set_point_labels(list(markers.names))
+    writer.set_screen_axis("+X", "+Y")
+    seen = markers.visible()
+    no_analog = np.zeros((0, 0), dtype=np.float32)
+    frames = []
+    for pos, ok in zip(markers.positions, seen, strict=True):
+        points = np.zeros((markers.n_markers, 5), dtype=np.float32)
+        points[:, :3] = np.where(ok[:, None], pos, 0.0)
+        points[~ok, 3] = -1.0
+        frames.append((points, no_analog))
+    writer.add_frames(frames)
+    with atomic_write(path, "wb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "no analog data": none is meant
+        writer.write(fh)

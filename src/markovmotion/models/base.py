@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError
 from markovmotion.persist import load_npz, save_npz
@@ -125,7 +126,7 @@ class Model(BaseEstimator):
         return model
 
     # ------------------------------------------------------------ training files
-    def record_training(self, motions: Iterable[Motion]) -> None:
+    def record_training(self, motions: Iterable[Motion | Markers]) -> None:
         """Set ``train_files_`` from the motions ``fit`` was given (:func:`file_record`)."""
         seen: dict[str, dict[str, str]] = {}
         for motion in motions:
@@ -134,8 +135,8 @@ class Model(BaseEstimator):
         self.train_files_ = list(seen.values())
 
 
-def file_record(motion: Motion) -> dict[str, str]:
-    """Name and content hash of what ``motion`` was read from.
+def file_record(motion: Motion | Markers) -> dict[str, str]:
+    """Name and content hash of what ``motion`` (or markers) was read from.
 
     The SHA-256 of the file's bytes when the motion came from a file (so the
     same take under another path or name is recognised), else of its arrays.
@@ -143,7 +144,12 @@ def file_record(motion: Motion) -> dict[str, str]:
     if motion.source and os.path.isfile(motion.source):
         return {"file": os.path.basename(motion.source), "sha256": file_sha256(motion.source)}
     digest = hashlib.sha256()
-    for arr in (motion.rotations, motion.translations):
+    arrays = (
+        (motion.positions,)
+        if isinstance(motion, Markers)
+        else (motion.rotations, motion.translations)
+    )
+    for arr in arrays:
         digest.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
     return {"file": motion.name or "(in memory)", "sha256": digest.hexdigest()}
 
@@ -169,12 +175,12 @@ def training_hashes(model: Model) -> set[str]:
     return {rec["sha256"] for rec in getattr(model, "train_files_", [])}
 
 
-def flatten(takes: Sequence[Any]) -> list[Motion]:
-    """Motions in ``takes`` (Motions, or tuples of them as two-person takes)."""
-    out: list[Motion] = []
+def flatten(takes: Sequence[Any]) -> list[Motion | Markers]:
+    """Motions (or Markers) in ``takes`` (them, or tuples of them as two-person takes)."""
+    out: list[Motion | Markers] = []
     for take in takes:
-        if isinstance(take, Motion):
+        if isinstance(take, Motion | Markers):
             out.append(take)
         elif isinstance(take, tuple | list):
-            out.extend(m for m in take if isinstance(m, Motion))
+            out.extend(m for m in take if isinstance(m, Motion | Markers))
     return out

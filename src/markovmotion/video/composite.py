@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from markovmotion.core.motion import Motion
-from markovmotion.errors import MotionFormatError
+from markovmotion.errors import MotionFormatError, SkeletonMismatchError
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
@@ -75,9 +75,7 @@ def respond_in_video(
     """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
     ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
     to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary."""
-    from markovmotion.models.hmm.dual import DualHMM
-
-    dual = DualHMM.load(model)
+    dual = _load_partner_model(model)
     where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
     single = Path(video).is_file()
@@ -130,7 +128,7 @@ def respond_in_video_live(
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.models.online import concatenate
 
-    dual = DualHMM.load(model)
+    dual = _load_partner_model(model)
     mv = open_video(video, cameras, None, max_frames)
     if Path(video).is_file():
         view = 0
@@ -199,6 +197,18 @@ def respond_in_video_live(
         "out": str(written),
         "view": view,
     }
+
+
+def _load_partner_model(model: str | os.PathLike[str]):
+    """The dual HMM of ``model``; one trained on markers cannot answer a tracked skeleton."""
+    from markovmotion.models.hmm.dual import DualHMM
+
+    dual = DualHMM.load(model)
+    if getattr(dual, "uses_markers", False):
+        raise SkeletonMismatchError(
+            f"{model}: the model was trained on markers; a person tracked in video is a skeleton"
+        )
+    return dual
 
 
 def _fill_forward(states: list[np.ndarray | None]) -> np.ndarray:

@@ -68,11 +68,15 @@ class ModelPartner:
         self._partner = model.partner()
         self.lag = int(self._partner.lag)
         self.fps = float(self._partner.fps)
-        self.parents = display_parents(self._partner.skeleton)
+        skeleton = self._partner.skeleton  # None: B comes as markers, drawn without bones
+        names = getattr(model, "marker_names_b_", ())
+        self.parents = display_parents(skeleton) if skeleton is not None else [-1] * len(names)
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
         out = self._partner.step(frame_a)
-        return None if out is None else out.positions()[0]
+        if out is None:
+            return None
+        return out.positions()[0] if isinstance(out, Motion) else out.positions[0]
 
 
 def load_partner_model(path: str | os.PathLike[str]) -> Model:

@@ -33,6 +33,21 @@ mm. The trellis picks real training frames of B, kept as exponential maps
 (with B's root relative to A), so the output is a Motion on B's skeleton
 without inverse kinematics; it is put back into the world through A's own
 ground frame.
+
+Markers (the paper's own data: 30 PhaseSpace markers, 90 numbers a pose).
+Given pairs of :class:`~markovmotion.core.markers.Markers` (C3D files), or
+skeleton takes with ``markers=N`` (N virtual markers placed on each person,
+:func:`~markovmotion.features.markers.virtual_markers`), the model learns
+and answers on markers: A is its markers relative to A's own centroid and
+heading (:class:`~markovmotion.features.markers.MarkerFeatures`, with
+``observation="motion"`` their change and A's travel) + PCA; B is B's
+markers in A's ground frame (A's marker centroid on the floor, A's heading)
++ PCA; the trellis and windowed decoder are the same, and the output is
+real training frames of B's markers (``markers_b_``), B's centroid averaged
+over ``placement_window`` and B's shape about it over ``blend_window``,
+placed through A's ground frame: ``respond`` returns Markers. A frame of A
+with a marker unseen (NaN) is a missing observation; gaps in training takes
+are filled by interpolation (:func:`~markovmotion.features.markers.fill_gaps`).
 """
 
 from __future__ import annotations
@@ -45,12 +60,21 @@ import numpy as np
 from markovmotion.algorithms.gaussian import precision_cholesky, weighted_gaussians
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.features.body_points import BODY_POINTS, body_point_index, body_points
+from markovmotion.features.markers import (
+    MarkerFeatures,
+    fill_gaps,
+    into_marker_frame,
+    out_of_marker_frame,
+    turn_about_up,
+    virtual_markers,
+)
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner, finite_frames
@@ -63,6 +87,7 @@ from markovmotion.models.hmm.trellis import (
 )
 from markovmotion.state import (
     StateError,
+    check_count,
     check_index,
     check_shape,
     is_fitted,
@@ -75,6 +100,7 @@ __all__ = ["DualHMM", "Partner", "finite_frames", "into_frame", "out_of_frame"]
 MODES = ("paper", "joint")
 OBSERVATIONS = ("pose", "motion")
 POINTS = ("body", "all")
+FRAMES = ("auto", "heading", "world")
 METHODS = ("standard", "windowed")
 
 
@@ -107,9 +133,7 @@ def _turn_root(
     s, c = np.sin(yaw / 2), np.cos(yaw / 2)
     x, y, z, w = quat.T
     turned = np.stack([c * x + s * z, c * y + s * w, c * z - s * x, c * w - s * y], axis=1)
-    s, c = np.sin(yaw), np.cos(yaw)
-    px, py, pz = position.T
-    return turned, np.stack([c * px + s * pz, py, c * pz - s * px], axis=1)
+    return turned, turn_about_up(position, yaw)
 
 
 # ------------------------------------------------------------------ the model
@@ -137,6 +161,12 @@ _LEARNT_TYPES = {
     "lambda_a_": GaussianHMM,
     "lambda_b_": GaussianHMM,
 }
+#: What a DualHMM fitted on markers holds instead of skeletons and exponential maps.
+_LEARNT_MARKERS = (
+    "marker_names_b_",
+    "markers_b_",
+    *(k for k in _LEARNT if k not in ("skeleton_a_", "skeleton_b_", "expmaps_b_", "frames_b_")),
+)
 
 
 class DualHMM(Model):
@@ -175,6 +205,19 @@ class DualHMM(Model):
             found by joint names (:data:`~markovmotion.features.body_points.BODY_POINTS`),
             so A may come on any skeleton that has them; or ``"all"``, every
             joint of the training skeleton (A must then come on that skeleton).
+            Not used on markers.
+        markers: 0, or N virtual markers (13 to 200; the paper's suit has 30) placed
+            on skeleton takes (:func:`~markovmotion.features.markers.virtual_markers`),
+            on which the model then learns and answers (module docstring, "Markers").
+            Pairs of Markers (C3D) make a marker model whatever this says.
+        frame: how B's place relative to A is measured: ``"heading"``, in A's ground
+            frame (A's pelvis on the floor, A's facing: right for partners who turn
+            with each other, as in salsa, and for A captured in any room);
+            ``"world"``, from A's pelvis along the world's axes (right when the
+            training and test takes share one room and B does not turn with A: in
+            CMU's pulls A turns side-on while B stays in front); ``"auto"`` (the
+            default) picks, on the training takes, the one in which B's place
+            varies less (:func:`choose_frame`), kept in ``frame_``.
         n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -183,7 +226,9 @@ class DualHMM(Model):
     features), ``train_states_``, ``train_lengths_`` (frames per training
     take, so the trellis knows which frame follows which), ``skeleton_a_`` / ``skeleton_b_``,
     ``labels_`` (the training takes' labels, if given), ``train_files_``
-    (both people's files, :meth:`Model.record_training`).
+    (both people's files, :meth:`Model.record_training`). On markers, instead of the
+    skeletons, ``expmaps_b_`` and ``frames_b_``: ``marker_names_b_`` and ``markers_b_``
+    (T, M, 3) float32, B's training markers in A's ground frame.
     """
 
     KIND = "dual_hmm"
@@ -203,6 +248,8 @@ class DualHMM(Model):
         blend_window: int = 9,
         trellis: str = "path",
         points: str = "body",
+        frame: str = "auto",
+        markers: int = 0,
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -221,6 +268,8 @@ class DualHMM(Model):
         self.blend_window = blend_window
         self.trellis = trellis
         self.points = points
+        self.frame = frame
+        self.markers = markers
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -230,10 +279,11 @@ class DualHMM(Model):
     # ---------------------------------------------------------------- fitting
     def fit(
         self,
-        pairs: Sequence[tuple[Motion, Motion]],
+        pairs: Sequence[tuple[Motion, Motion]] | Sequence[tuple[Markers, Markers]],
         labels: Sequence[str] | None = None,
     ) -> DualHMM:
-        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A).
+        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A): Motions,
+        or Markers (or Motions with ``markers=N``: virtual markers) for a marker model.
 
         ``labels``: the takes' interaction labels (INDEX.csv's ``label``), kept
         in ``labels_`` (sorted, distinct) so that evaluation on another index
@@ -249,25 +299,56 @@ class DualHMM(Model):
             raise ValueError(f"points must be one of {POINTS}, got {self.points!r}")
         if self.trellis not in TRELLISES:
             raise ValueError(f"trellis must be one of {TRELLISES}, got {self.trellis!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"frame must be one of {FRAMES}, got {self.frame!r}")
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
-        _check_one_skeleton_b(pairs, labels)
-        a_list, b_rel = [], []
+        if self.markers:
+            check_count("markers", self.markers, 1)
+        elif not isinstance(pairs[0][0], Markers):
+            _check_one_skeleton_b(pairs, labels)
         for a, b in pairs:
             if a.n_frames != b.n_frames:
                 raise ValueError(f"{a.name} and {b.name} differ in length")
-            a, b = self._rate(a), self._rate(b)
-            a_list.append(a)
-            b_rel.append(into_frame(b, *ground_frame(a)))
+        for k in _LEARNT + _LEARNT_MARKERS:  # a refit may change what the model sees
+            self.__dict__.pop(k, None)
+        if self.markers or isinstance(pairs[0][0], Markers):
+            xa, xb, lengths = self._marker_features(pairs)
+        else:
+            xa, xb, lengths = self._motion_features(pairs)
+        self._fit_chains(xa, xb, lengths)
+        self.labels_ = sorted(set(labels or ()))
+        self.record_training(flatten(pairs))
+        self._trellis_cache = None
+        return self
+
+    def _motion_features(
+        self, pairs: Sequence[tuple[Motion, Motion]]
+    ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+        """A's and B's features of skeleton takes (module docstring, "Features"); sets the
+        pipelines, skeletons and B's frames as exponential maps."""
+        a_list, b_rel = [], []
+        for a, b in pairs:
+            if not isinstance(a, Motion) or not isinstance(b, Motion):
+                raise TypeError("a dual HMM learns from pairs of all Motions or all Markers")
+            a_list.append(self._rate(a))
+            b_rel.append(self._rate(b))
+        points = BODY_POINTS if self.points == "body" else None
+        grounds = [ground_frame(a) for a in a_list]
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_rel, grounds, points)
+        turn = self.frame_ == "heading"
+        b_rel = [
+            into_frame(b, origin, yaw if turn else np.zeros_like(yaw))
+            for b, (origin, yaw) in zip(b_rel, grounds, strict=True)
+        ]
         self.skeleton_a_ = a_list[0].skeleton
         self.skeleton_b_ = b_rel[0].skeleton
-        points = BODY_POINTS if self.points == "body" else None
         first = (
-            BodyMotion(points=points)
+            BodyMotion(points=points, turn=turn)
             if self.observation == "motion"
-            else JointPositions(points=points)
+            else JointPositions(points=points, turn=turn)
         )
         self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
         self.pipeline_b_ = FeaturePipeline(
@@ -279,6 +360,36 @@ class DualHMM(Model):
         )
         xb = np.vstack(self.pipeline_b_.fit_transform(b_rel))
         self.frames_b_ = np.vstack(self.expmaps_b_.fit_transform(b_rel)).astype(np.float32)
+        return xa, xb, lengths
+
+    def _marker_features(
+        self, pairs: Sequence[tuple[Motion | Markers, Motion | Markers]]
+    ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+        """A's and B's features of marker takes (module docstring, "Markers"): A's markers
+        about A's own ground frame, B's in A's; sets the pipelines and ``markers_b_``."""
+        a_list, b_list = [], []
+        for a, b in pairs:
+            a, b = self.as_markers(a), self.as_markers(b)
+            a_list.append(fill_gaps(self._rate(a)))
+            b_list.append(fill_gaps(self._rate(b)))
+        first = MarkerFeatures(motion=self.observation == "motion").fit(a_list)
+        b_rel = []
+        for a, b in zip(a_list, b_list, strict=True):
+            b_rel.append(into_marker_frame(b, *first.place(first.select(a).positions)))
+        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
+        self.pipeline_b_ = FeaturePipeline([MarkerFeatures(body_centred=False), PCA(self.energy)])
+        xa, lengths = check_sequences(
+            np.vstack(self.pipeline_a_.fit_transform(a_list)), [len(m) for m in a_list]
+        )
+        xb = np.vstack(self.pipeline_b_.fit_transform(b_rel))
+        names = self.pipeline_b_.steps[0].names_
+        self.marker_names_b_ = list(names)
+        self.markers_b_ = np.concatenate([b.select(names).positions for b in b_rel])
+        self.markers_b_ = self.markers_b_.astype(np.float32)
+        return xa, xb, lengths
+
+    def _fit_chains(self, xa: np.ndarray, xb: np.ndarray, lengths: list[int]) -> None:
+        """lambda_A and lambda_B (eqs. 1-2) from A's and B's training features (``mode``)."""
         self.train_a_, self.train_b_ = xa, xb
         self.train_lengths_ = np.asarray(lengths, dtype=np.int64)
         hmm = GaussianHMM(
@@ -307,20 +418,47 @@ class DualHMM(Model):
             self.lambda_a_ = _sharing_chain(joint, m[:, :da], c[:, :da, :da], floor)
             self.lambda_b_ = _sharing_chain(joint, m[:, da:], c[:, da:, da:], floor)
         self.history_ = hmm.history_
-        self.labels_ = sorted(set(labels or ()))
-        self.record_training(flatten(pairs))
-        self._trellis_cache = None
-        return self
+
+    @property
+    def uses_markers(self) -> bool:
+        """Whether the fitted model sees people as markers (and answers with Markers)."""
+        return hasattr(self, "markers_b_")
+
+    def as_markers(self, x: Motion | Markers) -> Markers:
+        """``x`` as markers: Markers as they are, a Motion with ``markers`` virtual markers
+        placed on it (:func:`~markovmotion.features.markers.virtual_markers`).
+
+        Raises:
+            SkeletonMismatchError: a Motion and no virtual markers (a model learnt from
+                C3D markers), or a skeleton without the body points they need.
+        """
+        if isinstance(x, Markers):
+            return x
+        if not self.markers:
+            raise SkeletonMismatchError(
+                f"{x.name or 'input'}: a skeleton's motion, but the model knows markers by "
+                "their names in C3D files (give a .c3d file)"
+            )
+        return virtual_markers(x, int(self.markers))
 
     def check_state(self) -> None:
         """The learnt parts a model file must hold, and that they fit each other: both
         chains of n_states states, T training frames in train_a_, train_b_, frames_b_ and
         train_states_ (states in range), feature widths those of the pipelines and chains,
-        frames_b_ the width ExpMaps gives skeleton_b_."""
+        frames_b_ the width ExpMaps gives skeleton_b_; on markers, markers_b_ (T, M, 3) with
+        M the marker_names_b_ the B pipeline's markers, A's marker features those given."""
         if not is_fitted(self):
             return
-        require(self, *_LEARNT)
-        require_types(self, **_LEARNT_TYPES)
+        if getattr(self, "frame_", "heading") not in ("heading", "world"):
+            raise StateError(f"frame_: must be heading or world, got {self.frame_!r}")
+        on_markers = hasattr(self, "markers_b_")
+        if on_markers:
+            require(self, *_LEARNT_MARKERS)
+            types = {k: v for k, v in _LEARNT_TYPES.items() if k in _LEARNT_MARKERS}
+            require_types(self, **types)
+        else:
+            require(self, *_LEARNT)
+            require_types(self, **_LEARNT_TYPES)
         n = self.n_states
         t = len(check_shape("train_states_", self.train_states_, (None,)))
         check_index("train_states_", self.train_states_, n)
@@ -333,18 +471,41 @@ class DualHMM(Model):
             out = getattr(self, f"pipeline_{side}_").output_width()
             if out is not None and out != width:
                 raise StateError(f"pipeline_{side}_: gives {out} features, lambda_{side}_ {width}")
+        if on_markers:
+            self._check_marker_state(t)
+            return
         check_shape("frames_b_", self.frames_b_, (t, self.expmaps_b_.output_width()))
         if self.expmaps_b_.skeleton_.n_joints != self.skeleton_b_.n_joints:
             raise StateError("expmaps_b_: its skeleton is not skeleton_b_")
 
-    def _rate(self, motion: Motion) -> Motion:
+    def _check_marker_state(self, frames: int) -> None:
+        """A marker model's own parts: B's markers and names, the pipelines' first steps."""
+        names = self.marker_names_b_
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise StateError("marker_names_b_: expected a list of marker names")
+        check_shape("markers_b_", self.markers_b_, (frames, len(names), 3))
+        for side in ("a", "b"):
+            first = getattr(self, f"pipeline_{side}_").steps[0]
+            if not isinstance(first, MarkerFeatures) or not is_fitted(first):
+                raise StateError(f"pipeline_{side}_: does not start with fitted MarkerFeatures")
+        if self.pipeline_b_.steps[0].names_ != names:
+            raise StateError("marker_names_b_: not the markers of pipeline_b_")
+
+    def _rate(self, motion: Motion | Markers) -> Motion | Markers:
         return motion if np.isclose(motion.fps, self.fps) else motion.resample(self.fps)
 
     # ---------------------------------------------------------------- responding
-    def check_input(self, motion: Motion, source: str | os.PathLike[str] | None = None) -> None:
+    def check_input(
+        self, motion: Motion | Markers, source: str | os.PathLike[str] | None = None
+    ) -> None:
         """Raise :class:`SkeletonMismatchError` (naming ``source``) unless A's skeleton has
         the body points the model sees (by joint names; any skeleton that has them), or,
-        for a model that sees every joint (files of older versions), is the model's."""
+        for a model that sees every joint (files of older versions), is the model's. On
+        markers: unless A's markers (or the virtual ones placed on A's skeleton) include
+        those the model learnt, by name; Markers given to a skeleton model never fit."""
+        if self.uses_markers or isinstance(motion, Markers):
+            self._check_markers(motion, source)
+            return
         points = getattr(self.pipeline_a_.steps[0], "points", None)
         try:
             if points is None:
@@ -357,15 +518,62 @@ class DualHMM(Model):
                 f"{where}: person A's skeleton does not fit the model ({exc})"
             ) from None
 
-    def body_positions(self, motion: Motion, body_centred: bool = False) -> np.ndarray:
+    def _check_markers(self, x: Motion | Markers, source: str | os.PathLike[str] | None) -> None:
+        where = source or x.name or "input"
+        if not self.uses_markers:
+            raise SkeletonMismatchError(
+                f"{where}: markers, but the model was trained on skeletons (give a BVH file)"
+            )
+        try:
+            self.pipeline_a_.steps[0].select(self.as_markers(x))
+        except (ValueError, SkeletonMismatchError) as exc:
+            raise SkeletonMismatchError(
+                f"{where}: person A's markers do not fit the model ({exc})"
+            ) from None
+
+    def input_markers(self, x: Motion | Markers) -> Markers:
+        """A's markers the model sees, in its order (virtual ones placed on a Motion)."""
+        return self.pipeline_a_.steps[0].select(self.as_markers(x))
+
+    def place(self, x: Motion | Markers) -> tuple[np.ndarray, np.ndarray]:
+        """A's ground frame per frame, origin (F, 3) and heading (F,), as the model places
+        B through it: from A's markers on a marker model, else A's skeleton."""
+        if self.uses_markers:
+            first = self.pipeline_a_.steps[0]
+            return first.place(self.input_markers(x).positions)
+        return self.ground(x)
+
+    def ground(self, motion: Motion, positions: np.ndarray | None = None):
+        """A's ground frame (origin (F, 3), heading (F,)) as the model places B: A's own
+        facing, or with ``frame_ == "world"`` the world's axes (heading 0) at A's place."""
+        origin, yaw = ground_frame(motion, positions)
+        if getattr(self, "frame_", "heading") == "world":
+            yaw = np.zeros_like(yaw)
+        return origin, yaw
+
+    def training_b(self) -> Motion | Markers:
+        """B's training frames in A's ground frame, as the model outputs them."""
+        if self.uses_markers:
+            return Markers(self.marker_names_b_, self.markers_b_.astype(float), self.fps, "B")
+        return self.expmaps_b_.inverse_transform([self.frames_b_.astype(float)])[0]
+
+    def body_positions(self, motion: Motion | Markers, body_centred: bool = False) -> np.ndarray:
         """(F, P, 3) the positions (mm) people are compared by: the body points (world or
-        body-centred), or every joint with ``points="all"``."""
+        body-centred), or every joint with ``points="all"``. A marker model compares B's
+        markers (a Motion gets its virtual markers), world or about their own ground frame."""
+        if self.uses_markers:
+            markers = self.as_markers(motion).select(self.marker_names_b_)
+            step = MarkerFeatures(body_centred=body_centred).fit([markers])
+            return step.pose(markers)
         if self.points == "all":
             return motion.body_centred_positions() if body_centred else motion.positions()
         return body_points(motion, BODY_POINTS, body_centred=body_centred)
 
-    def features_a(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-        """A's model features (F, Da) at the model's rate and which frames are missing (NaN)."""
+    def features_a(self, motion: Motion | Markers) -> tuple[np.ndarray, np.ndarray]:
+        """A's model features (F, Da) at the model's rate and which frames are missing (NaN;
+        on markers, a frame with any of the model's markers unseen)."""
+        if self.uses_markers:
+            motion = self.input_markers(motion)
         missing = ~finite_frames(motion)
         return self.pipeline_a_.transform([_fill_missing(motion, missing)])[0], missing
 
@@ -383,16 +591,20 @@ class DualHMM(Model):
         hmm = self.lambda_a_
         return float(forward_backward(safe_log(hmm.startprob_), hmm.transmat_, log_b)[0])
 
-    def respond(self, motion_a: Motion, method: str = "standard") -> Motion:
+    def respond(self, motion_a: Motion | Markers, method: str = "standard") -> Motion | Markers:
         """B's responsive motion to the whole of ``motion_a`` (at the model's rate, in A's world).
 
         ``method="standard"``: Viterbi over all of A, lowest-error trellis path.
         ``method="windowed"``: exactly what :meth:`partner` streams, frame by frame.
-        Frames of A with NaN values count as missing observations.
+        Frames of A with NaN values count as missing observations. A model trained on
+        markers takes A's Markers (or a Motion: virtual markers placed first) and returns
+        B's Markers.
         """
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         self.check_input(motion_a)
+        if self.uses_markers:
+            motion_a = self.input_markers(motion_a)
         motion_a = self._rate(motion_a)
         xa, missing = self.features_a(motion_a)
         log_b = self.lambda_a_.log_frameprob(xa)
@@ -413,7 +625,7 @@ class DualHMM(Model):
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
-        where = ground_frame(_fill_missing(motion_a, missing))
+        where = self.place(_fill_missing(motion_a, missing))
         half = self.placement_window // 2
         where = smooth_place(*where, half if method == "standard" else min(half, self.window - 1))
         return self.frames_to_motion(idx, *where, root, rot)
@@ -430,11 +642,21 @@ class DualHMM(Model):
         yaw: np.ndarray,
         root: np.ndarray | None = None,
         rotations: np.ndarray | None = None,
-    ) -> Motion:
+    ) -> Motion | Markers:
         """B's training frames ``idx`` as a Motion placed by A's ground frame (origin, yaw);
         ``root`` (F, 3): B's root positions in A's ground frame instead of the frames' own;
-        ``rotations`` (F, J, 4): B's joint rotations instead (blended, :meth:`Trellis.blend`)."""
+        ``rotations`` (F, J, 4): B's joint rotations instead (blended, :meth:`Trellis.blend`).
+        On markers, Markers: ``root`` B's marker centroid, ``rotations`` B's markers about
+        it (F, M, 3) (:meth:`Trellis.blend`)."""
         frames = self._trellis().motion_b
+        if isinstance(frames, Markers):
+            rel = frames.positions[idx]
+            if rotations is not None:
+                rel = np.asarray(rotations, dtype=float) + rel.mean(axis=1, keepdims=True)
+            if root is not None:
+                rel = rel - rel.mean(axis=1, keepdims=True) + np.asarray(root)[:, None]
+            world = out_of_marker_frame(rel, origin, yaw)
+            return Markers(frames.names, world, self.fps, "B")
         rel = Motion(self.skeleton_b_, frames.rotations[idx], frames.translations[idx], self.fps)
         if root is not None:
             rel.translations[:, 0] = root
@@ -457,7 +679,7 @@ class DualHMM(Model):
             return cache
         prec_a, _ = precision_cholesky(self.lambda_a_.covars_)
         prec_b, _ = precision_cholesky(self.lambda_b_.covars_)
-        motion_b = self.expmaps_b_.inverse_transform([self.frames_b_.astype(float)])[0]
+        motion_b = self.training_b()
         self._trellis_cache = build_trellis(
             self.train_a_,
             self.train_b_,
@@ -471,6 +693,27 @@ class DualHMM(Model):
             self.trellis,
         )
         return self._trellis_cache
+
+
+def choose_frame(
+    b_list: Sequence[Motion],
+    grounds: Sequence[tuple[np.ndarray, np.ndarray]],
+    points: Sequence[str] | None,
+) -> str:
+    """``"heading"`` or ``"world"``: the frame of A (``grounds``, A's per-frame origin and
+    heading) in which B's body points (``points``; None: every joint) lie closer to their
+    mean over the training takes ``b_list``, i.e. the one where the mean-pose baseline is
+    better on the training data: B's place is then easier to tell from A's."""
+    spread = {}
+    for frame in ("heading", "world"):
+        where = []
+        for b, (origin, yaw) in zip(b_list, grounds, strict=True):
+            rel = into_frame(b, origin, yaw if frame == "heading" else np.zeros_like(yaw))
+            pos = rel.positions()
+            where.append(pos if points is None else pos[:, body_point_index(b.skeleton, points)])
+        where = np.concatenate(where)
+        spread[frame] = float(np.linalg.norm(where - where.mean(axis=0), axis=-1).mean())
+    return min(spread, key=spread.get)
 
 
 def _check_one_skeleton_b(
@@ -511,18 +754,31 @@ def _sharing_chain(
     return out
 
 
-def _fill_missing(motion: Motion, missing: np.ndarray) -> Motion:
+def _fill_missing(motion: Motion | Markers, missing: np.ndarray) -> Motion | Markers:
     """Missing frames replaced by the last finite one (the first finite one before it; the
-    rest pose if none is finite): A's place for the B frames shown then, and no jump in A's
-    motion features."""
+    rest pose if none is finite; markers at the origin): A's place for the B frames shown
+    then, and no jump in A's motion features."""
     if not missing.any():
         return motion
     out = motion.copy()
+    if isinstance(motion, Markers):
+        keep = _last_finite(missing)
+        out.positions = np.zeros_like(motion.positions) if keep is None else motion.positions[keep]
+        return out
     if missing.all():
         out.rotations[:] = [0.0, 0.0, 0.0, 1.0]
         out.translations[:] = motion.skeleton.offsets
         return out
-    keep = np.maximum.accumulate(np.where(missing, 0, np.arange(len(missing))))
-    keep[: int(np.argmin(missing))] = int(np.argmin(missing))
+    keep = _last_finite(missing)
     out.rotations, out.translations = motion.rotations[keep], motion.translations[keep]
     return out
+
+
+def _last_finite(missing: np.ndarray) -> np.ndarray | None:
+    """Per frame, the last frame up to it that is not ``missing`` (the first such frame for
+    those before it); None if every frame is missing."""
+    if missing.all():
+        return None
+    keep = np.maximum.accumulate(np.where(missing, 0, np.arange(len(missing))))
+    keep[: int(np.argmin(missing))] = int(np.argmin(missing))
+    return keep

@@ -21,10 +21,11 @@ import numpy as np
 
 from markovmotion.algorithms.gaussian import gaussian_log_density, precision_cholesky
 from markovmotion.algorithms.windowed_viterbi import WindowedViterbi, start_distribution
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
-from markovmotion.features.body_motion import ground_frame
+from markovmotion.features.markers import MarkerFeatures
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import smooth_place
 from markovmotion.progress import err_console
@@ -33,8 +34,11 @@ if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
 
 
-def finite_frames(motion: Motion) -> np.ndarray:
-    """(F,) whether each frame's rotations and translations are all finite numbers."""
+def finite_frames(motion: Motion | Markers) -> np.ndarray:
+    """(F,) whether each frame's rotations and translations (markers: positions) are all
+    finite numbers."""
+    if isinstance(motion, Markers):
+        return np.isfinite(motion.positions).all(axis=(1, 2))
     return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
         axis=(1, 2)
     )
@@ -86,9 +90,9 @@ class Partner:
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
 
     @property
-    def skeleton(self) -> Skeleton:
-        """B's skeleton."""
-        return self.model.skeleton_b_
+    def skeleton(self) -> Skeleton | None:
+        """B's skeleton (None for a model on markers: its frames are Markers)."""
+        return getattr(self.model, "skeleton_b_", None)
 
     def step_features(
         self, xa: np.ndarray | None, place: tuple[np.ndarray, float]
@@ -164,32 +168,44 @@ class Partner:
             out.append(cache[key])
         return out
 
-    def step(self, frame: Motion | None) -> Motion | None:
-        """One frame of A (a one-frame Motion) in; B's frame of ``lag`` frames ago out."""
+    def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
+        """One frame of A (a one-frame Motion, or for a model on markers one-frame Markers
+        or a Motion to place virtual markers on) in; B's frame of ``lag`` frames ago out."""
+        if frame is not None and self.model.uses_markers:
+            kind = frame.names if isinstance(frame, Markers) else id(frame.skeleton)
+            if kind != self._checked:
+                self.model.check_input(frame)
+                self._checked = kind
+            frame = self.model.input_markers(frame)
         if frame is None or not finite_frames(frame)[0]:
             err_console.print(
                 f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
                 highlight=False,
             )
             return self.skip()
-        if frame.skeleton is not self._checked:
-            self.model.check_input(frame)
-            self._checked = frame.skeleton
-        pos = frame.positions()
-        origin, yaw = ground_frame(frame, pos)
+        if isinstance(frame, Markers):
+            pos = frame.positions
+            origin, yaw = self.model.place(frame)
+        else:
+            if frame.skeleton is not self._checked:
+                self.model.check_input(frame)
+                self._checked = frame.skeleton
+            pos = frame.positions()
+            origin, yaw = self.model.ground(frame, pos)
         self._place = (origin[0], float(yaw[0]))
         return self._motion(
             self.step_features(self._features(frame, pos, origin, yaw), self._place)
         )
 
     def _features(
-        self, frame: Motion, pos: np.ndarray, origin: np.ndarray, yaw: np.ndarray
+        self, frame: Motion | Markers, pos: np.ndarray, origin: np.ndarray, yaw: np.ndarray
     ) -> np.ndarray:
-        """A's model features of ``frame`` from its joint positions and ground frame: with A's
-        motion in the observation, :meth:`BodyMotion.rows` of the last finite frame and this
-        one (what :meth:`DualHMM.features_a` gives for this frame of the whole stream)."""
+        """A's model features of ``frame`` from its joint (marker) positions and ground
+        frame: with A's motion in the observation, :meth:`BodyMotion.rows` of the last
+        finite frame and this one (what :meth:`DualHMM.features_a` gives for this frame of
+        the whole stream)."""
         first, *rest = self.model.pipeline_a_.steps
-        if not isinstance(first, BodyMotion):
+        if not isinstance(first, BodyMotion | MarkerFeatures) or not getattr(first, "motion", True):
             return self.model.features_a(frame)[0][-1]
         now = (first.pose(frame, pos), origin, yaw)
         last, self._last = self._last, now
@@ -200,11 +216,11 @@ class Partner:
             x = step.transform([x])[0]
         return x[-1]
 
-    def skip(self) -> Motion | None:
+    def skip(self) -> Motion | Markers | None:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
         return self._motion(self.step_features(None, self._place))
 
-    def finish(self) -> list[Motion]:
+    def finish(self) -> list[Motion | Markers]:
         """B's frames still owed at the end of the stream."""
         return [self._motion(shown) for shown in self.finish_frames()]
 
@@ -221,7 +237,7 @@ class Partner:
         )
         return origin[frame - lo], float(yaw[frame - lo])
 
-    def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | None:
+    def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""
         if shown is None:
             return None

@@ -48,6 +48,8 @@ Common to both:
   rotations are blended over ``blend_window`` frames (:meth:`Trellis.blend`):
   a cut between two training frames becomes a short transition instead of a
   jump (our additions; online both look no further ahead than the slice).
+- On markers (B's training frames are Markers), B's place is the centroid of
+  its markers and the blend is the mean of the markers' positions about it.
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 
 #: The trellis costs: ``"path"`` (a lowest-error path, ours) and ``"paper"`` (§3.2 as printed).
@@ -75,7 +78,7 @@ class Trellis:
         prec_b: (N, Db, Db) precision factors of B_B.
         train_b: (frames, Db) B's training features.
         size: candidates per column K.
-        motion_b: B's training frames relative to A, decoded once.
+        motion_b: B's training frames relative to A, decoded once (Motion, or Markers).
         successor: (frames,) the training frame after each in its recording
             (:func:`successors`); None: D measured from the frame itself.
         kind: ``"path"`` or ``"paper"`` (module docstring).
@@ -87,7 +90,7 @@ class Trellis:
     prec_b: np.ndarray
     train_b: np.ndarray
     size: int
-    motion_b: Motion
+    motion_b: Motion | Markers
     successor: np.ndarray | None = None
     kind: str = "path"
 
@@ -154,9 +157,16 @@ class Trellis:
         between two training frames becomes a blend over ``2 half + 1`` frames, and a
         sequence of consecutive training frames stays close to itself. ``half = 0``: the
         frames' own rotations. ``count``: only the path's first ``count`` frames (online,
-        the one frame shown)."""
+        the one frame shown). On markers: (F, M, 3) B's markers about their centroid, the
+        plain mean over the same frames."""
         frames = np.concatenate([before, path]).astype(int)
         t = np.arange(len(before), len(frames))[:count]
+        if isinstance(self.motion_b, Markers):
+            shape = self.motion_b.positions[frames]
+            shape = shape - shape.mean(axis=1, keepdims=True)
+            return _window_mean(shape.reshape(len(frames), -1), t, half).reshape(
+                -1, *shape.shape[1:]
+            )
         quats = self.motion_b.rotations
         if half <= 0:
             return quats[frames[t]]
@@ -171,11 +181,19 @@ class Trellis:
     def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
         """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
         t + half (those that exist; ``before``: frames shown before the path's first)."""
-        roots = self.motion_b.translations[np.concatenate([before, path]).astype(int), 0]
-        csum = np.vstack([np.zeros((1, 3)), np.cumsum(roots, axis=0)])
-        t = np.arange(len(before), len(roots))
-        lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(roots))
-        return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
+        frames = np.concatenate([before, path]).astype(int)
+        if isinstance(self.motion_b, Markers):  # B's centroid
+            roots = self.motion_b.positions[frames].mean(axis=1)
+        else:
+            roots = self.motion_b.translations[frames, 0]
+        return _window_mean(roots, np.arange(len(before), len(roots)), half)
+
+
+def _window_mean(values: np.ndarray, t: np.ndarray, half: int) -> np.ndarray:
+    """(len(t), D) the mean of rows t - half .. t + half of ``values`` (F, D) (those that exist)."""
+    csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
+    lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(values))
+    return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
 
 
 def smooth_place(origin: np.ndarray, yaw: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,260 @@
+"""Markers as input (issue #15, item 4): virtual markers, C3D writing, a dual HMM on markers."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from markovmotion.cli import main
+from markovmotion.core.markers import Markers
+from markovmotion.errors import ModelFormatError, MotionFormatError, SkeletonMismatchError
+from markovmotion.evaluate.hmm import evaluate_pair
+from markovmotion.features.markers import (
+    MarkerFeatures,
+    heading_markers,
+    marker_layout,
+    out_of_marker_frame,
+    virtual_marker_names,
+    virtual_markers,
+)
+from markovmotion.io.bvh import write_bvh
+from markovmotion.io.c3d import read_c3d, write_c3d
+from markovmotion.models.base import Model
+from markovmotion.models.hmm.dual import DualHMM
+
+FRAMES = 360  # of each real take used (120 fps: 3 s, 90 frames at the model's 30 fps)
+
+
+@pytest.fixture(scope="module")
+def takes(mocap):
+    """The first seconds of the real interaction takes (A, B) of two labels, skeletons."""
+    pairs = mocap.pairs(["handshake", "pull"])[:3]
+    return [tuple(m.trim(0, FRAMES) for m in mocap.load_pair(a, b)) for a, b in pairs]
+
+
+@pytest.fixture(scope="module")
+def marker_takes(takes):
+    """The same takes as 30 virtual markers per person (Markers pairs)."""
+    return [(virtual_markers(a), virtual_markers(b)) for a, b in takes]
+
+
+@pytest.fixture(scope="module")
+def model(marker_takes) -> DualHMM:
+    return DualHMM(n_states=6, n_iter=10, markers=30).fit(marker_takes[:2], ["handshake", "pull"])
+
+
+def test_virtual_markers_move_rigidly_with_their_segments(takes):
+    a = takes[0][0]
+    for n in (13, 30, 50):
+        markers = virtual_markers(a, n)
+        assert markers.names == virtual_marker_names(n) and len(set(markers.names)) == n
+        assert markers.positions.shape == (a.n_frames, n, 3) and markers.fps == a.fps
+        rigid, _ = marker_layout(a.skeleton, n)
+        dist = np.linalg.norm(markers.positions - a.positions()[:, rigid], axis=2)
+        assert np.ptp(dist, axis=0).max() < 1e-6  # constant distance to its joint
+        assert np.isfinite(markers.positions).all()
+    assert virtual_marker_names(30)[:13] == virtual_marker_names(13)
+    markers = virtual_markers(a)
+    # markers on the front of the body are ahead of those on the back, by A's heading
+    left, right = heading_markers(markers.names)
+    assert [markers.names[i] for i in left] == ["L_SHOULDER", "L_HIP"]
+    step = MarkerFeatures().fit([markers])
+    pose = step.pose(markers)
+    front, back = markers.names.index("STERNUM"), markers.names.index("C7")
+    assert (pose[:, front, 2] > pose[:, back, 2]).all()
+    with pytest.raises(ValueError, match="13 to 200"):
+        virtual_markers(a, 12)
+
+
+def test_virtual_markers_need_the_body_points(takes):
+    from conftest import make_motion
+
+    with pytest.raises(SkeletonMismatchError, match="body points"):
+        virtual_markers(make_motion())
+
+
+def test_c3d_round_trip(tmp_path):
+    rng = np.random.default_rng(3)
+    pos = rng.uniform(-2000, 2000, (40, 5, 3))
+    pos[5, 2] = np.nan
+    pos[7] = np.nan
+    markers = Markers(("L_HIP", "R_HIP", "HEAD", "a_long_marker_name", "x"), pos, 120.0)
+    path = tmp_path / "m.c3d"
+    write_c3d(markers, path)
+    back = read_c3d(path)
+    assert back.names == markers.names and back.fps == 120.0
+    assert np.array_equal(np.isnan(back.positions), np.isnan(pos))
+    np.testing.assert_allclose(back.positions, pos.astype(np.float32), rtol=1e-6, atol=1e-3)
+    with pytest.raises(MotionFormatError, match=r"\.c3d"):
+        write_c3d(markers, tmp_path / "m.bvh")
+    bad = Markers(("x" * 40,), pos[:, :1], 120.0)
+    with pytest.raises(MotionFormatError, match="labels"):
+        write_c3d(bad, path)
+    assert read_c3d(path).names == markers.names  # the earlier file is untouched
+    assert sorted(os.listdir(tmp_path)) == ["m.c3d"]  # no temporary left behind
+
+
+def test_a_marker_model_reproduces_b_on_its_training_takes(model, marker_takes):
+    assert model.uses_markers and model.marker_names_b_ == list(virtual_marker_names(30))
+    frames = sum(model._rate(a).n_frames for a, _ in marker_takes[:2])
+    assert model.train_a_.shape[0] == model.markers_b_.shape[0] == frames
+    mean_b = model.training_b().positions.mean(axis=0)
+    for a, b in marker_takes[:2]:
+        out = model.respond(a)
+        assert isinstance(out, Markers) and out.names == b.names and out.fps == model.fps
+        truth = model.body_positions(model._rate(b))
+        error = np.linalg.norm(model.body_positions(out) - truth, axis=2).mean()
+        origin, yaw = model.place(model._rate(a))
+        still = out_of_marker_frame(np.repeat(mean_b[None], len(yaw), axis=0), origin, yaw)
+        baseline = np.linalg.norm(still - truth, axis=2).mean()
+        assert error < 100.0, error  # mm per marker, on its training frames
+        assert error < 0.5 * baseline, (error, baseline)
+
+
+def test_a_motion_given_to_a_virtual_marker_model_gets_its_markers_first(model, takes):
+    a, b = takes[0]
+    assert np.array_equal(model.respond(a).positions, model.respond(virtual_markers(a)).positions)
+    res = evaluate_pair(model, a, b, "take", "handshake")
+    assert res.errors["standard"].mean() < res.errors["mean_pose"].mean()
+
+
+def test_responds_to_a_c3d_file_and_saves_and_loads_to_identical_output(
+    model, marker_takes, tmp_path
+):
+    a, _ = marker_takes[2]
+    write_c3d(a, tmp_path / "a.c3d")
+    a_file = read_c3d(tmp_path / "a.c3d")
+    path = tmp_path / "model.npz"
+    model.save(path)
+    loaded = Model.load(path)
+    assert isinstance(loaded, DualHMM) and loaded.uses_markers
+    for method in ("standard", "windowed"):
+        first, again = model.respond(a_file, method), loaded.respond(a_file, method)
+        assert np.array_equal(first.positions, again.positions)
+        assert first.n_frames == model._rate(a).n_frames
+    assert loaded.score(a_file) == model.score(a_file)
+
+
+def test_the_online_partner_streams_what_windowed_respond_gives(model, marker_takes, capsys):
+    a = model._rate(marker_takes[2][0])
+    a.positions[10:13, 4] = np.nan  # a marker unseen: missing observations
+    partner = model.partner()
+    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    streamed = np.concatenate([s.positions for s in shown])
+    whole = model.respond(a, "windowed")
+    np.testing.assert_allclose(streamed, whole.positions, atol=1e-9)
+    assert np.isfinite(whole.positions).all()
+    assert "missing" in capsys.readouterr().err
+
+
+def test_marker_model_files_are_checked(model, tmp_path):
+    from markovmotion import persist
+
+    path = tmp_path / "model.npz"
+    model.save(path)
+    header, arrays = persist.load_npz(path)
+    key = next(k for k in arrays if k.endswith("markers_b_"))
+    arrays[key] = arrays[key][:, :-1]
+    persist.save_npz(path, "dual_hmm", header, arrays)
+    with pytest.raises(ModelFormatError, match="markers_b_"):
+        Model.load(path)
+
+
+def test_bad_inputs_are_one_line(model, marker_takes, takes, tmp_path, capsys):
+    path = tmp_path / "model.npz"
+    model.save(path)
+    skeleton_model = tmp_path / "skeleton.npz"
+    DualHMM(n_states=4, n_iter=3).fit(takes[:1]).save(skeleton_model)
+    a_c3d = tmp_path / "a.c3d"
+    write_c3d(marker_takes[2][0], a_c3d)
+    a_bvh = tmp_path / "a.bvh"
+    write_bvh(takes[2][0], a_bvh)
+    other = marker_takes[2][0].select(virtual_marker_names(13))
+    write_c3d(other, tmp_path / "few.c3d")
+    cases = [
+        (path, a_c3d, "b.bvh", "trained on markers"),
+        (skeleton_model, a_c3d, "b.bvh", "trained on skeletons"),
+        (skeleton_model, a_bvh, "b.c3d", "trained on skeletons"),
+        (path, tmp_path / "few.c3d", "b.c3d", "markers not found: HEAD_BACK"),
+    ]
+    for model_file, a, out, message in cases:
+        args = ["dualhmm", "respond", "--model", str(model_file), "--input", str(a)]
+        with pytest.raises(SystemExit) as exc:
+            main([*args, "--out", str(tmp_path / out)])
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and message in err and "\n" not in err, err
+    # a BVH given to a model on virtual markers: its markers are placed first
+    main(
+        ["dualhmm", "respond", "--model", str(path), "--input", str(a_bvh)]
+        + ["--out", str(tmp_path / "b.c3d")]
+    )
+    assert read_c3d(tmp_path / "b.c3d").names == virtual_marker_names(30)
+    # a model learnt from C3D markers has no virtual markers to place on a BVH
+    c3d_model = DualHMM(n_states=4, n_iter=3).fit(marker_takes[:1])
+    assert not c3d_model.markers and c3d_model.uses_markers
+    with pytest.raises(SkeletonMismatchError, match="give a .c3d"):
+        c3d_model.respond(takes[0][0])
+
+
+def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes, tmp_path, capsys):
+    data = tmp_path / "data"
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for k, (a, b) in enumerate(marker_takes, start=1):
+        for who, m, partner in (("a", a, "b"), ("b", b, "a")):
+            write_c3d(m, data / f"{who}{k}.c3d")
+            rows.append(
+                f"{who}{k}.c3d,test,,{k},interaction,meet,{partner}{k}.c3d,120,{m.n_frames},"
+            )
+    (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    model = tmp_path / "m.npz"
+    main(
+        ["dualhmm", "train", "--data", str(data), "--out", str(model), "--states", "5"]
+        + ["--n-iter", "5", "--test-trials", "3"]
+    )
+    assert "30 markers" in capsys.readouterr().err
+    out = tmp_path / "b.c3d"
+    main(
+        ["dualhmm", "respond", "--model", str(model), "--input", str(data / "a3.c3d")]
+        + ["--out", str(out), "--standard"]
+    )
+    b = read_c3d(out)
+    assert b.names == virtual_marker_names(30) and b.n_frames == FRAMES // 4
+    main(["dualhmm", "evaluate", "--model", str(model), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert report["overall"]["frames"] == FRAMES // 4
+    assert report["overall"]["standard_mm"] < report["overall"]["mean_pose_mm"] * 2
+
+
+def test_the_live_page_draws_a_marker_partner_as_points(model, takes):
+    from markovmotion.web.live import ModelPartner
+
+    a = model._rate(takes[0][0])
+    live = ModelPartner(model, a)
+    assert live.parents == [-1] * 30 and live.lag == model.window - 1
+    shown = [live.step(a.trim(t, t + 1)) for t in range(live.lag + 2)]
+    assert shown[0] is None and shown[-1].shape == (30, 3)
+
+
+def test_heading_from_named_markers_or_the_markers_spread():
+    left, right = heading_markers(["LASI", "RASI", "LSHO", "RSHO", "CLAV", "LKNE"])
+    assert left.tolist() == [0, 2] and right.tolist() == [1, 3]
+    left, right = heading_markers(["ShoulderLeft", "ShoulderRight", "HipLeft"])
+    assert left.tolist() == [0] and right.tolist() == [1]  # hips only on one side: not used
+    # no names to go by: a body 400 mm wide and 200 mm deep, turning slowly
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0, 1, (5, 3)) * [200.0, 800.0, 100.0]
+    body = np.concatenate([base * [sx, 1, sz] for sx in (-1, 1) for sz in (-1, 1)])  # symmetric
+    yaw = np.linspace(0.2, 2.5, 30)
+    s, c = np.sin(yaw)[:, None], np.cos(yaw)[:, None]
+    x, z = body[None, :, 0], body[None, :, 2]
+    pos = np.stack([c * x + s * z, np.broadcast_to(body[:, 1], (30, 20)), c * z - s * x], -1)
+    markers = Markers([f"m{k}" for k in range(20)], pos + [500.0, 0.0, -300.0], 30.0)
+    step = MarkerFeatures().fit([markers])
+    assert len(step.left_) == 0
+    origin, found = step.place(markers.positions)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (found - yaw))), 0.0, atol=1e-9)
+    np.testing.assert_allclose(origin[:, [0, 2]], pos.mean(axis=1)[:, [0, 2]] + [500, -300])
