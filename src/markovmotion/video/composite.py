@@ -125,7 +125,6 @@ def respond_in_video_live(
     search for the person (and the partner's first step) happen before the
     clock starts.
     """
-    from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.models.online import concatenate
 
     dual = _load_partner_model(model)
