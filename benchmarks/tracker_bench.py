@@ -5,9 +5,9 @@ Renders the held-out two-person takes (person A alone, 3 cameras at 320x240,
 training takes, and tracks each video:
 
 * ``apf``: Deutscher et al.'s annealed particle filter (200 particles, 10 layers);
-* ``pf``: a plain particle filter (one layer, no annealing) with as many
-  particles as the APF evaluates per frame (2,000), so both spend the same
-  time on the weighting function;
+* ``pf``: a plain particle filter (one layer, no annealing, no limb search)
+  with as many particles as the APF evaluates in its layers per frame (2,000),
+  so both spend about the same time (the APF's limb search adds 240);
 * with ``--sweep`` instead: the APF with 1 and 2 views, 100 and 400
   particles, 5 and 15 layers.
 
