@@ -35,6 +35,7 @@ def _register() -> None:
         render,
         serve,
         silhouette,
+        video,
         vlmm,
     )
 
@@ -47,6 +48,8 @@ def _register() -> None:
     app.add_typer(gait.app, name="gait")
     app.add_typer(chain.app, name="chain")
     app.add_typer(silhouette.app, name="silhouette")
+    app.add_typer(video.app, name="video")
+    video.register(app)
     serve.register(app)
     app.add_typer(evaluation.app, name="evaluation")
     app._markovmotion_registered = True  # type: ignore[attr-defined]

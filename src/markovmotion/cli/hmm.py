@@ -218,11 +218,26 @@ def read_stream(path: Path, fps: float | None = None):
 def respond(
     model: Path = typer.Option(..., help="Dual-HMM model file (.npz)."),
     input: Path = typer.Option(
-        ..., help="Person A's motion (BVH), or markers (C3D) for a model trained on markers."
+        None,
+        help="Person A's motion (BVH), or markers (C3D) for a model trained on markers; "
+        "or --video.",
     ),
     out: Path = typer.Option(
-        ..., help="Person B's generated motion (.bvh), or markers (.c3d) from a marker model."
+        ...,
+        help="Person B's generated motion (.bvh), or markers (.c3d) from a marker model; "
+        "with --video the composite (.mp4).",
     ),
+    video: Path = typer.Option(
+        None,
+        help="Track A in this video (folder with cameras.json, or one .mp4 with --cameras) "
+        "and draw B into it.",
+    ),
+    cameras: Path = typer.Option(None, help="Camera file of --video (default: its cameras.json)."),
+    view: int = ranged("count", 0, min=0, max=3, help="Camera whose video is composited."),
+    particles: int = ranged("count", 200, min=10, max=5000, help="Tracker particles per layer."),
+    layers: int = ranged("count", 10, min=1, max=50, help="Tracker annealing layers."),
+    max_frames: int = ranged("count", None, max=1_000_000, help="Only the first video frames."),
+    data: Path = typer.Option(None, help="Motion capture for the tracker's body model."),
     window: int = ranged(
         "window", None, help="Windowed-Viterbi slice length (default: the model's)."
     ),
@@ -231,7 +246,9 @@ def respond(
         None, callback=choice(("path", "paper")), help="Trellis (default: the model's)."
     ),
     realtime: bool = typer.Option(
-        False, help="Replay A as a stream at its frame rate; report per-frame latency."
+        False,
+        help="Replay A as a stream at its frame rate (with --video: track frames as they "
+        "arrive, skipping those it cannot keep up with); report per-frame latency.",
     ),
     fps: float = ranged(
         "fps",
@@ -250,6 +267,14 @@ def respond(
 
     if standard and (realtime or window):
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
+    if (input is None) == (video is None):
+        raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
+    if video is not None:
+        _respond_video(
+            model, video, out, cameras, view, particles, layers, max_frames, data, standard,
+            realtime,
+        )  # fmt: skip
+        return
     as_c3d = base_suffix(out) == ".c3d"
     (check_c3d_output if as_c3d else check_motion_output)(out)
     if animation is not None:
@@ -291,6 +316,46 @@ def respond(
             shown.rotations[~np.isfinite(shown.rotations).all(axis=(1, 2))] = [0, 0, 0, 1]
         render([shown, b], animation, names=["A (real)", "B (virtual partner)"])
         console.print(f"wrote {animation}")
+
+
+def _respond_video(
+    model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime
+):
+    """``respond --video``: track A, generate B, composite B into the video (live with
+    ``realtime``)."""
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+    from markovmotion.video.composite import respond_in_video, respond_in_video_live
+    from markovmotion.video.multiview import training_body_model
+
+    if out.suffix.lower() != ".mp4":
+        raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
+    where = camera_file(video, cameras)
+    cams, _ = load_cameras(where)
+    if not video.is_file():
+        camera_videos(where, cams)  # a missing video: fail before the work
+    if realtime:
+        live = respond_in_video_live(
+            model, video, out, training_body_model(data), cameras, view, particles, layers,
+            max_frames,
+        )  # fmt: skip
+        err_console.print(
+            f"live: {live['frames']} frames at the video's rate, {live['tracked']} tracked, "
+            f"{live['skipped']} skipped; latency per frame median {live['latency_ms_median']} ms, "
+            f"p99 {live['latency_ms_p99']} ms; partner lag {live['lag_frames']} frames; "
+            f"wrote {live['out']}",
+            highlight=False,
+        )
+        return
+    summary = respond_in_video(
+        model, video, out, training_body_model(data), cameras, view, particles, layers,
+        max_frames, "standard" if standard else "windowed",
+    )  # fmt: skip
+    err_console.print(
+        f"tracked A over {summary['frames']} frames in {summary['views']} views "
+        f"({summary['fps']:.2f} frames/s), partner {summary['partner_frames']} frames; "
+        f"wrote {summary['out']}",
+        highlight=False,
+    )
 
 
 def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: bool) -> None:

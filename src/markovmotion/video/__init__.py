@@ -1,7 +1,14 @@
-"""Video for the interaction model (interaction paper, §2 and §5).
+"""Video in and out: silhouettes for the interaction model (interaction paper, §2 and §5), and
+multi-view video, 3-D tracking and compositing for the dual HMM (dual-HMM paper, §3).
 
 ``render`` draws motion capture as filled silhouettes from a fixed side camera,
 ``tracker`` finds people in video by background subtraction and outlines them
 with closed B-splines (``bspline``), ``dataset`` renders and tracks the
 two-person takes, ``partner`` draws the virtual partner into video.
+
+``cameras`` holds calibrated cameras and ``cameras.json``; ``body_model`` the
+articulated body tracked in 3-D; ``shading`` shaded bodies with depth;
+``multiview`` renders takes seen by several cameras and measures tracking;
+``annealed_particle_filter`` tracks a person in 3-D (Deutscher et al.);
+``composite`` draws the dual HMM's partner into the tracked video.
 """

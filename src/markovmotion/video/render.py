@@ -160,24 +160,87 @@ class Canvas:
         return cv2.resize(self.fine, (self.width, self.height), interpolation=cv2.INTER_AREA)
 
 
-def silhouette_mask(joints: np.ndarray, camera: Camera) -> np.ndarray:
-    """(H, W) uint8 coverage of one body with joints (19, 3) in :data:`MAJOR_JOINTS` order."""
+@dataclass(frozen=True)
+class BodyShape:
+    """A body as capsules between points and balls beside them (mm), for any list of points.
+
+    ``capsules`` (S, 2) point indices with radii (S, 2) at either end (tapered);
+    ``balls`` are (point, from_point, offset, radius): a ball of ``radius``
+    centred ``offset * radius`` beyond ``point`` along the bone from
+    ``from_point`` (the head above the neck, a hand past the wrist).
+    :meth:`points` adds the ball centres after the points, and :meth:`segments`
+    lists capsules and balls (as zero-length capsules) over those, so a
+    renderer or a tracker draws or tests one kind of primitive.
+    """
+
+    capsules: tuple[tuple[int, int], ...]
+    radii: tuple[tuple[float, float], ...]
+    balls: tuple[tuple[int, int, float, float], ...]
+    n_points: int
+
+    def points(self, joints: np.ndarray) -> np.ndarray:
+        """(..., P + balls, 3): the joints (..., P, 3) and the centres of the balls."""
+        joints = np.asarray(joints, dtype=float)
+        centres = []
+        for k, frm, offset, r in self.balls:
+            d = joints[..., k, :] - joints[..., frm, :]
+            d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-6)
+            centres.append(joints[..., k, :] + offset * r * d)
+        return np.concatenate([joints, np.stack(centres, axis=-2)], axis=-2)
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """(S, 2) indices into :meth:`points` and (S, 2) radii in mm of every primitive."""
+        ball_idx = [(self.n_points + i,) * 2 for i in range(len(self.balls))]
+        ball_r = [(b[3], b[3]) for b in self.balls]
+        return (
+            np.array(list(self.capsules) + ball_idx, dtype=np.intp),
+            np.array(list(self.radii) + ball_r, dtype=float),
+        )
+
+    @classmethod
+    def build(
+        cls,
+        names: Sequence[str],
+        capsules: Sequence[tuple[str, str, float, float]],
+        balls: Sequence[tuple[str, str, float, float]],
+    ) -> BodyShape:
+        idx = {n: i for i, n in enumerate(names)}
+        return cls(
+            tuple((idx[a], idx[b]) for a, b, _, _ in capsules),
+            tuple((float(ra), float(rb)) for _, _, ra, rb in capsules),
+            tuple((idx[k], idx[f], float(o), float(r)) for k, f, o, r in balls),
+            len(names),
+        )
+
+
+#: The silhouettes' body over :data:`MAJOR_JOINTS`.
+MAJOR_SHAPE = BodyShape.build(
+    MAJOR_JOINTS,
+    [(a, b, r, r) for a, b, r in CAPSULES],
+    [("head", "neck", 1.0, HEAD_RADIUS)]
+    + [(f"{s}Hand", f"{s}ForeArm", 0.6, HAND_RADIUS) for s in "rl"],
+)
+
+
+def draw_body(canvas: Canvas, joints: np.ndarray, camera, shape: BodyShape) -> None:
+    """Fill the body ``shape`` with joints (P, 3) mm seen by ``camera`` into ``canvas``.
+
+    ``camera`` is anything with ``project(points) -> (pixels, depths)`` and a
+    ``focal`` length in pixels (:class:`Camera`, a calibrated camera).
+    """
+    seg, radii = shape.segments()
+    pix, depth = camera.project(shape.points(joints))
+    r = camera.focal * radii / depth[seg]
+    for (i, j), (ri, rj) in zip(seg, r, strict=True):
+        canvas.capsule(pix[i], pix[j], ri, rj)
+
+
+def silhouette_mask(
+    joints: np.ndarray, camera: Camera, shape: BodyShape = MAJOR_SHAPE
+) -> np.ndarray:
+    """(H, W) uint8 coverage of one body with joints (P, 3) (default: :data:`MAJOR_JOINTS`)."""
     canvas = Canvas(camera.width, camera.height)
-    idx = {n: i for i, n in enumerate(MAJOR_JOINTS)}
-    neck, head = joints[idx["neck"]], joints[idx["head"]]
-    up = (head - neck) / max(np.linalg.norm(head - neck), 1e-6)
-    balls = [(head + HEAD_RADIUS * up, HEAD_RADIUS)]
-    for side in "rl":
-        hand, fore = joints[idx[f"{side}Hand"]], joints[idx[f"{side}ForeArm"]]
-        along = (hand - fore) / max(np.linalg.norm(hand - fore), 1e-6)
-        balls.append((hand + 0.6 * HAND_RADIUS * along, HAND_RADIUS))
-    pix, depth = camera.project(joints)
-    for a, b, r in CAPSULES:
-        i, j = idx[a], idx[b]
-        canvas.capsule(pix[i], pix[j], camera.focal * r / depth[i], camera.focal * r / depth[j])
-    for centre, r in balls:
-        p, z = camera.project(centre)
-        canvas.disc(p, camera.focal * r / z)
+    draw_body(canvas, joints, camera, shape)
     return canvas.coverage()
 
 

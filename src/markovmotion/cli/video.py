@@ -1,0 +1,96 @@
+"""``video render`` and ``track``: multi-view video of a take, and 3-D tracking by annealed
+particle filtering (dual-HMM paper, §3)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from markovmotion.cli.options import choice, ranged
+from markovmotion.progress import err_console
+
+app = typer.Typer(
+    help="Multi-view video of motion capture with calibrated cameras (cameras.json).",
+    no_args_is_help=True,
+)
+
+
+@app.command("render")
+def render(
+    take: Path = typer.Argument(..., help="Person A's motion (BVH or ASF/AMC)."),
+    out: Path = typer.Option(..., help="Folder for camK.mp4, camK_background.png, cameras.json."),
+    views: int = ranged("count", 3, min=1, max=4, help="Cameras around the capture volume."),
+    seconds: float = ranged("seconds", None, help="Only this much of the take."),
+    start: float = ranged("seconds", None, help="Start this far into the take (s)."),
+    fps: float = ranged("fps", None, help="Frame rate of the video (default: the take's)."),
+    people: str = typer.Option(
+        "a", callback=choice(("a", "both")), help="a: person A alone (B masked); both."
+    ),
+    width: int = ranged("count", 320, min=16, max=4096, help="Frame width (px)."),
+    height: int = ranged("count", 240, min=16, max=4096, help="Frame height (px)."),
+    noise: float = typer.Option(4.0, min=0.0, max=100.0, help="Sensor noise (grey levels, std)."),
+    seed: int = ranged("seed", 0, help="Seed of the background and the noise."),
+) -> None:
+    """Render a take as one video per calibrated camera, and write the cameras beside them."""
+    from markovmotion.video.multiview import render_multiview
+
+    path = render_multiview(
+        take, out, views, seconds, fps, people, (width, height), noise, seed, start or 0.0
+    )
+    err_console.print(f"wrote {views} videos and {path}", highlight=False)
+
+
+def register(root: typer.Typer) -> None:
+    """Attach ``track`` to the root command."""
+    root.command("track")(track)
+
+
+def track(
+    video: Path = typer.Option(
+        ..., help="Folder with cameras.json and the videos it names, or one camera's video."
+    ),
+    cameras: Path = typer.Option(
+        None, help="Camera file (default: VIDEO/cameras.json); a lone video is its first camera."
+    ),
+    out: Path = typer.Option(None, help="Person A's tracked motion (.bvh)."),
+    truth: Path = typer.Option(None, help="The true motion (BVH): report the error in mm."),
+    json_out: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    particles: int = ranged("count", 200, min=10, max=5000, help="Particles per layer."),
+    layers: int = ranged("count", 10, min=1, max=50, help="Annealing layers (1: plain PF)."),
+    views: int = ranged("count", None, min=1, max=4, help="Use only the first cameras."),
+    max_frames: int = ranged("count", None, max=1_000_000, help="Only the first frames."),
+    data: Path = typer.Option(None, help="Motion capture for the body model (default: README)."),
+    seed: int = ranged("seed", 0, help="Random seed."),
+    start: Path = typer.Option(
+        None, help="First frame's pose (BVH on the body model's skeleton); default: searched."
+    ),
+) -> None:
+    """Track person A in multi-view video by annealed particle filtering; write A as BVH."""
+    from markovmotion.io import check_motion_output, write_motion
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+    from markovmotion.video.multiview import track_take, training_body_model
+
+    if out is not None:
+        check_motion_output(out)
+    where = camera_file(video, cameras)
+    cams, _ = load_cameras(where)  # a bad camera file or a missing video: fail first
+    if not video.is_file():
+        camera_videos(where, cams)
+    body = training_body_model(data)
+    motion, _, summary = track_take(
+        video, body, cameras, truth, particles, layers, views, max_frames, seed, start
+    )
+    if out is not None:
+        write_motion(motion, out)
+        err_console.print(f"wrote {out}", highlight=False)
+    if json_out:
+        typer.echo(json.dumps(summary))
+    else:
+        err = f", MPJPE {summary['mpjpe_mm']:.1f} mm" if "mpjpe_mm" in summary else ""
+        err_console.print(
+            f"tracked {summary['frames']} frames in {summary['views']} views at "
+            f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries",
+            highlight=False,
+        )

@@ -1,0 +1,671 @@
+"""Annealed particle filtering of a person's 3-D articulated motion in multi-view video.
+
+The procedure of Deutscher, Blake and Reid, "Articulated body motion capture
+by annealed particle filtering" (CVPR 2000), used by the dual-HMM paper (§3)
+to track person A before the partner is generated:
+
+1. **Body model** (:mod:`markovmotion.video.body_model`): a kinematic tree
+   with ~28 degrees of freedom, joint limits from motion capture, flesh of
+   tapered capsules.
+2. **Image features**, per frame and camera: a foreground map (difference to
+   a background estimated as the per-pixel median of frames spread over the
+   video) and an edge map (the smoothed gradient of the foreground).
+3. **Weighting function** ``w(x) = exp(-beta E(x))`` with ``E`` the mean over
+   cameras of three costs of the projected model: points sampled inside each
+   capsule that fall on background (silhouette), foreground pixels that no
+   capsule covers (coverage), and points on the capsules' outlines that fall
+   on no edge (edge). All particles are projected and scored at once
+   (:func:`_costs`, compiled by Numba).
+4. **Annealing** per frame over ``layers`` layers (10): weight the particles
+   with ``beta_m`` chosen so that the survival rate -- the effective number of
+   particles over their number -- is ``survival`` (0.5); resample; diffuse
+   with Gaussian noise whose scale shrinks by ``sqrt(survival)`` per layer;
+   the last layer's weighted mean is the pose.
+5. **Initialisation** on the first frame by a coarse search from the standing
+   pose: the root placed where the cameras' foreground centroids meet,
+   heading and joints spread widely, annealed over twice as many layers.
+   The same search is the **recovery** when the weights collapse (the best
+   particle's cost above ``recover_cost``).
+
+Without annealing (``layers=1``) this is a plain particle filter
+(SIR/CONDENSATION), the comparison of ``benchmarks/tracker_bench.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numba
+import numpy as np
+
+from markovmotion.errors import MotionFormatError
+from markovmotion.video.body_model import BODY_SHAPE, BodyModel
+from markovmotion.video.cameras import (
+    CalibratedCamera,
+    camera_file,
+    camera_of_video,
+    camera_videos,
+    load_cameras,
+)
+from markovmotion.video.render import read_frames
+
+#: Foreground threshold on the largest channel difference to the background (grey levels).
+FG_LOW, FG_HIGH = 30.0, 60.0
+#: Foreground pixels sampled per view for the coverage cost.
+COVER_SAMPLES = 80
+EDGE_WEIGHT = 0.5
+#: Sobel response of an image edge counted as certain (a 30-grey-level step at sigma 1).
+EDGE_CONTRAST = 100.0
+BACKGROUND_FRAMES = 31
+#: Height (mm) of a standing person, for the first guess of depth from one view.
+STATURE = 1700.0
+
+
+# ----------------------------------------------------------------------------- image features
+def estimate_background(
+    video: str | os.PathLike[str], frames: int = BACKGROUND_FRAMES
+) -> np.ndarray:
+    """(H, W, 3) uint8 per-pixel median of up to ``frames`` frames spread over the video."""
+    from markovmotion.video.render import frame_count
+
+    n = frame_count(video)
+    keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
+    stack = [f for i, f in enumerate(read_frames(video)) if i in keep]
+    if not stack:
+        raise MotionFormatError(video, "no frames in this video")
+    return np.median(np.stack(stack), axis=0).astype(np.uint8)
+
+
+def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """An RGB image (H, W, 3) uint8 of ``size`` (W, H)."""
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise MotionFormatError(path, "not an image")
+    if (img.shape[1], img.shape[0]) != tuple(size):
+        raise MotionFormatError(
+            path, f"background is {img.shape[1]}x{img.shape[0]}, camera {size[0]}x{size[1]}"
+        )
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def _gradient(img: np.ndarray, sigma: float) -> np.ndarray:
+    g = cv2.GaussianBlur(img, (0, 0), sigma)
+    return np.hypot(
+        cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    )
+
+
+@dataclass
+class ViewFeatures:
+    """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame."""
+
+    fg: np.ndarray
+    edge: np.ndarray
+    samples: np.ndarray
+    n_samples: np.ndarray
+    centroids: list[np.ndarray | None] = field(default_factory=list)
+    heights: list[float] = field(default_factory=list)
+
+
+def view_features(
+    frames: Sequence[np.ndarray], backgrounds: Sequence[np.ndarray], seed: int = 0
+) -> ViewFeatures:
+    """Foreground and edge maps of one frame per camera (RGB uint8, same size per camera)."""
+    rng = np.random.default_rng(seed)
+    h = max(f.shape[0] for f in frames)
+    w = max(f.shape[1] for f in frames)
+    v = len(frames)
+    fg = np.zeros((v, h, w), np.float32)
+    edge = np.zeros((v, h, w), np.float32)
+    samples = np.zeros((v, COVER_SAMPLES, 2))
+    n_samples = np.zeros(v, np.intp)
+    centroids, heights = [], []
+    for k, (frame, bg) in enumerate(zip(frames, backgrounds, strict=True)):
+        diff = np.abs(frame.astype(np.int16) - bg.astype(np.int16)).max(axis=2).astype(np.float32)
+        diff = cv2.GaussianBlur(diff, (0, 0), 1.0)
+        f = np.clip((diff - FG_LOW) / (FG_HIGH - FG_LOW), 0, 1)
+        f = cv2.morphologyEx(f, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        outline = np.clip(_gradient(f, 2.0) / (8 * 0.15), 0, 1)  # Sobel gain 8; sigma-2 step 0.2
+        grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY).astype(np.float32)
+        near = cv2.GaussianBlur(f, (0, 0), 2.0) > 0.05
+        inner = np.clip(_gradient(grey, 1.0) / EDGE_CONTRAST, 0, 1) * near
+        fh, fw = f.shape
+        fg[k, :fh, :fw] = f
+        edge[k, :fh, :fw] = cv2.GaussianBlur(np.maximum(outline, inner), (0, 0), 1.0)
+        ys, xs = np.nonzero(f > 0.5)
+        if len(xs):
+            pick = rng.choice(len(xs), min(COVER_SAMPLES, len(xs)), replace=False)
+            samples[k, : len(pick)] = np.stack([xs[pick], ys[pick]], axis=1)
+            n_samples[k] = len(pick)
+            centroids.append(np.array([xs.mean(), ys.mean()]))
+            heights.append(float(ys.max() - ys.min() + 1))
+        else:
+            centroids.append(None)
+            heights.append(0.0)
+    return ViewFeatures(fg, edge, samples, n_samples, centroids, heights)
+
+
+# ----------------------------------------------------------------------------- the weighting function
+_T_CAPSULE = np.array([0.1, 0.3, 0.5, 0.7, 0.9])
+_ACROSS = np.array([-0.6, 0.0, 0.6])
+_BALL_COS = np.cos(np.pi / 4 + np.arange(4) * np.pi / 2)
+_BALL_SIN = np.sin(np.pi / 4 + np.arange(4) * np.pi / 2)
+
+
+@numba.njit(cache=True)
+def _lookup(img, v, x, y):  # pragma: no cover - compiled
+    xi = int(x + 0.5)
+    yi = int(y + 0.5)
+    if xi < 0 or yi < 0 or yi >= img.shape[1] or xi >= img.shape[2]:
+        return 0.0
+    return img[v, yi, xi]
+
+
+@numba.njit(cache=True, fastmath=True)
+def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
+    """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
+
+    pix (M, V, Q, 2) projected model points; rad (M, V, S, 2) capsule end radii in
+    pixels; seg (S, 2) point indices (a == b for a ball).
+    """
+    m_n, v_n = pix.shape[0], pix.shape[1]
+    s_n = seg.shape[0]
+    n_t = _T_CAPSULE.shape[0]
+    n_o = _ACROSS.shape[0]
+    for m in numba.prange(m_n):
+        geo = np.empty((s_n, 9))  # per capsule: ax, ay, dx, dy, l2, ra, rb, x range
+        ylo = np.empty(s_n)
+        yhi = np.empty(s_n)
+        total = 0.0
+        for v in range(v_n):
+            e_in = 0.0
+            n_in = 0
+            e_ed = 0.0
+            n_ed = 0
+            for s in range(s_n):
+                ax = pix[m, v, seg[s, 0], 0]
+                ay = pix[m, v, seg[s, 0], 1]
+                dx = pix[m, v, seg[s, 1], 0] - ax
+                dy = pix[m, v, seg[s, 1], 1] - ay
+                ra = rad[m, v, s, 0]
+                rb = rad[m, v, s, 1]
+                l2 = dx * dx + dy * dy
+                rmax = max(ra, rb)
+                geo[s, 0] = ax
+                geo[s, 1] = ay
+                geo[s, 2] = dx
+                geo[s, 3] = dy
+                geo[s, 4] = l2
+                geo[s, 5] = ra
+                geo[s, 6] = rb
+                geo[s, 7] = min(ax, ax + dx) - rmax
+                geo[s, 8] = max(ax, ax + dx) + rmax
+                ylo[s] = min(ay, ay + dy) - rmax
+                yhi[s] = max(ay, ay + dy) + rmax
+                if l2 > 1e-12:
+                    length = math.sqrt(l2)
+                    nx = -dy / length
+                    ny = dx / length
+                    for ti in range(n_t):
+                        t = _T_CAPSULE[ti]
+                        cx = ax + t * dx
+                        cy = ay + t * dy
+                        r = ra + t * (rb - ra)
+                        for oi in range(n_o):
+                            o = _ACROSS[oi]
+                            e_in += 1.0 - _lookup(fg, v, cx + o * r * nx, cy + o * r * ny)
+                        n_in += n_o
+                        e_ed += 2.0 - _lookup(edge, v, cx + r * nx, cy + r * ny)
+                        e_ed -= _lookup(edge, v, cx - r * nx, cy - r * ny)
+                        n_ed += 2
+                else:  # a ball
+                    e_in += 1.0 - _lookup(fg, v, ax, ay)
+                    n_in += 1
+                    for k in range(4):
+                        c = _BALL_COS[k]
+                        sn = _BALL_SIN[k]
+                        e_in += 1.0 - _lookup(fg, v, ax + 0.6 * ra * c, ay + 0.6 * ra * sn)
+                        e_ed += 1.0 - _lookup(edge, v, ax + ra * c, ay + ra * sn)
+                        n_in += 1
+                        n_ed += 1
+            miss = 0
+            for k in range(n_samples[v]):
+                px = samples[v, k, 0]
+                py = samples[v, k, 1]
+                covered = False
+                for s in range(s_n):
+                    if px < geo[s, 7] or px > geo[s, 8] or py < ylo[s] or py > yhi[s]:
+                        continue
+                    ax = geo[s, 0]
+                    ay = geo[s, 1]
+                    dx = geo[s, 2]
+                    dy = geo[s, 3]
+                    l2 = geo[s, 4]
+                    t = 0.0
+                    if l2 > 1e-12:
+                        t = ((px - ax) * dx + (py - ay) * dy) / l2
+                        t = min(max(t, 0.0), 1.0)
+                    ex = ax + t * dx - px
+                    ey = ay + t * dy - py
+                    r = geo[s, 5] + t * (geo[s, 6] - geo[s, 5])
+                    if ex * ex + ey * ey <= r * r:
+                        covered = True
+                        break
+                if not covered:
+                    miss += 1
+            e_cov = miss / n_samples[v] if n_samples[v] > 0 else 0.0
+            total += e_in / max(n_in, 1) + e_cov + edge_weight * e_ed / max(n_ed, 1)
+        out[m] = total / (v_n * (2.0 + edge_weight))
+
+
+@numba.njit(cache=True)
+def _coverage(pix, rad, seg, width, height):  # pragma: no cover - compiled
+    """(H, W) bool: pixels whose centre lies in a capsule (the tracker's view of one pose)."""
+    out = np.zeros((height, width), np.bool_)
+    for y in range(height):
+        for x in range(width):
+            for s in range(seg.shape[0]):
+                ax = pix[seg[s, 0], 0]
+                ay = pix[seg[s, 0], 1]
+                dx = pix[seg[s, 1], 0] - ax
+                dy = pix[seg[s, 1], 1] - ay
+                l2 = dx * dx + dy * dy
+                t = 0.0
+                if l2 > 1e-12:
+                    t = min(max(((x - ax) * dx + (y - ay) * dy) / l2, 0.0), 1.0)
+                ex = ax + t * dx - x
+                ey = ay + t * dy - y
+                r = rad[s, 0] + t * (rad[s, 1] - rad[s, 0])
+                if ex * ex + ey * ey <= r * r:
+                    out[y, x] = True
+                    break
+    return out
+
+
+def project_model(
+    joints: np.ndarray, cameras: Sequence[CalibratedCamera]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Projected model points (M, V, Q, 2), capsule radii in pixels (M, V, S, 2), depths (M, V, Q).
+
+    ``joints`` (M, 19, 3) are body points in mm; Q counts them and the balls' centres.
+    """
+    seg, radii = BODY_SHAPE.segments()
+    pts = BODY_SHAPE.points(joints)  # (M, Q, 3)
+    pix, depth = [], []
+    for c in cameras:
+        p, z = c.project(pts)
+        pix.append(p)
+        depth.append(z)
+    pix_a = np.stack(pix, axis=1)
+    depth_a = np.stack(depth, axis=1)
+    focal = np.array([c.focal for c in cameras])[None, :, None, None]
+    rad = focal * radii[None, None] / depth_a[:, :, seg]
+    return pix_a, rad, depth_a
+
+
+def model_coverage(joints: np.ndarray, camera: CalibratedCamera) -> np.ndarray:
+    """(H, W) bool silhouette of one pose (19, 3) as the weighting function sees it."""
+    seg, _ = BODY_SHAPE.segments()
+    pix, rad, _ = project_model(joints[None], [camera])
+    return _coverage(pix[0, 0], rad[0, 0], seg, camera.width, camera.height)
+
+
+def costs(
+    body: BodyModel, states: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
+) -> np.ndarray:
+    """E(x) (M,) in [0, 1] of particles (M, D) against one frame's features."""
+    seg, _ = BODY_SHAPE.segments()
+    pix, rad, _ = project_model(body.joint_positions(states), cameras)
+    out = np.empty(len(states))
+    _costs(pix, rad, seg, feats.fg, feats.edge, feats.samples, feats.n_samples, EDGE_WEIGHT, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- the filter
+def survival_beta(cost: np.ndarray, survival: float) -> float:
+    """beta such that the weights exp(-beta (E - min E)) keep ``survival`` of the particles alive.
+
+    The survival rate is the effective sample size (sum w)^2 / sum w^2 over the
+    number of particles (Deutscher et al. §4); it falls as beta grows.
+    """
+    e = cost - cost.min()
+    lo, hi = 0.0, 1.0
+    n = len(e)
+
+    def rate(b: float) -> float:
+        w = np.exp(-b * e)
+        return w.sum() ** 2 / (n * (w**2).sum())
+
+    while rate(hi) > survival and hi < 1e8:
+        hi *= 4
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if rate(mid) > survival:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def triangulate(
+    cameras: Sequence[CalibratedCamera],
+    pixels: Sequence[np.ndarray | None],
+    heights: Sequence[float] | None = None,
+    stature: float = STATURE,
+) -> np.ndarray | None:
+    """Least-squares meeting point (3,) of the rays through ``pixels`` (None: view not used).
+
+    With one view, the point on its ray at the depth where a person of ``stature``
+    (mm) is as tall as the foreground's ``heights`` (pixels) in that view.
+    """
+    used = [
+        (c, p, h)
+        for c, p, h in zip(cameras, pixels, heights or [0.0] * len(cameras), strict=True)
+        if p is not None
+    ]
+    if not used:
+        return None
+    if len(used) == 1:
+        c, p, h = used[0]
+        d = c.ray(p)
+        depth = c.focal * stature / h if h > 0 else 4000.0  # along the optical axis
+        return c.centre + d * depth / max(float(c.R[2] @ d), 1e-3)
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for c, p, _ in used:
+        d = c.ray(p)
+        proj = np.eye(3) - np.outer(d, d)
+        a += proj
+        b += proj @ c.centre
+    return np.linalg.solve(a + 1e-9 * np.eye(3), b)
+
+
+@dataclass
+class AnnealedParticleFilter:
+    """Deutscher et al.'s annealed particle filter over a :class:`BodyModel` (module docstring).
+
+    Args:
+        body: the body model (state, limits, diffusion scales).
+        cameras: calibrated cameras of the views.
+        particles: particles per layer.
+        layers: annealing layers per frame (1: a plain particle filter).
+        survival: target survival rate of every layer (sets beta_m).
+        fps: frame rate of the video (scales the diffusion).
+        spread: diffusion of the first layer, in multiples of a frame's typical motion.
+        recover_cost: cost of the best particle above which the filter starts again.
+        seed: random seed.
+        arms_again: restart the arms' diffusion half way through the layers.
+        refine: candidates per limb of the limb search after annealing (0: none).
+        start: the first frame's pose (a state), if known; else a coarse search finds it.
+    """
+
+    body: BodyModel
+    cameras: Sequence[CalibratedCamera]
+    particles: int = 200
+    layers: int = 10
+    survival: float = 0.5
+    fps: float = 30.0
+    spread: float = 3.0
+    recover_cost: float = 0.45
+    seed: int = 0
+    arms_again: bool = True
+    refine: int = 30
+    start: np.ndarray | None = None
+    evaluations: int = field(default=0, init=False)
+    recoveries: int = field(default=0, init=False)
+
+    def __post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.x: np.ndarray | None = None
+        self.second_pass = self.body.limb_mask(("elbow", "wrist")) if self.arms_again else None
+        self.limbs = [
+            m
+            for m in (
+                self.body.limb_mask((f"{side}_{a}", f"{side}_{b}"))
+                for side in ("right", "left")
+                for a, b in (("elbow", "wrist"), ("knee", "ankle"))
+            )
+            if m.any()
+        ]
+        step = self.body.speed / self.fps
+        floor = np.full(self.body.n_dof, 0.02)
+        floor[:3] = 10.0
+        self.step_std = np.maximum(step * self.spread, floor)
+
+    def _score(self, x: np.ndarray, feats: ViewFeatures) -> np.ndarray:
+        self.evaluations += len(x)
+        return costs(self.body, x, self.cameras, feats)
+
+    def _anneal(
+        self, x: np.ndarray, feats: ViewFeatures, layers: int, std: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """Anneal particles ``x`` over ``layers``; the estimate and its cost."""
+        shrink = math.sqrt(self.survival)
+        for m in range(layers):
+            sd = std * shrink**m
+            if self.second_pass is not None and m >= layers // 2:
+                sd = np.where(self.second_pass, std * shrink ** (m - layers // 2), sd)
+            x = x + self.rng.normal(size=x.shape) * sd
+            self.body.clip(x)
+            e = self._score(x, feats)
+            beta = survival_beta(e, self.survival)
+            w = np.exp(-beta * (e - e.min()))
+            w /= w.sum()
+            if m == layers - 1:
+                est = w @ x
+                self.x = x[self.rng.choice(len(x), len(x), p=w)]
+                best = float(e.min())
+                return est, best
+            x = x[self.rng.choice(len(x), len(x), p=w)]
+        raise AssertionError("unreachable")
+
+    def _refine_limbs(self, est: np.ndarray, feats: ViewFeatures) -> tuple[np.ndarray, float]:
+        """Search each limb alone around the estimate (the weighting function is nearly a sum
+        over body parts, so limbs can be searched one at a time, as partitioned sampling does);
+        the particles follow the estimate's change."""
+        cur = float(self._score(est[None], feats)[0])
+        start = est.copy()
+        for scale in (2.0, 0.7):
+            for mask in self.limbs:
+                cand = np.tile(est, (self.refine, 1))
+                cand[:, mask] += self.rng.normal(size=(self.refine, int(mask.sum()))) * (
+                    scale * self.step_std[mask]
+                )
+                self.body.clip(cand)
+                e = self._score(cand, feats)
+                k = int(np.argmin(e))
+                if e[k] < cur:
+                    est, cur = cand[k], float(e[k])
+        if self.x is not None:
+            self.x = self.body.clip(self.x + (est - start))
+        return est, cur
+
+    def initialise(
+        self, feats: ViewFeatures, start: np.ndarray | None = None
+    ) -> tuple[np.ndarray, float]:
+        """Coarse search from the standing pose (or around ``start``, a state) on one frame.
+
+        Two stages of annealing with twice the particles: first the root alone
+        (position near where the cameras' foreground centroids meet, any
+        heading, the mean pose), then every joint as well.
+        """
+        n = 2 * self.particles
+        root = np.zeros(self.body.n_dof, bool)
+        root[:4] = True
+        if self.body.joints and self.body.joints[0] == 0:
+            root[self.body.slices[0]] = True
+        std = self.step_std * 2.0
+        if start is None:
+            centre = triangulate(self.cameras, feats.centroids, feats.heights)
+            if centre is None:
+                centre = np.zeros(3)
+            centre[1] = self.body.height
+            x = np.tile(self.body.standing(centre), (n, 1))
+            x[:, 3] = self.rng.uniform(-math.pi, math.pi, n)
+            x[:, :3] += self.rng.normal(size=(n, 3)) * [150.0, 50.0, 150.0]
+            std_root = np.where(root, std, 0.0)
+            std_root[3] = 0.5
+            self._anneal(x, feats, max(self.layers, 5), std_root)
+            x = self.x[self.rng.choice(len(self.x), n)]
+            span = np.where(np.isfinite(self.body.upper), self.body.upper - self.body.lower, 0.0)
+            x[:, ~root] += self.rng.normal(size=(n, int((~root).sum()))) * 0.1 * span[~root]
+            self.body.clip(x)
+        else:
+            x = np.tile(start, (n, 1))
+        est, best = self._anneal(x, feats, max(self.layers, 5), std)
+        self.x = self.x[: self.particles]
+        return est, best
+
+    def step(self, feats: ViewFeatures, gap: int = 1) -> tuple[np.ndarray, float]:
+        """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost."""
+        if self.x is None:
+            return self.initialise(feats, self.start)
+        x = self.x
+        est, best = self._anneal(x, feats, self.layers, self.step_std * max(gap, 1))
+        if self.refine:
+            est, best = self._refine_limbs(est, feats)
+        if best > self.recover_cost:
+            self.recoveries += 1
+            prev = est
+            est2, best2 = self.initialise(feats)
+            if best2 >= best:
+                self.x = np.tile(prev, (self.particles, 1))
+            else:
+                est, best = est2, best2
+        return est, best
+
+
+# ----------------------------------------------------------------------------- whole videos
+@dataclass
+class TrackResult:
+    """States (F, D), per-frame confidence (1 - best cost), frame rate, wall and CPU time (s)."""
+
+    states: np.ndarray
+    confidence: np.ndarray
+    fps: float
+    seconds: float
+    views: int
+    recoveries: int
+    cpu_seconds: float = 0.0
+
+
+def multiview_frames(
+    videos: Sequence[Path], max_frames: int | None = None
+) -> Iterator[list[np.ndarray]]:
+    """One frame per camera at a time, until the shortest video ends."""
+    readers = [read_frames(v) for v in videos]
+    n = 0
+    for frames in zip(*readers, strict=False):
+        if max_frames is not None and n >= max_frames:
+            break
+        n += 1
+        yield list(frames)
+
+
+@dataclass
+class MultiviewVideo:
+    """The cameras, frame rate, background and frames (one per camera at a time) of a video."""
+
+    cameras: list[CalibratedCamera]
+    fps: float
+    doc: dict
+    backgrounds: list[np.ndarray]
+    frames: Iterator[list[np.ndarray]]
+    source: Path
+    videos: list[Path]
+
+    def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
+        """The features of one frame per camera (checked against the cameras' sizes)."""
+        for c, f in zip(self.cameras, frames, strict=True):
+            if f.shape[:2] != (c.height, c.width):
+                raise MotionFormatError(
+                    self.source,
+                    f"camera {c.name} is {c.width}x{c.height} but its video is "
+                    f"{f.shape[1]}x{f.shape[0]}",
+                )
+        return view_features(frames, self.backgrounds, seed + index)
+
+    def features(self, seed: int = 0) -> Iterator[ViewFeatures]:
+        """Every frame's features, made as they are consumed."""
+        for i, frames in enumerate(self.frames):
+            yield self.features_of(frames, i, seed)
+
+
+def open_video(
+    video: str | os.PathLike[str],
+    cameras_file: str | os.PathLike[str] | None = None,
+    views: int | None = None,
+    max_frames: int | None = None,
+) -> MultiviewVideo:
+    """A folder with ``cameras.json`` (or that file), or one camera's video file (with
+    ``cameras_file``, or ``cameras.json`` beside it: the camera naming the file, else the
+    first), ready to track: frames are decoded as they are consumed (no queue).
+    ``views`` keeps only the first cameras.
+
+    Raises:
+        MotionFormatError: a missing or malformed camera file, a missing video or
+            background, or frames of another size than their camera's.
+    """
+    cams_path = camera_file(video, cameras_file)
+    cameras, doc = load_cameras(cams_path)
+    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+        k = camera_of_video(cameras, video)  # one camera's video
+        cameras, videos = [cameras[k]], [Path(video)]
+    else:
+        videos = camera_videos(cams_path, cameras)
+    if views is not None:
+        cameras, videos = cameras[:views], videos[:views]
+    images = camera_videos(cams_path, cameras, "background")
+    backgrounds = [
+        estimate_background(v) if b is None else read_image(b, (c.width, c.height))
+        for v, b, c in zip(videos, images, cameras, strict=True)
+    ]
+    frames = multiview_frames(videos, max_frames)
+    return MultiviewVideo(
+        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos)
+    )
+
+
+def track_features(
+    features: Iterator[ViewFeatures] | Sequence[ViewFeatures],
+    apf: AnnealedParticleFilter,
+) -> TrackResult:
+    """Run the filter over every frame's features; the wall time includes making them."""
+    states, conf = [], []
+    t0, c0 = time.perf_counter(), time.process_time()
+    for feats in features:
+        x, best = apf.step(feats)
+        states.append(x)
+        conf.append(1.0 - best)
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if not states:
+        raise MotionFormatError("video", "no frames in this video")
+    return TrackResult(
+        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries, cpu
+    )
+
+
+def track_video(
+    video: str | os.PathLike[str],
+    body: BodyModel,
+    cameras_file: str | os.PathLike[str] | None = None,
+    particles: int = 200,
+    layers: int = 10,
+    views: int | None = None,
+    max_frames: int | None = None,
+    seed: int = 0,
+    start: np.ndarray | None = None,
+) -> TrackResult:
+    """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
+    from the pose ``start`` (a state) if given."""
+    mv = open_video(video, cameras_file, views, max_frames)
+    apf = AnnealedParticleFilter(
+        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start
+    )
+    return track_features(mv.features(seed), apf)

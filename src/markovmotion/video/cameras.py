@@ -1,0 +1,259 @@
+"""Calibrated pinhole cameras of a multi-view video, and the ``cameras.json`` that stores them.
+
+A camera maps world points (mm, Y up) to pixels (x right, y down, pixel
+centres at integer coordinates) by ``x_cam = R X + t`` and
+``u = fx x/z + cx``, ``v = fy y/z + cy`` (OpenCV's convention; no lens
+distortion). ``cameras.json`` lies beside the videos::
+
+    {"units": "mm", "fps": 30.0,
+     "cameras": [{"name": "cam0", "video": "cam0.mp4", "width": 320, "height": 240,
+                  "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
+                  "R": [[...], [...], [...]], "t": [tx, ty, tz],
+                  "distortion": [0, 0, 0, 0, 0]}, ...]}
+
+``video`` is relative to the file; so is the optional ``background``, an
+image of the empty scene (else the tracker estimates it from the video). Any real video with such a file is read
+the same way as the rendered ones; a malformed file is one error naming the
+file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from markovmotion.errors import MotionFormatError
+from markovmotion.io.files import atomic_write
+
+CAMERAS_FILE = "cameras.json"
+MAX_CAMERAS = 4
+MAX_SIDE = 4096
+MAX_JSON_BYTES = 1_000_000
+
+
+@dataclass(frozen=True)
+class CalibratedCamera:
+    """Intrinsics ``K`` (3, 3), rotation ``R`` (3, 3) world to camera, translation ``t`` (3,) mm."""
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    name: str = "cam"
+    video: str = ""
+    background: str = ""
+
+    @property
+    def focal(self) -> float:
+        """Mean focal length in pixels (the scale of a ball's radius at depth z: focal * r / z)."""
+        return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Optical centre in world coordinates (mm)."""
+        return -self.R.T @ self.t
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (..., 2) and depths (...) in mm of world points (..., 3)."""
+        cam = np.asarray(points, dtype=float) @ self.R.T + self.t
+        z = np.maximum(cam[..., 2], 1.0)
+        u = self.K[0, 0] * cam[..., 0] / z + self.K[0, 2]
+        v = self.K[1, 1] * cam[..., 1] / z + self.K[1, 2]
+        return np.stack([u, v], axis=-1), z
+
+    def ray(self, pixel: np.ndarray) -> np.ndarray:
+        """Unit direction in world coordinates of the ray through ``pixel`` (2,)."""
+        d = np.array(
+            [
+                (pixel[0] - self.K[0, 2]) / self.K[0, 0],
+                (pixel[1] - self.K[1, 2]) / self.K[1, 1],
+                1.0,
+            ]
+        )
+        d = self.R.T @ d
+        return d / np.linalg.norm(d)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "video": self.video,
+            "width": self.width,
+            "height": self.height,
+            "K": self.K.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "distortion": [0.0] * 5,
+            **({"background": self.background} if self.background else {}),
+        }
+
+
+def look_at(
+    position: np.ndarray,
+    target: np.ndarray,
+    width: int,
+    height: int,
+    focal: float,
+    name: str = "cam",
+    video: str = "",
+) -> CalibratedCamera:
+    """A camera at ``position`` (mm) looking at ``target``, upright (world Y up is image up)."""
+    position, target = np.asarray(position, float), np.asarray(target, float)
+    z = target - position
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 1.0, 0.0])  # image right
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)  # image down
+    r = np.stack([x, y, z])
+    k = np.array([[focal, 0, width / 2], [0, focal, height / 2], [0, 0, 1.0]])
+    return CalibratedCamera(k, r, -r @ position, int(width), int(height), name, video)
+
+
+def ring_of_cameras(
+    centre: np.ndarray,
+    radius: float,
+    views: int = 3,
+    size: tuple[int, int] = (320, 240),
+    height: float = 1800.0,
+    first_azimuth: float = 0.0,
+    fov_degrees: float = 50.0,
+) -> list[CalibratedCamera]:
+    """``views`` cameras evenly spaced around ``centre`` (mm) at ``radius``, looking at it from
+    ``height`` (Deutscher et al.'s set-up: three cameras around the capture volume)."""
+    width, h = size
+    focal = 0.5 * width / math.tan(math.radians(fov_degrees) / 2)
+    centre = np.asarray(centre, float)
+    target = np.array([centre[0], 900.0, centre[2]])
+    out = []
+    for k in range(views):
+        a = first_azimuth + 2 * math.pi * k / views
+        pos = np.array([centre[0] + radius * math.sin(a), height, centre[2] + radius * math.cos(a)])
+        cam = look_at(pos, target, width, h, focal, f"cam{k}", f"cam{k}.mp4")
+        out.append(replace(cam, background=f"cam{k}_background.png"))
+    return out
+
+
+def save_cameras(
+    cameras: list[CalibratedCamera], path: str | os.PathLike[str], fps: float, **extra
+) -> Path:
+    """Write ``cameras.json`` (atomically); ``extra`` keys (e.g. the source take) are kept."""
+    doc = {"units": "mm", "fps": float(fps), **extra, "cameras": [c.to_dict() for c in cameras]}
+    path = Path(path)
+    with atomic_write(path) as f:
+        f.write(json.dumps(doc, indent=1))
+    return path
+
+
+def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise MotionFormatError(path, f"{where} must be numbers of shape {shape}") from None
+    if a.shape != shape or not np.isfinite(a).all():
+        raise MotionFormatError(path, f"{where} must be finite numbers of shape {shape}")
+    return a
+
+
+def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
+    """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
+    ``video`` or beside the video file ``video``."""
+    if cameras is not None:
+        return Path(cameras)
+    video = Path(video)
+    if video.is_file() and video.suffix.lower() != ".json":
+        return video.parent / CAMERAS_FILE
+    return video
+
+
+def camera_of_video(cameras: list[CalibratedCamera], video: str | os.PathLike[str]) -> int:
+    """Which camera a lone video file is: the one naming it, else the first."""
+    name = Path(video).name
+    return next((k for k, c in enumerate(cameras) if Path(c.video).name == name), 0)
+
+
+def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], dict]:
+    """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document.
+
+    Raises:
+        MotionFormatError: no such file, not JSON, or a camera without valid
+            size, intrinsics, an orthonormal rotation, a translation, or with
+            lens distortion (not supported).
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / CAMERAS_FILE
+    if not path.is_file():
+        raise MotionFormatError(path, "no camera file (cameras.json) for this video")
+    if path.stat().st_size > MAX_JSON_BYTES:
+        raise MotionFormatError(path, f"camera file larger than {MAX_JSON_BYTES} bytes")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MotionFormatError(path, f"not a JSON camera file ({exc})") from None
+    cams = doc.get("cameras") if isinstance(doc, dict) else None
+    if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
+        raise MotionFormatError(path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras")
+    fps = doc.get("fps", 25.0)
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000):
+        raise MotionFormatError(path, "'fps' must be a number above 0 and at most 1000")
+    out = []
+    for i, c in enumerate(cams):
+        where = f"cameras[{i}]"
+        if not isinstance(c, dict):
+            raise MotionFormatError(path, f"{where} must be an object")
+        w, h = c.get("width"), c.get("height")
+        if not all(isinstance(v, int) and 16 <= v <= MAX_SIDE for v in (w, h)):
+            raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
+        k = _matrix(path, f"{where}.K", c.get("K"), (3, 3))
+        if not (k[0, 0] > 0 and k[1, 1] > 0) or not np.allclose(k[2], [0, 0, 1]):
+            raise MotionFormatError(
+                path, f"{where}.K: focal lengths must be positive, last row 0 0 1"
+            )
+        r = _matrix(path, f"{where}.R", c.get("R"), (3, 3))
+        if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
+            raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
+        t = _matrix(path, f"{where}.t", c.get("t"), (3,))
+        dist = c.get("distortion", [])
+        if dist and any(not isinstance(d, (int, float)) or d != 0 for d in dist):
+            raise MotionFormatError(
+                path, f"{where}: lens distortion is not supported (undistort first)"
+            )
+        video = c.get("video", "")
+        if not isinstance(video, str) or len(video) > 255:
+            raise MotionFormatError(path, f"{where}.video must be a file name")
+        bg = c.get("background", "")
+        if not isinstance(bg, str) or len(bg) > 255:
+            raise MotionFormatError(path, f"{where}.background must be a file name")
+        name = c.get("name", f"cam{i}")
+        out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg))
+    doc["fps"] = float(fps)
+    return out, doc
+
+
+def camera_videos(
+    path: str | os.PathLike[str], cameras: list[CalibratedCamera], what: str = "video"
+) -> list[Path | None]:
+    """The ``video`` (or ``background``) file of each camera, relative to ``cameras.json``'s folder
+    (None for a camera without a background image)."""
+    path = Path(path)
+    folder = path if path.is_dir() else path.parent
+    out: list[Path | None] = []
+    for c in cameras:
+        name = getattr(c, what)
+        if not name:
+            if what != "video":
+                out.append(None)
+                continue
+            raise MotionFormatError(folder / CAMERAS_FILE, f"camera {c.name} names no video")
+        v = (folder / name).resolve()
+        if not v.exists():
+            raise MotionFormatError(v, f"no {what} for camera {c.name}")
+        if not (v.is_file() or v.is_dir()):  # a device or a pipe would never end
+            raise MotionFormatError(v, f"the {what} of camera {c.name} is not a regular file")
+        out.append(v)
+    return out

@@ -1,0 +1,226 @@
+"""Video in, video out: track person A, generate the partner B, draw B into the video (dual-HMM
+paper, §3 and Fig. 1).
+
+:func:`respond_in_video` tracks A by annealed particle filtering
+(:mod:`markovmotion.video.annealed_particle_filter`), asks the dual HMM for
+B's response to the tracked motion (:meth:`DualHMM.respond`, public API
+only), and renders B shaded with the same camera over the original frames.
+A pixel of B is drawn only where B's surface is nearer the camera than A's
+tracked body model, so A's arm in front of B hides B and B in front of A
+hides A.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.errors import MotionFormatError, SkeletonMismatchError
+from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
+from markovmotion.video.body_model import BODY_SHAPE, BodyModel
+from markovmotion.video.cameras import (
+    CalibratedCamera,
+    camera_file,
+    camera_of_video,
+    camera_videos,
+    load_cameras,
+)
+from markovmotion.video.multiview import track_take
+from markovmotion.video.render import read_frames, write_video
+from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
+
+
+def composite_frames(
+    frames: Iterator[np.ndarray],
+    camera: CalibratedCamera,
+    a_points: np.ndarray,
+    b_points: np.ndarray,
+) -> Iterator[np.ndarray]:
+    """``frames`` with B (body points (F, 19, 3)) drawn shaded where it is in front of A's model.
+
+    Stops with A's tracked frames; frames beyond B's motion pass through unchanged.
+    """
+    colours = capsule_colours(BODY_SHAPE, BODY_POINTS, CLOTHES["b"])
+    hidden = np.zeros((len(BODY_SHAPE.segments()[0]), 3))
+    for t, frame in enumerate(frames):
+        if t >= len(a_points):
+            return
+        if t >= len(b_points) or not np.isfinite(b_points[t]).all():
+            yield frame
+            continue
+        canvas = DepthCanvas(camera.width, camera.height)
+        canvas.body(a_points[t], camera, BODY_SHAPE, hidden, 0)
+        canvas.body(b_points[t], camera, BODY_SHAPE, colours, 1)
+        yield canvas.over(frame, only=1)
+
+
+def respond_in_video(
+    model: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    body: BodyModel,
+    cameras: str | os.PathLike[str] | None = None,
+    view: int = 0,
+    particles: int = 200,
+    layers: int = 10,
+    max_frames: int | None = None,
+    method: str = "windowed",
+) -> dict:
+    """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
+    ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
+    to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary."""
+    dual = _load_partner_model(model)
+    where = camera_file(video, cameras)
+    cams, _ = load_cameras(where)
+    single = Path(video).is_file()
+    if single:  # one camera's video: that camera
+        view = camera_of_video(cams, video)
+    if not 0 <= view < len(cams):
+        raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
+    start = time.perf_counter()
+    a, result, summary = track_take(video, body, cameras, None, particles, layers, None, max_frames)
+    tracked = time.perf_counter() - start
+    b = _respond(dual, a, method)
+    video_path = Path(video) if single else camera_videos(where, cams)[view]
+    frames = read_frames(video_path)
+    written = write_video(
+        composite_frames(frames, cams[view], body_points(a), body_points(b)), out, result.fps
+    )
+    summary.update(
+        {
+            "tracking_seconds": round(tracked, 2),
+            "partner_frames": b.n_frames,
+            "out": str(written),
+            "view": view,
+        }
+    )
+    return summary
+
+
+def respond_in_video_live(
+    model: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    body: BodyModel,
+    cameras: str | os.PathLike[str] | None = None,
+    view: int = 0,
+    particles: int = 200,
+    layers: int = 10,
+    max_frames: int | None = None,
+) -> dict:
+    """:func:`respond_in_video` live: frames arrive at the video's rate, each tracked and
+    handed to the dual HMM's online partner as it comes.
+
+    A frame is decoded only when the tracker is ready for it (no queue); a frame
+    whose successor is already due is skipped (counted; the partner is told, and
+    the tracker widens its search by the frames it missed). B's frames come
+    ``lag`` frames late, as the windowed Viterbi decides them; the composite is
+    written at the end, B drawn over the frames it answers. The first frame's
+    search for the person (and the partner's first step) happen before the
+    clock starts.
+    """
+    from markovmotion.models.online import concatenate
+
+    dual = _load_partner_model(model)
+    mv = open_video(video, cameras, None, max_frames)
+    if Path(video).is_file():
+        view = 0
+    if not 0 <= view < len(mv.cameras):
+        raise MotionFormatError(mv.source, f"no camera {view}: the video has {len(mv.cameras)}")
+    partner = dual.partner()
+    if not np.isclose(mv.fps, partner.fps):
+        raise MotionFormatError(
+            mv.source,
+            f"live tracking needs the video at the model's {partner.fps:g} fps, not {mv.fps:g}",
+        )
+    apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps)
+    period = 1.0 / mv.fps
+    states: list[np.ndarray | None] = []
+    b_frames, times = [], []
+    skipped, gap = 0, 1
+    first = next(mv.frames, None)
+    if first is None:
+        raise MotionFormatError(mv.source, "no frames in this video")
+    # before the clock starts: the tracker's initial search and the partner's first step
+    x, _ = apf.step(mv.features_of(first, 0))
+    dual.partner().step(body.motion(x[None], mv.fps))  # loads compiled kernels
+    states.append(x)
+    if (b := partner.step(body.motion(x[None], mv.fps))) is not None:
+        b_frames.append(b)
+    start = time.perf_counter() - period
+    for i, frames in enumerate(mv.frames, start=1):
+        due = start + i * period
+        now = time.perf_counter()
+        if now < due:
+            time.sleep(due - now)
+        tick = time.perf_counter()
+        if tick > due + period:  # the next frame is already here: drop this one
+            skipped += 1
+            gap += 1
+            states.append(None)
+            b = partner.skip()
+        else:
+            x, _ = apf.step(mv.features_of(frames, i), gap)
+            gap = 1
+            states.append(x)
+            b = partner.step(body.motion(x[None], mv.fps))
+            times.append(time.perf_counter() - tick)
+        if b is not None:
+            b_frames.append(b)
+    b_frames.extend(partner.finish())
+    if not states or all(s is None for s in states):
+        raise MotionFormatError(mv.source, "no frames tracked")
+    filled = _fill_forward(states)
+    a = body.motion(filled, mv.fps)
+    b = concatenate(b_frames, partner.fps)
+    frames = read_frames(mv.videos[view])  # decoded again: no frame is kept in memory
+    written = write_video(
+        composite_frames(frames, mv.cameras[view], body_points(a), body_points(b)), out, mv.fps
+    )
+    ms = np.array(times or [0.0]) * 1e3
+    return {
+        "frames": len(states),
+        "tracked": len(states) - skipped,
+        "skipped": skipped,
+        "latency_ms_median": round(float(np.median(ms)), 1),
+        "latency_ms_p99": round(float(np.percentile(ms, 99)), 1),
+        "lag_frames": int(partner.lag),
+        "views": len(mv.cameras),
+        "partner_frames": b.n_frames,
+        "out": str(written),
+        "view": view,
+    }
+
+
+def _load_partner_model(model: str | os.PathLike[str]):
+    """The dual HMM of ``model``; one trained on markers cannot answer a tracked skeleton."""
+    from markovmotion.models.hmm.dual import DualHMM
+
+    dual = DualHMM.load(model)
+    if getattr(dual, "uses_markers", False):
+        raise SkeletonMismatchError(
+            f"{model}: the model was trained on markers; a person tracked in video is a skeleton"
+        )
+    return dual
+
+
+def _fill_forward(states: list[np.ndarray | None]) -> np.ndarray:
+    """States with each missing one replaced by the last known (the first known at the start)."""
+    first = next(s for s in states if s is not None)
+    out, last = [], first
+    for s in states:
+        last = s if s is not None else last
+        out.append(last)
+    return np.array(out)
+
+
+def _respond(dual, a: Motion, method: str) -> Motion:
+    """B's response at the video's rate (the model works at its own)."""
+    b = dual.respond(a, method)
+    return b.resample(a.fps) if not np.isclose(b.fps, a.fps) else b

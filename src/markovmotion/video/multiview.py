@@ -1,0 +1,208 @@
+"""Multi-view video of motion capture with ground truth, and 3-D tracking of it (dual-HMM paper, §3).
+
+:func:`render_multiview` renders a take as the person the tracker sees: the
+body model's flesh (:data:`~markovmotion.video.body_model.BODY_SHAPE`) on
+the take's body points, seen by 1 to 4 calibrated cameras spaced around the
+capture volume (Deutscher et al. used three), over a static textured
+background with sensor noise; person A alone (B masked) or both. It writes
+one video per camera and ``cameras.json``.
+
+:func:`training_body_model` learns the body model from the collection's
+two-person takes (training split); :func:`track_take` tracks a multi-view
+video and, given the true motion, measures the error over the body points.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from markovmotion.core.motion import Motion
+from markovmotion.data.index import MocapIndex, listed_entry, read_listed_motion
+from markovmotion.data.splits import held_out_pairs
+from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.io.files import atomic_path
+from markovmotion.limits import MAX_FRAMES
+from markovmotion.video.annealed_particle_filter import TrackResult, track_video
+from markovmotion.video.body_model import BODY_SHAPE, BodyModel
+from markovmotion.video.cameras import ring_of_cameras, save_cameras
+from markovmotion.video.render import background, write_video
+from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
+
+#: Labels of the two-person takes the default body model learns from.
+BODY_LABELS = ("handshake", "pull")
+
+
+def shaded_frames(
+    people: list[np.ndarray], camera, bg: np.ndarray, noise: float = 4.0, seed: int = 0
+) -> Iterator[np.ndarray]:
+    """RGB frames of people (each (F, 19, 3) body points, mm) shaded over ``bg``, with noise."""
+    rng = np.random.default_rng(seed)
+    colours = [capsule_colours(BODY_SHAPE, BODY_POINTS, CLOTHES[k]) for k in ("a", "b")]
+    for t in range(len(people[0])):
+        canvas = DepthCanvas(camera.width, camera.height)
+        for k, p in enumerate(people):
+            canvas.body(p[t], camera, BODY_SHAPE, colours[k % 2], k)
+        img = canvas.over(bg).astype(np.float32)
+        img += rng.normal(0.0, noise, img.shape).astype(np.float32)
+        yield np.clip(img, 0, 255).round().astype(np.uint8)
+
+
+def load_take(path: str | os.PathLike[str], people: str = "a") -> tuple[Motion, Motion | None]:
+    """Person A of a take and, for ``people="both"``, its partner (from the collection's index)."""
+    path = Path(path)
+    entry = listed_entry(path)
+    if people == "both":
+        if entry is None or not entry.partner_file:
+            raise DataNotFoundError(f"{path}: no partner listed for this file in INDEX.csv")
+        index = MocapIndex.load()
+        return index.load_pair(entry, index.find(entry.partner_file))
+    return read_listed_motion(path), None
+
+
+def render_multiview(
+    take: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    views: int = 3,
+    seconds: float | None = None,
+    fps: float | None = None,
+    people: str = "a",
+    size: tuple[int, int] = (320, 240),
+    noise: float = 4.0,
+    seed: int = 0,
+    start: float = 0.0,
+) -> Path:
+    """Render ``take`` (a BVH/ASF-AMC file) into ``out``: ``camK.mp4`` per camera and
+    ``cameras.json``; returns the path of ``cameras.json``."""
+    a, b = load_take(take, people)
+    fps = fps or a.fps
+    if not np.isclose(fps, a.fps):
+        a = a.resample(fps)
+        b = b.resample(fps) if b is not None else None
+    first = int(round(start * fps))
+    stop = None if seconds is None else first + max(1, int(round(seconds * fps)))
+    a = a.trim(first, stop)
+    b = b.trim(first, stop) if b is not None else None
+    if a.n_frames < 1:
+        raise MotionFormatError(take, f"no frames from {start:g} s")
+    if a.n_frames > MAX_FRAMES.value:
+        raise MotionFormatError(take, f"more than {MAX_FRAMES.value:g} frames")
+    bodies = [a] + ([b] if b is not None else [])
+    pts = [body_points(m) for m in bodies]
+    pelvis = np.concatenate([p[:, 0] for p in pts])
+    centre = pelvis.mean(axis=0)
+    reach = np.linalg.norm((pelvis - centre)[:, [0, 2]], axis=1).max()
+    # camera 0 sees A from the side of its mean heading, at 45 degrees
+    heading = float(np.median(a.heading())) if a.n_frames else 0.0
+    cams = ring_of_cameras(
+        centre,
+        radius=2800.0 + 1.3 * reach,
+        views=views,
+        size=size,
+        first_azimuth=heading + math.pi / 4,
+    )
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, cam in enumerate(cams):
+        bg = background((cam.width, cam.height), seed + 7 * k)
+        write_video(shaded_frames(pts, cam, bg, noise, seed + 7 * k), out / cam.video, fps)
+        with atomic_path(out / cam.background) as tmp:
+            cv2.imwrite(str(tmp), cv2.cvtColor(bg, cv2.COLOR_RGB2BGR))
+    return save_cameras(
+        cams,
+        out / "cameras.json",
+        fps,
+        source=Path(take).name,
+        start_frame=first,
+        people=people,
+    )
+
+
+def training_body_model(
+    data: str | os.PathLike[str] | None = None,
+    labels: tuple[str, ...] = BODY_LABELS,
+    include_held_out: bool = False,
+    max_dof: int = 28,
+) -> BodyModel:
+    """The body model learnt from both people of the collection's training takes of ``labels``
+    (its skeleton: person A's of the first take)."""
+    index = MocapIndex.load(data)
+    pairs = index.pairs(label=list(labels))
+    if not pairs:
+        raise DataNotFoundError(f"no two-person takes labelled {', '.join(labels)} in {index.root}")
+    train, test = held_out_pairs(pairs)
+    motions = []
+    for a, b in train + (test if include_held_out else []):
+        ma, mb = index.load_pair(a, b)
+        motions += [ma.resample(30.0), mb.resample(30.0)]
+    return BodyModel.fit(motions, max_dof=max_dof)
+
+
+def tracking_errors(tracked: Motion, truth: Motion) -> dict:
+    """MPJPE (mm) over the body points, per point, per frame, of a tracked motion vs the truth."""
+    if not np.isclose(tracked.fps, truth.fps):
+        truth = truth.resample(tracked.fps)
+    n = min(tracked.n_frames, truth.n_frames)
+    err = np.linalg.norm(body_points(tracked)[:n] - body_points(truth)[:n], axis=-1)  # (F, 19)
+    return {
+        "mpjpe_mm": round(float(err.mean()), 1),
+        "per_joint_mm": {
+            p: round(float(e), 1) for p, e in zip(BODY_POINTS, err.mean(0), strict=True)
+        },
+        "per_frame_mm": [round(float(e), 1) for e in err.mean(1)],
+        "frames_compared": n,
+    }
+
+
+def track_take(
+    video: str | os.PathLike[str],
+    body: BodyModel,
+    cameras: str | os.PathLike[str] | None = None,
+    truth: str | os.PathLike[str] | None = None,
+    particles: int = 200,
+    layers: int = 10,
+    views: int | None = None,
+    max_frames: int | None = None,
+    seed: int = 0,
+    start: str | os.PathLike[str] | None = None,
+) -> tuple[Motion, TrackResult, dict]:
+    """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
+
+    With ``truth`` (the take's BVH), the summary has ``mpjpe_mm`` and per-joint
+    errors, the truth aligned by the ``start_frame`` the renderer recorded. ``start``
+    (a motion of the body model's skeleton) gives the first frame's pose instead of
+    the coarse search.
+    """
+    from markovmotion.video.cameras import camera_file, load_cameras
+
+    first = None
+    if start is not None:  # the first frame's pose, on the body model's skeleton
+        first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
+    result = track_video(video, body, cameras, particles, layers, views, max_frames, seed, first)
+    motion = body.motion(result.states, result.fps, name=Path(video).name)
+    summary = {
+        "frames": len(result.states),
+        "fps": round(len(result.states) / max(result.seconds, 1e-9), 2),
+        "fps_cpu": round(len(result.states) / max(result.cpu_seconds, 1e-9), 2),
+        "video_fps": result.fps,
+        "views": result.views,
+        "particles": particles,
+        "layers": layers,
+        "dof": body.n_dof,
+        "recoveries": result.recoveries,
+        "confidence": [round(float(c), 3) for c in result.confidence],
+    }
+    if truth is not None:
+        _, doc = load_cameras(camera_file(video, cameras))
+        true = read_listed_motion(truth)
+        if not np.isclose(true.fps, result.fps):
+            true = true.resample(result.fps)
+        start = int(doc.get("start_frame", 0)) if isinstance(doc.get("start_frame", 0), int) else 0
+        summary.update(tracking_errors(motion, true.trim(start)))
+    return motion, result, summary

@@ -1,0 +1,266 @@
+"""Multi-view video, calibrated cameras and the annealed particle filter tracker (dual-HMM §3)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from markovmotion import read_motion
+from markovmotion.cli import main
+from markovmotion.errors import MotionFormatError
+from markovmotion.features.body_points import body_points
+from markovmotion.video.annealed_particle_filter import (
+    AnnealedParticleFilter,
+    model_coverage,
+    survival_beta,
+    view_features,
+)
+from markovmotion.video.body_model import BODY_SHAPE
+from markovmotion.video.cameras import load_cameras, look_at, ring_of_cameras, save_cameras
+from markovmotion.video.multiview import shaded_frames, training_body_model
+from markovmotion.video.render import background, read_frames, silhouette_mask
+from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
+
+
+@pytest.fixture(scope="module")
+def body(mocap):
+    return training_body_model(mocap.root)
+
+
+@pytest.fixture(scope="module")
+def take(mocap):
+    """Person A of the held-out pull take at 30 fps, and its file."""
+    from markovmotion.data.splits import held_out_pairs
+
+    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"]))
+    entry = test[0][0]
+    return mocap.load_motion(entry).resample(30.0), mocap.root / entry.file
+
+
+def _cameras(points, views=3, size=(160, 120)):
+    centre = points[:, 0].mean(axis=0)
+    return ring_of_cameras(centre, 3500.0, views, size)
+
+
+def test_camera_file_round_trip(tmp_path):
+    cams = ring_of_cameras(np.array([100.0, 0.0, -300.0]), 4000.0, 3, (320, 240))
+    path = save_cameras(cams, tmp_path / "cameras.json", 30.0, source="x.bvh")
+    back, doc = load_cameras(tmp_path)
+    assert doc["fps"] == 30.0 and doc["source"] == "x.bvh" and len(back) == 3
+    pts = np.random.default_rng(0).normal(0, 500, (50, 3)) + [0, 900, 0]
+    for a, b in zip(cams, back, strict=True):
+        assert np.allclose(a.project(pts)[0], b.project(pts)[0])
+        assert (a.name, a.video, a.width, a.height) == (b.name, b.video, b.width, b.height)
+    assert path == tmp_path / "cameras.json"
+
+
+def test_camera_looks_at_its_target():
+    cam = look_at(np.array([0.0, 1500.0, -4000.0]), np.array([0.0, 900.0, 0.0]), 320, 240, 300.0)
+    pix, depth = cam.project(np.array([[0.0, 900.0, 0.0], [0.0, 1900.0, 0.0]]))
+    assert np.allclose(pix[0], [160, 120]) and depth[0] > 0
+    assert pix[1, 1] < pix[0, 1]  # up in the world is up in the image
+
+
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (lambda d: d.update(cameras=3), "'cameras' must be a list"),
+        (lambda d: d["cameras"][0].update(K=[[1, 0], [0, 1]]), "K must be"),
+        (lambda d: d["cameras"][0].update(R=[[2, 0, 0], [0, 1, 0], [0, 0, 1]]), "not a rotation"),
+        (lambda d: d["cameras"][0].update(distortion=[0.1, 0, 0, 0, 0]), "distortion"),
+        (lambda d: d["cameras"][0].update(width=-5), "width and height"),
+        (lambda d: d["cameras"][0].update(t=["a", 0, 0]), ".t must be"),
+    ],
+)
+def test_bad_camera_file_is_one_error(tmp_path, edit, problem):
+    save_cameras(ring_of_cameras(np.zeros(3), 4000.0, 1), tmp_path / "cameras.json", 25.0)
+    doc = json.loads((tmp_path / "cameras.json").read_text())
+    edit(doc)
+    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    with pytest.raises(MotionFormatError, match=problem):
+        load_cameras(tmp_path)
+
+
+def test_body_model_projection_agrees_with_rasterisers(body, take):
+    """The tracker's capsule test, the silhouette renderer and the z-buffer agree on the body."""
+    motion, _ = take
+    pts = body_points(motion)
+    cam = _cameras(pts, 1, (320, 240))[0]
+    colours = capsule_colours(BODY_SHAPE, [str(i) for i in range(19)], CLOTHES["a"])
+    for t in (0, len(pts) // 2):
+        tracker = model_coverage(pts[t], cam)
+        canvas = silhouette_mask(pts[t], cam, BODY_SHAPE) >= 128
+        z = DepthCanvas(cam.width, cam.height, scale=1)
+        z.body(pts[t], cam, BODY_SHAPE, colours)
+        shaded = z.ident >= 0
+        for other in (canvas, shaded):
+            iou = (tracker & other).sum() / (tracker | other).sum()
+            assert iou > 0.93
+        assert tracker.sum() > 300
+
+
+def test_depth_test_hides_the_farther_body(take):
+    motion, _ = take
+    p = body_points(motion)[0]
+    cam = _cameras(body_points(motion), 1)[0]
+    towards = cam.centre - p[0]
+    towards[1] = 0
+    near = p + 600 * towards / np.linalg.norm(towards)  # the same pose nearer the camera
+    grey = np.zeros((19 + 2, 3))
+    canvas = DepthCanvas(cam.width, cam.height)
+    canvas.body(p, cam, BODY_SHAPE, grey, 0)
+    canvas.body(near, cam, BODY_SHAPE, grey + 255, 1)
+    behind = DepthCanvas(cam.width, cam.height)
+    behind.body(near, cam, BODY_SHAPE, grey + 255, 1)
+    behind.body(p, cam, BODY_SHAPE, grey, 0)
+    assert (canvas.ident == 1).sum() == (behind.ident == 1).sum() > 0
+
+
+def test_survival_rate_sets_beta():
+    cost = np.random.default_rng(0).uniform(0.1, 0.5, 300)
+    for alpha in (0.2, 0.5, 0.8):
+        w = np.exp(-survival_beta(cost, alpha) * (cost - cost.min()))
+        assert w.sum() ** 2 / (len(w) * (w**2).sum()) == pytest.approx(alpha, abs=0.01)
+
+
+def test_body_model_rebuilds_capture(body, take):
+    """The state of a captured pose rebuilds it closely, within the joint limits."""
+    motion, _ = take
+    x = body.states_of(motion)
+    err = np.linalg.norm(body.joint_positions(x) - body_points(motion), axis=-1).mean()
+    assert err < 40.0
+    assert 24 <= body.n_dof <= 31
+    inside = (x >= body.lower - 1e-9) & (x <= body.upper + 1e-9)
+    assert inside.mean() > 0.97
+
+
+def test_tracker_converges_on_a_known_pose(body, take):
+    """Rendered from three cameras, the tracker finds a captured pose from a standing start."""
+    motion, _ = take
+    pts = body_points(motion)[:4]
+    cams = _cameras(pts, 3, (240, 180))
+    bgs = [background((c.width, c.height), k) for k, c in enumerate(cams)]
+    videos = [
+        list(shaded_frames([pts], c, bg, 2.0, k))
+        for k, (c, bg) in enumerate(zip(cams, bgs, strict=True))
+    ]
+    apf = AnnealedParticleFilter(body, cams, particles=150, layers=8, fps=30.0, seed=1)
+    errors, costs = [], []
+    for t in range(len(pts)):
+        feats = view_features([v[t] for v in videos], bgs, t)
+        x, best = apf.step(feats)
+        errors.append(np.linalg.norm(body.joint_positions(x)[0] - pts[t], axis=-1).mean())
+        costs.append(best)
+    assert errors[-1] < 120.0, errors
+    assert np.mean(errors) < 130.0, errors
+    assert all(0.0 <= c < 0.5 for c in costs)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory, take):
+    """Two cameras, 0.1 s of the held-out take at 30 fps, 96x72, by the command line."""
+    _, path = take
+    out = tmp_path_factory.mktemp("video") / "take"
+    main(["video", "render", str(path), "--out", str(out), "--views", "2", "--seconds", "0.1",
+          "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
+    return out
+
+
+def test_video_render_writes_videos_and_cameras(rendered):
+    cams, doc = load_cameras(rendered)
+    assert len(cams) == 2 and doc["fps"] == 30.0 and doc["people"] == "a"
+    assert all((rendered / c.video).is_file() and (rendered / c.background).is_file() for c in cams)
+    assert all((c.width, c.height) == (96, 72) for c in cams)
+
+
+def test_track_command_reports_error_against_truth(rendered, take, tmp_path, capsys):
+    _, path = take
+    capsys.readouterr()
+    main(["track", "--video", str(rendered), "--truth", str(path), "--json", "--particles", "20",
+          "--layers", "2", "--out", str(tmp_path / "a.bvh")])  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["views"] == 2 and summary["frames"] == 3
+    assert {"mpjpe_mm", "per_joint_mm", "fps", "confidence"} <= summary.keys()
+    assert summary["mpjpe_mm"] > 0 and len(summary["per_joint_mm"]) == 19
+    tracked = read_motion(tmp_path / "a.bvh")
+    assert tracked.n_frames == 3 and body_points(tracked).shape == (3, 19, 3)
+
+
+@pytest.fixture(scope="module")
+def dual_model(mocap, tmp_path_factory):
+    """A small dual HMM on the training handshake and pull takes (A's skeleton: the template's)."""
+    from markovmotion.data.splits import held_out_pairs
+    from markovmotion.models.hmm.dual import DualHMM
+
+    train, _ = held_out_pairs(mocap.pairs(label=["handshake", "pull"]))
+    pairs = [mocap.load_pair(a, b) for a, b in train]
+    model = DualHMM(n_states=4, n_iter=3, window=4, placement_window=3).fit(pairs)
+    path = tmp_path_factory.mktemp("model") / "dual.npz"
+    model.save(path)
+    return path
+
+
+@pytest.mark.parametrize("live", [False, True])
+def test_respond_draws_the_partner_into_the_video(rendered, dual_model, tmp_path, capsys, live):
+    out = tmp_path / "composite.mp4"
+    args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+            "--out", str(out), "--particles", "20", "--layers", "2", "--view", "1"]  # fmt: skip
+    main(args + (["--realtime"] if live else []))
+    frames = list(read_frames(out))
+    original = list(read_frames(rendered / "cam1.mp4"))
+    assert len(frames) == len(original) == 3
+    assert frames[0].shape == original[0].shape
+    changed = [
+        np.abs(f.astype(int) - o).max(axis=2) > 60 for f, o in zip(frames, original, strict=True)
+    ]
+    assert sum(c.sum() for c in changed) > 0  # the partner is drawn somewhere
+    err = capsys.readouterr().err
+    assert ("skipped" in err) == live
+
+
+def test_respond_needs_one_source_of_a(dual_model, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(dual_model), "--out", str(tmp_path / "c.mp4")])
+    assert exc.value.code == 2
+    assert "--input" in capsys.readouterr().err
+
+
+def test_missing_or_bad_camera_file_exits_2(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(tmp_path / "empty")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "cameras.json" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "cameras.json").write_text("{not json")
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(tmp_path / "bad")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "not a JSON camera file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_lone_video_uses_its_camera(rendered, tmp_path, capsys):
+    """One camera's video is tracked with the camera naming it; without a camera file: exit 2."""
+    capsys.readouterr()
+    main(["track", "--video", str(rendered / "cam1.mp4"), "--json", "--particles", "10",
+          "--layers", "1", "--max-frames", "1"])  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["views"] == 1
+    lone = tmp_path / "lone.mp4"
+    lone.write_bytes((rendered / "cam1.mp4").read_bytes())
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(lone)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "no camera file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_given_start_pose_must_be_on_the_body_models_skeleton(rendered, mocap, capsys):
+    salsa = mocap.root / mocap.pairs(label="salsa")[0][0].file
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(rendered), "--start", str(salsa), "--max-frames", "1"])
+    assert exc.value.code == 2
+    assert "not the body model's skeleton" in capsys.readouterr().err
