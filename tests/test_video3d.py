@@ -264,3 +264,21 @@ def test_given_start_pose_must_be_on_the_body_models_skeleton(rendered, mocap, c
         main(["track", "--video", str(rendered), "--start", str(salsa), "--max-frames", "1"])
     assert exc.value.code == 2
     assert "not the body model's skeleton" in capsys.readouterr().err
+
+
+def test_demo_video_step_composites_the_partner_into_the_handshake(mocap, tmp_path):
+    """``markovmotion demo``'s video step: 2 s of the handshake rendered, A tracked, B put
+    into camera 0's video: an MP4 of 60 frames that moves."""
+    import cv2
+    from rich.console import Console
+
+    from markovmotion.video.demo import video_partner
+
+    (path,) = video_partner(tmp_path, mocap, Console(quiet=True))
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    ok, frame = cap.read()
+    while ok:
+        frames.append(frame)
+        ok, frame = cap.read()
+    assert len(frames) == 60 and not np.array_equal(frames[0], frames[-1])
