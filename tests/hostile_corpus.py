@@ -85,6 +85,8 @@ def run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float =
     proc.returncode = os.waitstatus_to_exitcode(status)
     for t in readers:
         t.join()
+    for pipe in (proc.stdout, proc.stderr):  # read to the end; closed now, not when collected
+        pipe.close()
     return Run(
         code=proc.returncode,
         stdout=out.get("out", b"").decode("utf-8", "replace"),
