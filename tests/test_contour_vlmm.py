@@ -3,6 +3,8 @@ exercise take rendered, tracked and learnt."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -24,16 +26,20 @@ SECONDS = 4.0
 
 
 @pytest.fixture(scope="module")
-def contour_take(mocap: MocapIndex, tmp_path_factory):
-    """The track of the first few seconds of the first exercise take the renderer draws."""
-    index = mocap
+def contour_source(mocap: MocapIndex, tmp_path_factory):
+    """The first exercise take the renderer draws, and the track of its first few seconds."""
     cache = tmp_path_factory.mktemp("contours")
-    for entry in index.query(category="exercise"):
+    for entry in mocap.query(category="exercise"):
         try:
-            return contour_track(index, entry, cache, SECONDS)
+            return entry, contour_track(mocap, entry, cache, SECONDS)
         except MotionFormatError:
             continue
     pytest.skip("no exercise take with the renderer's joints")
+
+
+@pytest.fixture(scope="module")
+def contour_take(contour_source):
+    return contour_source[1]
 
 
 @pytest.fixture(scope="module")
@@ -104,9 +110,60 @@ def test_contour_model_bad_input_one_line(contour_model):
 def test_contour_strip_png(contour_model, tmp_path):
     model, c = contour_model
     out = contour_strip(
-        [c, model.generate(2.0)], 1.0, tmp_path / "strip.png", 5, 5, titles=["tracked", "N = 3"]
+        [c, model.generate(2.0)], tmp_path / "strip.png", 5, 5, titles=["tracked", "N = 3"]
     )
     import cv2
 
     img = cv2.imread(str(out), cv2.IMREAD_GRAYSCALE)
     assert img is not None and (img == 0).any() and (img == 255).any()
+
+
+def test_cli_contour_train_generate_evaluate(contour_source, mocap, tmp_path, capsys):
+    """vlmm train --source contour / generate (PNG) / evaluate (configuration, pixels), on a
+    cache holding a short track for every take of one label (so nothing is rendered);
+    bad combinations are one line, exit 2."""
+    from markovmotion.cli import main
+    from markovmotion.video.contours import take_name
+
+    entry, track = contour_source
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    for e in mocap.query(category="exercise", label=entry.label):
+        track.save(cache / f"{take_name(e)}.mp4.track.npz")
+    model = tmp_path / "c.npz"
+    main(["vlmm", "train", "--source", "contour", "--label", entry.label, "--cache", str(cache),
+          "--prototypes", "8", "--max-memory", "3", "--lam", "10", "--out", str(model)])  # fmt: skip
+    loaded = Model.load(model)
+    assert loaded.configuration == "contour" and loaded.contour_scale_ > 0
+    assert loaded.held_out_files_ and entry.file in {r["file"] for r in loaded.train_files_}
+    main(["vlmm", "generate", "--model", str(model), "--seconds", "2", "--stochastic",
+          "--out", str(tmp_path / "g.png")])  # fmt: skip
+    assert (tmp_path / "g.png").stat().st_size > 500
+    capsys.readouterr()
+    for space in ("configuration", "pixels"):
+        main(["vlmm", "evaluate", "--model", str(model), "--cache", str(cache), "--samples",
+              "2", "--stride", "10", "--horizon", "1", "--space", space, "--json"])  # fmt: skip
+        result = json.loads(capsys.readouterr().out)
+        assert set(result["E_T"]) == {"vlmm", "first_order", "zero_velocity"}
+        assert all(v["1"] > 0 for v in result["E_T"].values())
+    bad = [
+        ["vlmm", "train", "--source", "contour", "--out", str(tmp_path / "x.npz")],
+        ["vlmm", "evaluate", "--model", str(model)],
+        ["vlmm", "evaluate", "--model", str(model), "--cache", str(cache), "--space", "mm"],
+        ["vlmm", "generate", "--model", str(model), "--out", str(tmp_path / "g.bvh")],
+        [
+            "vlmm",
+            "predict",
+            "--model",
+            str(model),
+            "--input",
+            str(tmp_path / "g.png"),
+            "--out",
+            str(tmp_path / "p.bvh"),
+        ],  # fmt: skip
+    ]
+    for args in bad:
+        with pytest.raises(SystemExit) as info:
+            main(args)
+        assert info.value.code == 2, args
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1, args

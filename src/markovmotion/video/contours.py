@@ -20,7 +20,8 @@ arms) stay inside it. Contours where limbs were lost are kept as tracked. The be
 
 :func:`exercise_contours` renders and tracks the takes of an index (category
 ``exercise``), caching videos and tracks in a folder; :func:`contour_strip`
-draws a synthesized routine as filled contours (paper Fig. 9).
+draws a synthesized routine as filled contours (paper Fig. 9);
+:func:`evaluate_contours` measures E_T (eq. 9, Figs. 4 and 10).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -36,8 +38,16 @@ import numpy as np
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.splits import held_out_last
 from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.evaluate.vlmm import (
+    FIRST_ORDER,
+    ConfigurationSpace,
+    HorizonCurve,
+    ZeroVelocity,
+    evaluate_horizon,
+)
 from markovmotion.features.joint_shape import person_from_motion
 from markovmotion.io.files import atomic_path
+from markovmotion.models.vlmm.behaviour import BehaviourModel
 from markovmotion.progress import track
 from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.dataset import FPS, tracked
@@ -179,22 +189,24 @@ def exercise_contours(
 # ------------------------------------------------------------------ figures
 def contour_strip(
     sequences: Sequence[np.ndarray],
-    scale: float,
     path: str | os.PathLike[str],
     frames: int = 10,
     step: int = 10,
     cell: int = 96,
     titles: Sequence[str] = (),
+    box: tuple[float, float, float, float] = (0.15, 0.15, 0.85, 0.85),
 ) -> Path:
     """A PNG of filled contours (paper Fig. 9): one row per sequence of configurations
     (F, 2n), every ``step``-th frame of the first ``frames * step``, the closed
-    B-spline sampled (:func:`evaluate_closed_bspline`) and filled, written atomically."""
+    B-spline sampled (:func:`evaluate_closed_bspline`) and filled, the part ``box``
+    (x0, y0, x1, y1) of the unit square filling each cell; written atomically."""
+    lo, span = np.asarray(box[:2]), np.asarray(box[2:]) - np.asarray(box[:2])
     rows = []
     for configs in sequences:
         row = np.full((cell, cell * frames), 255, np.uint8)
         for k, t in enumerate(range(0, min(len(configs), frames * step), step)):
-            ctrl = configuration_control(configs[t : t + 1], 1.0)[0] + np.asarray(HEAD_AT)
-            curve = evaluate_closed_bspline(ctrl, 256) * cell + [k * cell, 0]
+            ctrl = np.asarray(configs[t], dtype=float).reshape(-1, 2)
+            curve = (evaluate_closed_bspline(ctrl, 256) - lo) / span * cell + [k * cell, 0]
             cv2.fillPoly(row, [np.round(curve * 4).astype(np.int32)], 0, cv2.LINE_AA, shift=2)
         rows.append(row)
     label_h = 18 if titles else 0
@@ -209,3 +221,108 @@ def contour_strip(
         if not cv2.imwrite(str(tmp), img):
             raise OSError(f"{path}: could not write the PNG")
     return path
+
+
+# ------------------------------------------------------------------ evaluation
+class ContourPixels:
+    """A contour predictor measured in pixels: eq. 9 on the control points, the
+    configurations undone (eq. 4, then :func:`configuration_control` at ``scale``)."""
+
+    def __init__(self, predictor: Any, model: BehaviourModel, scale: float):
+        self.predictor, self.model, self.scale = predictor, model, scale
+
+    def prepare(self, features: np.ndarray) -> Any:
+        return self.predictor.prepare(features)
+
+    def predict_configurations(self, features, prepared, frames, horizon, n_samples, rng):
+        return self.predictor.predict_configurations(
+            features, prepared, frames, horizon, n_samples, rng
+        )
+
+    def configuration_positions(self, configs: np.ndarray) -> np.ndarray:
+        return self.model.configuration_positions(configs) * self.scale
+
+
+def evaluate_contours(
+    model: BehaviourModel,
+    sequences: Sequence[np.ndarray],
+    scale: float,
+    samples: int = 50,
+    horizon: float = 3.0,
+    stride: int = 1,
+    seed: int = 0,
+    space: str = "configuration",
+) -> dict[str, HorizonCurve]:
+    """E_T (eq. 9) of a contour model on contour configurations (F, 2n), against a
+    first-order Markov model over the same prototypes and zero velocity.
+
+    ``space``: ``"configuration"`` (C in [0, 1]^2n scaled by eq. 4, as
+    :class:`~markovmotion.evaluate.vlmm.ConfigurationSpace`) or ``"pixels"`` (mean
+    control-point distance, :class:`ContourPixels`).
+    """
+    if space not in ("configuration", "pixels"):
+        raise ValueError(f"space must be configuration or pixels, got {space!r}")
+    feats = model.observe(sequences)
+    predictors = {
+        "vlmm": model,
+        "first_order": model.with_vlmm(*FIRST_ORDER),
+        "zero_velocity": ZeroVelocity(model),
+    }
+    frames = int(round(horizon * model.fps))
+    curves = {}
+    for name, p in predictors.items():
+        measured = (
+            ConfigurationSpace(p) if space == "configuration" else ContourPixels(p, model, scale)
+        )
+        curves[name] = evaluate_horizon(
+            measured, feats, frames, model.fps, samples, stride, seed=seed, name=name
+        )
+    return curves
+
+
+# ------------------------------------------------------------------ training on an index
+def fit_contours(
+    model: BehaviourModel,
+    data: str | os.PathLike[str] | None,
+    cache: str | os.PathLike[str],
+    category: str = "exercise",
+    labels: Sequence[str] | None = None,
+    hold_out: bool = True,
+) -> ContourTakes:
+    """Fit a ``configuration="contour"`` model on the rendered and tracked takes of an index
+    (:func:`exercise_contours`), at the video's frame rate.
+
+    Records on the model ``contour_scale_`` (pixels), ``category_``, ``labels_``,
+    ``held_out_files_`` and, in ``train_files_``, the INDEX.csv names of the takes.
+    """
+    if not model.is_contour:
+        raise ValueError("fit_contours needs a model with configuration='contour'")
+    takes = exercise_contours(data, cache, category, labels, hold_out)
+    model.fps = takes.train[0].fps
+    model.fit(takes.configurations("train"))
+    for rec, entry in zip(model.train_files_, takes.train_entries, strict=True):
+        rec["file"] = entry.file
+    model.contour_scale_ = takes.scale
+    model.category_ = category
+    model.labels_ = sorted({e.label for e in takes.train_entries})
+    model.held_out_files_ = [e.file for e in takes.test_entries]
+    return takes
+
+
+def held_out_contours(
+    model: BehaviourModel, data: str | os.PathLike[str] | None, cache: str | os.PathLike[str]
+) -> tuple[list[np.ndarray], list[Entry]]:
+    """Contour configurations (at the model's scale) of the takes the model held out.
+
+    Raises:
+        DataNotFoundError: the model held out no take, or the index lacks them.
+    """
+    index = MocapIndex.load(data)
+    wanted = list(getattr(model, "held_out_files_", []))
+    entries = [e for e in index.query(category=model.category_) if e.file in wanted]
+    if not entries:
+        raise DataNotFoundError(
+            f"the contour model held out no take found in {index.root / 'INDEX.csv'}"
+        )
+    tracks = [contour_track(index, e, cache) for e in track(entries, "contour takes")]
+    return [contour_configurations(t, model.contour_scale_) for t in tracks], entries
