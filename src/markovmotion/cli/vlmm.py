@@ -138,8 +138,6 @@ def train(
     if source == "contour":
         if cache is None:
             raise typer.BadParameter("--source contour needs --cache DIR", param_hint="--cache")
-        if structured:
-            raise typer.BadParameter("not with --source contour", param_hint="--structured")
     elif cache is not None:
         raise typer.BadParameter("only with --source contour", param_hint="--cache")
     model = BehaviourModel(
@@ -162,10 +160,11 @@ def train(
 
         takes = fit_contours(model, data, cache, category, label, hold_out)
         model.save(out)
+        base = model.prototype_model_ if structured else model
         err_console.print(
             f"trained on {len(takes.train)} tracked takes "
-            f"({sum(t.n_frames for t in takes.train)} frames at {model.fps:g} fps), "
-            f"{len(model.train_tokens_)} prototype tokens, scale {model.contour_scale_:.1f} px; "
+            f"({sum(t.n_frames for t in takes.train)} frames at {base.fps:g} fps), "
+            f"{len(base.train_tokens_)} prototype tokens, scale {model.contour_scale_:.1f} px; "
             f"held out: {', '.join(e.file for e in takes.test_entries) or 'none'}",
             highlight=False,
         )
@@ -174,7 +173,9 @@ def train(
                 "left out (no silhouette joints): " + ", ".join(e.file for e in takes.left_out),
                 highlight=False,
             )
-        err_console.print(_memory_table(f"prototype VLMM (N = {max_memory})", model.vlmm_))
+        err_console.print(_memory_table(f"prototype VLMM (N = {max_memory})", base.vlmm_))
+        if structured:
+            err_console.print(_memory_table(f"key-prototype VLMM (N = {key_memory})", model.vlmm_))
         err_console.print(f"wrote {out}")
         return
     run = fit_index(model, MocapIndex.load(data), category, label, hold_out)
@@ -224,7 +225,11 @@ def generate(
 
         if base_suffix(out) != ".png":
             raise typer.BadParameter("a contour model writes a PNG strip", param_hint="--out")
-        first = behaviour.with_vlmm(1, behaviour.epsilon)
+        first = (
+            behaviour.with_key_memory(1, behaviour.epsilon)
+            if hasattr(behaviour, "prototype_model_")
+            else behaviour.with_vlmm(1, behaviour.epsilon)
+        )
         routines = [
             m.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
             for m in (behaviour, first)
@@ -303,10 +308,10 @@ def evaluate(
     ),
     plot: Path = typer.Option(None, help="Write E_T curves (paper Fig. 4) to this PNG."),
     space: str = typer.Option(
-        "mm",
+        None,
         callback=choice(("mm", "configuration", "pixels")),
-        help="E_T in mm, or in configuration space [0, 1]^d (eq. 9); a contour model: "
-        "configuration or pixels.",
+        help="E_T in mm (the default), or in configuration space [0, 1]^d (eq. 9); a contour "
+        "model: configuration (the default) or pixels.",
     ),
     cache: Path = typer.Option(
         None, help="A contour model: folder of rendered videos and tracks (as in training)."
@@ -350,6 +355,7 @@ def evaluate(
         return
     if cache is not None:
         raise typer.BadParameter("only for a contour model", param_hint="--cache")
+    space = space or "mm"
     if space == "pixels":
         raise typer.BadParameter("pixels only for a contour model", param_hint="--space")
     result = evaluate_model(
@@ -407,6 +413,7 @@ def _evaluate_contours(
         raise typer.BadParameter(
             "a contour model is evaluated on its held-out takes", param_hint="--category/--label"
         )
+    space = space or "configuration"
     if space == "mm":
         raise typer.BadParameter(
             "a contour model: --space configuration or pixels", param_hint="--space"

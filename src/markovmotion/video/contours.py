@@ -48,6 +48,7 @@ from markovmotion.evaluate.vlmm import (
 from markovmotion.features.joint_shape import person_from_motion
 from markovmotion.io.files import atomic_path
 from markovmotion.models.vlmm.behaviour import BehaviourModel
+from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 from markovmotion.progress import track
 from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.dataset import FPS, tracked
@@ -244,7 +245,7 @@ class ContourPixels:
 
 
 def evaluate_contours(
-    model: BehaviourModel,
+    model: BehaviourModel | StructuredBehaviourModel,
     sequences: Sequence[np.ndarray],
     scale: float,
     samples: int = 50,
@@ -254,7 +255,8 @@ def evaluate_contours(
     space: str = "configuration",
 ) -> dict[str, HorizonCurve]:
     """E_T (eq. 9) of a contour model on contour configurations (F, 2n), against a
-    first-order Markov model over the same prototypes and zero velocity.
+    first-order Markov model over the same prototypes and zero velocity (and for a
+    structured model, its prototype VLMM as ``vlmm`` and itself as ``structured``).
 
     ``space``: ``"configuration"`` (C in [0, 1]^2n scaled by eq. 4, as
     :class:`~markovmotion.evaluate.vlmm.ConfigurationSpace`) or ``"pixels"`` (mean
@@ -262,43 +264,48 @@ def evaluate_contours(
     """
     if space not in ("configuration", "pixels"):
         raise ValueError(f"space must be configuration or pixels, got {space!r}")
-    feats = model.observe(sequences)
-    predictors = {
-        "vlmm": model,
-        "first_order": model.with_vlmm(*FIRST_ORDER),
-        "zero_velocity": ZeroVelocity(model),
+    base = model.prototype_model_ if isinstance(model, StructuredBehaviourModel) else model
+    feats = base.observe(sequences)
+    predictors: dict[str, Any] = {
+        "vlmm": base,
+        "first_order": base.with_vlmm(*FIRST_ORDER),
+        "zero_velocity": ZeroVelocity(base),
     }
-    frames = int(round(horizon * model.fps))
+    if model is not base:
+        predictors["structured"] = model
+    frames = int(round(horizon * base.fps))
     curves = {}
     for name, p in predictors.items():
         measured = (
-            ConfigurationSpace(p) if space == "configuration" else ContourPixels(p, model, scale)
+            ConfigurationSpace(p) if space == "configuration" else ContourPixels(p, base, scale)
         )
         curves[name] = evaluate_horizon(
-            measured, feats, frames, model.fps, samples, stride, seed=seed, name=name
+            measured, feats, frames, base.fps, samples, stride, seed=seed, name=name
         )
     return curves
 
 
 # ------------------------------------------------------------------ training on an index
 def fit_contours(
-    model: BehaviourModel,
+    model: BehaviourModel | StructuredBehaviourModel,
     data: str | os.PathLike[str] | None,
     cache: str | os.PathLike[str],
     category: str = "exercise",
     labels: Sequence[str] | None = None,
     hold_out: bool = True,
 ) -> ContourTakes:
-    """Fit a ``configuration="contour"`` model on the rendered and tracked takes of an index
-    (:func:`exercise_contours`), at the video's frame rate.
+    """Fit a ``configuration="contour"`` model (or a structured model over one) on the
+    rendered and tracked takes of an index (:func:`exercise_contours`), at the video's
+    frame rate.
 
     Records on the model ``contour_scale_`` (pixels), ``category_``, ``labels_``,
     ``held_out_files_`` and, in ``train_files_``, the INDEX.csv names of the takes.
     """
-    if not model.is_contour:
+    base = model.prototype_model if isinstance(model, StructuredBehaviourModel) else model
+    if base is None or not base.is_contour:
         raise ValueError("fit_contours needs a model with configuration='contour'")
     takes = exercise_contours(data, cache, category, labels, hold_out)
-    model.fps = takes.train[0].fps
+    base.fps = takes.train[0].fps
     model.fit(takes.configurations("train"))
     for rec, entry in zip(model.train_files_, takes.train_entries, strict=True):
         rec["file"] = entry.file
@@ -310,7 +317,9 @@ def fit_contours(
 
 
 def held_out_contours(
-    model: BehaviourModel, data: str | os.PathLike[str] | None, cache: str | os.PathLike[str]
+    model: BehaviourModel | StructuredBehaviourModel,
+    data: str | os.PathLike[str] | None,
+    cache: str | os.PathLike[str],
 ) -> tuple[list[np.ndarray], list[Entry]]:
     """Contour configurations (at the model's scale) of the takes the model held out.
 
