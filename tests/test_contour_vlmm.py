@@ -194,3 +194,18 @@ def test_structured_model_on_contours(contour_take, tmp_path):
     model.save(tmp_path / "s.npz")
     back = Model.load(tmp_path / "s.npz")
     np.testing.assert_array_equal(back.generate(2.0, np.random.default_rng(0)), g)
+
+
+def test_contour_extrapolation_png(contour_model, tmp_path):
+    """Fig. 7: recent contours and the first predicted frames at selected instants."""
+    import cv2
+
+    from markovmotion.video.contours import contour_extrapolation
+
+    model, c = contour_model
+    out = contour_extrapolation(model, c, [20, 50, 80], tmp_path / "fig7.png")
+    img = cv2.imread(str(out))
+    assert img.shape == (160, 480, 3)
+    assert ((img[..., 2] > 150) & (img[..., 0] < 80)).any()  # red prediction outlines
+    with pytest.raises(ValueError, match="outside"):
+        contour_extrapolation(model, c, [len(c)], tmp_path / "x.png")

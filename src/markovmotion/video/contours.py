@@ -20,7 +20,8 @@ arms) stay inside it. Contours where limbs were lost are kept as tracked. The be
 
 :func:`exercise_contours` renders and tracks the takes of an index (category
 ``exercise``), caching videos and tracks in a folder; :func:`contour_strip`
-draws a synthesized routine as filled contours (paper Fig. 9);
+draws a synthesized routine as filled contours (paper Fig. 9) and
+:func:`contour_extrapolation` predictions at selected instants (Fig. 7);
 :func:`evaluate_contours` measures E_T (eq. 9, Figs. 4 and 10).
 """
 
@@ -217,6 +218,44 @@ def contour_strip(
         if i < len(titles):
             cv2.putText(img, titles[i], (4, y + 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, 0, 1)
         img[y + label_h : y + label_h + cell] = row
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), img):
+            raise OSError(f"{path}: could not write the PNG")
+    return path
+
+
+def contour_extrapolation(
+    model: BehaviourModel | StructuredBehaviourModel,
+    configs: np.ndarray,
+    instants: Sequence[int],
+    path: str | os.PathLike[str],
+    recent: int = 8,
+    ahead: int = 12,
+    cell: int = 160,
+    box: tuple[float, float, float, float] = (0.15, 0.15, 0.85, 0.85),
+) -> Path:
+    """A PNG of maximum likelihood extrapolation at selected instants (paper Fig. 7): per
+    instant t, the last ``recent`` observed contours filled in greys (the lightest the
+    current one, t) and the first ``ahead`` predicted frames (:meth:`BehaviourModel.predict`
+    from ``configs[: t + 1]``) as red outlines; written atomically."""
+    lo, span = np.asarray(box[:2]), np.asarray(box[2:]) - np.asarray(box[:2])
+    img = np.full((cell, cell * len(instants), 3), 255, np.uint8)
+
+    def curve(c: np.ndarray, k: int) -> np.ndarray:
+        pts = (evaluate_closed_bspline(c.reshape(-1, 2), 256) - lo) / span * cell + [k * cell, 0]
+        return np.round(pts * 4).astype(np.int32)
+
+    for k, t in enumerate(instants):
+        if not 1 <= t < len(configs):
+            raise ValueError(f"instant {t} is outside the sequence (1..{len(configs) - 1})")
+        pred = model.predict(configs[: t + 1], ahead / model.fps)[t + 1 : t + 1 + ahead]
+        past = configs[max(0, t - recent + 1) : t + 1]
+        for i, c in enumerate(past):  # oldest darkest
+            grey = int(200 * (i + 1) / len(past))
+            cv2.fillPoly(img, [curve(c, k)], (grey, grey, grey), cv2.LINE_AA, shift=2)
+        for c in pred:
+            cv2.polylines(img, [curve(c, k)], True, (0, 0, 220), 1, cv2.LINE_AA, shift=2)
     path = Path(path)
     with atomic_path(path) as tmp:
         if not cv2.imwrite(str(tmp), img):
