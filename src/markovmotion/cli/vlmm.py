@@ -43,6 +43,11 @@ def _memory_table(title: str, vlmm) -> Table:
     return table
 
 
+def _is_contour(behaviour) -> bool:
+    base = getattr(behaviour, "prototype_model_", behaviour)
+    return base.configuration == "contour"
+
+
 def _is_markers(behaviour) -> bool:
     base = getattr(behaviour, "prototype_model_", behaviour)
     return base.configuration == "markers"
@@ -97,8 +102,12 @@ def train(
     ),
     source: str = typer.Option(
         "skeleton",
-        callback=choice(("skeleton", "markers")),
-        help="skeleton (joints, --configuration) or markers (the paper's 13 body points).",
+        callback=choice(("skeleton", "markers", "contour")),
+        help="skeleton (joints, --configuration), markers (the paper's 13 body points) or "
+        "contour (silhouette video rendered and tracked: the paper's data set 1, needs --cache).",
+    ),
+    cache: Path = typer.Option(
+        None, help="For --source contour: folder for the rendered videos and their tracks."
     ),
     configuration: str = typer.Option(
         "positions",
@@ -126,12 +135,17 @@ def train(
     from markovmotion.models.vlmm.behaviour import BehaviourModel, fit_index
 
     check_model_output(out)
+    if source == "contour":
+        if cache is None:
+            raise typer.BadParameter("--source contour needs --cache DIR", param_hint="--cache")
+    elif cache is not None:
+        raise typer.BadParameter("only with --source contour", param_hint="--cache")
     model = BehaviourModel(
         n_prototypes=prototypes,
         max_memory=max_memory,
         epsilon=epsilon,
         lam=lam,
-        configuration="markers" if source == "markers" else configuration,
+        configuration=source if source in ("markers", "contour") else configuration,
         fps=fps,
         quantiser=quantiser,
         join=join,
@@ -141,6 +155,29 @@ def train(
         from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 
         model = StructuredBehaviourModel(model, max_memory=key_memory, epsilon=epsilon)
+    if source == "contour":
+        from markovmotion.video.contours import fit_contours
+
+        takes = fit_contours(model, data, cache, category, label, hold_out)
+        model.save(out)
+        base = model.prototype_model_ if structured else model
+        err_console.print(
+            f"trained on {len(takes.train)} tracked takes "
+            f"({sum(t.n_frames for t in takes.train)} frames at {base.fps:g} fps), "
+            f"{len(base.train_tokens_)} prototype tokens, scale {model.contour_scale_:.1f} px; "
+            f"held out: {', '.join(e.file for e in takes.test_entries) or 'none'}",
+            highlight=False,
+        )
+        if takes.left_out:
+            err_console.print(
+                "left out (no silhouette joints): " + ", ".join(e.file for e in takes.left_out),
+                highlight=False,
+            )
+        err_console.print(_memory_table(f"prototype VLMM (N = {max_memory})", base.vlmm_))
+        if structured:
+            err_console.print(_memory_table(f"key-prototype VLMM (N = {key_memory})", model.vlmm_))
+        err_console.print(f"wrote {out}")
+        return
     run = fit_index(model, MocapIndex.load(data), category, label, hold_out)
     model.save(out)
     base = model.prototype_model_ if structured else model
@@ -169,7 +206,9 @@ def train(
 def generate(
     model: Path = typer.Option(..., help="Model file from 'vlmm train'."),
     out: Path = typer.Option(
-        ..., help="Motion to write (.bvh or .bvh.gz; a markers model: .c3d or .gif)."
+        ...,
+        help="Motion to write (.bvh or .bvh.gz; a markers model: .c3d or .gif; a contour "
+        "model: .png, filled contours of the routine and of N = 1, paper Fig. 9).",
     ),
     seconds: float = ranged("seconds", 20.0, min=0.1, help="Length of the routine."),
     stochastic: bool = typer.Option(
@@ -180,8 +219,32 @@ def generate(
     """Synthesize a new routine by traversing the automaton (§3.2.1, §4.3)."""
     from markovmotion.models.vlmm.structured import load_behaviour
 
-    _check_output(None, out)
     behaviour = load_behaviour(model)
+    if _is_contour(behaviour):
+        from markovmotion.video.contours import contour_strip
+
+        if base_suffix(out) != ".png":
+            raise typer.BadParameter("a contour model writes a PNG strip", param_hint="--out")
+        first = (
+            behaviour.with_key_memory(1, behaviour.epsilon)
+            if hasattr(behaviour, "prototype_model_")
+            else behaviour.with_vlmm(1, behaviour.epsilon)
+        )
+        routines = [
+            m.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
+            for m in (behaviour, first)
+        ]
+        contour_strip(
+            routines,
+            out,
+            titles=[f"N = {behaviour.max_memory}", "N = 1"],
+        )
+        err_console.print(
+            f"wrote {out}: {len(routines[0])} frames at {behaviour.fps:g} fps, "
+            f"N = {behaviour.max_memory} and N = 1"
+        )
+        return
+    _check_output(None, out)
     _check_output(behaviour, out)
     motion = behaviour.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
     _write(motion, out)
@@ -209,6 +272,11 @@ def predict(
 
     _check_output(None, out)
     behaviour = load_behaviour(model)
+    if _is_contour(behaviour):
+        raise typer.BadParameter(
+            "a contour model predicts tracked contours: see 'vlmm evaluate --cache'",
+            param_hint="--model",
+        )
     _check_output(behaviour, out)
     motion = read_listed_motion(input, fps=fps)
     try:
@@ -240,9 +308,13 @@ def evaluate(
     ),
     plot: Path = typer.Option(None, help="Write E_T curves (paper Fig. 4) to this PNG."),
     space: str = typer.Option(
-        "mm",
-        callback=choice(("mm", "configuration")),
-        help="E_T in mm, or in configuration space [0, 1]^d (eq. 9).",
+        None,
+        callback=choice(("mm", "configuration", "pixels")),
+        help="E_T in mm (the default), or in configuration space [0, 1]^d (eq. 9); a contour "
+        "model: configuration (the default) or pixels.",
+    ),
+    cache: Path = typer.Option(
+        None, help="A contour model: folder of rendered videos and tracks (as in training)."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print E_T as JSON on stdout."),
     seed: int = ranged("seed", 0, help="Seed of the Monte Carlo predictions."),
@@ -266,6 +338,26 @@ def evaluate(
             f"not a list of integers: {memories!r}", param_hint="--memories"
         ) from None
     behaviour = load_behaviour(model)
+    if _is_contour(behaviour):
+        _evaluate_contours(
+            behaviour,
+            test,
+            cache,
+            category or label,
+            samples,
+            horizon,
+            stride,
+            plot,
+            space,
+            as_json,
+            seed,
+        )
+        return
+    if cache is not None:
+        raise typer.BadParameter("only for a contour model", param_hint="--cache")
+    space = space or "mm"
+    if space == "pixels":
+        raise typer.BadParameter("pixels only for a contour model", param_hint="--space")
     result = evaluate_model(
         behaviour,
         MocapIndex.load(test),
@@ -305,4 +397,50 @@ def evaluate(
     for name, c in result.curves.items():
         fmt = ".1f" if space == "mm" else ".4f"
         table.add_row(name, *(f"{c.at(s):{fmt}}" for s in result.seconds))
+    print_table(table)
+
+
+def _evaluate_contours(
+    behaviour, test, cache, other_takes, samples, horizon, stride, plot, space, as_json, seed
+) -> None:
+    """``vlmm evaluate`` of a contour model: E_T on its held-out takes (rendered, tracked)."""
+    from markovmotion.evaluate.vlmm import plot_horizon_curves
+    from markovmotion.video.contours import evaluate_contours, held_out_contours
+
+    if cache is None:
+        raise typer.BadParameter("a contour model needs --cache DIR", param_hint="--cache")
+    if other_takes:
+        raise typer.BadParameter(
+            "a contour model is evaluated on its held-out takes", param_hint="--category/--label"
+        )
+    space = space or "configuration"
+    if space == "mm":
+        raise typer.BadParameter(
+            "a contour model: --space configuration or pixels", param_hint="--space"
+        )
+    sequences, entries = held_out_contours(behaviour, test, cache)
+    curves = evaluate_contours(
+        behaviour, sequences, behaviour.contour_scale_, samples, horizon, stride, seed, space
+    )
+    seconds = [s for s in (0.5, 1.0, 2.0, 3.0) if s <= horizon + 1e-9]
+    unit = "pixels" if space == "pixels" else "configuration space"
+    if plot:
+        plot_horizon_curves(
+            list(curves.values()), plot, ylabel=f"E_T ({unit})", title="contour VLMM"
+        )
+        err_console.print(f"wrote {plot}")
+    if as_json:
+        out = {
+            "space": space,
+            "test_files": [e.file for e in entries],
+            "E_T": {n: {f"{s:g}": c.at(s) for s in seconds} for n, c in curves.items()},
+        }
+        typer.echo(json.dumps(out, indent=2))
+        return
+    table = Table(title=f"E_T ({unit}) on {', '.join(e.file for e in entries)}")
+    table.add_column("model")
+    for s in seconds:
+        table.add_column(f"{s:g} s", justify="right")
+    for name, c in curves.items():
+        table.add_row(name, *(f"{c.at(s):.{1 if space == 'pixels' else 3}f}" for s in seconds))
     print_table(table)

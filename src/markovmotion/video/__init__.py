@@ -4,7 +4,9 @@ multi-view video, 3-D tracking and compositing for the dual HMM (dual-HMM paper,
 ``render`` draws motion capture as filled silhouettes from a fixed side camera,
 ``tracker`` finds people in video by background subtraction and outlines them
 with closed B-splines (``bspline``), ``dataset`` renders and tracks the
-two-person takes, ``partner`` draws the virtual partner into video.
+two-person takes, ``partner`` draws the virtual partner into video,
+``contours`` renders and tracks one person's exercise takes into the contour
+configurations of the VLMM paper's data set 1 (§2.1.1).
 
 ``cameras`` holds calibrated cameras and ``cameras.json``; ``body_model`` the
 articulated body tracked in 3-D; ``shading`` shaded bodies with depth;

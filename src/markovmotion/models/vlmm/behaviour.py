@@ -17,12 +17,17 @@ component is scaled to [0, 1] (eq. 4). Generated rotations or positions go
 back to a :class:`Motion` (rotations directly, positions through an
 inverse-kinematics fit to the training skeleton); markers come out as
 :class:`~markovmotion.core.markers.Markers` (written as C3D or a point-light
-animation).
+animation). ``configuration="contour"`` learns from arrays instead of motions:
+the paper's data set 1 (§2.1.1), a silhouette's closed B-spline control points
+relative to its head reference point, (F, 2n) in [0, 1] per frame
+(:func:`markovmotion.video.contours.contour_configurations`); generation and
+prediction then return such arrays.
 """
 
 from __future__ import annotations
 
 import copy
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -57,7 +62,7 @@ from markovmotion.state import (
     require_types,
 )
 
-CONFIGURATIONS = ("rotations", "positions", "markers")
+CONFIGURATIONS = ("rotations", "positions", "markers", "contour")
 QUANTISERS = ("kmeans", "competitive")
 
 
@@ -120,6 +125,41 @@ def call_rng(
     return rng if rng is not None else np.random.default_rng(random_state)
 
 
+def contour_arrays(sequences: Sequence[np.ndarray], width: int | None = None) -> list[np.ndarray]:
+    """Contour configurations as float arrays (F, 2n), checked: finite, even width
+    (``width`` if given), at least two frames each.
+
+    Raises:
+        ValueError: anything else (one line).
+    """
+    if isinstance(sequences, np.ndarray) or not len(sequences):
+        raise ValueError("contour configurations: give a list of (frames, 2n) arrays")
+    out = []
+    for i, s in enumerate(sequences):
+        if not isinstance(s, np.ndarray):
+            raise ValueError(
+                f"contour sequence {i}: a contour model takes (frames, 2n) arrays, "
+                f"not {type(s).__name__}"
+            )
+        a = np.asarray(s, dtype=float)
+        if a.ndim != 2 or a.shape[1] % 2 or len(a) < 2 or not np.isfinite(a).all():
+            raise ValueError(
+                f"contour sequence {i}: expected finite (frames >= 2, 2n) values, got {a.shape}"
+            )
+        if width is not None and a.shape[1] != width:
+            raise ValueError(
+                f"contour sequence {i}: {a.shape[1]} values a frame, model has {width}"
+            )
+        out.append(a)
+    return out
+
+
+def array_record(array: np.ndarray, i: int) -> dict[str, str]:
+    """Name and content hash of a training array (what ``train_files_`` lists of it)."""
+    digest = hashlib.sha256(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+    return {"file": f"contour sequence {i}", "sha256": digest.hexdigest()}
+
+
 # ------------------------------------------------------------------ model
 class BehaviourModel(Model):
     """Prototypes in augmented configuration space and a VLMM over them (§2, §3.2).
@@ -134,7 +174,8 @@ class BehaviourModel(Model):
             (``positions``, lambda 100, join 2 s: docs/vlmm.md).
         configuration: ``"rotations"`` (exponential maps + pelvis height),
             ``"positions"`` (body-centred joint positions in mm) or ``"markers"``
-            (the 13 body points of §2.1.2, body-centred).
+            (the 13 body points of §2.1.2, body-centred) or ``"contour"`` ((F, 2n) arrays
+            of silhouette contour configurations, §2.1.1, instead of motions).
         fps: frame rate the motion is resampled to for modelling.
         quantiser: ``"kmeans"`` or ``"competitive"`` (robust competitive learning).
         time_scale: factor on the eq. 8 intervals (1: the paper's).
@@ -182,7 +223,14 @@ class BehaviourModel(Model):
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
-    def _make_pipeline(self, skeleton: Skeleton) -> FeaturePipeline:
+    @property
+    def is_contour(self) -> bool:
+        """Whether the model learns contour arrays (§2.1.1) rather than motions."""
+        return self.configuration == "contour"
+
+    def _make_pipeline(self, skeleton: Skeleton | None) -> FeaturePipeline:
+        if self.configuration == "contour":
+            return FeaturePipeline([AugmentedConfiguration(self.lam)])
         if self.configuration == "rotations":
             first = [RemoveHeading(), ExpMaps(root_position="height")]
         elif self.configuration == "positions":
@@ -194,15 +242,21 @@ class BehaviourModel(Model):
             raise ValueError(f"configuration must be one of {CONFIGURATIONS}")
         return FeaturePipeline([*first, DropStaticColumns(), AugmentedConfiguration(self.lam)])
 
-    def fit(self, motions: Sequence[Motion]) -> BehaviourModel:
-        """Learn prototypes and the VLMM from motions (resampled to ``fps``); returns self."""
+    def fit(self, motions: Sequence[Motion] | Sequence[np.ndarray]) -> BehaviourModel:
+        """Learn prototypes and the VLMM from motions (resampled to ``fps``), or for
+        ``configuration="contour"`` from (F, 2n) contour configurations at ``fps``; returns self."""
         if self.quantiser not in QUANTISERS:
             raise ValueError(f"quantiser must be one of {QUANTISERS}")
         if not self.join >= 0:
             raise ValueError(f"join must be a time constant >= 0 s, got {self.join}")
-        self.record_training(motions)
-        motions = [m.resample(self.fps) for m in motions]
-        self.skeleton_ = motions[0].skeleton
+        if self.is_contour:
+            motions = contour_arrays(motions)
+            self.train_files_ = [array_record(a, i) for i, a in enumerate(motions)]
+            self.skeleton_ = None
+        else:
+            self.record_training(motions)
+            motions = [m.resample(self.fps) for m in motions]
+            self.skeleton_ = motions[0].skeleton
         self.pipeline_ = self._make_pipeline(self.skeleton_)
         feats = self.pipeline_.fit_transform(motions)
         x = np.vstack(feats)
@@ -213,7 +267,9 @@ class BehaviourModel(Model):
         runs = [collapse_repeats(nearest_prototype(f, self.prototypes_)) for f in feats]
         self.train_tokens_ = np.concatenate([r[0] for r in runs])
         self.train_lengths_ = np.array([len(r[0]) for r in runs])
-        if self.configuration == "markers":
+        if self.is_contour:
+            self.eval_joints_ = np.arange(motions[0].shape[1] // 2)  # the control points
+        elif self.configuration == "markers":
             self.eval_joints_ = body_point_index(self.skeleton_, MARKER_POINTS)
         else:
             self.eval_joints_ = evaluation_joints(motions)
@@ -230,7 +286,9 @@ class BehaviourModel(Model):
             return
         require(self, "train_files_", "prototypes_", "eval_joints_", "train_tokens_")
         require(self, "train_lengths_")
-        require_types(self, skeleton_=Skeleton, pipeline_=FeaturePipeline, vlmm_=VLMM)
+        require_types(self, pipeline_=FeaturePipeline, vlmm_=VLMM)
+        if not self.is_contour:
+            require_types(self, skeleton_=Skeleton)
         width = self.pipeline_.output_width()
         k = len(check_shape("prototypes_", self.prototypes_, (None, width)))
         if self.vlmm_.n_symbols_ != k:
@@ -239,7 +297,8 @@ class BehaviourModel(Model):
             "train_tokens_", check_shape("train_tokens_", self.train_tokens_, (None,)), k
         )
         check_lengths("train_lengths_", self.train_lengths_, len(tokens))
-        check_index("eval_joints_", self.eval_joints_, self.skeleton_.n_joints)
+        n_points = width // 4 if self.is_contour else self.skeleton_.n_joints
+        check_index("eval_joints_", self.eval_joints_, n_points)
 
     def token_sequences(self) -> list[np.ndarray]:
         """The collapsed prototype sequences of the training motions."""
@@ -261,8 +320,11 @@ class BehaviourModel(Model):
         """d, the dimension of the configuration C (prototypes are 2d long)."""
         return self.prototypes_.shape[1] // 2
 
-    def observe(self, motions: Sequence[Motion]) -> list[np.ndarray]:
-        """Augmented configuration vectors (F, 2d) of motions, at the model's frame rate."""
+    def observe(self, motions: Sequence[Motion] | Sequence[np.ndarray]) -> list[np.ndarray]:
+        """Augmented configuration vectors (F, 2d) of motions, at the model's frame rate
+        (of contour configurations (F, d) for ``configuration="contour"``: eq. 2)."""
+        if self.is_contour:
+            return self.pipeline_.transform(contour_arrays(motions, self.n_dims))
         return self.pipeline_.transform([m.resample(self.fps) for m in motions])
 
     def knots(self, tokens: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -292,11 +354,12 @@ class BehaviourModel(Model):
         times = np.r_[0.0, np.cumsum(self.intervals(c, dc))]
         return hermite_sample(c, dc, times, np.arange(int(np.floor(times[-1])) + 1))
 
-    def to_motion(self, configs: np.ndarray) -> Motion | Markers:
+    def to_motion(self, configs: np.ndarray) -> Motion | Markers | np.ndarray:
         """Scaled configurations (F, d) back to a motion on the training skeleton, or for
-        ``configuration="markers"`` to the 13 markers (mm, lowest marker on the floor)."""
+        ``configuration="markers"`` to the 13 markers (mm, lowest marker on the floor), or
+        for ``"contour"`` to contour configurations (F, d) (eq. 4 undone)."""
         out = self.pipeline_.inverse_transform([configs])[0]
-        if isinstance(out, Motion):
+        if isinstance(out, Motion) or self.is_contour:
             return out
         if self.configuration == "markers":
             out = out - np.array([0.0, 1.0, 0.0]) * np.nanmin(out[..., 1])
@@ -306,8 +369,11 @@ class BehaviourModel(Model):
         return fit_rotations(self.skeleton_, pos, fps=self.fps)
 
     def configuration_positions(self, configs: np.ndarray) -> np.ndarray:
-        """Positions (M, J_eval, 3) in mm of the evaluated joints for scaled configurations (M, d)."""
+        """Positions (M, J_eval, 3) in mm of the evaluated joints for scaled configurations (M, d);
+        for ``"contour"``, control points (M, n, 2) in contour configuration units."""
         raw = self.pipeline_.steps[-1].inverse_transform([configs])[0]
+        if self.is_contour:
+            return raw.reshape(len(raw), -1, 2)
         raw = self.pipeline_.steps[-2].inverse_transform([raw])[0]
         if self.configuration == "positions":
             return raw.reshape(len(raw), -1, 3)[:, self.eval_joints_]
@@ -351,8 +417,9 @@ class BehaviourModel(Model):
 
     def generate(
         self, seconds: float, rng: np.random.Generator | None = None, stochastic: bool = True
-    ) -> Motion:
-        """A new routine of ``seconds`` (plus its first frame) on the training skeleton.
+    ) -> Motion | Markers | np.ndarray:
+        """A new routine of ``seconds`` (plus its first frame) on the training skeleton
+        (13 markers; contour configurations (F, d)).
 
         Drawn from the automaton when ``stochastic`` (from ``rng``, else a
         generator seeded with ``random_state``), else its most likely path.
@@ -459,11 +526,11 @@ class BehaviourModel(Model):
 
     def predict(
         self,
-        motion: Motion,
+        motion: Motion | np.ndarray,
         seconds: float,
         rng: np.random.Generator | None = None,
         stochastic: bool = False,
-    ) -> Motion:
+    ) -> Motion | Markers | np.ndarray:
         """The observed motion (at the model's frame rate) followed by ``seconds`` of
         predicted continuation: the most likely one, or drawn when ``stochastic``."""
         feats = self.observe([motion])[0]
@@ -476,11 +543,11 @@ class BehaviourModel(Model):
         return self.to_motion(np.vstack([feats[:, : self.n_dims], pred]))
 
     # ---------------------------------------------------------------- score
-    def tokens(self, motion: Motion) -> np.ndarray:
+    def tokens(self, motion: Motion | np.ndarray) -> np.ndarray:
         """The collapsed prototype sequence of a motion (eq. 3)."""
         return collapse_repeats(nearest_prototype(self.observe([motion])[0], self.prototypes_))[0]
 
-    def score(self, motions: Sequence[Motion]) -> float:
+    def score(self, motions: Sequence[Motion] | Sequence[np.ndarray]) -> float:
         """Log-likelihood (nats) of the motions' collapsed prototype sequences under the VLMM,
         summed over the motions (:meth:`VLMM.log_likelihood`: each sequence read from the
         root, unseen events backed off to P(a))."""

@@ -156,10 +156,13 @@ class StructuredBehaviourModel(Model):
         self.unseen_threshold = unseen_threshold
 
     # ---------------------------------------------------------------- fitting
-    def fit(self, motions: Sequence[Motion]) -> StructuredBehaviourModel:
-        """Fit the prototype model, then keys, templates and the key VLMM; returns self."""
-        self.record_training(motions)
+    def fit(self, motions: Sequence[Motion] | Sequence[np.ndarray]) -> StructuredBehaviourModel:
+        """Fit the prototype model, then keys, templates and the key VLMM; returns self.
+
+        With a ``configuration="contour"`` prototype model, ``motions`` are contour
+        configurations (F, 2n) (§2.1.1) and generation returns such arrays."""
         base = clone(self.prototype_model or BehaviourModel()).fit(motions)
+        self.train_files_ = list(base.train_files_)  # what record_training would give
         self.prototype_model_ = base
         feats = base.observe(motions)
         runs = [collapse_repeats(nearest_prototype(f, base.prototypes_)) for f in feats]
