@@ -283,4 +283,5 @@ def test_temporary_output_removed_when_killed(tmp_path, sig):
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
     proc.send_signal(sig)
     proc.wait(timeout=30)
+    proc.stdout.close()
     assert list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())

@@ -355,6 +355,7 @@ def test_serve_command_prints_the_admin_token(site, dual, tmp_path):
     finally:
         proc.terminate()
         proc.wait(10)
+        proc.stdout.close()
 
 
 # ---------------------------------------------------------------- live partner
