@@ -443,6 +443,8 @@ def test_evaluation_stimuli_with_nothing_to_add_writes_nothing(tmp_path):
 TEXT = st.text(st.characters(codec="utf-8"), max_size=300) | st.sampled_from(
     ["x" * 100_000, "../" * 50, "%00", "\x00", "é", "\ud800", "/etc/passwd", "walk.bvh/..", "~"]
 )
+#: h11's largest request head (uvicorn's default): longer ones are refused before the app.
+H11_LIMIT = 16 * 1024
 GET_TARGETS = [
     "/api/motion?path={}",
     "/results?token={}",
@@ -464,7 +466,17 @@ def quote(value: str) -> str:
 @HYPO
 @given(target=st.sampled_from(GET_TARGETS), value=TEXT)
 def test_hostile_query_and_path_values(server, target, value):
-    status, _, data, s = timed(server, "GET", target.format(quote(value)))
+    path = target.format(quote(value))
+    try:
+        status, _, data, s = timed(server, "GET", path)
+    except (ConnectionResetError, BrokenPipeError):
+        # An over-long request line: the HTTP layer (h11, 16 KiB) answers 400 and closes,
+        # and if that happens while the client is still sending, the client sees a reset.
+        # Rejected before the app, not crashed; anything shorter must get its answer.
+        assert len(path) > H11_LIMIT, len(path)
+        PROBES["tried"] += 1
+        PROBES["clean"] += 1
+        return
     # an empty value leaves a trailing slash: redirected (307) to the path without it
     assert_clean(
         status, data, s, ok=(200, 307) if target.startswith("/static") or not value else ()
