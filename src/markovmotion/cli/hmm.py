@@ -83,45 +83,29 @@ def _split(values: str | None) -> list[str] | None:
     return [v.strip() for v in values.split(",") if v.strip()] if values else None
 
 
-def new_model(
-    states: int,
-    mode: str,
-    observation: str,
-    candidates: int,
-    placement_window: int,
-    blend_window: int,
-    trellis: str,
-    points: str,
-    energy: float,
-    frame: str,
-    fps: float,
-    window: int,
-    n_iter: int,
-    seed: int,
-    markers: int = 0,
-):
-    """An unfitted DualHMM with the settings that ``train`` and ``crossval`` share."""
+#: The options of ``train`` and ``crossval`` that set the model, as DualHMM's parameters.
+MODEL_OPTIONS = {
+    "states": "n_states",
+    "seed": "random_state",
+    **{
+        k: k
+        for k in (
+            "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
+            "points", "energy", "frame", "markers", "fps", "window", "n_iter",
+        )
+    },
+}  # fmt: skip
+
+
+def new_model(options: dict):
+    """An unfitted DualHMM from a command's options (its ``locals()``: those of
+    :data:`MODEL_OPTIONS`), the settings that ``train`` and ``crossval`` share."""
     from markovmotion.models.hmm.dual import DualHMM
 
+    markers = options.get("markers", 0)
     if 0 < markers < 13:
         raise typer.BadParameter("--markers: 0 (skeletons) or 13 to 200 virtual markers")
-    return DualHMM(
-        n_states=states,
-        mode=mode,
-        observation=observation,
-        candidates=candidates,
-        placement_window=placement_window,
-        blend_window=blend_window,
-        trellis=trellis,
-        points=points,
-        energy=energy,
-        frame=frame,
-        markers=markers,
-        fps=fps,
-        window=window,
-        n_iter=n_iter,
-        random_state=seed,
-    )
+    return DualHMM(**{param: options[opt] for opt, param in MODEL_OPTIONS.items()})
 
 
 @app.command()
@@ -156,23 +140,7 @@ def train(
 
     check_model_output(out)
     start = time.perf_counter()
-    model = new_model(
-        states,
-        mode,
-        observation,
-        candidates,
-        placement_window,
-        blend_window,
-        trellis,
-        points,
-        energy,
-        frame,
-        fps,
-        window,
-        n_iter,
-        seed,
-        markers,
-    )
+    model = new_model(locals())
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
     model.save(out, **extras)
@@ -456,23 +424,7 @@ def crossval(
 
     from markovmotion.evaluate.hmm import crossval_index
 
-    model = new_model(
-        states,
-        mode,
-        observation,
-        candidates,
-        placement_window,
-        blend_window,
-        trellis,
-        points,
-        energy,
-        frame,
-        fps,
-        window,
-        n_iter,
-        seed,
-        markers,
-    )
+    model = new_model(locals())
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
         report, written = crossval_index(model, data, _split(labels), plots, windows)
