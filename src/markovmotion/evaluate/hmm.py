@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -351,6 +351,21 @@ def evaluation_pairs(
     return index, test_takes(model, index, pairs, "two-person take")
 
 
+def pairs_that_fit(
+    model: DualHMM, index: MocapIndex, pairs: Iterable[Pair], other_skeleton: list[str]
+) -> Iterator[tuple[Entry, Entry, Motion, Motion]]:
+    """The takes of ``pairs`` loaded, those whose person A the model can answer; the files
+    of the others (A on a skeleton without the model's body points) go to ``other_skeleton``."""
+    for ea, eb in pairs:
+        a, b = index.load_pair(ea, eb)
+        try:
+            model.check_input(a, ea.path)
+        except SkeletonMismatchError:
+            other_skeleton += [ea.file, eb.file]
+            continue
+        yield ea, eb, a, b
+
+
 def evaluate_model(
     model: DualHMM,
     test: str | os.PathLike[str] | None = None,
@@ -364,13 +379,8 @@ def evaluate_model(
     index, takes = evaluation_pairs(model, test, labels, trials)
     baselines = _Baselines(model)
     results, plots, kept, incompatible = [], [], [], []
-    for ea, eb in track(takes.takes, "evaluating pairs"):
-        a, b = index.load_pair(ea, eb)
-        try:
-            model.check_input(a, ea.path)
-        except SkeletonMismatchError:
-            incompatible += [ea.file, eb.file]
-            continue
+    pairs = track(takes.takes, "evaluating pairs")
+    for ea, eb, a, b in pairs_that_fit(model, index, pairs, incompatible):
         kept.append((ea, eb))
         res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
         results.append(res)

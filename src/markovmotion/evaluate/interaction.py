@@ -158,8 +158,7 @@ def write_interaction_stimuli(
         ModelFormatError: not a dual-HMM model file.
         DataNotFoundError: no take fits, or all are training takes or of another skeleton.
     """
-    from markovmotion.errors import SkeletonMismatchError
-    from markovmotion.evaluate.hmm import evaluation_pairs
+    from markovmotion.evaluate.hmm import evaluation_pairs, pairs_that_fit
     from markovmotion.models.hmm.dual import DualHMM
 
     root = Path(folder)
@@ -169,13 +168,7 @@ def write_interaction_stimuli(
     index, takes = evaluation_pairs(model, test)
     made: list[tuple[str, str, Any, Any, Any]] = []
     other_skeleton: list[str] = []
-    for ea, eb in takes.takes:
-        a, b = index.load_pair(ea, eb)
-        try:
-            model.check_input(a, ea.path)
-        except SkeletonMismatchError:
-            other_skeleton += [ea.file, eb.file]
-            continue
+    for ea, eb, a, b in pairs_that_fit(model, index, takes.takes, other_skeleton):
         made.append((f"{ea.name}+{eb.name}", ea.label, *_clip_pair(model, a, b)))
     if not made:
         raise DataNotFoundError(

@@ -105,16 +105,14 @@ class BodyMotion(FeatureStep):
     def pose(self, motion: Motion, positions: np.ndarray | None = None) -> np.ndarray:
         """(F, J, 3) body-centred positions of the joints (or body points) the features
         hold, from the motion's world ``positions`` if already computed."""
-        return pelvis_centred(motion, positions, getattr(self, "turn", True))[
-            :, self._index(motion)
-        ]
+        return pelvis_centred(motion, positions, self.turn)[:, self._index(motion)]
 
     def transform(self, sequences: Sequence[Motion]) -> list[np.ndarray]:
         out = []
         for m in sequences:
             pos = m.positions()
             origin, yaw = ground_frame(m, pos)
-            if not getattr(self, "turn", True):
+            if not self.turn:
                 yaw = np.zeros_like(yaw)
             out.append(self.rows(self.pose(m, pos), origin, yaw, m.fps))
         return out

@@ -388,7 +388,7 @@ class MarkerFeatures(FeatureStep):
             else:
                 yaw = principal_heading(positions)
         origin[:, 1] = 0.0
-        if not getattr(self, "turn", True):
+        if not self.turn:
             yaw = np.where(np.isnan(yaw), np.nan, 0.0)
         return origin, yaw
 

@@ -77,8 +77,7 @@ class JointPositions(FeatureStep):
         out = []
         for m in sequences:
             idx = self._index(m)
-            turn = getattr(self, "turn", True)
-            pos = pelvis_centred(m, None, turn) if self.body_centred else m.positions()
+            pos = pelvis_centred(m, None, self.turn) if self.body_centred else m.positions()
             out.append(pos[:, idx].reshape(len(pos), -1))
         return out
 

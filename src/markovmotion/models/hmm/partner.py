@@ -81,7 +81,7 @@ class Partner:
         # where A stood in the slice's frames and the ``half`` before
         self._places: deque = deque(maxlen=window + self._half)
         self._shown_count = 0
-        self._blend = min(getattr(model, "blend_window", 1) // 2, self.lag)
+        self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
         self._history: deque = deque(maxlen=keep)  # B's training frames shown
         self._frames_in = 0
