@@ -60,7 +60,7 @@ FRAME = typer.Option(
     help="B's place measured in A's facing ('heading'), along the world's axes from A "
     "('world'), or whichever varies less on the training takes ('auto').",
 )
-ENERGY = ranged("fraction", 0.99, help="PCA energy kept per person (the paper's 0.95).")
+ENERGY = ranged("fraction", 0.95, help="PCA energy kept per person (the paper's).")
 MARKERS = typer.Option(
     0,
     "--markers",
