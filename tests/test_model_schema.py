@@ -90,7 +90,7 @@ CASES = {
         "probability": (_array("lambda_a_/transmat_", lambda a: a * 0.5), "transmat_"),
         "variance": (_array("lambda_b_/covars_", lambda a: -a), "lambda_b_"),
         "missing": (_learnt(["train_states_"]), "missing learnt attribute train_states_"),
-        "width": (_array("pipeline_b_/param/steps/1/components_", lambda a: a[:1]), "pipeline_b_"),
+        "width": (_array("pipeline_b_/param/steps/1/components_", lambda a: a[:-1]), "pipeline_b_"),
     },
     "vlmm": {
         "index": (_array("model/train_tokens_", _at(0, 12)), "train_tokens_: index 12"),
