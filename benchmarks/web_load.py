@@ -40,14 +40,13 @@ from markovmotion.evaluate.store import open_results
 from markovmotion.io import write_motion
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.web import create_app
-from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import (
     STALL_SECONDS,
     MirrorPartner,
     simulate_evaluators,
     simulate_live,
 )
-from markovmotion.web.server import running
+from markovmotion.web.server import AppOptions, running, running_workers
 
 
 def build_library(folder: Path, index: MocapIndex) -> str:
@@ -103,6 +102,9 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, default=20)
     parser.add_argument("--data", type=Path, default=None, help="Folder with INDEX.csv.")
     parser.add_argument("--partner", type=Path, default=None, help="A dual HMM model (.npz).")
+    parser.add_argument(
+        "--workers", type=int, default=2, help="Server processes for the dual-HMM sessions."
+    )
     args = parser.parse_args()
     console = Console()
     with tempfile.TemporaryDirectory(prefix="markovmotion-load-") as tmp:
@@ -122,9 +124,12 @@ def main() -> None:
                 stored = open_results(db).count_answers()
                 console.print(f"{args.sessions} stand-in live sessions for {args.seconds:g} s ...")
                 live = pool.submit(simulate_live, url, walk, args.sessions, args.seconds).result()
-            app = create_app(lib, Path(tmp) / "dual.sqlite", partner=dual_hmm_partner(model))
-            with running(app) as url:
-                console.print(f"{args.sessions} dual-HMM live sessions for {args.seconds:g} s ...")
+            options = AppOptions(lib, Path(tmp) / "dual.sqlite", partner=model)
+            with running_workers(options, args.workers) as url:
+                console.print(
+                    f"{args.sessions} dual-HMM live sessions for {args.seconds:g} s, "
+                    f"{args.workers} server processes ..."
+                )
                 dual = pool.submit(simulate_live, url, salsa, args.sessions, args.seconds).result()
 
     t = Table(title=f"{args.evaluators} simulated evaluators, {ev.seconds:.1f} s, loopback")
@@ -140,7 +145,8 @@ def main() -> None:
     t.add_row("answer latency p99 (ms)", f"{np.quantile(ev.latency_ms, 0.99):.1f}")
     console.print(t)
     console.print(live_table(live, args.sessions, args.seconds, "stand-in partner"))
-    console.print(live_table(dual, args.sessions, args.seconds, "dual HMM partner"))
+    what = f"dual HMM partner, {args.workers} server processes"
+    console.print(live_table(dual, args.sessions, args.seconds, what))
     for e in (ev.errors + live.errors + dual.errors)[:10]:
         console.print(f"[red]error:[/] {e}")
 

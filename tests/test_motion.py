@@ -77,3 +77,36 @@ def test_real_walk_is_upright_and_moves_forward(mocap):
     yaw = m.heading(pos)
     forward = np.array([np.sin(yaw[0]), 0, np.cos(yaw[0])])
     assert travelled @ forward > 0.8 * np.linalg.norm(travelled[[0, 2]])  # walks where it faces
+
+
+def test_slerp_of_every_joint_at_once_gives_scipys_rotations():
+    from scipy.spatial.transform import Slerp
+
+    from markovmotion.core.motion import slerp_frames
+
+    q = Rotation.random(40 * 5, random_state=2).as_quat().reshape(40, 5, 4) * 3.0  # not unit
+    q[6] = -q[5]  # the same rotation, the other sign: no turn between them
+    at = np.concatenate([np.linspace(0, 39, 517), np.arange(40.0)])
+    ours = slerp_frames(q, at)
+    ref = np.stack(
+        [Slerp(np.arange(40), Rotation.from_quat(q[:, j]))(at).as_quat() for j in range(5)], 1
+    )
+    np.testing.assert_allclose(np.linalg.norm(ours, axis=-1), 1.0, atol=1e-12)
+    # the same rotations (a quaternion and its negative are one rotation)
+    np.testing.assert_allclose(np.abs(np.sum(ours * ref, axis=-1)), 1.0, atol=1e-9)
+    # and at a captured frame, that frame's own quaternion (its sign kept)
+    np.testing.assert_allclose(
+        ours[517:], q / np.linalg.norm(q, axis=-1, keepdims=True), atol=1e-12
+    )
+
+
+def test_forward_kinematics_matches_scipys_rotations_and_refuses_a_zero_quaternion():
+    from markovmotion.core.motion import _quat_matrices
+
+    q = np.random.default_rng(0).normal(size=(6, 7, 4)) * 3
+    ref = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(6, 7, 3, 3)
+    np.testing.assert_allclose(_quat_matrices(q), ref, atol=1e-12)
+    m = make_motion(5)
+    m.rotations[2, 1] = 0.0
+    with pytest.raises(ValueError, match="zero norm"):
+        m.positions()

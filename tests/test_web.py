@@ -37,10 +37,10 @@ from markovmotion.io import read_motion, write_motion
 from markovmotion.io.bvh import bvh_text
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.web import create_app
-from markovmotion.web.library import display_parents
+from markovmotion.web.library import MotionLibrary, display_parents
 from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import MirrorPartner, simulate_evaluators, simulate_live
-from markovmotion.web.server import running
+from markovmotion.web.server import AppOptions, running, running_workers
 
 ADMIN = "admin-token-for-tests"
 SECRET = "TOP-SECRET-OUTSIDE-THE-LIBRARY"
@@ -461,6 +461,35 @@ def test_short_load_every_answer_is_stored(site, tmp_path):
     assert not evaluators.errors and evaluators.answers > 50
     assert open_results(db).count_answers() == evaluators.answers
     assert not live.errors and live.sessions == 20 and min(live.frames) > 0
+
+
+def test_two_server_processes_share_the_sessions_and_store_every_answer(site, dual, tmp_path):
+    db = tmp_path / "workers.sqlite"
+    options = AppOptions(site / "lib", db, admin_token=ADMIN, partner=dual)
+    with running_workers(options, workers=2) as url:
+        evaluators = simulate_evaluators(url, n=10, seconds=3.0)
+        live = simulate_live(url, "salsa_a.bvh", n=6, seconds=1.5)
+        assert fetch(f"{url}/api/motions")[0] == 200
+    # two writers on one SQLite file: every accepted answer is there once
+    assert not evaluators.errors and evaluators.answers > 10
+    assert open_results(db).count_answers() == evaluators.answers
+    assert not live.errors and live.sessions == 6 and min(live.frames) >= 30
+
+
+def test_library_streams_a_file_read_once_until_it_changes(site):
+    lib = MotionLibrary(site / "lib")
+    motion, frames = lib.stream("short.bvh", 15.0)
+    again = lib.stream("short.bvh", 15.0)
+    assert again[0] is motion and again[1] is frames  # one read for every session
+    assert motion.fps == 15.0 and len(frames) == motion.n_frames == 12
+    np.testing.assert_allclose(
+        np.array(json.loads(frames[3])).reshape(-1, 3), motion.positions()[3], atol=0.051
+    )
+    assert lib.stream("short.bvh")[0].n_frames == 24  # another rate, another entry
+    path = site / "lib" / "short.bvh"
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
+    assert lib.stream("short.bvh", 15.0)[0] is not motion  # the file changed: read again
 
 
 # ---------------------------------------------------------------- browser

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import signal
+import sys
+from dataclasses import replace
 from pathlib import Path
 
 import typer
@@ -26,6 +29,11 @@ def serve(
     admin_token: str = typer.Option(
         None, envvar="MARKOVMOTION_ADMIN_TOKEN", help="Token of the results page (default: random)."
     ),
+    workers: int = typer.Option(
+        1,
+        help="Server processes sharing the port (live sessions spread over them; about one "
+        "per core).",
+    ),
     allow_host: list[str] = typer.Option(
         [],
         help="Also answer requests whose Host is NAME (repeat; default: 127.0.0.1, "
@@ -34,28 +42,26 @@ def serve(
     ),
 ) -> None:
     """Serve the viewer, the live partner and the perceptual evaluation in a browser."""
-    import uvicorn
-
     from markovmotion.cli import fail
-    from markovmotion.web import create_app
-    from markovmotion.web.live import model_partner
-    from markovmotion.web.server import PortInUseError, listen
+    from markovmotion.web.server import (
+        AppOptions,
+        PortInUseError,
+        listen,
+        start_workers,
+        stop_workers,
+        uvicorn_server,
+    )
 
     if not 0 <= port <= 65535:
         fail(f"--port {port}: must be between 0 and 65535")
+    if not 1 <= workers <= 64:
+        fail(f"--workers {workers}: must be between 1 and 64")
     try:
         sock = listen(host, port)  # before anything is printed or opened: one line, exit 2
     except PortInUseError as exc:
         fail(str(exc))
-    factory = model_partner(partner) if partner else None
-    app = create_app(
-        library,
-        db,
-        stimuli=stimuli,
-        admin_token=admin_token,
-        partner=factory,
-        allow_hosts=[host, *allow_host],
-    )
+    options = AppOptions(library, db, stimuli, admin_token, partner, (host, *allow_host))
+    app = options.build()  # here first, so that a bad option is one line before any worker
     port = sock.getsockname()[1]
     url = f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
     console = Console()
@@ -65,9 +71,22 @@ def serve(
         console.print(
             f"evaluation: {url}/evaluation · results: {url}/results?token=...", highlight=False
         )
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
     try:
-        server.run(sockets=[sock])
+        if workers == 1:
+            uvicorn_server(app).run(sockets=[sock])
+        else:
+            token = app.state.admin_token  # the one printed, for every worker
+            del app
+            procs = start_workers(replace(options, admin_token=token), sock, workers)
+            # stopped by a signal: the workers are stopped with it (the finally below)
+            signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+            try:
+                for p in procs:
+                    p.join()
+            except KeyboardInterrupt:
+                pass
+            finally:
+                stop_workers(procs)
     finally:
         sock.close()
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from markovmotion.core.skeleton import Skeleton
 
@@ -100,8 +100,9 @@ class Motion:
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: global rotation matrices (F, J, 3, 3) and positions (F, J, 3) mm."""
-        f = self.n_frames
-        local = Rotation.from_quat(self.rotations.reshape(-1, 4)).as_matrix().reshape(f, -1, 3, 3)
+        local = _quat_matrices(self.rotations)
+        if local is None:  # a zero quaternion: SciPy's error names it
+            Rotation.from_quat(self.rotations.reshape(-1, 4))
         return _chain(local, self.translations, self.skeleton.parents)
 
     def positions(self) -> np.ndarray:
@@ -210,9 +211,7 @@ class Motion:
             )
         n_new = int(np.floor(span + 1e-9)) + 1
         t_new = np.arange(n_new) / fps
-        rot = np.empty((n_new, self.skeleton.n_joints, 4))
-        for j in range(self.skeleton.n_joints):
-            rot[:, j] = Slerp(t_old, Rotation.from_quat(self.rotations[:, j]))(t_new).as_quat()
+        rot = slerp_frames(self.rotations, t_new * self.fps)
         flat = self.translations.reshape(self.n_frames, -1)
         trans = np.stack([np.interp(t_new, t_old, c) for c in flat.T], axis=1)
         return Motion(self.skeleton, rot, trans.reshape(n_new, -1, 3), fps, self.name, self.source)
@@ -248,6 +247,67 @@ class Motion:
         out[..., 0] = c[:, None] * x + s[:, None] * z
         out[..., 2] = -s[:, None] * x + c[:, None] * z
         return out
+
+
+def slerp_frames(quats: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Unit quaternions (F, J, 4) interpolated at fractional frames ``at`` (n,) in [0, F - 1]:
+    spherical linear interpolation between the two frames around each time, the
+    shorter way round, every joint at once.
+
+    SciPy's ``Slerp`` gives the same rotations and signs (it composes frame k with a
+    fraction of the relative rotation to frame k + 1) but takes one joint per call,
+    which made resampling a take a fifth of a second of a live session's start."""
+    q = np.asarray(quats, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    at = np.asarray(at, dtype=float)
+    at = np.where(np.abs(at - np.rint(at)) < 1e-6, np.rint(at), at)  # a frame is itself
+    k = np.clip(np.floor(at).astype(int), 0, len(q) - 1)
+    u = (at - k)[:, None, None]
+    q0, q1 = q[k], q[np.minimum(k + 1, len(q) - 1)]
+    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    dot = np.minimum(np.abs(dot), 1.0)
+    omega = np.arccos(dot)
+    sin = np.sin(omega)
+    near = sin < 1e-9  # the same rotation: any weights do
+    safe = np.where(near, 1.0, sin)
+    w0 = np.where(near, 1.0 - u, np.sin((1.0 - u) * omega) / safe)
+    w1 = np.where(near, u, np.sin(u * omega) / safe)
+    out = w0 * q0 + w1 * q1
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def _quat_matrices(quats: np.ndarray) -> np.ndarray | None:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), scalar last, each
+    normalised first (as SciPy's ``Rotation.from_quat``); None if one has zero norm.
+
+    Compiled, not SciPy's: the one-frame calls of online partners spent most of
+    their forward kinematics in ``Rotation``'s argument checks."""
+    q = np.ascontiguousarray(quats, dtype=float).reshape(-1, 4)
+    out = np.empty((len(q), 3, 3))
+    if not _quat_matrices_into(q, out):
+        return None
+    return out.reshape(*quats.shape[:-1], 3, 3)
+
+
+@numba.njit(cache=True)
+def _quat_matrices_into(q, out):  # pragma: no cover - compiled
+    for i in range(q.shape[0]):
+        x, y, z, w = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        n = x * x + y * y + z * z + w * w
+        if n == 0.0:
+            return False
+        s = 2.0 / n
+        out[i, 0, 0] = 1.0 - s * (y * y + z * z)
+        out[i, 0, 1] = s * (x * y - z * w)
+        out[i, 0, 2] = s * (x * z + y * w)
+        out[i, 1, 0] = s * (x * y + z * w)
+        out[i, 1, 1] = 1.0 - s * (x * x + z * z)
+        out[i, 1, 2] = s * (y * z - x * w)
+        out[i, 2, 0] = s * (x * z - y * w)
+        out[i, 2, 1] = s * (y * z + x * w)
+        out[i, 2, 2] = 1.0 - s * (x * x + y * y)
+    return True
 
 
 @numba.njit(cache=True)

@@ -14,8 +14,9 @@ import tempfile
 import threading
 import zlib
 from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO, TypeVar
 
 import numpy as np
 
@@ -66,6 +67,19 @@ def display_parents(skeleton: Skeleton) -> list[int]:
     return parents
 
 
+T = TypeVar("T")
+
+
+def flat_positions(positions: np.ndarray) -> list[float]:
+    """Joint positions as the pages get them: mm to one decimal, flat (``F*J*3`` or ``J*3``)."""
+    return np.round(positions, 1).ravel().tolist()
+
+
+def encoded_frames(motion: Motion) -> list[str]:
+    """Each frame's :func:`flat_positions` as JSON text, for streaming frame by frame."""
+    return [json.dumps(flat_positions(p), separators=(",", ":")) for p in motion.positions()]
+
+
 def motion_payload(motion: Motion) -> dict:
     """The JSON sent to pages: global joint positions (mm, flat ``F*J*3``), the
     parents of the bones to draw (:func:`display_parents`), fps."""
@@ -76,7 +90,7 @@ def motion_payload(motion: Motion) -> dict:
         "frames": motion.n_frames,
         "joints": list(motion.skeleton.names),
         "parents": display_parents(motion.skeleton),
-        "positions": np.round(pos, 1).ravel().tolist(),
+        "positions": flat_positions(pos),
     }
 
 
@@ -119,8 +133,9 @@ class MotionLibrary:
         if not self.root.is_dir():
             raise LibraryPathError(f"{root}: no such folder")
         self.cache_size = cache_size
-        self._cache: OrderedDict[tuple[Path, float], bytes] = OrderedDict()
+        self._cache: OrderedDict[tuple, Any] = OrderedDict()
         self._lock = threading.Lock()
+        self._building: dict[tuple, threading.Lock] = {}
 
     def files(self) -> list[str]:
         """Every motion file under the folder, as sorted POSIX paths relative to it."""
@@ -159,8 +174,11 @@ class MotionLibrary:
         return path
 
     def motion(self, relative: str) -> Motion:
-        """The skeletal motion at ``relative`` (BVH or ASF/AMC)."""
-        path = self.resolve(relative)
+        """The skeletal motion at ``relative`` (BVH or ASF/AMC), cached by mtime: the same
+        object for every caller, which must not change it."""
+        return self._cached(relative, "motion", lambda path: self._read(path))
+
+    def _read(self, path: Path) -> Motion:
         if self.index is not None:
             rel = path.relative_to(self.root).as_posix()
             entry = next((e for e in self.index if e.file == rel), None)
@@ -168,25 +186,56 @@ class MotionLibrary:
                 return self.index.load_motion(entry)
         return read_motion(path)
 
+    def stream(self, relative: str, fps: float | None = None) -> tuple[Motion, list[str]]:
+        """The motion at ``relative`` at ``fps`` (its own if None) and each frame's joint
+        positions as JSON text (mm, flat, one decimal), cached by mtime: a live session's
+        person A, read, resampled and encoded once for every session that streams it."""
+
+        def build(path: Path) -> tuple[Motion, list[str]]:
+            motion = self.motion(relative)
+            if fps is not None and not np.isclose(fps, motion.fps):
+                motion = motion.resample(fps)
+            return motion, encoded_frames(motion)
+
+        return self._cached(relative, ("stream", fps), build)
+
     def json(self, relative: str) -> bytes:
         """The file at ``relative`` as encoded JSON (:func:`motion_payload`), cached by mtime."""
+
+        def build(path: Path) -> bytes:
+            if base_suffix(path) == ".c3d":
+                payload = _markers_payload(path)
+            else:
+                payload = motion_payload(self.motion(relative))
+            payload["name"] = "" if self.anonymous else Path(relative).name
+            return json.dumps(payload, separators=(",", ":")).encode()
+
+        return self._cached(relative, "json", build)
+
+    def _cached(self, relative: str, kind: object, build: Callable[[Path], T]) -> T:
+        """``build(path)`` of the file at ``relative``, kept (least recently used first out,
+        ``cache_size`` entries) until the file's mtime changes."""
         path = self.resolve(relative)
-        key = (path, path.stat().st_mtime)
+        key = (path, path.stat().st_mtime_ns, kind)
         with self._lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
                 return self._cache[key]
-        if base_suffix(path) == ".c3d":
-            payload = _markers_payload(path)
-        else:
-            payload = motion_payload(self.motion(relative))
-        payload["name"] = "" if self.anonymous else Path(relative).name
-        data = json.dumps(payload, separators=(",", ":")).encode()
-        with self._lock:
-            self._cache[key] = data
-            while len(self._cache) > self.cache_size:
-                self._cache.popitem(last=False)
-        return data
+            building = self._building.setdefault(key, threading.Lock())
+        with building:  # sessions that start together build it once
+            with self._lock:
+                if key in self._cache:
+                    return self._cache[key]
+            try:
+                value = build(path)
+                with self._lock:
+                    self._cache[key] = value
+                    while len(self._cache) > self.cache_size:
+                        self._cache.popitem(last=False)
+            finally:
+                with self._lock:
+                    self._building.pop(key, None)
+        return value
 
 
 def _copy_bounded(src: BinaryIO, dst: BinaryIO, name: str, limit: int) -> None:

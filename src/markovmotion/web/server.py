@@ -1,13 +1,28 @@
-"""Running the app with uvicorn in a background thread (tests, benchmarks, notebooks)."""
+"""Running the app with uvicorn: in a background thread (tests, benchmarks, notebooks), or
+in worker processes sharing one listening socket (``serve --workers N``).
+
+A live session runs its partner in the server's interpreter; one process is one core. With
+``workers`` processes each connection (a page, a live session) is taken by one of them,
+so live sessions spread over the cores. Each worker builds its own app from the same
+options (:func:`markovmotion.web.create_app`); the evaluation answers go to the one
+SQLite file, whose writes are serialised by SQLite's lock (``BEGIN IMMEDIATE``).
+"""
 
 from __future__ import annotations
 
 import errno
+import multiprocessing
+import os
+import secrets
+import signal
 import socket
 import threading
 import time
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import uvicorn
 from fastapi import FastAPI
@@ -41,11 +56,20 @@ def listen(host: str, port: int) -> socket.socket:
     return sock
 
 
+def uvicorn_server(app: FastAPI) -> uvicorn.Server:
+    """The uvicorn server for ``app`` (``serve`` and :func:`running` alike).
+
+    WebSocket compression (permessage-deflate) is off: the live page's frames are
+    small and sent 30 times a second per session, and compressing each one took a
+    third of the time spent sending it (py-spy under ``benchmarks/web_load.py``)."""
+    return uvicorn.Server(uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False))
+
+
 @contextmanager
 def running(app: FastAPI, host: str = "127.0.0.1", port: int = 0) -> Iterator[str]:
     """Serve ``app`` on ``host:port`` (a free port if 0) while in the block; yields its base URL."""
     sock = listen(host, port)
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
+    server = uvicorn_server(app)
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
     deadline = time.monotonic() + 30
@@ -58,4 +82,92 @@ def running(app: FastAPI, host: str = "127.0.0.1", port: int = 0) -> Iterator[st
     finally:
         server.should_exit = True
         thread.join(timeout=10)
+        sock.close()
+
+
+@dataclass(frozen=True)
+class AppOptions:
+    """What each worker process builds its app from (:func:`markovmotion.web.create_app`);
+    the partner as a model file, loaded in each worker."""
+
+    library: Path
+    db: Path | None = None
+    stimuli: Path | None = None
+    admin_token: str | None = None
+    partner: Path | None = None
+    allow_hosts: tuple[str, ...] = field(default_factory=tuple)
+
+    def build(self) -> FastAPI:
+        from markovmotion.web.app import create_app
+        from markovmotion.web.live import model_partner
+
+        return create_app(
+            self.library,
+            self.db,
+            stimuli=self.stimuli,
+            admin_token=self.admin_token,
+            partner=model_partner(self.partner) if self.partner else None,
+            allow_hosts=self.allow_hosts,
+        )
+
+
+def _worker(options: AppOptions, sock: socket.socket) -> None:  # pragma: no cover - child
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops the workers
+    uvicorn_server(options.build()).run(sockets=[sock])
+
+
+def start_workers(
+    options: AppOptions, sock: socket.socket, workers: int
+) -> list[multiprocessing.process.BaseProcess]:
+    """``workers`` processes serving ``options``' app on the listening ``sock``."""
+    spawn = multiprocessing.get_context("spawn")
+    procs = [
+        spawn.Process(target=_worker, args=(options, sock), daemon=True) for _ in range(workers)
+    ]
+    for p in procs:
+        p.start()
+    return procs
+
+
+def stop_workers(procs: list[multiprocessing.process.BaseProcess], timeout: float = 10) -> None:
+    """Ask the workers to finish (SIGTERM: uvicorn closes its connections), then kill any
+    that do not within ``timeout`` seconds."""
+    for p in procs:
+        if p.is_alive() and p.pid is not None:
+            os.kill(p.pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join()
+
+
+def wait_until_serving(url: str, procs: list, timeout: float = 60) -> None:
+    """Return once ``url`` answers; RuntimeError if a worker dies or ``timeout`` passes."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(f"{url}/api/motions", timeout=5):
+                return
+        except OSError:
+            if any(not p.is_alive() for p in procs) or time.monotonic() > deadline:
+                raise RuntimeError("the web server's workers did not start") from None
+            time.sleep(0.1)
+
+
+@contextmanager
+def running_workers(
+    options: AppOptions, workers: int = 2, host: str = "127.0.0.1", port: int = 0
+) -> Iterator[str]:
+    """:func:`running` with ``workers`` processes (module docstring); yields the base URL."""
+    sock = listen(host, port)
+    if options.admin_token is None:  # one token for every worker
+        options = replace(options, admin_token=secrets.token_urlsafe(18))
+    procs = start_workers(options, sock, workers)
+    try:
+        wait_until_serving(f"http://{host}:{sock.getsockname()[1]}", procs)
+        yield f"http://{host}:{sock.getsockname()[1]}"
+    finally:
+        stop_workers(procs)
         sock.close()
