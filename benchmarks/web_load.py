@@ -10,7 +10,7 @@ simulated clients in another, then:
    for ``--seconds`` (30): each registers, answers its 30 items one request at a
    time, and registers again. Every accepted answer must be in the SQLite
    database (count equal); answer latency p50/p99 is reported.
-2. ``--sessions`` (20) concurrent live-partner WebSocket sessions stream
+2. ``--sessions`` (40) concurrent live-partner WebSocket sessions stream
    person A in a loop for ``--seconds``: frames received against the frame
    rate, stalls (no frame for 250 ms), partner latency p99, gap between frames
    p99. Twice: with a stand-in partner (A mirrored, 3 frames late; a real walk
@@ -99,7 +99,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--evaluators", type=int, default=50)
-    parser.add_argument("--sessions", type=int, default=20)
+    parser.add_argument("--sessions", type=int, default=40)
     parser.add_argument("--data", type=Path, default=None, help="Folder with INDEX.csv.")
     parser.add_argument("--partner", type=Path, default=None, help="A dual HMM model (.npz).")
     parser.add_argument(
