@@ -11,7 +11,8 @@ from PIL import Image
 from markovmotion import MarkovMotionError, read_motion
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
-from markovmotion.demo.run import WALK, run_demo
+from markovmotion.demo.run import STEPS, WALK, run_demo
+from markovmotion.video.demo import vlmm_contours
 from markovmotion.viz import render, render_frames, save_line_plot
 from markovmotion.viz.animation import COLOURS, _Stage, _tracks
 
@@ -185,7 +186,7 @@ def test_render_command(mocap, tmp_path):
 
 def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     out = tmp_path / "demo"
-    run_demo(out, mocap.root)
+    run_demo(out, mocap.root, [*STEPS, vlmm_contours])  # as 'markovmotion demo' (video apart)
     for name in ("walk.bvh", "walk.gif", "pca-energy.png"):
         assert (out / name).stat().st_size > 0
     back = read_motion(out / "walk.bvh")
@@ -209,6 +210,14 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     for name in (*gifs, "chain-partner.gif"):
         frames = gif_frames(out / name)
         assert len(frames) > 10 and not np.array_equal(frames[0], frames[-1])
+    # the contour routines at key memory 1 and 4 (paper Fig. 9): two rows of filled bodies
+    with Image.open(out / "vlmm-contours-key-memory.png") as im:
+        assert im.format == "PNG" and im.size[0] > 2 * im.size[1]
+        strip = np.asarray(im.convert("L"))
+    for row in np.array_split(strip, 2):
+        dark = (row < 128).mean(axis=0)
+        assert 0.02 < (row < 128).mean() < 0.5  # filled contours, not blank nor solid
+        assert (np.convolve(dark > 0, np.ones(8), "same") == 0).sum() > 100  # gaps between
 
 
 def test_line_plot_is_written_atomically(tmp_path):

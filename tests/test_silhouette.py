@@ -23,6 +23,7 @@ from markovmotion.video.render import (
     side_camera,
     write_video,
 )
+from markovmotion.video.render import empty_frames as scene_frames
 from markovmotion.video.tracker import SilhouetteTrack, SilhouetteTracker, track_video
 
 RNG = np.random.default_rng(7)
@@ -121,6 +122,19 @@ def test_track_video_round_trip(tmp_path):
     np.testing.assert_array_equal(filled.reference[12:], np.repeat(tr.reference[11:12, 0], 4, 0))
     with pytest.raises(MotionFormatError):
         list(read_frames(tmp_path / "missing.mp4"))
+
+
+def test_track_video_learns_the_background_from_an_empty_scene(tmp_path):
+    # someone standing still through a whole clip is the median of its frames, hence no one;
+    # the empty scene's video gives the background instead (what contour clips use)
+    still = ring(320.0, 240.0, 40.0, 100.0)
+    video = write_video([frame_with([still]) for _ in range(10)], tmp_path / "v.mp4", 25.0)
+    assert not track_video(video, n_people=1).found.any()
+    plate = write_video(list(scene_frames(8, seed=0)), tmp_path / "empty.mp4", 25.0)
+    tr = track_video(video, n_people=1, background=plate)
+    assert tr.found.all()
+    top = evaluate_closed_bspline(still, 4096)[0]
+    assert np.abs(tr.reference[:, 0] - top).max() < 1.5
 
 
 def test_partner_drawn_black_inside_its_outline():

@@ -14,9 +14,9 @@ def demo(
     """One model of each family on the CMU and Bandai data: motion (BVH), animations (GIF), plots (PNG)."""
     from markovmotion.demo import run_demo
     from markovmotion.demo.run import STEPS
-    from markovmotion.video.demo import video_partner
+    from markovmotion.video.demo import video_partner, vlmm_contours
 
-    run_demo(out, data, [*STEPS, video_partner])
+    run_demo(out, data, [*STEPS, vlmm_contours, video_partner])
 
 
 def register(app: typer.Typer) -> None:

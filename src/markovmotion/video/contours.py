@@ -53,8 +53,8 @@ from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 from markovmotion.progress import track
 from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.dataset import FPS, tracked
-from markovmotion.video.render import render_frames, side_camera, write_video
-from markovmotion.video.tracker import SilhouetteTrack
+from markovmotion.video.render import empty_frames, render_frames, side_camera, write_video
+from markovmotion.video.tracker import SilhouetteTrack, track_video
 
 #: Where the head reference point sits in the unit square (x, y; y down).
 HEAD_AT = (0.5, 0.35)
@@ -62,6 +62,8 @@ HEAD_AT = (0.5, 0.35)
 HEIGHTS_PER_UNIT = 2.0
 #: The person's height is this percentile of the tracked heights.
 HEIGHT_PERCENTILE = 95.0
+#: Frames of the empty scene a clip's background is learnt from (a static plate needs few).
+PLATE_FRAMES = 15
 
 
 def contour_scale(tracks: Sequence[SilhouetteTrack], person: int = 0) -> float:
@@ -129,22 +131,30 @@ def contour_track(
     """The silhouette track of one take seen alone from a side camera (first ``seconds``).
 
     The video (``<cache>/<name>.mp4``) and its track (``.track.npz`` beside it) are
-    written once and reused (:func:`markovmotion.video.dataset.tracked`).
+    written once and reused (:func:`markovmotion.video.dataset.tracked`). A whole take's
+    background is learnt from its own frames; a clip's (``seconds``) from a video of the
+    empty scene (``<cache>/empty-scene.mp4``, :data:`PLATE_FRAMES` frames, written once):
+    in a few seconds a dancer hardly leaves her spot, and the median of the clip's own
+    frames would keep her in the background.
     """
     cache = Path(cache)
     cache.mkdir(parents=True, exist_ok=True)
     tag = "" if seconds is None else f".{seconds:g}s"
     video = cache / f"{take_name(entry)}{tag}.mp4"
     stored = video.parent / f"{video.name}.track.npz"
-    if not stored.is_file():
-        motion = index.load_motion(entry).resample(FPS)
-        if seconds is not None:
-            motion = motion.trim(0, int(round(seconds * FPS)))
-        person = person_from_motion(motion)
-        write_video(render_frames([person], side_camera([person]), noise), video, FPS)
-    result = tracked(video, 1)
-    if not stored.is_file():
-        result.save(stored)
+    if stored.is_file():
+        return tracked(video, 1)
+    motion = index.load_motion(entry).resample(FPS)
+    plate = None
+    if seconds is not None:
+        motion = motion.trim(0, int(round(seconds * FPS)))
+        plate = cache / "empty-scene.mp4"
+        if not plate.is_file():
+            write_video(empty_frames(PLATE_FRAMES, noise=noise), plate, FPS)
+    person = person_from_motion(motion)
+    write_video(render_frames([person], side_camera([person]), noise), video, FPS)
+    result = track_video(video, 1, background=plate)
+    result.save(stored)
     return result
 
 

@@ -281,6 +281,19 @@ def render_frames(
         yield np.clip(img, 0, 255).round().astype(np.uint8)
 
 
+def empty_frames(
+    n: int, size: tuple[int, int] = FRAME_SIZE, noise: float = 4.0, seed: int = 0
+) -> Iterator[np.ndarray]:
+    """``n`` RGB frames (H, W, 3) uint8 of the empty scene: :func:`background` with the sensor
+    noise of :func:`render_frames` (a clean plate to learn the background from)."""
+    bg = background(size, seed).astype(np.float32)
+    noisy = np.empty_like(bg)
+    cv2.setRNGSeed(seed + 1)
+    for _ in range(n):
+        cv2.randn(noisy, (0.0, 0.0, 0.0), (noise, noise, noise))
+        yield np.clip(bg + noisy, 0, 255).round().astype(np.uint8)
+
+
 def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps: float) -> Path:
     """Write RGB frames to ``path``: an ``.mp4`` file, or else a folder of ``NNNNN.png`` files.
 

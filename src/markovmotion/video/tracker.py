@@ -333,16 +333,23 @@ def track_video(
     path: str | os.PathLike[str],
     n_people: int = 2,
     background_frames: int = 60,
+    background: str | os.PathLike[str] | None = None,
     **options,
 ) -> SilhouetteTrack:
     """Track the people of a video file or image folder (two passes: background, then people).
 
+    The background is the median of ``background_frames`` frames spread over the video, or,
+    given ``background`` (a video of the empty scene), of that video's frames: a short clip
+    in which people hardly move would leave them in the median of its own frames.
     ``options`` go to :class:`SilhouetteTracker`.
     """
     tracker = SilhouetteTracker(n_people=n_people, **options)
     count = frame_count(path)
-    step = max(count // background_frames, 1)
-    tracker.learn_background(f for t, f in enumerate(read_frames(path)) if t % step == 0)
+    if background is not None:
+        tracker.learn_background(read_frames(background))
+    else:
+        step = max(count // background_frames, 1)
+        tracker.learn_background(f for t, f in enumerate(read_frames(path)) if t % step == 0)
     p, k = tracker.n_people, tracker.n_control
     rows = []
     for frame in track(read_frames(path), f"tracking {Path(path).name}", total=count):
