@@ -57,7 +57,7 @@ def serve(
     if not 1 <= workers <= 64:
         fail(f"--workers {workers}: must be between 1 and 64")
     try:
-        sock = listen(host, port)  # before anything is printed or opened: one line, exit 2
+        sock = listen(host, port, workers)  # before anything is printed or opened: one line, exit 2
     except PortInUseError as exc:
         fail(str(exc))
     options = AppOptions(library, db, stimuli, admin_token, partner, (host, *allow_host))

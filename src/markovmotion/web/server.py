@@ -18,7 +18,6 @@ import signal
 import socket
 import threading
 import time
-import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -32,9 +31,27 @@ class PortInUseError(OSError):
     """The address cannot be listened on (port taken, address not local, no permission)."""
 
 
-def listen(host: str, port: int) -> socket.socket:
+def listen(host: str, port: int, workers: int = 1) -> socket.socket:
     """A socket bound to ``host:port`` (IPv4 or IPv6) and listening, before anything is
-    printed; :class:`PortInUseError` with one line if that fails."""
+    printed; :class:`PortInUseError` with one line if that fails.
+
+    For ``workers`` > 1 processes on a system with ``SO_REUSEPORT``, the socket is bound
+    (the port is ours) but not listening: each worker listens on its own socket on the
+    same port (:func:`start_workers`) and the kernel spreads the connections over them.
+    One listening socket shared by all would let the first worker to wake take all of
+    40 sessions opened at once (seen: one worker at 100 % CPU, the other idle)."""
+    return _bind(
+        host,
+        port,
+        reuse_port=workers > 1 and _REUSE_PORT,
+        listening=not (workers > 1 and _REUSE_PORT),
+    )
+
+
+_REUSE_PORT = hasattr(socket, "SO_REUSEPORT")
+
+
+def _bind(host: str, port: int, reuse_port: bool, listening: bool) -> socket.socket:
     try:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         # IPPROTO_TCP, not 0: asyncio sets TCP_NODELAY on accepted connections only when the
@@ -44,8 +61,11 @@ def listen(host: str, port: int) -> socket.socket:
         raise PortInUseError(f"cannot listen on {host}: {exc.strerror or exc}") from None
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if reuse_port:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
         sock.bind((host, port))
-        sock.listen(2048)
+        if listening:
+            sock.listen(2048)
     except (OSError, OverflowError, UnicodeError) as exc:
         sock.close()
         where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
@@ -111,21 +131,40 @@ class AppOptions:
         )
 
 
-def _worker(options: AppOptions, sock: socket.socket) -> None:  # pragma: no cover - child
+def _worker(options: AppOptions, sock: socket.socket, ready) -> None:  # pragma: no cover - child
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops the workers
-    uvicorn_server(options.build()).run(sockets=[sock])
+    if _REUSE_PORT and sock.getsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT):
+        # the parent's socket holds the port; this worker listens on its own (see listen)
+        host, port = sock.getsockname()[:2]
+        sock = _bind(host, port, reuse_port=True, listening=True)
+    server = uvicorn_server(options.build())
+
+    def tell_when_started() -> None:
+        while not server.started and not server.should_exit:
+            time.sleep(0.02)
+        ready.set()
+
+    threading.Thread(target=tell_when_started, daemon=True).start()
+    server.run(sockets=[sock])
 
 
 def start_workers(
-    options: AppOptions, sock: socket.socket, workers: int
+    options: AppOptions, sock: socket.socket, workers: int, timeout: float = 120
 ) -> list[multiprocessing.process.BaseProcess]:
-    """``workers`` processes serving ``options``' app on the listening ``sock``."""
+    """``workers`` processes serving ``options``' app on ``sock``'s port (:func:`listen`
+    with the same ``workers``), returned once all are serving; RuntimeError if one
+    dies first or ``timeout`` seconds pass."""
     spawn = multiprocessing.get_context("spawn")
-    procs = [
-        spawn.Process(target=_worker, args=(options, sock), daemon=True) for _ in range(workers)
-    ]
+    events = [spawn.Event() for _ in range(workers)]
+    procs = [spawn.Process(target=_worker, args=(options, sock, ev), daemon=True) for ev in events]
     for p in procs:
         p.start()
+    deadline = time.monotonic() + timeout
+    for ev in events:
+        while not ev.wait(0.1):
+            if any(not p.is_alive() for p in procs) or time.monotonic() > deadline:
+                stop_workers(procs)
+                raise RuntimeError("the web server's workers did not start")
     return procs
 
 
@@ -143,30 +182,16 @@ def stop_workers(procs: list[multiprocessing.process.BaseProcess], timeout: floa
             p.join()
 
 
-def wait_until_serving(url: str, procs: list, timeout: float = 60) -> None:
-    """Return once ``url`` answers; RuntimeError if a worker dies or ``timeout`` passes."""
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            with urllib.request.urlopen(f"{url}/api/motions", timeout=5):
-                return
-        except OSError:
-            if any(not p.is_alive() for p in procs) or time.monotonic() > deadline:
-                raise RuntimeError("the web server's workers did not start") from None
-            time.sleep(0.1)
-
-
 @contextmanager
 def running_workers(
     options: AppOptions, workers: int = 2, host: str = "127.0.0.1", port: int = 0
 ) -> Iterator[str]:
     """:func:`running` with ``workers`` processes (module docstring); yields the base URL."""
-    sock = listen(host, port)
+    sock = listen(host, port, workers)
     if options.admin_token is None:  # one token for every worker
         options = replace(options, admin_token=secrets.token_urlsafe(18))
     procs = start_workers(options, sock, workers)
     try:
-        wait_until_serving(f"http://{host}:{sock.getsockname()[1]}", procs)
         yield f"http://{host}:{sock.getsockname()[1]}"
     finally:
         stop_workers(procs)
