@@ -210,11 +210,11 @@ def test_demo_writes_motion_animation_and_plot(mocap, real, tmp_path):
     for name in (*gifs, "chain-partner.gif"):
         frames = gif_frames(out / name)
         assert len(frames) > 10 and not np.array_equal(frames[0], frames[-1])
-    # the contour routines at key memory 1 and 4 (paper Fig. 9): two rows of filled bodies
+    # contour routines at memory 1 and 4 (paper Fig. 9), key and prototype memory: four rows
     with Image.open(out / "vlmm-contours-key-memory.png") as im:
-        assert im.format == "PNG" and im.size[0] > 2 * im.size[1]
+        assert im.format == "PNG" and im.size[0] > 3 * im.size[1]
         strip = np.asarray(im.convert("L"))
-    for row in np.array_split(strip, 2):
+    for row in np.array_split(strip, 4):
         dark = (row < 128).mean(axis=0)
         assert 0.02 < (row < 128).mean() < 0.5  # filled contours, not blank nor solid
         assert (np.convolve(dark > 0, np.ones(8), "same") == 0).sum() > 100  # gaps between

@@ -127,14 +127,15 @@ def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         collapse_repeats(nearest_prototype(f, model.prototype_model_.prototypes_))[0]
         for f in model.prototype_model_.observe(configs)
     ]
-    routines, seen, seen_vlmm = [], [], []
+    routines, vlmm_routines, seen, seen_vlmm = [], [], [], []
     for n in (1, 4):
         key_model = model.with_key_memory(n)
         routines.append(key_model.generate(ROUTINE_SECONDS, np.random.default_rng(0)))
         long_run = key_model.generate_tokens(COHERENCE_SECONDS, np.random.default_rng(0))
         seen.append(seen_windows(long_run, runs, 4))
-        vlmm = model.prototype_model_.with_vlmm(n, model.epsilon)
-        long_run = vlmm.generate_tokens(COHERENCE_SECONDS, np.random.default_rng(0))
+        prototype_model = model.prototype_model_.with_vlmm(n, model.epsilon)
+        vlmm_routines.append(prototype_model.generate(ROUTINE_SECONDS, np.random.default_rng(0)))
+        long_run = prototype_model.generate_tokens(COHERENCE_SECONDS, np.random.default_rng(0))
         seen_vlmm.append(seen_windows(long_run, runs, 4))
     console.print(
         f"contours: the first {CONTOUR_SECONDS:g} s of {len(tracks)} {label} takes tracked "
@@ -144,11 +145,16 @@ def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         f"{seen_vlmm[0]:.0%} / {seen_vlmm[1]:.0%} with the prototype VLMM's memory",
         highlight=False,
     )
+    # both memories side by side: the key memory (the paper's Fig. 9) and the prototype
+    # VLMM's, where on a few seconds of video the difference shows
     path = contour_strip(
-        routines,
+        [*routines, *vlmm_routines],
         out / "vlmm-contours-key-memory.png",
         frames=STRIP_FRAMES,
         step=STRIP_STEP,
-        titles=[f"key memory N = {n}" for n in (1, 4)],
+        titles=[
+            *(f"structured model, key memory N = {n}" for n in (1, 4)),
+            *(f"prototype VLMM, memory N = {n}" for n in (1, 4)),
+        ],
     )
     return [path]
