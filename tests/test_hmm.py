@@ -15,6 +15,7 @@ from markovmotion.algorithms.windowed_viterbi import (
     WindowedViterbi,
     leavable,
     one_hot_log,
+    start_distribution,
     windowed_viterbi,
 )
 from markovmotion.models.hmm.gaussian import GaussianHMM
@@ -182,3 +183,26 @@ def test_a_state_seen_only_at_the_ends_is_made_leavable_for_the_windowed_decoder
     states = windowed_viterbi(one_hot_log(3, end), np.log(fixed), log_b, 10)
     assert (states[1:120] != end).all()
     assert (states[120:] == end).all()
+
+
+def test_windowed_decoder_from_the_learnt_pi_follows_viterbi_where_eq3_is_trapped():
+    # two recordings' worth of chain that never meet (states 0-1 and 2-3), every sampled
+    # sequence starting in the first: the middle state (eq. 3) is in the other part
+    pi = np.array([0.5, 0.5, 0.0, 0.0])
+    trans = np.array(
+        [[0.9, 0.1, 0, 0], [0.1, 0.9, 0, 0], [0, 0, 0.9, 0.1], [0, 0, 0.1, 0.9]], dtype=float
+    )
+    hmm = GaussianHMM(4)
+    hmm.startprob_, hmm.transmat_ = pi, trans
+    hmm.means_ = np.array([[0.0], [4.0], [0.5], [4.5]])  # the parts look alike
+    hmm.covars_ = np.ones((4, 1, 1))
+    x, _ = hmm.sample(400, random_state=0)
+    log_b = hmm.log_frameprob(x)
+    with np.errstate(divide="ignore"):
+        log_pi, log_t = np.log(pi), np.log(trans)
+    best = viterbi(log_pi, log_t, log_b)[0]
+    assert set(best) <= {0, 1}
+    prior = windowed_viterbi(start_distribution(log_pi, "prior"), log_t, log_b, 10)
+    middle = windowed_viterbi(start_distribution(log_pi, "middle"), log_t, log_b, 10)
+    assert (prior == best).mean() > 0.95
+    assert set(middle) <= {2, 3}  # never leaves the part it was started in

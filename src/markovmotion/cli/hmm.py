@@ -71,6 +71,12 @@ MARKERS = typer.Option(
 )
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
+INITIAL = typer.Option(
+    "prior",
+    callback=choice(("prior", "middle")),
+    help="Windowed Viterbi's first slice starts from the learnt pi ('prior') or one-hot on "
+    "the middle state ('middle', eq. 3 as printed).",
+)
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
 SEED = ranged("seed", 0, help="Random seed (k-means start).")
 JOBS = typer.Option(
@@ -91,7 +97,7 @@ MODEL_OPTIONS = {
         k: k
         for k in (
             "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
-            "points", "energy", "frame", "markers", "fps", "window", "n_iter",
+            "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
         )
     },
 }  # fmt: skip
@@ -129,6 +135,7 @@ def train(
     markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
+    initial: str = INITIAL,
     n_iter: int = N_ITER,
     seed: int = SEED,
     jobs: int = JOBS,
@@ -408,6 +415,7 @@ def crossval(
     markers: int = MARKERS,
     fps: float = FPS,
     window: int = WINDOW,
+    initial: str = INITIAL,
     n_iter: int = N_ITER,
     seed: int = SEED,
     jobs: int = JOBS,
