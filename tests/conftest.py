@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -47,3 +52,57 @@ def make_motion(n_frames: int = 40, seed: int = 0, fps: float = 30.0) -> Motion:
     quats[:, 4] = [0, 0, 0, 1]
     root = np.column_stack([10 * t[:, 0], 900 + 5 * np.sin(t[:, 0] / 3), 20 * t[:, 0]])
     return Motion.from_rotations(sk, quats, root, fps=fps, name="synthetic")
+
+
+# ---------------------------------------------------------------- browser
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def ensure_chromium() -> None:
+    """Debian's Chromium for the browser tests: installed here if missing (as root with apt-get,
+    the way .ci/run does), else the tests fail saying what is missing. Never a silent skip:
+    these are the project's own end-to-end tests."""
+    if CHROMIUM.exists():
+        return
+    if os.geteuid() == 0 and shutil.which("apt-get"):
+        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+        for cmd in (["apt-get", "update", "-q"], ["apt-get", "install", "-y", "-q", "chromium"]):
+            subprocess.run(cmd, env=env, capture_output=True, timeout=900, check=False)
+    if not CHROMIUM.exists():
+        pytest.fail(
+            f"the browser tests need headless Chromium at {CHROMIUM}: install Debian's package "
+            "'chromium' (sudo apt-get install chromium), then run the tests again",
+            pytrace=False,
+        )
+
+
+@pytest.fixture(scope="session")
+def browser():
+    ensure_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture()
+def page(browser):
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    pg = context.new_page()
+    errors = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    yield pg
+    context.close()
+    assert not errors, errors

@@ -44,36 +44,7 @@ from markovmotion.web.server import AppOptions, running, running_workers
 
 ADMIN = "admin-token-for-tests"
 SECRET = "TOP-SECRET-OUTSIDE-THE-LIBRARY"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 SHOTS = Path(__file__).resolve().parent.parent / "test-screenshots"
-
-
-def ensure_chromium() -> None:
-    """Debian's Chromium for the browser tests: installed here if missing (as root with apt-get,
-    the way .ci/run does), else the tests fail saying what is missing. Never a silent skip:
-    these are the project's own end-to-end tests."""
-    if CHROMIUM.exists():
-        return
-    if os.geteuid() == 0 and shutil.which("apt-get"):
-        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-        for cmd in (["apt-get", "update", "-q"], ["apt-get", "install", "-y", "-q", "chromium"]):
-            subprocess.run(cmd, env=env, capture_output=True, timeout=900, check=False)
-    if not CHROMIUM.exists():
-        pytest.fail(
-            f"the browser tests need headless Chromium at {CHROMIUM}: install Debian's package "
-            "'chromium' (sudo apt-get install chromium), then run the tests again",
-            pytrace=False,
-        )
 
 
 BAD_BVH = "HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition\n}\nMOTION\n"
@@ -493,28 +464,6 @@ def test_library_streams_a_file_read_once_until_it_changes(site):
 
 
 # ---------------------------------------------------------------- browser
-
-
-@pytest.fixture(scope="module")
-def browser():
-    ensure_chromium()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
-
-
-@pytest.fixture()
-def page(browser):
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
-    pg = context.new_page()
-    errors = []
-    pg.on("pageerror", lambda e: errors.append(str(e)))
-    yield pg
-    context.close()
-    assert not errors, errors
 
 
 def frame_of(page) -> int:

@@ -361,39 +361,34 @@ def test_pages_have_no_inline_script_or_style():
             assert "src=" in tag.split(">", 1)[0], page.name
 
 
-def test_the_pages_work_under_the_content_security_policy(server):
+def test_the_pages_work_under_the_content_security_policy(server, browser):
     """Every page loads, runs its scripts and fetches its data with no CSP violation."""
-    from playwright.sync_api import sync_playwright
-    from test_web import CHROMIUM, CHROMIUM_ARGS, ensure_chromium
-
-    ensure_chromium()
     status, _, data = raw(server, "POST", "/api/evaluation", {}, b"")
     token = json.loads(data)["token"]
     pages = ["/", "/viewer?files=walk.bvh", "/live", "/evaluation", f"/evaluation/{token}"]
     pages.append(f"/results?token={ADMIN}")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page()
-            problems: list[str] = []
-            page.on("pageerror", lambda e: problems.append(str(e)))
-            page.on(
-                "console",
-                lambda m: problems.append(m.text) if "Security Policy" in m.text else None,
-            )
-            page.add_init_script(
-                "document.addEventListener('securitypolicyviolation', e => "
-                "(window.__csp = window.__csp || []).push(e.violatedDirective + ' ' + e.blockedURI))"
-            )
-            for target in pages:
-                page.goto(server + target)
-                page.wait_for_load_state("networkidle")
-                problems += page.evaluate("window.__csp || []")
-            page.goto(server + "/evaluation")
-            page.click("#begin")
-            page.wait_for_url("**/evaluation/*")
-        finally:
-            browser.close()
+    context = browser.new_context()
+    try:
+        page = context.new_page()
+        problems: list[str] = []
+        page.on("pageerror", lambda e: problems.append(str(e)))
+        page.on(
+            "console",
+            lambda m: problems.append(m.text) if "Security Policy" in m.text else None,
+        )
+        page.add_init_script(
+            "document.addEventListener('securitypolicyviolation', e => "
+            "(window.__csp = window.__csp || []).push(e.violatedDirective + ' ' + e.blockedURI))"
+        )
+        for target in pages:
+            page.goto(server + target)
+            page.wait_for_load_state("networkidle")
+            problems += page.evaluate("window.__csp || []")
+        page.goto(server + "/evaluation")
+        page.click("#begin")
+        page.wait_for_url("**/evaluation/*")
+    finally:
+        context.close()
     assert not problems, problems
 
 

@@ -19,7 +19,7 @@ from collections import defaultdict
 import numpy as np
 import pytest
 from PIL import Image
-from test_web import CHROMIUM, CHROMIUM_ARGS, SHOTS, ensure_chromium, fetch, post_json
+from test_web import SHOTS, fetch, post_json
 
 from markovmotion.cli import main
 from markovmotion.errors import MarkovMotionError
@@ -294,28 +294,6 @@ def test_both_studies_from_one_folder(study, mocap, tmp_path):
 
 
 # ---------------------------------------------------------------- browser
-
-
-@pytest.fixture(scope="module")
-def browser():
-    ensure_chromium()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
-
-
-@pytest.fixture()
-def page(browser):
-    context = browser.new_context(viewport={"width": 1280, "height": 900})
-    pg = context.new_page()
-    errors = []
-    pg.on("pageerror", lambda e: errors.append(str(e)))
-    yield pg
-    context.close()
-    assert not errors, errors
 
 
 def light_pixels(page) -> tuple[int, int]:

@@ -299,7 +299,7 @@ def _respond_video(
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-    from markovmotion.video.composite import respond_in_video, respond_in_video_live
+    from markovmotion.video.composite import respond_in_video
     from markovmotion.video.multiview import training_body_model
 
     if out.suffix.lower() != ".mp4":
@@ -309,9 +309,9 @@ def _respond_video(
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work
     if realtime:
-        live = respond_in_video_live(
+        live = respond_in_video(
             model, video, out, training_body_model(data), cameras, view, particles, layers,
-            max_frames,
+            max_frames, live=True,
         )  # fmt: skip
         err_console.print(
             f"live: {live['frames']} frames at the video's rate, {live['tracked']} tracked, "

@@ -71,10 +71,14 @@ def respond_in_video(
     layers: int = 10,
     max_frames: int | None = None,
     method: str = "windowed",
+    live: bool = False,
 ) -> dict:
     """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
     ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
-    to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary."""
+    to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
+    frame at the video's rate, through the online partner (:func:`_respond_live`)."""
+    if live:
+        return _respond_live(model, video, out, body, cameras, view, particles, layers, max_frames)
     dual = _load_partner_model(model)
     where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
@@ -103,17 +107,10 @@ def respond_in_video(
     return summary
 
 
-def respond_in_video_live(
-    model: str | os.PathLike[str],
-    video: str | os.PathLike[str],
-    out: str | os.PathLike[str],
-    body: BodyModel,
-    cameras: str | os.PathLike[str] | None = None,
-    view: int = 0,
-    particles: int = 200,
-    layers: int = 10,
-    max_frames: int | None = None,
-) -> dict:
+def _respond_live(
+    model, video, out, body: BodyModel, cameras, view: int, particles: int, layers: int,
+    max_frames: int | None,
+) -> dict:  # fmt: skip
     """:func:`respond_in_video` live: frames arrive at the video's rate, each tracked and
     handed to the dual HMM's online partner as it comes.
 
