@@ -441,3 +441,52 @@ def test_markers_source_learns_13_points_and_writes_c3d_and_point_lights(tmp_pat
         main(["vlmm", "generate", "--model", str(model), "--out", str(tmp_path / "g.bvh")])
     assert info.value.code == 2
     assert "C3D" in capsys.readouterr().err
+
+
+def test_markers_read_from_c3d_files_go_through_train_generate_predict_evaluate(
+    tmp_path, exercise, capsys
+):
+    """A markers-only capture: C3D files of an index (30 named markers, none of them the 13
+    body points), learnt as named; generation and prediction come out as the same markers,
+    E_T is measured on the held-out C3D take, and a BVH where a C3D is wanted is one line."""
+    from markovmotion.cli import main
+    from markovmotion.features.markers import virtual_marker_names, virtual_markers
+    from markovmotion.io import read_c3d, write_c3d
+
+    train, test = exercise
+    data = tmp_path / "c3d"
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for k, motion in enumerate([*train, *test], start=1):
+        markers = virtual_markers(motion, 30)
+        markers.positions[5:8, 3] = np.nan  # a marker unseen for three frames
+        write_c3d(markers, data / f"take{k}.c3d")
+        rows.append(f"take{k}.c3d,test,,{k},exercise,dance,,15,{markers.n_frames},")
+    (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    model = tmp_path / "m.npz"
+    main(["vlmm", "train", "--source", "markers", "--data", str(data), "--prototypes", "20",
+          "--max-memory", "3", "--fps", "15", "--lam", "30", "--out", str(model)])  # fmt: skip
+    assert "held out: take4.c3d" in " ".join(capsys.readouterr().err.split())
+    main(["vlmm", "generate", "--model", str(model), "--seconds", "2", "--stochastic",
+          "--out", str(tmp_path / "g.c3d")])  # fmt: skip
+    generated = read_c3d(tmp_path / "g.c3d")
+    assert generated.names == virtual_marker_names(30) and generated.n_frames == 31
+    assert np.isfinite(generated.positions).all()
+    spread = np.ptp(generated.positions[..., 1], axis=1)
+    assert (spread > 1000).all()  # a standing body's height, every frame
+    main(["vlmm", "predict", "--model", str(model), "--input", str(data / "take4.c3d"),
+          "--horizon", "1", "--out", str(tmp_path / "p.c3d")])  # fmt: skip
+    predicted = read_c3d(tmp_path / "p.c3d")
+    assert predicted.n_frames == test[0].n_frames + 15 and predicted.names == generated.names
+    capsys.readouterr()
+    main(["vlmm", "evaluate", "--model", str(model), "--test", str(data), "--samples", "3",
+          "--stride", "20", "--json"])  # fmt: skip
+    result = json.loads(capsys.readouterr().out)
+    assert result["test_files"] == ["take4.c3d"]
+    # on markers that move, predicting beats nothing: below twice holding still
+    assert 0 < result["E_T_mm.vlmm.1"] < 2 * result["E_T_mm.zero_velocity.1"]
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "predict", "--model", str(model), "--input", str(tmp_path / "x.bvh"),
+              "--out", str(tmp_path / "q.c3d")])  # fmt: skip
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "learnt markers" in err

@@ -16,7 +16,7 @@ from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
 from markovmotion.io import check_motion_output, write_c3d, write_motion
-from markovmotion.io.c3d import check_c3d_output
+from markovmotion.io.c3d import check_c3d_output, read_c3d
 from markovmotion.io.files import base_suffix
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -254,7 +254,9 @@ def generate(
 @app.command()
 def predict(
     model: Path = typer.Option(..., help="Model file from 'vlmm train'."),
-    input: Path = typer.Option(..., help="Observed motion (BVH or ASF/AMC)."),
+    input: Path = typer.Option(
+        ..., help="Observed motion (BVH or ASF/AMC; a model learnt from C3D: a C3D file)."
+    ),
     out: Path = typer.Option(
         ..., help="Observed motion plus prediction (.bvh; a markers model: .c3d or .gif)."
     ),
@@ -278,11 +280,23 @@ def predict(
             param_hint="--model",
         )
     _check_output(behaviour, out)
-    motion = read_listed_motion(input, fps=fps)
-    try:
-        behaviour.skeleton_.check_compatible(motion.skeleton, "input")
-    except SkeletonMismatchError as exc:
-        raise SkeletonMismatchError(f"{input}: {exc}") from None
+    if behaviour.skeleton_ is None:  # learnt from C3D markers
+        if base_suffix(input) != ".c3d":
+            raise SkeletonMismatchError(f"{input}: the model learnt markers: give a C3D file")
+        motion = read_c3d(input)
+        if fps is not None:
+            motion.fps = fps
+        if not behaviour.fits(motion):
+            missing = sorted(set(behaviour.marker_names) - set(motion.names))
+            raise SkeletonMismatchError(f"{input}: markers not found: {', '.join(missing)}")
+    else:
+        if base_suffix(input) == ".c3d":
+            raise SkeletonMismatchError(f"{input}: the model learnt a skeleton: give BVH or ASF/AMC")
+        motion = read_listed_motion(input, fps=fps)
+        try:
+            behaviour.skeleton_.check_compatible(motion.skeleton, "input")
+        except SkeletonMismatchError as exc:
+            raise SkeletonMismatchError(f"{input}: {exc}") from None
     result = behaviour.predict(motion, horizon, np.random.default_rng(seed), stochastic=stochastic)
     _write(result, out)
     observed = result.n_frames - int(round(horizon * behaviour.fps))

@@ -222,6 +222,13 @@ class MocapIndex:
             out.append((e, partner))
         return out
 
+    def load_take(self, entry: Entry) -> Motion | Markers:
+        """An entry's motion (:meth:`load_motion`), or for a C3D file its markers at
+        INDEX.csv's rate (unseen samples NaN)."""
+        if base_suffix(entry.file) == ".c3d":
+            return _read_markers(entry)
+        return self.load_motion(entry)
+
     def load_pair(self, a: Entry, b: Entry) -> tuple[Motion, Motion] | tuple[Markers, Markers]:
         """Both people of a take, at the same frame rate and cut to the same frames: Motions,
         or Markers when both files are C3D (at INDEX.csv's rate)."""
@@ -231,9 +238,7 @@ class MocapIndex:
                 raise MotionFormatError(
                     self.root / INDEX_NAME, f"{a.file} and {b.file}: one C3D, one skeleton"
                 )
-            ma, mb = (_read_markers(e) for e in (a, b))
-        else:
-            ma, mb = self.load_motion(a), self.load_motion(b)
+        ma, mb = self.load_take(a), self.load_take(b)
         if not ma.fps == mb.fps:
             mb = mb.resample(ma.fps)
         n = min(ma.n_frames, mb.n_frames)

@@ -304,8 +304,8 @@ def evaluate_model(
     takes = test_takes(model, index, candidate_takes(model, index, held_out, category, labels))
     motions, kept, other = [], [], []
     for entry in takes.takes:
-        motion = index.load_motion(entry).resample(base.fps)
-        if motion.skeleton.same_topology(base.skeleton_):
+        motion = index.load_take(entry)
+        if base.fits(motion):
             motions.append(motion)
             kept.append(entry)
         else:

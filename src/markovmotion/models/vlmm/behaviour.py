@@ -45,10 +45,11 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
-from markovmotion.errors import DataNotFoundError
+from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_points import MARKER_POINTS, body_point_index
 from markovmotion.features.heading import RemoveHeading
+from markovmotion.features.markers import MarkerFeatures, fill_gaps
 from markovmotion.features.select import DropStaticColumns
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
@@ -69,22 +70,36 @@ QUANTISERS = ("kmeans", "competitive")
 # ------------------------------------------------------------------- data
 def load_motions(
     index: MocapIndex, entries: Sequence[Entry], fps: float
-) -> tuple[list[Motion], list[Entry]]:
-    """The entries' motions at ``fps``, keeping the largest group sharing one skeleton.
+) -> tuple[list[Motion | Markers], list[Entry]]:
+    """The entries' motions (C3D files: their markers, gaps filled) at ``fps``, keeping the
+    largest group sharing one skeleton (or one set of marker names).
 
     Returns the motions and the entries left out for having another skeleton.
     """
-    motions = [index.load_motion(e).resample(fps) for e in entries]
+    motions = [_take(index.load_take(e)).resample(fps) for e in entries]
     groups: list[list[int]] = []
     for i, m in enumerate(motions):
         for g in groups:
-            if motions[g[0]].skeleton.same_topology(m.skeleton):
+            if same_kind(motions[g[0]], m):
                 g.append(i)
                 break
         else:
             groups.append([i])
     best = max(groups, key=len) if groups else []
     return [motions[i] for i in best], [e for i, e in enumerate(entries) if i not in best]
+
+
+def _take(take: Motion | Markers) -> Motion | Markers:
+    """A take as the models learn it: markers with their unseen samples filled in."""
+    return fill_gaps(take) if isinstance(take, Markers) else take
+
+
+def same_kind(a: Motion | Markers, b: Motion | Markers) -> bool:
+    """Whether two takes can be learnt together: skeletons of one topology, or markers of
+    the same names."""
+    if isinstance(a, Markers) or isinstance(b, Markers):
+        return isinstance(a, Markers) and isinstance(b, Markers) and set(a.names) == set(b.names)
+    return a.skeleton.same_topology(b.skeleton)
 
 
 def evaluation_joints(motions: Sequence[Motion], tol: float = 1e-3) -> np.ndarray:
@@ -231,6 +246,9 @@ class BehaviourModel(Model):
     def _make_pipeline(self, skeleton: Skeleton | None) -> FeaturePipeline:
         if self.configuration == "contour":
             return FeaturePipeline([AugmentedConfiguration(self.lam)])
+        if skeleton is None:  # markers read from C3D files: as they are named
+            first = [MarkerFeatures(body_centred=True)]
+            return FeaturePipeline([*first, DropStaticColumns(), AugmentedConfiguration(self.lam)])
         if self.configuration == "rotations":
             first = [RemoveHeading(), ExpMaps(root_position="height")]
         elif self.configuration == "positions":
@@ -255,8 +273,9 @@ class BehaviourModel(Model):
             self.skeleton_ = None
         else:
             self.record_training(motions)
-            motions = [m.resample(self.fps) for m in motions]
-            self.skeleton_ = motions[0].skeleton
+            motions = [_take(m).resample(self.fps) for m in motions]
+            self._check_takes(motions)
+            self.skeleton_ = None if isinstance(motions[0], Markers) else motions[0].skeleton
         self.pipeline_ = self._make_pipeline(self.skeleton_)
         feats = self.pipeline_.fit_transform(motions)
         x = np.vstack(feats)
@@ -269,6 +288,8 @@ class BehaviourModel(Model):
         self.train_lengths_ = np.array([len(r[0]) for r in runs])
         if self.is_contour:
             self.eval_joints_ = np.arange(motions[0].shape[1] // 2)  # the control points
+        elif self.skeleton_ is None:
+            self.eval_joints_ = np.arange(len(self.marker_names))  # every marker
         elif self.configuration == "markers":
             self.eval_joints_ = body_point_index(self.skeleton_, MARKER_POINTS)
         else:
@@ -277,6 +298,36 @@ class BehaviourModel(Model):
             self.token_sequences(), n_symbols=self.n_prototypes
         )
         return self
+
+    def _check_takes(self, takes: Sequence[Motion | Markers]) -> None:
+        """Markers only for ``configuration="markers"``, and one kind of take throughout
+        (:class:`SkeletonMismatchError` naming the first that differs)."""
+        if isinstance(takes[0], Markers) and self.configuration != "markers":
+            raise SkeletonMismatchError(
+                f"{takes[0].name or 'markers'}: markers are learnt with "
+                f'configuration="markers", not {self.configuration!r}'
+            )
+        for t in takes[1:]:
+            if not same_kind(takes[0], t):
+                what = "markers" if isinstance(takes[0], Markers) else "a skeleton"
+                raise SkeletonMismatchError(
+                    f"{t.name or 'a take'}: not {what} like {takes[0].name or 'the first take'}"
+                )
+
+    def fits(self, take: Motion | Markers) -> bool:
+        """Whether the model can observe ``take``: its skeleton's topology, or (a model
+        learnt from markers files) markers holding every one the model learnt."""
+        if self.skeleton_ is None:
+            return isinstance(take, Markers) and set(self.marker_names) <= set(take.names)
+        return isinstance(take, Motion) and take.skeleton.same_topology(self.skeleton_)
+
+    @property
+    def marker_names(self) -> tuple[str, ...]:
+        """The markers a ``configuration="markers"`` model learns and writes: the 13 body
+        points placed on a skeleton, or the markers of the C3D files it was trained on."""
+        if self.skeleton_ is None:
+            return tuple(self.pipeline_.steps[0].names_)
+        return tuple(MARKER_POINTS)
 
     def check_state(self) -> None:
         """The learnt parts a model file must hold, and that they fit: one prototype per
@@ -287,7 +338,7 @@ class BehaviourModel(Model):
         require(self, "train_files_", "prototypes_", "eval_joints_", "train_tokens_")
         require(self, "train_lengths_")
         require_types(self, pipeline_=FeaturePipeline, vlmm_=VLMM)
-        if not self.is_contour:
+        if not self.is_contour and not self._from_markers():
             require_types(self, skeleton_=Skeleton)
         width = self.pipeline_.output_width()
         k = len(check_shape("prototypes_", self.prototypes_, (None, width)))
@@ -297,8 +348,19 @@ class BehaviourModel(Model):
             "train_tokens_", check_shape("train_tokens_", self.train_tokens_, (None,)), k
         )
         check_lengths("train_lengths_", self.train_lengths_, len(tokens))
-        n_points = width // 4 if self.is_contour else self.skeleton_.n_joints
+        if self.is_contour:
+            n_points = width // 4
+        elif self._from_markers():
+            n_points = len(self.pipeline_.steps[0].names_)
+        else:
+            n_points = self.skeleton_.n_joints
         check_index("eval_joints_", self.eval_joints_, n_points)
+
+    def _from_markers(self) -> bool:
+        """Whether the model learnt from markers files (its pipeline starts on markers)."""
+        return self.configuration == "markers" and isinstance(
+            self.pipeline_.steps[0], MarkerFeatures
+        )
 
     def token_sequences(self) -> list[np.ndarray]:
         """The collapsed prototype sequences of the training motions."""
@@ -325,7 +387,12 @@ class BehaviourModel(Model):
         (of contour configurations (F, d) for ``configuration="contour"``: eq. 2)."""
         if self.is_contour:
             return self.pipeline_.transform(contour_arrays(motions, self.n_dims))
-        return self.pipeline_.transform([m.resample(self.fps) for m in motions])
+        takes = [_take(m).resample(self.fps) for m in motions]
+        for t in takes:
+            if isinstance(t, Markers) != (self.skeleton_ is None):
+                learnt = "markers" if self.skeleton_ is None else "a skeleton"
+                raise SkeletonMismatchError(f"{t.name or 'input'}: the model learnt {learnt}")
+        return self.pipeline_.transform(takes)
 
     def knots(self, tokens: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Configurations C and their per-frame derivatives dC of prototypes (eq. 2)."""
@@ -363,7 +430,7 @@ class BehaviourModel(Model):
             return out
         if self.configuration == "markers":
             out = out - np.array([0.0, 1.0, 0.0]) * np.nanmin(out[..., 1])
-            return Markers(MARKER_POINTS, out, self.fps, name="vlmm")
+            return Markers(self.marker_names, out, self.fps, name="vlmm")
         # positions: fit rotations to the skeleton, feet on the floor
         pos = out - np.array([0.0, 1.0, 0.0]) * out[..., 1].min(axis=1)[:, None, None]
         return fit_rotations(self.skeleton_, pos, fps=self.fps)

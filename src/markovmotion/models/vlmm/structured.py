@@ -454,6 +454,14 @@ class StructuredBehaviourModel(Model):
     def skeleton_(self):
         return self.prototype_model_.skeleton_
 
+    @property
+    def marker_names(self) -> tuple[str, ...]:
+        return self.prototype_model_.marker_names
+
+    def fits(self, take) -> bool:
+        """Whether the model can observe ``take`` (:meth:`BehaviourModel.fits`)."""
+        return self.prototype_model_.fits(take)
+
     def observe(self, motions: Sequence[Motion]) -> list[np.ndarray]:
         return self.prototype_model_.observe(motions)
 
