@@ -18,15 +18,14 @@ from __future__ import annotations
 import argparse
 import itertools
 from collections.abc import Callable
+from functools import partial
 
 from markovmotion.data import MocapIndex
 from markovmotion.evaluate.hmm import evaluate_pair
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.models.hmm.dual import DualHMM
 
-ENERGY_GRID = [
-    {"energy": e, "blend_window": b} for e, b in itertools.product((0.95, 0.99), (1, 9))
-]
+ENERGY_GRID = [{"energy": e, "blend_window": b} for e, b in itertools.product((0.95, 0.99), (1, 9))]
 INITIAL_GRID = [{"initial": i} for i in ("middle", "prior")]
 
 
@@ -72,12 +71,12 @@ def main() -> None:
     pairs = [p for p in idx.pairs() if p[0].label in ("handshake", "pull")]
     takes = [(a.name, a.label, *idx.load_pair(a, b)) for a, b in pairs]
     if study == "energy":
-        print("nested overall: standard %.1f windowed %.1f"
-              % nested(takes, ENERGY_GRID, DualHMM, "standard"))  # fmt: skip
+        std, win = nested(takes, ENERGY_GRID, DualHMM, "standard")
+        print(f"nested overall: standard {std} windowed {win}")
         return
     for markers in (0, 30):
         print(f"--- {'body points' if not markers else f'{markers} virtual markers'}")
-        std, win = nested(takes, INITIAL_GRID, lambda **s: DualHMM(markers=markers, **s), "windowed")
+        std, win = nested(takes, INITIAL_GRID, partial(DualHMM, markers=markers), "windowed")
         print(f"nested overall: standard {std} windowed {win}")
 
 

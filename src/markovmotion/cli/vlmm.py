@@ -291,7 +291,9 @@ def predict(
             raise SkeletonMismatchError(f"{input}: markers not found: {', '.join(missing)}")
     else:
         if base_suffix(input) == ".c3d":
-            raise SkeletonMismatchError(f"{input}: the model learnt a skeleton: give BVH or ASF/AMC")
+            raise SkeletonMismatchError(
+                f"{input}: the model learnt a skeleton: give BVH or ASF/AMC"
+            )
         motion = read_listed_motion(input, fps=fps)
         try:
             behaviour.skeleton_.check_compatible(motion.skeleton, "input")
