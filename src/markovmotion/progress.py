@@ -24,7 +24,9 @@ from rich.progress import (
 
 T = TypeVar("T")
 
-err_console = Console(stderr=True)
+# soft_wrap: a long message stays one line when stderr is not a terminal (a log, a pipe),
+# where Rich would otherwise wrap it at 80 columns mid-number
+err_console = Console(stderr=True, soft_wrap=True)
 
 
 #: Seconds between the plain progress lines printed off a terminal.

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import typer
-from rich.console import Console
 
 from markovmotion.cli.options import choice, ranged
 from markovmotion.data.index import listed_entry, read_listed_motion
@@ -263,7 +262,7 @@ def respond(
         err_console.print(f"resampling {input.name} from {motion.fps:g} to {dual.fps:g} fps")
         motion = _resample_stream(motion, broken, dual.fps)
     window = window or dual.window
-    console = Console(stderr=True)
+    console = err_console
     if realtime:
         from markovmotion.models.online import replay
 

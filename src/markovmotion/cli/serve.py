@@ -64,29 +64,32 @@ def serve(
     app = options.build()  # here first, so that a bad option is one line before any worker
     port = sock.getsockname()[1]
     url = f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
-    console = Console()
-    console.print(f"markovmotion serving {app.state.library.root} at {url}", highlight=False)
-    console.print(f"admin token: {app.state.admin_token}", highlight=False)
+    lines = [f"markovmotion serving {app.state.library.root} at {url}"]
+    lines.append(f"admin token: {app.state.admin_token}")
     if app.state.store is not None:
-        console.print(
-            f"evaluation: {url}/evaluation · results: {url}/results?token=...", highlight=False
-        )
+        lines.append(f"evaluation: {url}/evaluation · results: {url}/results?token=...")
+    console = Console(soft_wrap=True)
     try:
         if workers == 1:
+            for line in lines:
+                console.print(line, highlight=False)
             uvicorn_server(app).run(sockets=[sock])
-        else:
-            token = app.state.admin_token  # the one printed, for every worker
-            del app
+            return
+        token = app.state.admin_token  # the one printed, for every worker
+        del app
+        # stopped by a signal: the workers are stopped with it (the finally below)
+        signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+        procs: list = []
+        try:
             procs = start_workers(replace(options, admin_token=token), sock, workers)
-            # stopped by a signal: the workers are stopped with it (the finally below)
-            signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-            try:
-                for p in procs:
-                    p.join()
-            except KeyboardInterrupt:
-                pass
-            finally:
-                stop_workers(procs)
+            for line in lines:  # once every worker answers
+                console.print(line, highlight=False)
+            for p in procs:
+                p.join()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            stop_workers(procs)
     finally:
         sock.close()
 

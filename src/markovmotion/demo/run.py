@@ -129,7 +129,7 @@ STEPS: list[Step] = [
 
 def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None = None) -> None:
     """Run the demo ``steps`` (default :data:`STEPS`) on the data in ``data``, writing to ``out``."""
-    console = Console()
+    console = Console(soft_wrap=True)  # a log file keeps whole lines
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     index = MocapIndex.load(data)
