@@ -155,7 +155,9 @@ def train(
     err_console.print(
         f"wrote {out}: {len(pairs)} takes, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
-        f"{hmm.n_iter_} EM iterations, log-likelihood {model.history_[-1]:.1f}, "
+        f"{hmm.n_iter_} EM iterations "
+        f"({'converged' if hmm.converged_ else f'stopped at --n-iter {n_iter}, not converged'}), "
+        f"log-likelihood {model.history_[-1]:.1f}, "
         f"{time.perf_counter() - start:.1f} s",
         highlight=False,
     )
