@@ -100,8 +100,10 @@ def seen_windows(tokens: np.ndarray, runs: list[np.ndarray], length: int) -> flo
 
 
 def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
-    """Contour routines at memory N = 1 and 4, of a structured VLMM's keys and of its
-    prototype VLMM (VLMM paper Fig. 9)."""
+    """Contour routines at memory N = 1 and 4, key and prototype (VLMM paper Fig. 9).
+
+    A structured VLMM of tracked silhouette contours; rows for its key memory and for its
+    prototype VLMM's memory."""
     label = contour_label(index)
     train, _ = held_out_last(index.query(category="exercise", label=label))
     cache = out / "contour-cache"  # videos and tracks, reused by the next run
