@@ -152,8 +152,8 @@ def start_workers(
     options: AppOptions, sock: socket.socket, workers: int, timeout: float = 120
 ) -> list[multiprocessing.process.BaseProcess]:
     """``workers`` processes serving ``options``' app on ``sock``'s port (:func:`listen`
-    with the same ``workers``), returned once all are serving; RuntimeError if one
-    dies first or ``timeout`` seconds pass."""
+    with the same ``workers``), returned once all are serving; OSError (one line from
+    ``serve``) if one dies first or ``timeout`` seconds pass."""
     spawn = multiprocessing.get_context("spawn")
     events = [spawn.Event() for _ in range(workers)]
     procs = [spawn.Process(target=_worker, args=(options, sock, ev), daemon=True) for ev in events]
@@ -164,7 +164,7 @@ def start_workers(
         while not ev.wait(0.1):
             if any(not p.is_alive() for p in procs) or time.monotonic() > deadline:
                 stop_workers(procs)
-                raise RuntimeError("the web server's workers did not start")
+                raise OSError("the web server's workers did not start (see their output above)")
     return procs
 
 
