@@ -16,9 +16,11 @@ simulated clients in another, then:
    p99. Twice: with a stand-in partner (A mirrored, 3 frames late; a real walk
    at 30 fps), which measures the streaming alone, then with the dual HMM's
    windowed-Viterbi partner (``--partner MODEL``, or a small one trained here
-   on two CMU salsa takes) answering a third salsa take's A, resampled to 30 fps.
+   on two CMU salsa takes) answering a third salsa take's A, resampled to 30 fps,
+   served by ``--workers`` (2) processes as ``serve --workers`` runs them.
 
     python3 benchmarks/web_load.py [--seconds S] [--evaluators N] [--sessions N] [--partner M]
+        [--workers W]
 """
 
 from __future__ import annotations
