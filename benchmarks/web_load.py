@@ -92,6 +92,9 @@ def live_table(live, sessions: int, seconds: float, what: str) -> Table:
     t.add_row(f"stalls (no frame for {1000 * STALL_SECONDS:.0f} ms)", str(live.stalls))
     t.add_row("partner latency p50 (ms)", f"{np.quantile(live.latency_ms, 0.5):.2f}")
     t.add_row("partner latency p99 (ms)", f"{np.quantile(live.latency_ms, 0.99):.2f}")
+    t.add_row(
+        "frame late against the stream's clock p99 (ms)", f"{np.quantile(live.late_ms, 0.99):.1f}"
+    )
     t.add_row("gap between frames p99 (ms)", f"{np.quantile(live.gap_ms, 0.99):.1f}")
     t.add_row("gap between frames max (ms)", f"{max(live.gap_ms):.1f}")
     return t

@@ -131,13 +131,15 @@ def simulate_evaluators(
 
 @dataclass
 class LiveLoad:
-    """What live sessions received: frames, partner latency, gaps between frames, stalls."""
+    """What live sessions received: frames, partner latency, gaps between frames, how late
+    frames came against the stream's clock, stalls."""
 
     sessions: int = 0
     fps: float = 0.0
     frames: list[int] = field(default_factory=list)
     latency_ms: list[float] = field(default_factory=list)
     gap_ms: list[float] = field(default_factory=list)
+    late_ms: list[float] = field(default_factory=list)
     stalls: int = 0
     errors: list[str] = field(default_factory=list)
     seconds: float = 0.0
@@ -145,7 +147,7 @@ class LiveLoad:
 
 def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
     ws_url = "ws" + url.removeprefix("http") + "/ws/live"
-    frames, latency, gaps, stalls = 0, [], [], 0
+    frames, latency, gaps, late, stalls = 0, [], [], [], 0
     try:
         with connect(ws_url, open_timeout=30, max_size=None) as ws:
             ws.send(json.dumps({"path": path, "loop": True}))
@@ -153,7 +155,7 @@ def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
             if start.get("type") != "start":
                 raise RuntimeError(start.get("message", "no start message"))
             deadline = time.monotonic() + seconds
-            last = None
+            last = first = None
             while time.monotonic() < deadline:
                 msg = json.loads(ws.recv(timeout=5))
                 now = time.monotonic()
@@ -161,6 +163,10 @@ def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
                     break
                 frames += 1
                 latency.append(msg["latency_ms"])
+                # how late the frame came against the stream's clock (the first frame's arrival
+                # plus i / fps): the end-to-end frame latency beyond the schedule
+                first = now if first is None else first
+                late.append(1000.0 * (now - first - (frames - 1) / start["fps"]))
                 if last is not None:
                     gaps.append(1000.0 * (now - last))
                     stalls += now - last > STALL_SECONDS
@@ -176,6 +182,7 @@ def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
         out.frames.append(frames)
         out.latency_ms += latency
         out.gap_ms += gaps
+        out.late_ms += late
         out.stalls += stalls
 
 
