@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 from conftest import make_motion
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
@@ -460,6 +460,7 @@ def quote(value: str) -> str:
 
 @HYPO
 @given(target=st.sampled_from(GET_TARGETS), value=TEXT)
+@example(target="/evaluation/{}", value="/")  # found by a CI run: a trailing slash, 307
 def test_hostile_query_and_path_values(server, target, value):
     path = target.format(quote(value))
     try:
@@ -472,10 +473,10 @@ def test_hostile_query_and_path_values(server, target, value):
         PROBES["tried"] += 1
         PROBES["clean"] += 1
         return
-    # an empty value leaves a trailing slash: redirected (307) to the path without it
-    assert_clean(
-        status, data, s, ok=(200, 307) if target.startswith("/static") or not value else ()
-    )
+    # a path left with a trailing slash (an empty value, or one ending in "/", which quote
+    # keeps) is redirected (307) to the path without it
+    trailing = path.split("?")[0].endswith("/")
+    assert_clean(status, data, s, ok=(200, 307) if target.startswith("/static") or trailing else ())
 
 
 @HYPO
