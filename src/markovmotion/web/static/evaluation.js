@@ -1,7 +1,7 @@
 // Evaluation page (gait paper §6): three tests of ten items, one at a time; the
 // evaluator starts each animation by clicking it and may watch it again. Every
 // answer is sent at once; coming back to the same link resumes.
-import { COLOURS, Player, Stage, bounds, fetchJSON, poseAt } from "/static/stage.js";
+import { COLOURS, Player, bounds, fetchJSON, poseAt, stimulus } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const token = decodeURIComponent(location.pathname.split("/").pop());
@@ -85,20 +85,10 @@ async function openTest(test) {
   box.innerHTML = "";
   box.className = `stages cols-${sides.length}`;
   shown = motions.map((motion, k) => {
-    const wrap = document.createElement("div");
-    wrap.className = "stimulus";
-    const canvas = document.createElement("canvas");
-    canvas.className = "stage";
-    const play = document.createElement("button");
-    play.className = "play primary";
-    play.textContent = "▶ Play";
-    wrap.append(canvas, play);
+    const { wrap, stage, play } = stimulus(player, start);
     box.appendChild(wrap);
-    const stage = new Stage(canvas);
     stage.fit(bounds([motion]));
     if (item.pair) stage.label = k === 0 ? "Video A" : "Video B";
-    play.addEventListener("click", start);
-    canvas.addEventListener("click", () => { if (!player.playing) start(); });
     return { stage, motion, play };
   });
   player.set(motions);

@@ -2,7 +2,7 @@
 // (white dots on black, both people). The observer names the action, may say they noticed
 // something strange or unusual and write what; each answer is sent at once, and coming
 // back to the same link resumes at the first clip not answered.
-import { Player, Stage, bounds, fetchJSON, poseAt } from "/static/stage.js";
+import { Player, bounds, fetchJSON, poseAt, stimulus } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const token = decodeURIComponent(location.pathname.split("/").pop());
@@ -49,20 +49,10 @@ async function next() {
     $("error").textContent = e.message;
     return;
   }
-  const wrap = document.createElement("div");
-  wrap.className = "stimulus";
-  const canvas = document.createElement("canvas");
-  canvas.className = "stage";
-  const play = document.createElement("button");
-  play.className = "play primary";
-  play.textContent = "▶ Play";
-  wrap.append(canvas, play);
+  const { wrap, stage, play } = stimulus(player, start);
   $("stages").replaceChildren(wrap);
-  const stage = new Stage(canvas);
   stage.pointLight = true;
   stage.fit(bounds([motion]));
-  play.addEventListener("click", start);
-  canvas.addEventListener("click", () => { if (!player.playing) start(); });
   shown = { stage, motion, play };
   player.set([motion]);
   for (const [value, label] of test.choices) {

@@ -254,6 +254,23 @@ export class Stage {
 }
 
 // Decoded motion JSON from the server: {name, fps, frames, joints, parents, positions}.
+// A stimulus of the perceptual tests: a stage on its canvas and a play button under it, in a
+// "stimulus" box (frame it with stage.fit once the box is on the page); the button, or a click
+// on the canvas while the player is stopped, calls start.
+export function stimulus(player, start) {
+  const wrap = document.createElement("div");
+  wrap.className = "stimulus";
+  const canvas = document.createElement("canvas");
+  canvas.className = "stage";
+  const play = document.createElement("button");
+  play.className = "play primary";
+  play.textContent = "▶ Play";
+  wrap.append(canvas, play);
+  play.addEventListener("click", start);
+  canvas.addEventListener("click", () => { if (!player.playing) start(); });
+  return { wrap, stage: new Stage(canvas), play };
+}
+
 export function poseAt(motion, frame) {
   const n = motion.parents.length * 3;
   const f = Math.max(0, Math.min(motion.frames - 1, frame));
