@@ -193,8 +193,7 @@ class MotionLibrary:
 
         def build(path: Path) -> tuple[Motion, list[str]]:
             motion = self.motion(relative)
-            if fps is not None and not np.isclose(fps, motion.fps):
-                motion = motion.resample(fps)
+            motion = motion.resample(fps) if fps else motion  # the same arrays at its own rate
             return motion, encoded_frames(motion)
 
         return self._cached(relative, ("stream", fps), build)

@@ -171,8 +171,7 @@ def _stream(msg: dict, library: MotionLibrary, factory: PartnerFactory):
         return motion, poses, partner
     motion = _motion_of(msg, library)
     partner = factory(motion)
-    if partner.fps and not np.isclose(partner.fps, motion.fps):
-        motion = motion.resample(partner.fps)
+    motion = motion.resample(partner.fps) if partner.fps else motion
     return motion, encoded_frames(motion), partner
 
 

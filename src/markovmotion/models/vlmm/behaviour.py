@@ -288,7 +288,7 @@ class BehaviourModel(Model):
         self.train_lengths_ = np.array([len(r[0]) for r in runs])
         if self.is_contour:
             self.eval_joints_ = np.arange(motions[0].shape[1] // 2)  # the control points
-        elif self.skeleton_ is None:
+        elif self._from_markers():
             self.eval_joints_ = np.arange(len(self.marker_names))  # every marker
         elif self.configuration == "markers":
             self.eval_joints_ = body_point_index(self.skeleton_, MARKER_POINTS)
@@ -317,7 +317,7 @@ class BehaviourModel(Model):
     def fits(self, take: Motion | Markers) -> bool:
         """Whether the model can observe ``take``: its skeleton's topology, or (a model
         learnt from markers files) markers holding every one the model learnt."""
-        if self.skeleton_ is None:
+        if self._from_markers():
             return isinstance(take, Markers) and set(self.marker_names) <= set(take.names)
         return isinstance(take, Motion) and take.skeleton.same_topology(self.skeleton_)
 
@@ -325,7 +325,7 @@ class BehaviourModel(Model):
     def marker_names(self) -> tuple[str, ...]:
         """The markers a ``configuration="markers"`` model learns and writes: the 13 body
         points placed on a skeleton, or the markers of the C3D files it was trained on."""
-        if self.skeleton_ is None:
+        if self._from_markers():
             return tuple(self.pipeline_.steps[0].names_)
         return tuple(MARKER_POINTS)
 
@@ -351,7 +351,7 @@ class BehaviourModel(Model):
         if self.is_contour:
             n_points = width // 4
         elif self._from_markers():
-            n_points = len(self.pipeline_.steps[0].names_)
+            n_points = len(self.marker_names)
         else:
             n_points = self.skeleton_.n_joints
         check_index("eval_joints_", self.eval_joints_, n_points)
@@ -388,9 +388,10 @@ class BehaviourModel(Model):
         if self.is_contour:
             return self.pipeline_.transform(contour_arrays(motions, self.n_dims))
         takes = [_take(m).resample(self.fps) for m in motions]
+        markers = self._from_markers()
         for t in takes:
-            if isinstance(t, Markers) != (self.skeleton_ is None):
-                learnt = "markers" if self.skeleton_ is None else "a skeleton"
+            if isinstance(t, Markers) != markers:
+                learnt = "markers" if markers else "a skeleton"
                 raise SkeletonMismatchError(f"{t.name or 'input'}: the model learnt {learnt}")
         return self.pipeline_.transform(takes)
 
