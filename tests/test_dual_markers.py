@@ -31,7 +31,7 @@ FRAMES = 360  # of each real take used (120 fps: 3 s, 90 frames at the model's 3
 @pytest.fixture(scope="module")
 def takes(mocap):
     """The first seconds of the real interaction takes (A, B) of two labels, skeletons."""
-    pairs = mocap.pairs(["handshake", "pull"])[:3]
+    pairs = mocap.pairs(["handshake", "pull"], kind="skeleton")[:3]
     return [tuple(m.trim(0, FRAMES) for m in mocap.load_pair(a, b)) for a, b in pairs]
 
 

@@ -119,10 +119,10 @@ def test_jump_sizes_are_the_median_point_step():
 @pytest.fixture(scope="module")
 def interactions(mocap):
     """The index's interaction takes of the people of its handshakes (any labels they do)."""
-    shakes = mocap.pairs(label=["handshake"])
+    shakes = mocap.pairs(label=["handshake"], kind="skeleton")
     if not shakes:
         pytest.fail("the shared index has no handshake take")
-    pairs = [p for p in mocap.pairs() if p[0].subject == shakes[0][0].subject]
+    pairs = [p for p in mocap.pairs(kind="skeleton") if p[0].subject == shakes[0][0].subject]
     return [(a.label, a.name, *mocap.load_pair(a, b)) for a, b in pairs]
 
 

@@ -34,7 +34,7 @@ def take(mocap):
     """Person A of the held-out pull take at 30 fps, and its file."""
     from markovmotion.data.splits import held_out_pairs
 
-    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"]))
+    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
     entry = test[0][0]
     return mocap.load_motion(entry).resample(30.0), mocap.root / entry.file
 
@@ -194,7 +194,7 @@ def dual_model(mocap, tmp_path_factory):
     from markovmotion.data.splits import held_out_pairs
     from markovmotion.models.hmm.dual import DualHMM
 
-    train, _ = held_out_pairs(mocap.pairs(label=["handshake", "pull"]))
+    train, _ = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
     pairs = [mocap.load_pair(a, b) for a, b in train]
     model = DualHMM(n_states=4, n_iter=3, window=4, placement_window=3).fit(pairs)
     path = tmp_path_factory.mktemp("model") / "dual.npz"

@@ -46,3 +46,8 @@ class LimitError(MarkovMotionError, ValueError):
 
     Also a :class:`ValueError`, so library callers that catch that keep working.
     """
+
+
+class TooLittleDataError(MarkovMotionError, ValueError):
+    """The training data are too few for the model asked for (fewer frames than
+    prototypes or states). Also a :class:`ValueError`."""

@@ -29,6 +29,12 @@ T = TypeVar("T")
 err_console = Console(stderr=True, soft_wrap=True)
 
 
+def note(message: str) -> None:
+    """One line to stderr about a choice the library made for the user (takes left out,
+    a kind chosen): where commands and the demo show it, off stdout's JSON."""
+    err_console.print(f"[yellow]note:[/] {message}", highlight=False)
+
+
 #: Seconds between the plain progress lines printed off a terminal.
 LOG_EVERY = 30.0
 

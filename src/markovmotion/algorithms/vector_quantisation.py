@@ -14,12 +14,17 @@ import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.metrics import pairwise_distances_argmin
 
+from markovmotion.errors import TooLittleDataError
+
 
 def kmeans_prototypes(x: np.ndarray, k: int, seed: int = 0, n_init: int = 3) -> np.ndarray:
     """(k, d) k-means centres of the rows of ``x`` (k-means++ starts, best of ``n_init``)."""
     x = np.asarray(x, dtype=float)
     if not 1 <= k <= len(x):
-        raise ValueError(f"cannot find {k} prototypes in {len(x)} vectors")
+        raise TooLittleDataError(
+            f"cannot find {k} prototypes in {len(x)} vectors: train on more takes or ask "
+            "for fewer prototypes"
+        )
     return KMeans(n_clusters=k, n_init=n_init, random_state=seed).fit(x).cluster_centers_
 
 
@@ -67,7 +72,10 @@ def competitive_learning(
     """
     x = np.ascontiguousarray(x, dtype=float)
     if not 1 <= k <= len(x):
-        raise ValueError(f"cannot find {k} prototypes in {len(x)} vectors")
+        raise TooLittleDataError(
+            f"cannot find {k} prototypes in {len(x)} vectors: train on more takes or ask "
+            "for fewer prototypes"
+        )
     rng = np.random.default_rng(seed)
     protos = x[rng.choice(len(x), k, replace=False)].copy()
     order = rng.permutation(len(x))

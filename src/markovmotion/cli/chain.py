@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import ranged
+from markovmotion.cli.options import kind_option, ranged
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -28,7 +28,7 @@ from markovmotion.models.chain.condensation import (
     DEFAULT_SIGMA,
     RESPONSES,
 )
-from markovmotion.models.chain.partner import DEFAULT_PROTOTYPES, VirtualPartner
+from markovmotion.models.chain.partner import DEFAULT_PROTOTYPES, KINDS, VirtualPartner
 from markovmotion.progress import err_console, track
 
 SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
@@ -56,11 +56,17 @@ def _check_response(response: str) -> None:
         raise typer.BadParameter(f"response must be one of {', '.join(RESPONSES)}")
 
 
-def _training_takes(data: Path | None, source: str, label: str):
-    """Motion-capture (A, B) pairs, or tracked silhouette takes."""
+def _training_takes(data: Path | None, source: str, label: str, kind: str | None = None):
+    """Motion-capture (A, B) pairs (skeletons: :func:`~markovmotion.data.kinds.choose_kind`
+    says what it leaves out), or tracked silhouette takes."""
     if source == "mocap":
+        from markovmotion.data.kinds import choose_kind
+
         index = MocapIndex.load(data)
-        train, _ = held_out_pairs(index.pairs(label=label))
+        pairs, _ = choose_kind(
+            index.pairs(label=label), kind, "two-person takes", lambda p: p[0], KINDS
+        )
+        train, _ = held_out_pairs(pairs)
         if not train:
             raise DataNotFoundError(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
@@ -91,10 +97,11 @@ def train(
     lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10)."),
     epochs: int = ranged("iterations", 5, min=1, help="Passes of each competitive learning."),
     seed: int = ranged("seed", 0, help="Random seed of the quantisations."),
+    kind: str = kind_option(),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded)."""
     _check_source(source)
-    takes = _training_takes(data, source, label)
+    takes = _training_takes(data, source, label, kind)
     model = VirtualPartner(
         lam=lam,
         n_state_prototypes=prototypes,

@@ -7,9 +7,11 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
+from markovmotion.cli.options import choice
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.fetch import BANDAI_BASE_URL, CMU_BASE_URL, INTERACTION_SUBJECTS, fetch
+from markovmotion.data.kinds import KINDS
 from markovmotion.progress import err_console
 
 app = typer.Typer(help="The motion-capture collection: list it, fetch it.", no_args_is_help=True)
@@ -20,16 +22,32 @@ def list_(
     data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
     category: str = typer.Option(None, help="Only this category (walk, style_walk, ...)."),
     label: str = typer.Option(None, help="Only this label (salsa, normal, sad, ...)."),
-    source: str = typer.Option(None, help="Only this source (cmu, bandai)."),
+    source: str = typer.Option(None, help="Only this source (cmu, bandai, buetepage)."),
+    kind: str = typer.Option(
+        None,
+        callback=choice(KINDS),
+        help="Only 'skeleton' takes (BVH, ASF/AMC) or 'markers' (C3D).",
+    ),
 ) -> None:
-    """List the motions of the collection."""
+    """List the motions of the collection, with the kind of each (skeleton and its joint
+    count, or markers and their count, read from the files' headers)."""
+    from markovmotion.errors import MarkovMotionError
+    from markovmotion.io import describe_take
+
     index = MocapIndex.load(data)
-    rows = index.query(category=category, label=label, source=source)
+    rows = index.query(category=category, label=label, source=source, kind=kind)
     table = Table(title=f"{len(rows)} of {len(index)} motions in {index.root}")
-    for col in ("file", "source", "category", "label", "fps", "frames"):
+    for col in ("file", "source", "subject", "category", "label", "kind", "fps", "frames"):
         table.add_column(col)
     for e in rows:
-        table.add_row(e.file, e.source, e.category, e.label, f"{e.fps:g}", str(e.frames))
+        try:
+            what, count = describe_take(e.path)
+            shape = f"{what}, {count} {'points' if what == 'markers' else 'joints'}"
+        except MarkovMotionError as exc:  # listed but unreadable: say so, keep listing
+            shape = f"{e.kind}, unreadable ({exc})"
+        table.add_row(
+            e.file, e.source, e.subject, e.category, e.label, shape, f"{e.fps:g}", str(e.frames)
+        )
     print_table(table)
 
 

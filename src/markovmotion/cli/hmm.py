@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from markovmotion.cli.options import choice, ranged
+from markovmotion.cli.options import choice, kind_option, ranged
 from markovmotion.data.index import listed_entry, read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -82,6 +82,7 @@ JOBS = typer.Option(
     1, "--jobs", min=0, help="Parallel jobs of EM's E-step over the takes (0: all cores)."
 )
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
+KIND = kind_option()
 
 
 def _split(values: str | None) -> list[str] | None:
@@ -138,6 +139,7 @@ def train(
     n_iter: int = N_ITER,
     seed: int = SEED,
     jobs: int = JOBS,
+    kind: str = KIND,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
@@ -148,7 +150,7 @@ def train(
     start = time.perf_counter()
     model = new_model(locals())
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
-        model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials))
+        model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials), kind)
     model.save(out, **extras)
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
@@ -427,6 +429,7 @@ def crossval(
         "(nested leave-one-take-out; ~25 min for 1,9,15,19 on salsa).",
     ),
     json_out: bool = JSON,
+    kind: str = KIND,
 ) -> None:
     """Leave-one-take-out evaluation: train on all takes but one, test on it, for every take."""
     import joblib
@@ -436,7 +439,7 @@ def crossval(
     model = new_model(locals())
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
-        report, written = crossval_index(model, data, _split(labels), plots, windows)
+        report, written = crossval_index(model, data, _split(labels), plots, windows, kind)
     _report(report, written, json_out)
 
 

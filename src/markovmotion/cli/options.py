@@ -167,3 +167,16 @@ def choice(values: tuple[str, ...] | list[str]):
         return value
 
     return check
+
+
+def kind_option() -> Any:
+    """``--kind skeleton|markers``, one name across the command line: which kind of take to
+    learn from where a label or category holds both (default: the larger group, said in
+    one line; :func:`markovmotion.data.kinds.choose_kind`)."""
+    return typer.Option(
+        None,
+        "--kind",
+        callback=choice(("skeleton", "markers")),
+        help="Learn from 'skeleton' takes (BVH, ASF/AMC) or 'markers' takes (C3D) where the "
+        "labels hold both (default: the larger group, said in one line).",
+    )

@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import choice, ranged
+from markovmotion.cli.options import choice, kind_option, ranged
 from markovmotion.cli.tables import print_table
 from markovmotion.core.markers import Markers
 from markovmotion.data import MocapIndex
@@ -130,6 +130,7 @@ def train(
     structured: bool = typer.Option(False, help="Also learn the structured two-level model (§4)."),
     key_memory: int = typer.Option(4, min=0, help="Maximum memory of the key-prototype VLMM."),
     seed: int = ranged("seed", 0, help="Seed of the vector quantisation."),
+    kind: str = kind_option(),
 ) -> None:
     """Learn prototypes and a VLMM (optionally the structured model) from motion capture."""
     from markovmotion.models.vlmm.behaviour import BehaviourModel, fit_index
@@ -178,7 +179,7 @@ def train(
             err_console.print(_memory_table(f"key-prototype VLMM (N = {key_memory})", model.vlmm_))
         err_console.print(f"wrote {out}")
         return
-    run = fit_index(model, MocapIndex.load(data), category, label, hold_out)
+    run = fit_index(model, MocapIndex.load(data), category, label, hold_out, kind)
     model.save(out)
     base = model.prototype_model_ if structured else model
     err_console.print(
@@ -187,11 +188,6 @@ def train(
         f"{', '.join(e.file for e in run.held_out) or 'none'}",
         highlight=False,
     )
-    if run.other_skeleton:
-        err_console.print(
-            f"left out (another skeleton): {', '.join(e.file for e in run.other_skeleton)}",
-            highlight=False,
-        )
     err_console.print(_memory_table(f"prototype VLMM (N = {max_memory})", base.vlmm_))
     if structured:
         err_console.print(

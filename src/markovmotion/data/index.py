@@ -110,6 +110,11 @@ class Entry:
         return self.source == "cmu" and base_suffix(self.file) == ".bvh"
 
     @property
+    def kind(self) -> str:
+        """``"markers"`` for a C3D file (named points, no skeleton), else ``"skeleton"``."""
+        return "markers" if base_suffix(self.file) == ".c3d" else "skeleton"
+
+    @property
     def first_frame(self) -> int:
         """The first frame of the take proper: 1 after CMU's reference frame, else 0."""
         return int(self.has_reference_frame)
@@ -183,8 +188,10 @@ class MocapIndex:
         label: str | Iterable[str] | None = None,
         source: str | None = None,
         subject: str | None = None,
+        kind: str | None = None,
     ) -> list[Entry]:
-        """Entries matching every criterion given (a criterion may be a list of values)."""
+        """Entries matching every criterion given (a criterion may be a list of values);
+        ``kind``: ``"skeleton"`` or ``"markers"`` (:attr:`Entry.kind`)."""
 
         def ok(value: str, want: str | Iterable[str] | None) -> bool:
             if want is None:
@@ -198,6 +205,7 @@ class MocapIndex:
             and ok(e.label, label)
             and ok(e.source, source)
             and ok(e.subject, subject)
+            and ok(e.kind, kind)
         ]
 
     def find(self, file: str) -> Entry:
@@ -210,11 +218,14 @@ class MocapIndex:
         """Read an entry at its true frame rate, without CMU's reference frame."""
         return entry.read()
 
-    def pairs(self, label: str | Iterable[str] | None = None) -> list[tuple[Entry, Entry]]:
-        """Two-person takes as (A, B) entries, each take once (A is the file listed first)."""
+    def pairs(
+        self, label: str | Iterable[str] | None = None, kind: str | None = None
+    ) -> list[tuple[Entry, Entry]]:
+        """Two-person takes as (A, B) entries, each take once (A is the file listed first);
+        ``kind``: only skeleton or markers takes."""
         out = []
         seen: set[str] = set()
-        for e in self.query(category="interaction", label=label):
+        for e in self.query(category="interaction", label=label, kind=kind):
             if not e.partner_file or e.file in seen:
                 continue
             partner = self.find(e.partner_file)

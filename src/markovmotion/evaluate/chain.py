@@ -40,6 +40,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.kinds import choose_kind
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.evaluate.takes import test_takes
@@ -50,7 +51,7 @@ from markovmotion.models.chain.condensation import (
     DEFAULT_SIGMA,
     RESPONSES,
 )
-from markovmotion.models.chain.partner import VirtualPartner
+from markovmotion.models.chain.partner import KINDS, VirtualPartner
 from markovmotion.progress import err_console, track
 
 if TYPE_CHECKING:
@@ -123,7 +124,13 @@ def test_set(
     if model.source != "mocap":
         raise ValueError("a silhouette model is evaluated on tracked takes: give takes")
     index = MocapIndex.load(test)
-    candidates = index.pairs(label=model_labels(model, labels))
+    candidates, _ = choose_kind(
+        index.pairs(label=model_labels(model, labels)),
+        None,
+        "two-person takes",
+        lambda p: p[0],
+        KINDS,
+    )
     if test is None:
         _, candidates = held_out_pairs(candidates)
     chosen = test_takes(model, index, candidates, "two-person take")

@@ -42,6 +42,7 @@ from sklearn.neighbors import NearestNeighbors
 
 from markovmotion.core.motion import UP, Motion
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
+from markovmotion.data.kinds import choose_kind, largest_group
 from markovmotion.data.splits import select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
@@ -293,24 +294,42 @@ def index_record(index: MocapIndex) -> dict[str, str]:
     return {"root": str(index.root.resolve()), "sha256": file_sha256(path)}
 
 
+def load_pairs(
+    index: MocapIndex, pairs: Sequence[Pair], kind: str | None = None
+) -> tuple[list[Pair], list[tuple]]:
+    """The two-person takes of ``pairs`` a dual HMM can learn together, loaded: those of
+    one kind (``kind``, else the larger group) and, of these, the largest group whose
+    person B shares one skeleton or marker set (:mod:`markovmotion.data.kinds`, which
+    says what it left out). Returns the pairs kept and their (A, B) takes."""
+    pairs, _ = choose_kind(pairs, kind, "two-person takes", entry=lambda p: p[0])
+    takes = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
+    keep, _ = largest_group(
+        takes, [a.file for a, _ in pairs], "two-person takes (person B)", key=lambda t: t[1]
+    )
+    return [pairs[i] for i in keep], [takes[i] for i in keep]
+
+
 def fit_on_index(
     model: DualHMM,
     data: str | os.PathLike[str] | None = None,
     labels: Sequence[str] | None = None,
     test_trials: Sequence[str] | None = None,
+    kind: str | None = None,
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
-    ``test_trials``. Returns the model, the extras to save with it (``data_index``: the
-    index, ``held_out_files``: the held-out takes' files, which ``evaluate`` without
-    ``--test`` evaluates on) and the training pairs."""
+    ``test_trials``, of one kind and set (:func:`load_pairs`). Returns the model, the
+    extras to save with it (``data_index``: the index, ``held_out_files``: the held-out
+    takes' files, which ``evaluate`` without ``--test`` evaluates on) and the training
+    pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
-    motions = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
+    pairs, motions = load_pairs(index, pairs, kind)
     model.fit(motions, labels=[a.label for a, _ in pairs])
     held: list[str] = []
     if test_trials is not None:
         for a, b in select_pairs(index, labels, test_trials, held_out=True):
-            held += [a.file, b.file]
+            if a.kind == pairs[0][0].kind:
+                held += [a.file, b.file]
     return model, {"data_index": index_record(index), "held_out_files": held}, pairs
 
 
@@ -402,15 +421,13 @@ def crossval_index(
     labels: Sequence[str] | None = None,
     plot_dir: str | os.PathLike[str] | None = None,
     placement_windows: Sequence[int] | None = None,
+    kind: str | None = None,
 ) -> tuple[dict, list[Path]]:
     """``dualhmm crossval``: :func:`cross_validate` over the two-person takes of ``labels``
     in the index at ``data``; the JSON (:func:`summarise`, with ``test_files``) and plots."""
     index = MocapIndex.load(data)
-    pairs = select_pairs(index, labels, None, held_out=False)
-    takes = [
-        (f"{a.name}+{b.name}", a.label, *index.load_pair(a, b))
-        for a, b in track(pairs, "loading takes")
-    ]
+    pairs, loaded = load_pairs(index, select_pairs(index, labels, None, held_out=False), kind)
+    takes = [(f"{a.name}+{b.name}", a.label, *ab) for (a, b), ab in zip(pairs, loaded, strict=True)]
     results, written = cross_validate(takes, model, plot_dir, placement_windows)
     report = summarise(results, model)
     report.update(TestTakes(list(pairs)).report())

@@ -13,8 +13,8 @@ import os
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError
-from markovmotion.io.asfamc import read_amc, read_asf
-from markovmotion.io.bvh import read_bvh, write_bvh
+from markovmotion.io.asfamc import asf_beside, read_amc, read_asf
+from markovmotion.io.bvh import read_bvh, read_bvh_skeleton, write_bvh
 from markovmotion.io.c3d import read_c3d, write_c3d
 from markovmotion.io.files import base_suffix
 
@@ -44,6 +44,21 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
         f"unknown motion format {suffix or '(no suffix)'!r}; "
         f"expected one of {', '.join(ALL_SUFFIXES)}",
     )
+
+
+def describe_take(path: str | os.PathLike[str]) -> tuple[str, int]:
+    """``("skeleton", joints)`` (end sites not counted) or ``("markers", markers)`` of a
+    motion file, from its header (BVH hierarchy, ASF skeleton beside an AMC, C3D points)."""
+    suffix = base_suffix(path)
+    if suffix == ".c3d":
+        return "markers", len(read_c3d(path).names)
+    if suffix == ".bvh":
+        skeleton = read_bvh_skeleton(path)
+    elif suffix == ".amc":
+        skeleton = read_asf(asf_beside(path))
+    else:
+        raise MotionFormatError(path, f"unknown motion format {suffix or '(no suffix)'!r}")
+    return "skeleton", int((~skeleton.end_site).sum())
 
 
 def check_motion_output(path: str | os.PathLike[str]) -> None:

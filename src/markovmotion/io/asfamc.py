@@ -346,7 +346,7 @@ def _lines(path: str | os.PathLike[str], text: str) -> list[str]:
     return text.splitlines()
 
 
-def _asf_beside(amc: str | os.PathLike[str]) -> Path:
+def asf_beside(amc: str | os.PathLike[str]) -> Path:
     """CMU's naming: ``NN_TT.amc[.gz]`` is animated with ``NN.asf`` in the same folder."""
     amc = Path(amc)
     if "_" not in amc.name:
@@ -519,7 +519,7 @@ def read_amc(
             number of values, non-numeric or non-finite values, missing or
             repeated frames, a truncated last frame, zero frames, or a bad ASF.
     """
-    skeleton = _parse_asf(_asf_beside(path) if asf is None else asf)
+    skeleton = _parse_asf(asf_beside(path) if asf is None else asf)
     values, degrees = _parse_amc(str(path), read_text(path), skeleton)
     with np.errstate(all="ignore"):  # overflow is reported below, not as a warning
         quats, trans = _values_to_motion(skeleton, values, degrees)

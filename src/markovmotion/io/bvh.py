@@ -29,7 +29,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.rotations import euler_to_quat
 from markovmotion.core.skeleton import POSITION_CHANNELS, VALID_CHANNELS, Skeleton
 from markovmotion.errors import MotionFormatError
-from markovmotion.io.files import atomic_write, read_text
+from markovmotion.io.files import atomic_write, is_gzip, open_regular, read_text
 from markovmotion.limits import (
     MAX_CHANNELS,
     MAX_FRAMES,
@@ -409,6 +409,37 @@ def read_bvh(
             input, and for one beyond the limits of :mod:`markovmotion.limits`.
     """
     return read_bvh_stream(path, fps, length_unit, bad_frames)[0]
+
+
+#: How much of a BVH file :func:`read_bvh_skeleton` reads for its hierarchy.
+HEADER_BYTES = 1 << 20
+
+
+def read_bvh_skeleton(path: str | os.PathLike[str], length_unit: str = "cm") -> Skeleton:
+    """The skeleton of a BVH file from its HIERARCHY alone, without reading the frames (the
+    first :data:`HEADER_BYTES` of the file, decompressed if ``.gz``): what ``data list``
+    shows of every take.
+
+    Raises:
+        MotionFormatError: no MOTION line in that much of the file, or a malformed hierarchy.
+    """
+    import gzip
+    import zlib
+
+    with open_regular(path) as fh:
+        try:
+            stream = gzip.GzipFile(fileobj=fh, mode="rb") if is_gzip(path) else fh
+            head = stream.read(HEADER_BYTES).decode("latin-1")
+        except (OSError, EOFError, zlib.error) as exc:
+            raise MotionFormatError(path, f"cannot read file ({exc})") from None
+    lines = head.splitlines()
+    motion_at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
+    if motion_at is None:
+        raise MotionFormatError(path, f"no MOTION line in its first {HEADER_BYTES} bytes")
+    try:
+        return _parse_hierarchy(_Tokens(str(path), lines[:motion_at]), _unit_scale(length_unit))
+    except ValueError as exc:  # the Skeleton's own checks
+        raise MotionFormatError(path, str(exc)) from None
 
 
 def read_bvh_stream(

@@ -44,7 +44,7 @@ def render_takes(
     """Render every two-person take of ``label`` into ``out`` (``.mp4`` files, or PNG folders
     with ``suffix`` ""); returns the path of ``index.json``."""
     index = MocapIndex.load(data)
-    train, test = held_out_pairs(index.pairs(label=label))
+    train, test = held_out_pairs(index.pairs(label=label, kind="skeleton"))
     out = Path(out)
     entries = []
     for pair, split in track(

@@ -52,12 +52,14 @@ COHERENCE_SECONDS = 120.0
 
 def video_partner(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """A handshake on video: A tracked from 3 cameras, the virtual partner composited in."""
-    shakes = index.pairs(label=[HANDSHAKE])
+    shakes = index.pairs(label=[HANDSHAKE], kind="skeleton")  # rendered from skeletons
     if not shakes:
         console.print("no handshake in the index: video demo skipped")
         return []
     test = shakes[-1]
-    train = [p for p in index.pairs() if p[0].subject == test[0].subject and p != test]
+    train = [
+        p for p in index.pairs(kind="skeleton") if p[0].subject == test[0].subject and p != test
+    ]
     if not train:
         console.print("no other take of the handshake's people to learn from: skipped")
         return []

@@ -24,6 +24,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import MocapIndex, listed_entry, read_listed_motion
+from markovmotion.data.kinds import choose_kind
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, body_points
@@ -131,11 +132,16 @@ def training_body_model(
     max_dof: int = 28,
 ) -> BodyModel:
     """The body model learnt from both people of the collection's training takes of ``labels``
-    (its skeleton: person A's of the first take)."""
+    (its skeleton: person A's of the first take): skeleton takes only, markers takes of
+    the labels left out (:func:`~markovmotion.data.kinds.choose_kind` says so)."""
     index = MocapIndex.load(data)
     pairs = index.pairs(label=list(labels))
-    if not pairs:
-        raise DataNotFoundError(f"no two-person takes labelled {', '.join(labels)} in {index.root}")
+    if not any(a.kind == "skeleton" for a, _ in pairs):
+        raise DataNotFoundError(
+            f"no skeleton two-person takes labelled {', '.join(labels)} in {index.root} "
+            "for the body model"
+        )
+    pairs, _ = choose_kind(pairs, None, "two-person takes", lambda p: p[0], ("skeleton",))
     train, test = held_out_pairs(pairs)
     motions = []
     for a, b in train + (test if include_held_out else []):

@@ -78,6 +78,10 @@ class PartnerResponse:
     errors: np.ndarray
 
 
+#: The kinds of take the behaviour chain learns from (:mod:`markovmotion.data.kinds`).
+KINDS = ("skeleton",)
+
+
 class VirtualPartner(Model):
     """Interaction model: joint shape vectors, behaviour chain, virtual partner (§2-5).
 

@@ -311,6 +311,9 @@ class DualHMM(Model):
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
+        kinds = {Markers if isinstance(x, Markers) else type(x) for pair in pairs for x in pair}
+        if len(kinds) > 1 or not all(issubclass(k, (Motion, Markers)) for k in kinds):
+            raise TypeError("a dual HMM learns from pairs of all Motions or all Markers")
         if self.markers:
             check_count("markers", self.markers, 1)
         elif not isinstance(pairs[0][0], Markers):

@@ -45,6 +45,7 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.kinds import choose_kind, largest_group, same_set
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_points import MARKER_POINTS, body_point_index
@@ -72,34 +73,19 @@ def load_motions(
     index: MocapIndex, entries: Sequence[Entry], fps: float
 ) -> tuple[list[Motion | Markers], list[Entry]]:
     """The entries' motions (C3D files: their markers, gaps filled) at ``fps``, keeping the
-    largest group sharing one skeleton (or one set of marker names).
+    largest group sharing one skeleton (or one set of marker names,
+    :func:`~markovmotion.data.kinds.largest_group`, which says what it left out).
 
     Returns the motions and the entries left out for having another skeleton.
     """
     motions = [_take(index.load_take(e)).resample(fps) for e in entries]
-    groups: list[list[int]] = []
-    for i, m in enumerate(motions):
-        for g in groups:
-            if same_kind(motions[g[0]], m):
-                g.append(i)
-                break
-        else:
-            groups.append([i])
-    best = max(groups, key=len) if groups else []
-    return [motions[i] for i in best], [e for i, e in enumerate(entries) if i not in best]
+    best, left = largest_group(motions, [e.file for e in entries])
+    return [motions[i] for i in best], [entries[i] for i in left]
 
 
 def _take(take: Motion | Markers) -> Motion | Markers:
     """A take as the models learn it: markers with their unseen samples filled in."""
     return fill_gaps(take) if isinstance(take, Markers) else take
-
-
-def same_kind(a: Motion | Markers, b: Motion | Markers) -> bool:
-    """Whether two takes can be learnt together: skeletons of one topology, or markers of
-    the same names."""
-    if isinstance(a, Markers) or isinstance(b, Markers):
-        return isinstance(a, Markers) and isinstance(b, Markers) and set(a.names) == set(b.names)
-    return a.skeleton.same_topology(b.skeleton)
 
 
 def evaluation_joints(motions: Sequence[Motion], tol: float = 1e-3) -> np.ndarray:
@@ -308,7 +294,7 @@ class BehaviourModel(Model):
                 f'configuration="markers", not {self.configuration!r}'
             )
         for t in takes[1:]:
-            if not same_kind(takes[0], t):
+            if not same_set(takes[0], t):
                 what = "markers" if isinstance(takes[0], Markers) else "a skeleton"
                 raise SkeletonMismatchError(
                     f"{t.name or 'a take'}: not {what} like {takes[0].name or 'the first take'}"
@@ -640,11 +626,14 @@ def fit_index(
     category: str = "exercise",
     labels: Sequence[str] | None = None,
     hold_out: bool = True,
+    kind: str | None = None,
 ) -> IndexFit:
     """Fit ``model`` (a behaviour model, plain or structured) on the takes of ``category``
     (and ``labels``) of an index, the last take of each label held out when ``hold_out``
-    (:func:`markovmotion.data.splits.held_out_last`), keeping the largest group of takes
-    that share a skeleton.
+    (:func:`markovmotion.data.splits.held_out_last`): takes of one kind (``kind``, else
+    the larger group; :func:`~markovmotion.data.kinds.choose_kind`: a model of skeleton
+    positions or rotations learns skeletons only), then the largest group of them that
+    share a skeleton or marker set.
 
     Records on the model ``category_``, ``labels_`` (those of the takes used) and
     ``held_out_files_`` (INDEX.csv file names), which ``vlmm evaluate`` reads.
@@ -658,12 +647,16 @@ def fit_index(
     if not entries:
         which = f"{category} takes labelled {', '.join(labels)}" if labels else f"{category} takes"
         raise DataNotFoundError(f"no {which} in {index.root / 'INDEX.csv'}")
+    base = (model if isinstance(model, BehaviourModel) else model.prototype_model) or (
+        BehaviourModel()
+    )
+    can = ("skeleton", "markers") if base.configuration == "markers" else ("skeleton",)
+    entries, other_kind = choose_kind(entries, kind, f"{category} takes", can=can)
     train, held_out = held_out_last(entries) if hold_out else (list(entries), [])
-    base = model if isinstance(model, BehaviourModel) else model.prototype_model
-    motions, skipped = load_motions(index, train, (base or BehaviourModel()).fps)
+    motions, skipped = load_motions(index, train, base.fps)
     used = [e for e in train if e not in skipped]
     model.fit(motions)
     model.category_ = category
     model.labels_ = sorted({e.label for e in used})
     model.held_out_files_ = [e.file for e in held_out]
-    return IndexFit(model, motions, used, held_out, skipped)
+    return IndexFit(model, motions, used, held_out, skipped + other_kind)

@@ -1,0 +1,213 @@
+"""A collection that mixes skeleton takes (BVH, ASF/AMC) and markers-only takes (C3D) under
+one label: every family chooses takes it can learn, by kind and by set, and says in one
+line what it left out (:mod:`markovmotion.data.kinds`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import make_motion
+
+from markovmotion.cli import main
+from markovmotion.core.markers import Markers
+from markovmotion.data.kinds import choose_kind, largest_group
+from markovmotion.errors import DataNotFoundError
+from markovmotion.io import describe_take
+from markovmotion.models import Model
+from markovmotion.models.hmm.dual import DualHMM
+
+LABEL = "handshake"
+
+
+@pytest.fixture(scope="module")
+def both(mocap):
+    """The collection's handshakes by kind (the label holds both; the test says so)."""
+    pairs = mocap.pairs(label=LABEL)
+    kinds = {k: [p for p in pairs if p[0].kind == k] for k in ("skeleton", "markers")}
+    assert all(kinds.values()), "the collection's handshakes should hold both kinds"
+    return kinds
+
+
+def _notes(stderr: str) -> list[str]:
+    return [ln for ln in stderr.splitlines() if ln.startswith("note:")]
+
+
+def _run(args: list[str], capsys) -> tuple[int, str]:
+    try:
+        main(args)
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+# ------------------------------------------------------------------ choose_kind, largest_group
+def _entries(mocap, kinds: str):
+    """Index entries of the given kinds in order ("s": a skeleton take, "m": a markers one)."""
+    skeleton = mocap.query(kind="skeleton")[0]
+    markers = mocap.query(kind="markers")[0]
+    return [replace(skeleton if k == "s" else markers, trial=str(i)) for i, k in enumerate(kinds)]
+
+
+def test_choose_kind_takes_the_larger_group_and_says_so(mocap, capsys):
+    entries = _entries(mocap, "smmsm")
+    kept, left = choose_kind(entries)
+    assert [e.kind for e in kept] == ["markers"] * 3 and [e.kind for e in left] == ["skeleton"] * 2
+    (line,) = _notes(capsys.readouterr().err)
+    assert "both kinds" in line and "larger group" in line and "--kind" in line
+    assert "left out 2 skeleton" in line
+
+
+def test_choose_kind_tie_goes_to_skeletons_and_the_asked_kind_wins(mocap, capsys):
+    entries = _entries(mocap, "smsm")
+    assert {e.kind for e in choose_kind(entries)[0]} == {"skeleton"}
+    capsys.readouterr()
+    kept, left = choose_kind(entries, "markers")
+    assert {e.kind for e in kept} == {"markers"} and len(left) == 2
+    (line,) = _notes(capsys.readouterr().err)
+    assert "--kind markers" in line and "left out 2 skeleton" in line
+
+
+def test_choose_kind_one_kind_says_nothing(mocap, capsys):
+    entries = _entries(mocap, "sss")
+    assert choose_kind(entries) == (entries, [])
+    assert capsys.readouterr().err == ""
+
+
+def test_choose_kind_refuses_a_kind_absent_or_not_learnt(mocap):
+    with pytest.raises(DataNotFoundError, match="no markers"):
+        choose_kind(_entries(mocap, "ss"), "markers")
+    with pytest.raises(DataNotFoundError, match="learns from skeleton"):
+        choose_kind(_entries(mocap, "sm"), "markers", can=("skeleton",))
+    with pytest.raises(ValueError, match="kind must be one of"):
+        choose_kind(_entries(mocap, "s"), "points")
+
+
+def test_largest_group_keeps_one_skeleton_or_marker_set(capsys):
+    a, b = make_motion(10), make_motion(10, seed=1)
+    other = a.copy()
+    other.skeleton = replace(a.skeleton, names=("root", *a.skeleton.names[1:]))
+    m8 = Markers(tuple("abcdefgh"), np.zeros((5, 8, 3)), 30.0)
+    m3 = Markers(tuple("abc"), np.zeros((5, 3, 3)), 30.0)
+    takes = [m8, a, other, b, m3, m8]
+    keep, left = largest_group(takes, [f"t{i}.bvh" for i in range(6)])
+    assert keep == [1, 3] or keep == [0, 5]
+    assert sorted(keep + left) == list(range(6))
+    (line,) = _notes(capsys.readouterr().err)
+    assert "4 skeletons or marker sets" in line and "left out" in line
+
+
+def test_dual_hmm_refuses_a_mix_of_motions_and_markers():
+    m = make_motion(20)
+    markers = Markers(tuple("abcdefgh"), np.random.default_rng(0).normal(size=(20, 8, 3)), 30.0)
+    with pytest.raises(TypeError, match="all Motions or all Markers"):
+        DualHMM(n_states=2).fit([(m, m), (markers, markers)])
+
+
+# ------------------------------------------------------------------ every family, by the CLI
+def test_dualhmm_trains_on_the_larger_kind_or_the_one_asked(tmp_path: Path, capsys, both):
+    out = tmp_path / "m.npz"
+    code, err = _run(
+        [
+            "dualhmm",
+            "train",
+            "--labels",
+            LABEL,
+            "--states",
+            "4",
+            "--n-iter",
+            "3",
+            "--out",
+            str(out),
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    larger = max(both, key=lambda k: (len(both[k]), k == "skeleton"))
+    other = "markers" if larger == "skeleton" else "skeleton"
+    (line,) = _notes(err)
+    assert "both kinds" in line and f"left out {len(both[other])} {other}" in line
+    assert Model.load(out).uses_markers == (larger == "markers")
+    for kind in ("skeleton", "markers"):
+        code, err = _run(
+            ["dualhmm", "train", "--labels", LABEL, "--states", "2", "--n-iter", "2"]
+            + ["--kind", kind, "--out", str(out)],
+            capsys,
+        )
+        assert code == 0, err
+        (line,) = _notes(err)
+        assert f"--kind {kind}" in line
+        assert Model.load(out).uses_markers == (kind == "markers")
+
+
+def test_chain_trains_on_skeletons_and_refuses_markers_in_one_line(tmp_path: Path, capsys, both):
+    out = tmp_path / "c.npz"
+    small = ["--prototypes", "8", "--behaviours", "8", "--epochs", "1"]
+    code, err = _run(["chain", "train", "--label", LABEL, *small, "--out", str(out)], capsys)
+    assert code == 0, err
+    (line,) = _notes(err)
+    assert "learns from skeleton takes" in line
+    assert f"left out {len(both['markers'])} markers" in line
+    code, err = _run(
+        [
+            "chain",
+            "train",
+            "--label",
+            LABEL,
+            "--kind",
+            "markers",
+            *small,
+            "--out",
+            str(tmp_path / "d.npz"),
+        ],
+        capsys,
+    )
+    assert code == 2
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "skeleton" in lines[0] and "markers" in lines[0]
+    assert not (tmp_path / "d.npz").exists()
+
+
+def test_vlmm_learns_markers_or_skeletons_by_kind(tmp_path: Path, capsys, mocap):
+    out = tmp_path / "v.npz"
+    base = ["vlmm", "train", "--category", "interaction", "--label", LABEL, "--no-hold-out"]
+    code, err = _run(
+        [
+            *base,
+            "--source",
+            "markers",
+            "--prototypes",
+            "12",
+            "--kind",
+            "markers",
+            "--out",
+            str(out),
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    (line,) = _notes(err)
+    assert "--kind markers" in line and "left out" in line and "skeleton" in line
+    assert Model.load(out).fits(mocap.load_take(mocap.query(label=LABEL, kind="markers")[0]))
+    # skeleton positions cannot learn C3D markers: they are left out, or refused if asked for
+    code, err = _run([*base, "--prototypes", "12", "--out", str(out)], capsys)
+    assert code == 0, err
+    (line,) = _notes(err)
+    assert "learns from skeleton takes" in line and "markers" in line
+    code, err = _run([*base, "--kind", "markers", "--out", str(out)], capsys)
+    assert code == 2 and len([ln for ln in err.splitlines() if ln.strip()]) == 1
+
+
+def test_data_list_shows_each_takes_kind(capsys, mocap):
+    main(["data", "list", "--label", LABEL])
+    shown = capsys.readouterr().out
+    for e in mocap.query(label=LABEL):
+        row = next(ln for ln in shown.splitlines() if e.file in ln)
+        kind, count = describe_take(e.path)
+        assert kind == e.kind
+        assert f"{kind}, {count} {'points' if kind == 'markers' else 'joints'}" in row
