@@ -83,6 +83,12 @@ JOBS = typer.Option(
 )
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 KIND = kind_option()
+ROLES = typer.Option(
+    "one",
+    callback=choice(("one", "both")),
+    help="Learn each take as listed ('one': A answered by B) or also with the roles swapped "
+    "('both': for interactions whose roles are alike, such as handshakes and waves).",
+)
 
 
 def _split(values: str | None) -> list[str] | None:
@@ -140,6 +146,7 @@ def train(
     seed: int = SEED,
     jobs: int = JOBS,
     kind: str = KIND,
+    roles: str = ROLES,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
@@ -154,8 +161,9 @@ def train(
     model.save(out, **extras)
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
+    both = " in both roles" if roles == "both" else ""
     err_console.print(
-        f"wrote {out}: {len(pairs)} takes, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
+        f"wrote {out}: {len(pairs)} takes{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
         f"{hmm.n_iter_} EM iterations "
         f"({'converged' if hmm.converged_ else f'stopped at --n-iter {n_iter}, not converged'}), "
@@ -430,8 +438,10 @@ def crossval(
     ),
     json_out: bool = JSON,
     kind: str = KIND,
+    roles: str = ROLES,
 ) -> None:
-    """Leave-one-take-out evaluation: train on all takes but one, test on it, for every take."""
+    """Leave-one-out evaluation: train on all takes but those of one pair of people (INDEX.csv's
+    subject; one take when all come from one pair), test on those, for every pair."""
     import joblib
 
     from markovmotion.evaluate.hmm import crossval_index
@@ -439,7 +449,7 @@ def crossval(
     model = new_model(locals())
     windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
     with joblib.parallel_config(n_jobs=jobs or -1):
-        report, written = crossval_index(model, data, _split(labels), plots, windows, kind)
+        report, written = crossval_index(model, data, _split(labels), plots, windows, kind, roles)
     _report(report, written, json_out)
 
 
@@ -468,7 +478,12 @@ def _print_table(report: dict) -> None:
     jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
     for c in ("group", *cols, "paper trellis std/win", *jumps, "latency median/p99 (µs)"):
         table.add_column(c)
-    rows = {"overall": report["overall"], **report["per_label"], **report["per_pair"]}
+    rows = {
+        "overall": report["overall"],
+        **report["per_label"],
+        **{f"people {p}": r for p, r in report.get("per_people", {}).items()},
+        **report["per_pair"],
+    }
     for name, r in rows.items():
         lat, paper = r["latency_us"], r["trellis"]["paper"]
         table.add_row(

@@ -54,6 +54,9 @@ from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 
 METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour")
+#: Which roles of each two-person take a partner learns from: as listed (A answered by
+#: B), or ``"both"`` (also B answered by A: :func:`both_roles`).
+ROLES = ("one", "both")
 #: A step of the median body point larger than this between frames is a jump (mm).
 JUMP_MM = 100.0
 
@@ -66,6 +69,7 @@ class PairResult:
     label: str
     fps: float
     errors: dict[str, np.ndarray] = field(default_factory=dict)
+    people: str = ""  # INDEX.csv's subject: the pair of people of the take
     pose_errors: dict[str, np.ndarray] = field(default_factory=dict)
     latencies_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
     jumps: dict[str, np.ndarray] = field(default_factory=dict)  # per frame step (mm)
@@ -224,11 +228,13 @@ def describe(model: DualHMM) -> dict:
 def summarise(results: Sequence[PairResult], model: DualHMM) -> dict:
     """The evaluation JSON: ``model``, ``overall``, ``per_label.<label>``, ``per_pair.<name>``."""
     labels = sorted({r.label for r in results})
+    people = sorted({r.people for r in results if r.people})
     per_pair = {r.name: _summary([r]) | ({"chosen": r.chosen} if r.chosen else {}) for r in results}
     return {
         "model": describe(model),
         "overall": _summary(results),
         "per_label": {lab: _summary([r for r in results if r.label == lab]) for lab in labels},
+        "per_people": {p: _summary([r for r in results if r.people == p]) for p in people},
         "per_pair": per_pair,
     }
 
@@ -259,28 +265,56 @@ def choose_placement(
     }
 
 
+def both_roles(
+    takes: Sequence[tuple[str, str, Motion, Motion]],
+) -> list[tuple[str, str, Motion, Motion]]:
+    """Each take ``(name, label, A, B)`` and the same take with the roles swapped (B as
+    person A, A as the partner): twice the people to learn a partner from, for
+    interactions whose roles are alike (a handshake, a wave; not a pull)."""
+    return [*takes, *((f"{n} (B as A)", lab, b, a) for n, lab, a, b in takes)]
+
+
 def cross_validate(
     takes: Sequence[tuple[str, str, Motion, Motion]],
     model: DualHMM,
     plot_dir: str | os.PathLike[str] | None = None,
     placement_windows: Sequence[int] | None = None,
+    people: Sequence[str] | None = None,
+    roles: str = "one",
 ) -> tuple[list[PairResult], list[Path]]:
-    """Leave-one-take-out: each take ``(name, label, A, B)`` is evaluated by a copy of
-    ``model`` (same hyper-parameters) trained on all the other takes. With
+    """Leave-one-out over the takes ``(name, label, A, B)``: each is evaluated by a copy of
+    ``model`` (same hyper-parameters) trained on the others.
+
+    ``people`` (per take, INDEX.csv's ``subject``): when the takes come from two or more
+    pairs of people, each pair of people is left out at once (its takes are evaluated by
+    a copy trained on the other people's takes alone: a partner for people it has never
+    seen); otherwise one take at a time. ``roles="both"``: each fold also learns from its
+    training takes with the roles swapped (:func:`both_roles`). With
     ``placement_windows``, each copy's ``placement_window`` is first chosen among them on
-    the other takes alone (:func:`choose_placement`: nested leave-one-take-out)."""
-    results, plots = [], []
-    for i, (name, label, a, b) in enumerate(track(takes, "leave-one-take-out")):
-        rest = [t for j, t in enumerate(takes) if j != i]
+    its training takes alone (:func:`choose_placement`: nested leave-one-take-out)."""
+    if roles not in ROLES:
+        raise ValueError(f"roles must be one of {', '.join(ROLES)}, got {roles!r}")
+    groups = list(people) if people is not None else [""] * len(takes)
+    if len(set(groups)) < 2:  # one pair of people: one take at a time
+        groups = [str(i) for i in range(len(takes))]
+    results: list[PairResult | None] = [None] * len(takes)
+    plots = []
+    for group in track(list(dict.fromkeys(groups)), "leave-one-out"):
+        rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
+        rest = both_roles(rest) if roles == "both" else rest
         fold, chosen = clone(model), {}
         if placement_windows:
             chosen = choose_placement(rest, fold, placement_windows)
             fold.set_params(placement_window=chosen["placement_window"])
         fold = _fit_on(fold, rest)
-        results.append(evaluate_pair(fold, a, b, name, label))
-        results[-1].chosen = chosen
-        if plot_dir is not None:
-            plots.append(plot_pair(results[-1], Path(plot_dir) / f"{name}_error.png"))
+        for i in (i for i, g in enumerate(groups) if g == group):
+            name, label, a, b = takes[i]
+            res = evaluate_pair(fold, a, b, name, label)
+            res.chosen, res.people = chosen, people[i] if people is not None else ""
+            results[i] = res
+            if plot_dir is not None:
+                plots.append(plot_pair(res, Path(plot_dir) / f"{name}_error.png"))
+    return [r for r in results if r is not None], plots
     return results, plots
 
 
@@ -315,16 +349,20 @@ def fit_on_index(
     labels: Sequence[str] | None = None,
     test_trials: Sequence[str] | None = None,
     kind: str | None = None,
+    roles: str = "one",
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
-    ``test_trials``, of one kind and set (:func:`load_pairs`). Returns the model, the
+    ``test_trials``, of one kind and set (:func:`load_pairs`), in both roles with
+    ``roles="both"`` (:func:`both_roles`). Returns the model, the
     extras to save with it (``data_index``: the index, ``held_out_files``: the held-out
     takes' files, which ``evaluate`` without ``--test`` evaluates on) and the training
     pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
     pairs, motions = load_pairs(index, pairs, kind)
-    model.fit(motions, labels=[a.label for a, _ in pairs])
+    takes = [("", a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
+    takes = both_roles(takes) if roles == "both" else takes
+    model.fit([(a, b) for _, _, a, b in takes], labels=[lab for _, lab, _, _ in takes])
     held: list[str] = []
     if test_trials is not None:
         for a, b in select_pairs(index, labels, test_trials, held_out=True):
@@ -402,6 +440,7 @@ def evaluate_model(
     for ea, eb, a, b in pairs_that_fit(model, index, pairs, incompatible):
         kept.append((ea, eb))
         res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
+        res.people = ea.subject
         results.append(res)
         if plot_dir is not None:
             plots.append(plot_pair(res, Path(plot_dir) / f"{res.name}_error.png"))
@@ -422,13 +461,19 @@ def crossval_index(
     plot_dir: str | os.PathLike[str] | None = None,
     placement_windows: Sequence[int] | None = None,
     kind: str | None = None,
+    roles: str = "one",
 ) -> tuple[dict, list[Path]]:
     """``dualhmm crossval``: :func:`cross_validate` over the two-person takes of ``labels``
-    in the index at ``data``; the JSON (:func:`summarise`, with ``test_files``) and plots."""
+    in the index at ``data`` (one kind and set, :func:`load_pairs`), leaving out one pair of
+    people at a time (INDEX.csv's ``subject``) when there are two or more, else one take;
+    the JSON (:func:`summarise`, with ``test_files``, ``left_out`` and ``roles``) and plots."""
     index = MocapIndex.load(data)
     pairs, loaded = load_pairs(index, select_pairs(index, labels, None, held_out=False), kind)
     takes = [(f"{a.name}+{b.name}", a.label, *ab) for (a, b), ab in zip(pairs, loaded, strict=True)]
-    results, written = cross_validate(takes, model, plot_dir, placement_windows)
+    people = [a.subject for a, _ in pairs]
+    results, written = cross_validate(takes, model, plot_dir, placement_windows, people, roles)
     report = summarise(results, model)
+    report["left_out"] = "pairs of people" if len(set(people)) > 1 else "takes"
+    report["roles"] = roles
     report.update(TestTakes(list(pairs)).report())
     return report, written
