@@ -68,6 +68,12 @@ MARKERS = typer.Option(
     help="Learn on N virtual markers placed on each person's skeleton (13-200; the paper's "
     "suit has 30); 0: skeletons (takes listed as .c3d files are markers anyway).",
 )
+NORMALISE = typer.Option(
+    "none",
+    callback=choice(("none", "person")),
+    help="'person': A's features relative to A's own running mean and (markers) B's frames "
+    "on the average training body, for people the model has never seen; 'none': the paper's.",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 INITIAL = typer.Option(
@@ -104,6 +110,7 @@ MODEL_OPTIONS = {
         for k in (
             "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
+            "normalise",
         )
     },
 }  # fmt: skip
@@ -139,6 +146,7 @@ def train(
     energy: float = ENERGY,
     frame: str = FRAME,
     markers: int = MARKERS,
+    normalise: str = NORMALISE,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,
@@ -424,6 +432,7 @@ def crossval(
     energy: float = ENERGY,
     frame: str = FRAME,
     markers: int = MARKERS,
+    normalise: str = NORMALISE,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,

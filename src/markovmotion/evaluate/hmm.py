@@ -239,9 +239,13 @@ def summarise(results: Sequence[PairResult], model: DualHMM) -> dict:
     }
 
 
-def _fit_on(model: DualHMM, takes: Sequence[tuple[str, str, Motion, Motion]]) -> DualHMM:
-    """A copy of ``model`` (same hyper-parameters) trained on ``takes``."""
-    return clone(model).fit([(a, b) for _, _, a, b in takes])
+def _fit_on(
+    model: DualHMM,
+    takes: Sequence[tuple[str, str, Motion, Motion]],
+    people: Sequence[str] | None = None,
+) -> DualHMM:
+    """A copy of ``model`` (same hyper-parameters) trained on ``takes`` (of ``people``)."""
+    return clone(model).fit([(a, b) for _, _, a, b in takes], groups=people)
 
 
 def choose_placement(
@@ -301,12 +305,14 @@ def cross_validate(
     plots = []
     for group in track(list(dict.fromkeys(groups)), "leave-one-out"):
         rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
-        rest = both_roles(rest) if roles == "both" else rest
+        who = [g for g in groups if g != group]
+        if roles == "both":
+            rest, who = both_roles(rest), who + who
         fold, chosen = clone(model), {}
         if placement_windows:
             chosen = choose_placement(rest, fold, placement_windows)
             fold.set_params(placement_window=chosen["placement_window"])
-        fold = _fit_on(fold, rest)
+        fold = _fit_on(fold, rest, who)
         for i in (i for i, g in enumerate(groups) if g == group):
             name, label, a, b = takes[i]
             res = evaluate_pair(fold, a, b, name, label)
@@ -361,8 +367,12 @@ def fit_on_index(
     pairs = select_pairs(index, labels, test_trials, held_out=False)
     pairs, motions = load_pairs(index, pairs, kind)
     takes = [("", a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
-    takes = both_roles(takes) if roles == "both" else takes
-    model.fit([(a, b) for _, _, a, b in takes], labels=[lab for _, lab, _, _ in takes])
+    people = [a.subject for a, _ in pairs]
+    if roles == "both":
+        takes, people = both_roles(takes), people + people
+    model.fit(
+        [(a, b) for _, _, a, b in takes], labels=[lab for _, lab, _, _ in takes], groups=people
+    )
     held: list[str] = []
     if test_trials is not None:
         for a, b in select_pairs(index, labels, test_trials, held_out=True):

@@ -75,6 +75,7 @@ from markovmotion.features.markers import (
     turn_about_up,
     virtual_markers,
 )
+from markovmotion.features.person import RunningCentre, on_average_body
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner, finite_frames
@@ -101,6 +102,7 @@ MODES = ("paper", "joint")
 OBSERVATIONS = ("pose", "motion")
 POINTS = ("body", "all")
 FRAMES = ("auto", "heading", "world")
+NORMALISE = ("none", "person")
 METHODS = ("standard", "windowed")
 
 
@@ -222,8 +224,15 @@ class DualHMM(Model):
             ``"world"``, from A's pelvis along the world's axes (right when the
             training and test takes share one room and B does not turn with A: in
             CMU's pulls A turns side-on while B stays in front); ``"auto"`` (the
-            default) picks, on the training takes, the one in which B's place
-            varies less (:func:`choose_frame`), kept in ``frame_``.
+            default) picks, by cross-validation on the training takes (one pair of
+            people, or one take, left out at a time), the one in which the others' mean
+            tells B's place better (:func:`choose_frame`), kept in ``frame_``.
+        normalise: ``"none"`` (the paper's) or ``"person"``: A's features relative to A's
+            own running mean (:class:`~markovmotion.features.person.RunningCentre`, online)
+            and, on markers, B's training frames on the average training body
+            (:func:`~markovmotion.features.person.on_average_body`), so that states learn
+            how people move rather than who they are: a partner for people the model has
+            never seen (docs/hmm.md, "New people").
         n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -256,6 +265,7 @@ class DualHMM(Model):
         points: str = "body",
         frame: str = "auto",
         markers: int = 0,
+        normalise: str = "none",
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -276,6 +286,7 @@ class DualHMM(Model):
         self.points = points
         self.frame = frame
         self.markers = markers
+        self.normalise = normalise
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -287,13 +298,16 @@ class DualHMM(Model):
         self,
         pairs: Sequence[tuple[Motion, Motion]] | Sequence[tuple[Markers, Markers]],
         labels: Sequence[str] | None = None,
+        groups: Sequence[str] | None = None,
     ) -> DualHMM:
         """Learn from two-person takes ``(A, B)`` (same frames; B responds to A): Motions,
         or Markers (or Motions with ``markers=N``: virtual markers) for a marker model.
 
         ``labels``: the takes' interaction labels (INDEX.csv's ``label``), kept
         in ``labels_`` (sorted, distinct) so that evaluation on another index
-        picks takes of the same interactions; empty if not given.
+        picks takes of the same interactions; empty if not given. ``groups``: the takes'
+        pairs of people (INDEX.csv's ``subject``), which ``frame="auto"`` leaves out one at a
+        time (:func:`choose_frame`); one take at a time if not given.
         """
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
@@ -307,10 +321,14 @@ class DualHMM(Model):
             raise ValueError(f"trellis must be one of {TRELLISES}, got {self.trellis!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"frame must be one of {FRAMES}, got {self.frame!r}")
+        if self.normalise not in NORMALISE:
+            raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
+        if groups is not None and len(groups) != len(pairs):
+            raise ValueError(f"{len(groups)} groups for {len(pairs)} two-person takes")
         kinds = {Markers if isinstance(x, Markers) else type(x) for pair in pairs for x in pair}
         if len(kinds) > 1 or not all(issubclass(k, (Motion, Markers)) for k in kinds):
             raise TypeError("a dual HMM learns from pairs of all Motions or all Markers")
@@ -324,9 +342,9 @@ class DualHMM(Model):
         for k in _LEARNT + _LEARNT_MARKERS:  # a refit may change what the model sees
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
-            xa, xb, lengths = self._marker_features(pairs)
+            xa, xb, lengths = self._marker_features(pairs, groups)
         else:
-            xa, xb, lengths = self._motion_features(pairs)
+            xa, xb, lengths = self._motion_features(pairs, groups)
         self._fit_chains(xa, xb, lengths)
         self.labels_ = sorted(set(labels or ()))
         self.record_training(flatten(pairs))
@@ -334,7 +352,7 @@ class DualHMM(Model):
         return self
 
     def _motion_features(
-        self, pairs: Sequence[tuple[Motion, Motion]]
+        self, pairs: Sequence[tuple[Motion, Motion]], groups: Sequence[str] | None = None
     ) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """A's and B's features of skeleton takes (module docstring, "Features"); sets the
         pipelines, skeletons and B's frames as exponential maps."""
@@ -347,14 +365,14 @@ class DualHMM(Model):
         points = BODY_POINTS if self.points == "body" else None
         grounds = [ground_frame(a) for a in a_list]
 
-        def b_in(frame: str) -> np.ndarray:
+        def b_in(frame: str) -> list[np.ndarray]:
             where = []
             for b, (origin, yaw) in zip(b_rel, grounds, strict=True):
                 rel = into_frame(b, origin, yaw if frame == "heading" else np.zeros_like(yaw))
                 where.append(self.body_positions(rel))
-            return np.concatenate(where)
+            return where
 
-        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in)
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in, groups)
         turn = self.frame_ == "heading"
         b_rel = [
             into_frame(b, origin, yaw if turn else np.zeros_like(yaw))
@@ -367,7 +385,7 @@ class DualHMM(Model):
             if self.observation == "motion"
             else JointPositions(points=points, turn=turn)
         )
-        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
+        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy), *self._centring()])
         self.pipeline_b_ = FeaturePipeline(
             [JointPositions(body_centred=False, points=points), PCA(self.energy)]
         )
@@ -380,7 +398,9 @@ class DualHMM(Model):
         return xa, xb, lengths
 
     def _marker_features(
-        self, pairs: Sequence[tuple[Motion | Markers, Motion | Markers]]
+        self,
+        pairs: Sequence[tuple[Motion | Markers, Motion | Markers]],
+        groups: Sequence[str] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """A's and B's features of marker takes (module docstring, "Markers"): A's markers
         about A's own ground frame, B's in A's; sets the pipelines and ``markers_b_``."""
@@ -392,20 +412,21 @@ class DualHMM(Model):
         first = MarkerFeatures(motion=self.observation == "motion").fit(a_list)
         grounds = [first.place(first.select(a).positions) for a in a_list]
 
-        def b_in(frame: str) -> np.ndarray:
-            return np.concatenate(
-                [
-                    into_marker_frame(b, o, y if frame == "heading" else 0 * y).positions
-                    for b, (o, y) in zip(b_list, grounds, strict=True)
-                ]
-            )
+        def b_in(frame: str) -> list[np.ndarray]:
+            return [
+                into_marker_frame(b, o, y if frame == "heading" else 0 * y).positions
+                for b, (o, y) in zip(b_list, grounds, strict=True)
+            ]
 
-        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in)
+        self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in, groups)
         first.turn = self.frame_ == "heading"
         b_rel = []
         for a, b in zip(a_list, b_list, strict=True):
             b_rel.append(into_marker_frame(b, *first.place(first.select(a).positions)))
-        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy)])
+        if self.normalise == "person":
+            moved = on_average_body([b.positions for b in b_rel])
+            b_rel = [Markers(b.names, p, b.fps, b.name) for b, p in zip(b_rel, moved, strict=True)]
+        self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy), *self._centring()])
         self.pipeline_b_ = FeaturePipeline([MarkerFeatures(body_centred=False), PCA(self.energy)])
         xa, lengths = check_sequences(
             np.vstack(self.pipeline_a_.fit_transform(a_list)), [len(m) for m in a_list]
@@ -416,6 +437,10 @@ class DualHMM(Model):
         self.markers_b_ = np.concatenate([b.select(names).positions for b in b_rel])
         self.markers_b_ = self.markers_b_.astype(np.float32)
         return xa, xb, lengths
+
+    def _centring(self) -> list[RunningCentre]:
+        """The last step of A's pipeline with ``normalise="person"``: A's running mean out."""
+        return [RunningCentre()] if self.normalise == "person" else []
 
     def _fit_chains(self, xa: np.ndarray, xb: np.ndarray, lengths: list[int]) -> None:
         """lambda_A and lambda_B (eqs. 1-2) from A's and B's training features (``mode``)."""
@@ -724,18 +749,42 @@ class DualHMM(Model):
         return self._trellis_cache
 
 
-def choose_frame(b_in: Callable[[str], np.ndarray]) -> str:
-    """``"heading"`` or ``"world"``: the frame of A in which B's training positions
-    (``b_in(frame)``: (frames, points, 3), NaN for unseen markers) lie closer to their mean,
-    i.e. the one where the mean-pose baseline is better on the training data: B's place
-    is then easier to tell from A's."""
-    spread = {}
+def choose_frame(
+    b_in: Callable[[str], list[np.ndarray]], groups: Sequence[str] | None = None
+) -> str:
+    """``"heading"`` or ``"world"``: the frame of A in which B's place is better told by the
+    other training takes, by cross-validation on the training takes alone.
+
+    ``b_in(frame)``: B's training positions per take ((frames, points, 3), NaN for unseen
+    markers). Each take (with ``groups``, e.g. the takes' pairs of people, each group when
+    there are two or more) is predicted by the mean of the others' positions, as the
+    mean-pose baseline would be on a new take; the frame with the lower mean error wins.
+    A room's axes fit takes from one room and one pair of people (CMU 18/19's pulls); A's
+    facing fits new people placed anywhere by the sensor (Bütepage's pairs). One take:
+    the frame in which its positions lie closer to their mean."""
+    error = {}
     for frame in ("heading", "world"):
-        where = b_in(frame)
-        spread[frame] = float(
-            np.nanmean(np.linalg.norm(where - np.nanmean(where, axis=0), axis=-1))
-        )
-    return min(spread, key=spread.get)
+        takes = b_in(frame)
+        keys = list(groups) if groups is not None else [str(i) for i in range(len(takes))]
+        if len(set(keys)) < 2:
+            keys = [str(i) for i in range(len(takes))]
+        if len(takes) < 2:
+            where = takes[0]
+            error[frame] = float(
+                np.nanmean(np.linalg.norm(where - np.nanmean(where, axis=0), axis=-1))
+            )
+            continue
+        total, count = 0.0, 0
+        for key in dict.fromkeys(keys):
+            inside = [t for t, k in zip(takes, keys, strict=True) if k == key]
+            others = np.concatenate([t for t, k in zip(takes, keys, strict=True) if k != key])
+            mean = np.nanmean(others, axis=0)
+            for t in inside:
+                d = np.linalg.norm(t - mean, axis=-1)
+                total += float(np.nansum(d))
+                count += int(np.isfinite(d).sum())
+        error[frame] = total / max(count, 1)
+    return min(error, key=error.get)
 
 
 def _check_one_skeleton_b(

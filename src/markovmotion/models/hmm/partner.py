@@ -26,6 +26,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
 from markovmotion.features.markers import MarkerFeatures
+from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import smooth_place
 from markovmotion.progress import err_console
@@ -88,6 +89,7 @@ class Partner:
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton, once checked against the model's
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
+        self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
 
     @property
     def skeleton(self) -> Skeleton | None:
@@ -206,14 +208,19 @@ class Partner:
         the whole stream)."""
         first, *rest = self.model.pipeline_a_.steps
         if not isinstance(first, BodyMotion | MarkerFeatures) or not getattr(first, "motion", True):
-            return self.model.features_a(frame)[0][-1]
-        now = (first.pose(frame, pos), origin, yaw)
-        last, self._last = self._last, now
-        if last is not None:
-            now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
-        x = first.rows(*now, frame.fps)
+            x = first.transform([frame])[0]
+        else:
+            now = (first.pose(frame, pos), origin, yaw)
+            last, self._last = self._last, now
+            if last is not None:
+                now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
+            x = first.rows(*now, frame.fps)
         for step in rest:
-            x = step.transform([x])[0]
+            if isinstance(step, RunningCentre):  # A's running mean: kept across frames
+                self._centre = self._centre or step.online()
+                x = self._centre(x[-1])[None]
+            else:
+                x = step.transform([x])[0]
         return x[-1]
 
     def skip(self) -> Motion | Markers | None:
