@@ -139,3 +139,71 @@ def test_both_roles_swaps_a_and_b():
     b = Markers(("x",), np.ones((3, 1, 3)), 30.0, "b")
     (one, two) = evaluation.both_roles([("t", "wave", a, b)])
     assert one[2] is a and one[3] is b and two[2] is b and two[3] is a
+
+
+# ------------------------------------------------------------------ output="regression"
+def test_state_regressions_are_ridge_regressions_per_state():
+    from sklearn.linear_model import Ridge
+
+    from markovmotion.algorithms.gaussian import state_regressions
+
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(300, 3))
+    state = (x[:, 0] > 0).astype(int)
+    true = np.stack([rng.normal(size=(2, 3)) for _ in range(2)])
+    y = np.einsum("tij,tj->ti", true[state], x) + 5 * state[:, None]
+    gamma = np.eye(2)[state]
+    mx, my, gains = state_regressions(x, y, gamma, ridge=0.0)
+    for k in range(2):  # no ridge, no noise: the true maps come back
+        np.testing.assert_allclose(gains[k], true[k], atol=1e-8)
+        pred = my[k] + (x[state == k] - mx[k]) @ gains[k].T
+        np.testing.assert_allclose(pred, y[state == k], atol=1e-8)
+    _, _, gains = state_regressions(x, y, gamma, ridge=0.5)
+    v = x.var(axis=0).mean()
+    for k in range(2):
+        n = int((state == k).sum())
+        ridge = Ridge(alpha=0.5 * v * n).fit(x[state == k], y[state == k])
+        np.testing.assert_allclose(gains[k], ridge.coef_, atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def regression(people) -> DualHMM:
+    pairs = [(a, b) for _, a, b in people]
+    return DualHMM(n_states=6, n_iter=10, normalise="person", output="regression").fit(pairs)
+
+
+def test_regression_output_streams_what_windowed_respond_gives(regression, people, tmp_path):
+    a = regression._rate(people[-1][1])
+    partner = regression.partner()
+    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    streamed = np.concatenate([s.positions for s in shown])
+    whole = regression.respond(a, "windowed")
+    np.testing.assert_allclose(streamed, whole.positions, atol=1e-9)
+    assert whole.n_frames == a.n_frames and np.isfinite(whole.positions).all()
+    path = tmp_path / "r.npz"
+    regression.save(path)
+    loaded = Model.load(path)
+    for method in ("standard", "windowed"):
+        np.testing.assert_array_equal(
+            loaded.respond(a, method).positions, regression.respond(a, method).positions
+        )
+
+
+def test_regression_output_on_its_training_take_beats_the_mean_pose(regression, people):
+    """On a take it learnt from, the regression answers B closer than B's mean pose."""
+    _, a, b = people[0]
+    res = evaluation.evaluate_pair(regression, a, b, "t", "handshake")
+    for method in ("standard", "windowed"):
+        assert res.errors[method].mean() < res.errors["mean_pose"].mean()
+        assert res.pose_errors[method].mean() < res.pose_errors["mean_pose"].mean()
+
+
+def test_regression_output_needs_markers(people):
+    from conftest import make_motion
+
+    from markovmotion.errors import SkeletonMismatchError
+
+    m = make_motion(30)
+    with pytest.raises(SkeletonMismatchError, match="regression"):
+        DualHMM(n_states=2, output="regression").fit([(m, m)])

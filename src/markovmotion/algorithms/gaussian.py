@@ -82,3 +82,31 @@ def log_gaussian_diag(x: np.ndarray, means: np.ndarray, variances: np.ndarray) -
     prec = 1.0 / variances
     quad = (x**2) @ prec.T - 2.0 * x @ (means * prec).T + np.sum(means**2 * prec, axis=1)
     return -0.5 * (quad + np.sum(np.log(variances), axis=1) + x.shape[1] * LOG_2PI)
+
+
+def state_regressions(
+    x: np.ndarray, y: np.ndarray, gamma: np.ndarray, ridge: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per state k, the linear regression of ``y`` on ``x`` under the state's weights: the
+    conditional mean of a Gaussian over [x, y], E[y | x, k] = mu_y,k + G_k (x - mu_x,k) with
+    G_k = S_yx,k (S_xx,k + ridge * v I)^-1, v the mean variance of ``x`` (Gaussian mixture
+    regression, as HSMM-GMR in learning from demonstration, one component per state).
+
+    Args:
+        x: (T, Dx) inputs; y: (T, Dy) outputs; gamma: (T, K) state posteriors of the frames.
+        ridge: the ridge, in units of x's mean variance, that keeps G_k small where a state
+            holds few frames.
+
+    Returns:
+        means_x (K, Dx), means_y (K, Dy), gains (K, Dy, Dx).
+    """
+    w = gamma / np.maximum(gamma.sum(axis=0), 1e-300)
+    means_x, means_y = w.T @ x, w.T @ y
+    lift = ridge * float(x.var(axis=0).mean()) * np.eye(x.shape[1])
+    gains = np.empty((len(means_x), y.shape[1], x.shape[1]))
+    for k in range(len(means_x)):
+        dx, dy = x - means_x[k], y - means_y[k]
+        sxx = (dx * w[:, k, None]).T @ dx + lift
+        syx = (dy * w[:, k, None]).T @ dx
+        gains[k] = np.linalg.solve(sxx, syx.T).T
+    return means_x, means_y, gains

@@ -74,6 +74,12 @@ NORMALISE = typer.Option(
     help="'person': A's features relative to A's own running mean and (markers) B's frames "
     "on the average training body, for people the model has never seen; 'none': the paper's.",
 )
+OUTPUT = typer.Option(
+    "frames",
+    callback=choice(("frames", "regression")),
+    help="B as real training frames through the trellis ('frames', the paper's) or, on "
+    "markers, as the state-conditional regression on A ('regression').",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 INITIAL = typer.Option(
@@ -110,7 +116,7 @@ MODEL_OPTIONS = {
         for k in (
             "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
-            "normalise",
+            "normalise", "output",
         )
     },
 }  # fmt: skip
@@ -147,6 +153,7 @@ def train(
     frame: str = FRAME,
     markers: int = MARKERS,
     normalise: str = NORMALISE,
+    output: str = OUTPUT,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,
@@ -433,6 +440,7 @@ def crossval(
     frame: str = FRAME,
     markers: int = MARKERS,
     normalise: str = NORMALISE,
+    output: str = OUTPUT,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,

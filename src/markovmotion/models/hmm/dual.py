@@ -57,7 +57,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from markovmotion.algorithms.gaussian import precision_cholesky, weighted_gaussians
+from markovmotion.algorithms.gaussian import (
+    precision_cholesky,
+    state_regressions,
+    weighted_gaussians,
+)
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
 from markovmotion.core.markers import Markers
@@ -82,6 +86,7 @@ from markovmotion.models.hmm.partner import Partner, finite_frames
 from markovmotion.models.hmm.trellis import (
     TRELLISES,
     Trellis,
+    blend_positions,
     build_trellis,
     smooth_place,
     successors,
@@ -103,6 +108,12 @@ OBSERVATIONS = ("pose", "motion")
 POINTS = ("body", "all")
 FRAMES = ("auto", "heading", "world")
 NORMALISE = ("none", "person")
+OUTPUTS = ("frames", "regression")
+#: The learnt parts of ``output="regression"`` (:func:`state_regressions`).
+_REGRESSION = ("reg_means_a_", "reg_means_b_", "reg_gains_")
+#: Its ridge, in units of A's features' mean variance: chosen by leaving one pair of people
+#: out on the Bütepage handshakes and waves among 1e-3, 0.1, 1 and 10 (docs/hmm.md).
+RIDGE = 1.0
 METHODS = ("standard", "windowed")
 
 
@@ -233,6 +244,12 @@ class DualHMM(Model):
             (:func:`~markovmotion.features.person.on_average_body`), so that states learn
             how people move rather than who they are: a partner for people the model has
             never seen (docs/hmm.md, "New people").
+        output: ``"frames"`` (the paper's §3.2: B's real training frames through the
+            trellis) or ``"regression"`` (a marker model only): B's markers as the
+            state-conditional regression on A's features
+            (:func:`~markovmotion.algorithms.gaussian.state_regressions`, Gaussian mixture
+            regression with one component per state), the states decoded by the same
+            standard or windowed Viterbi, blended over ``blend_window`` frames.
         n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
@@ -266,6 +283,7 @@ class DualHMM(Model):
         frame: str = "auto",
         markers: int = 0,
         normalise: str = "none",
+        output: str = "frames",
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 1e-3,
@@ -287,6 +305,7 @@ class DualHMM(Model):
         self.frame = frame
         self.markers = markers
         self.normalise = normalise
+        self.output = output
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -323,6 +342,14 @@ class DualHMM(Model):
             raise ValueError(f"frame must be one of {FRAMES}, got {self.frame!r}")
         if self.normalise not in NORMALISE:
             raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
+        if self.output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {self.output!r}")
+        markers_in = self.markers or (pairs and isinstance(pairs[0][0], Markers))
+        if self.output == "regression" and not markers_in:
+            raise SkeletonMismatchError(
+                "output 'regression' generates B's markers: train on markers (C3D takes, or "
+                "virtual markers placed on skeletons with markers=N)"
+            )
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
@@ -339,13 +366,18 @@ class DualHMM(Model):
         for a, b in pairs:
             if a.n_frames != b.n_frames:
                 raise ValueError(f"{a.name} and {b.name} differ in length")
-        for k in _LEARNT + _LEARNT_MARKERS:  # a refit may change what the model sees
+        for k in _LEARNT + _LEARNT_MARKERS + _REGRESSION:  # a refit may change what it sees
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
             xa, xb, lengths = self._marker_features(pairs, groups)
         else:
             xa, xb, lengths = self._motion_features(pairs, groups)
         self._fit_chains(xa, xb, lengths)
+        if self.output == "regression":
+            gamma = self.lambda_a_.predict_proba(xa, lengths)
+            self.reg_means_a_, self.reg_means_b_, self.reg_gains_ = state_regressions(
+                xa, xb, gamma, RIDGE
+            )
         self.labels_ = sorted(set(labels or ()))
         self.record_training(flatten(pairs))
         self._trellis_cache = None
@@ -525,6 +557,12 @@ class DualHMM(Model):
             out = getattr(self, f"pipeline_{side}_").output_width()
             if out is not None and out != width:
                 raise StateError(f"pipeline_{side}_: gives {out} features, lambda_{side}_ {width}")
+        if getattr(self, "output", "frames") == "regression":
+            require(self, *_REGRESSION)
+            da, db = self.lambda_a_.means_.shape[1], self.lambda_b_.means_.shape[1]
+            check_shape("reg_means_a_", self.reg_means_a_, (n, da))
+            check_shape("reg_means_b_", self.reg_means_b_, (n, db))
+            check_shape("reg_gains_", self.reg_gains_, (n, db, da))
         if on_markers:
             self._check_marker_state(t)
             return
@@ -665,7 +703,11 @@ class DualHMM(Model):
         log_b[missing] = 0.0
         trellis = self._trellis()
         seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
-        if method == "standard":
+        if method == "standard" and self.output == "regression":
+            rel = self.regression_positions(self.decode(log_b), seen)
+            root, rot = blend_positions(rel, np.arange(len(rel)), self.blend_window // 2)
+            idx = np.zeros(len(rel), dtype=int)
+        elif method == "standard":
             states = self.decode(log_b)
             idx = trellis.best_path(states, trellis.columns(states, seen))
             root = trellis.placement(idx, self.placement_window // 2)
@@ -683,6 +725,19 @@ class DualHMM(Model):
         half = self.placement_window // 2
         where = smooth_place(*where, half if method == "standard" else min(half, self.window - 1))
         return self.frames_to_motion(idx, *where, root, rot)
+
+    def regression_positions(
+        self, states: Sequence[int], xa: Sequence[np.ndarray | None]
+    ) -> np.ndarray:
+        """(F, M, 3) B's markers in A's ground frame by ``output="regression"``: per frame the
+        conditional mean of B's features given A's under the frame's state (the state's mean
+        where A's frame is missing), :func:`state_regressions`, back through B's PCA."""
+        q = np.asarray(states, dtype=int)
+        xb = self.reg_means_b_[q].copy()
+        for t, x in enumerate(xa):
+            if x is not None:
+                xb[t] += self.reg_gains_[q[t]] @ (x - self.reg_means_a_[q[t]])
+        return np.asarray(self.pipeline_b_.inverse_transform([xb])[0], dtype=float)
 
     def decode(self, log_frameprob: np.ndarray) -> np.ndarray:
         """Standard Viterbi states of A's frames from their log emission probabilities."""

@@ -28,7 +28,7 @@ from markovmotion.features import BodyMotion
 from markovmotion.features.markers import MarkerFeatures
 from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.models.hmm.gaussian import safe_log
-from markovmotion.models.hmm.trellis import smooth_place
+from markovmotion.models.hmm.trellis import blend_positions, smooth_place
 from markovmotion.progress import err_console
 
 if TYPE_CHECKING:
@@ -85,6 +85,7 @@ class Partner:
         self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
         self._history: deque = deque(maxlen=keep)  # B's training frames shown
+        self._generated: deque = deque(maxlen=keep)  # output="regression": B's markers shown
         self._frames_in = 0
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton, once checked against the model's
@@ -118,6 +119,8 @@ class Partner:
         if self._frames_in <= self.lag:
             return None
         states = self.decoder.path
+        if self.model.output == "regression":
+            return self._regress(states, list(self._slice), 1)[0]
         cols = self._columns(states, self._slice)
         path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         return self._show(path, 1)[0]
@@ -147,8 +150,24 @@ class Partner:
             states, entries = list(self.decoder.path[1:]), entries[1:]
         if not entries:
             return []
+        if self.model.output == "regression":
+            return self._regress(states, entries, len(entries))
         path = self._trellis.best_path(states, self._columns(states, entries), self._shown)
         return self._show(path, len(path))
+
+    def _regress(
+        self, states: Sequence[int], entries: Sequence[tuple], count: int
+    ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """``output="regression"``: B's generated markers for the slice's frames, the first
+        ``count`` shown, each blended with those shown before and the slice ahead (as
+        :meth:`DualHMM.respond` blends the whole stream)."""
+        rel = self.model.regression_positions(states, [x for x, _ in entries])
+        before = np.array(self._generated).reshape(-1, *rel.shape[1:])
+        frames = np.concatenate([before, rel])
+        t = np.arange(len(before), len(before) + count)
+        root, rot = blend_positions(frames, t, self._blend)
+        self._generated.extend(rel[:count])
+        return [(0, r, s) for r, s in zip(root, rot, strict=True)]
 
     def _columns(self, states: Sequence[int], entries: Sequence[tuple]) -> list[tuple]:
         cols = []

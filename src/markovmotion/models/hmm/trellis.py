@@ -183,6 +183,18 @@ class Trellis:
         return _window_mean(roots, np.arange(len(before), len(roots)), half)
 
 
+def blend_positions(
+    positions: np.ndarray, t: np.ndarray, half: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generated markers (F, M, 3) blended over frames t - half .. t + half (those that
+    exist) at the frames ``t``: their centroid (len(t), 3) and their shape about it
+    (len(t), M, 3), what :meth:`DualHMM.frames_to_motion` places (``output="regression"``)."""
+    mean = _window_mean(positions.reshape(len(positions), -1), t, half)
+    mean = mean.reshape(len(t), *positions.shape[1:])
+    root = mean.mean(axis=1)
+    return root, mean - root[:, None]
+
+
 def _window_mean(values: np.ndarray, t: np.ndarray, half: int) -> np.ndarray:
     """(len(t), D) the mean of rows t - half .. t + half of ``values`` (F, D) (those that exist)."""
     csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
