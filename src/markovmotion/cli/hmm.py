@@ -492,8 +492,11 @@ def _print_table(report: dict) -> None:
         title="dual HMM: mean per-frame error of B (mm) and jumps (p90 of frame steps, mm)"
     )
     cols = ("standard_mm", "windowed_mm", "mean_pose_mm", "nearest_neighbour_mm")
+    if "gmr_mm" in report["overall"]:
+        cols = (*cols, "gmr_mm")
     jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
-    for c in ("group", *cols, "paper trellis std/win", *jumps, "latency median/p99 (µs)"):
+    heads = ("group", *cols, "body-centred std/win/mean", "paper trellis std/win", *jumps)
+    for c in (*heads, "hand gap real/win", "latency median/p99 (µs)"):
         table.add_column(c)
     rows = {
         "overall": report["overall"],
@@ -502,12 +505,15 @@ def _print_table(report: dict) -> None:
         **report["per_pair"],
     }
     for name, r in rows.items():
-        lat, paper = r["latency_us"], r["trellis"]["paper"]
+        lat, paper, body = r["latency_us"], r["trellis"]["paper"], r["body_centred"]
+        gap = r.get("hand_gap_in_contact_median_mm")
         table.add_row(
             name,
             *(f"{r[c]:.1f}" for c in cols),
+            "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
             f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}",
             *(f"{r[c]:.1f}" for c in jumps),
+            f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",
             f"{lat['median']:.0f}/{lat['p99']:.0f}",
         )
     print_table(table)

@@ -11,10 +11,14 @@ counts both B's pose and where B stands relative to A. How much B jumps:
 per frame step, how far the median body point moves (:func:`jump_sizes`);
 the JSON gives the 90th percentile of these steps (``*_jump_p90_mm``) and
 the fraction over 100 mm (``*_jump_over_100mm``) for standard, windowed
-and the real B. Two baselines: B's mean pose (the mean of B's training joint
-positions in A's ground frame) and nearest-neighbour retrieval (the B frame
-whose A frame is nearest in A's feature space). The same four are also given
-for body-centred positions (pose alone). ``windowed_as_shown_mm`` compares
+and the real B. Baselines: B's mean pose (the mean of B's training joint
+positions in A's ground frame), nearest-neighbour retrieval (the B frame
+whose A frame is nearest in A's feature space) and, for a marker model,
+Gaussian mixture regression of B's features on A's with the ``gmr`` package
+(``gmr_mm``, as many components as states). The same are also given for
+body-centred positions (pose alone). In the frames where the real people's
+right hands touch (handshakes), ``hand_gap_in_contact_median_mm`` gives how far
+A's hand is from each B's (:func:`hand_gaps`). ``windowed_as_shown_mm`` compares
 the windowed output with the real B ``lag`` frames later, as a live viewer
 sees it. Step latency is the time of one online partner step (emission
 probabilities, windowed Viterbi, trellis) on A's features.
@@ -40,6 +44,7 @@ from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.neighbors import NearestNeighbors
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import UP, Motion
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.data.kinds import choose_kind, largest_group
@@ -47,13 +52,14 @@ from markovmotion.data.splits import select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
+from markovmotion.features.body_points import BODY_POINTS
 from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.dual import DualHMM
-from markovmotion.models.hmm.trellis import TRELLISES
+from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 
-METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour")
+METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr")
 #: Which roles of each two-person take a partner learns from: as listed (A answered by
 #: B), or ``"both"`` (also B answered by A: :func:`both_roles`).
 ROLES = ("one", "both")
@@ -74,10 +80,15 @@ class PairResult:
     latencies_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
     jumps: dict[str, np.ndarray] = field(default_factory=dict)  # per frame step (mm)
     chosen: dict = field(default_factory=dict)  # settings picked on inner folds, if any
+    hand_gaps: dict[str, np.ndarray] = field(default_factory=dict)  # mm, in contact frames
 
 
 class _Baselines:
-    """What the two baselines need from a model, computed once."""
+    """What the baselines need from a model, computed once: B's mean pose, the nearest
+    neighbour in A's features, and (a marker model) Gaussian mixture regression of B's
+    features on A's by the ``gmr`` package, with as many components as the model has states
+    (fitted on the model's own training features: k-means++ start, oracle approximating
+    shrinkage of the covariances, seed 0)."""
 
     def __init__(self, model: DualHMM):
         self.model = model
@@ -85,6 +96,21 @@ class _Baselines:
         self.mean_rel = model.body_positions(train_b).mean(axis=0)
         self.mean_pose = model.body_positions(train_b, body_centred=True).mean(axis=0)
         self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
+        self.gmr = None
+        if model.uses_markers:
+            from gmr import GMM
+
+            joint = np.hstack([model.train_a_, model.train_b_])
+            self.gmr = GMM(model.n_states, random_state=0).from_samples(
+                joint, init_params="kmeans++", oracle_approximating_shrinkage=True
+            )
+
+    def regression(self, xa: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Markers:
+        """B by Gaussian mixture regression on A's features ``xa``, placed as the model does."""
+        xb = self.gmr.predict(np.arange(xa.shape[1]), xa)
+        rel = np.asarray(self.model.pipeline_b_.inverse_transform([xb])[0], dtype=float)
+        root, rot = blend_positions(rel, np.arange(len(rel)), 0)
+        return self.model.frames_to_motion(np.zeros(len(rel), dtype=int), origin, yaw, root, rot)
 
     def mean_world(self, origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         turn = Rotation.from_rotvec(np.outer(yaw, UP))
@@ -93,6 +119,55 @@ class _Baselines:
     def nearest(self, xa: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Motion:
         idx = self.nn.kneighbors(xa, return_distance=False)[:, 0]
         return self.model.frames_to_motion(idx, origin, yaw)
+
+
+#: Frames whose real right hands are closer than this are in contact (the Bütepage
+#: handshakes' hands meet at 9-113 mm, their data README; other hands stay 500 mm apart).
+CONTACT_MM = 150.0
+
+
+def right_hand(names: Sequence[str]) -> int | None:
+    """Index of the right hand among marker or body-point names (``R_HAND``, ``RHand``,
+    ``right_wrist`` ...), or None."""
+    for want in ("hand", "wrist"):
+        for i, name in enumerate(names):
+            n = name.lower().replace("_", "").replace(" ", "")
+            side = n.startswith("r") or n.startswith("right") or n.endswith("r")
+            if want in n and side and not n.startswith("l"):
+                return i
+    return None
+
+
+def hand_gaps(
+    model: DualHMM, a: Motion | Markers, b: Motion | Markers, generated: dict
+) -> dict[str, np.ndarray] | None:
+    """How far A's right hand is from B's (mm) in the frames where the real hands touch
+    (closer than :data:`CONTACT_MM`): ``"real"`` and each generated B's. None when the take
+    has no such frame or the people have no right hand by name."""
+    if model.uses_markers:
+        names = list(model.marker_names_b_)
+        k = right_hand(names)
+        try:
+            where_a = model.input_markers(a).select([names[k]]).positions[:, 0]
+        except (KeyError, TypeError, ValueError):  # no right hand by name, or not A's
+            where_a = None
+    else:
+        names = list(BODY_POINTS) if model.points == "body" else list(model.skeleton_b_.names)
+        k = right_hand(names)
+        where_a = model.body_positions(a)[:, k] if k is not None else None
+    if where_a is None:
+        return None
+    truth = model.body_positions(b)[:, k]
+    real = np.linalg.norm(truth - where_a, axis=-1)
+    contact = real < CONTACT_MM
+    if not contact.any():
+        return None
+    out = {"real": real[contact]}
+    for key in ("standard", "windowed", "nearest_neighbour", "gmr"):
+        if key in generated:
+            hand = model.body_positions(generated[key])[:, k]
+            out[key] = np.linalg.norm(hand - where_a, axis=-1)[contact]
+    return out
 
 
 def jump_sizes(points: np.ndarray) -> np.ndarray:
@@ -129,6 +204,8 @@ def evaluate_pair(
     origin, yaw = model.place(a)
     xa, _ = model.features_a(a)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
+    if baselines.gmr is not None:
+        generated["gmr"] = baselines.regression(xa, origin, yaw)
     own = model.trellis
     try:
         for kind in TRELLISES:
@@ -149,6 +226,9 @@ def evaluate_pair(
         res.jumps[k] = jump_sizes(where)
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    gaps = hand_gaps(model, a, b, generated)
+    if gaps is not None:
+        res.hand_gaps = gaps
     lag = model.window - 1
     shown = model.body_positions(generated["windowed"])[: len(truth) - lag]
     res.errors["windowed_as_shown"] = trial_errors(shown, truth[lag:])
@@ -177,7 +257,8 @@ def _summary(results: Sequence[PairResult]) -> dict:
         return round(float(np.concatenate([getattr(r, attr)[key] for r in results]).mean()), 1)
 
     lat = np.concatenate([r.latencies_us for r in results])
-    out = {f"{k}_mm": mean(k) for k in METHODS}
+    methods = [k for k in METHODS if all(k in r.errors for r in results)]
+    out = {f"{k}_mm": mean(k) for k in methods}
     out["windowed_as_shown_mm"] = mean("windowed_as_shown")
     out.update(_jumps(results, ("standard", "windowed", "real")))
     out["trellis"] = {
@@ -185,7 +266,14 @@ def _summary(results: Sequence[PairResult]) -> dict:
         | _jumps(results, (f"{kind}/standard", f"{kind}/windowed"))
         for kind in TRELLISES
     }
-    out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in METHODS}
+    out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in methods}
+    touching = [r for r in results if r.hand_gaps]
+    if touching:
+        keys = [k for k in touching[0].hand_gaps if all(k in r.hand_gaps for r in touching)]
+        out["hand_gap_in_contact_median_mm"] = {
+            k: round(float(np.median(np.concatenate([r.hand_gaps[k] for r in touching]))), 1)
+            for k in keys
+        } | {"frames": int(sum(len(r.hand_gaps["real"]) for r in touching))}
     out["latency_us"] = {
         "median": round(float(np.median(lat)), 1),
         "p99": round(float(np.percentile(lat, 99)), 1),
