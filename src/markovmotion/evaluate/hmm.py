@@ -53,6 +53,7 @@ from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.features.body_points import BODY_POINTS
+from markovmotion.features.markers import turn_about_up
 from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
@@ -81,14 +82,14 @@ class PairResult:
     jumps: dict[str, np.ndarray] = field(default_factory=dict)  # per frame step (mm)
     chosen: dict = field(default_factory=dict)  # settings picked on inner folds, if any
     hand_gaps: dict[str, np.ndarray] = field(default_factory=dict)  # mm, in contact frames
+    windows: dict[str, np.ndarray] = field(default_factory=dict)  # A and B, for the observer
 
 
 class _Baselines:
     """What the baselines need from a model, computed once: B's mean pose, the nearest
     neighbour in A's features, and (a marker model) Gaussian mixture regression of B's
     features on A's by the ``gmr`` package, with as many components as the model has states
-    (fitted on the model's own training features: k-means++ start, oracle approximating
-    shrinkage of the covariances, seed 0)."""
+    (fitted on the model's own training features by scikit-learn's EM, seed 0)."""
 
     def __init__(self, model: DualHMM):
         self.model = model
@@ -99,11 +100,14 @@ class _Baselines:
         self.gmr = None
         if model.uses_markers:
             from gmr import GMM
+            from sklearn.mixture import GaussianMixture
 
+            # EM by scikit-learn (its reg_covar keeps every component proper on few frames,
+            # where gmr's own EM left NaN components on some folds); regression by gmr
             joint = np.hstack([model.train_a_, model.train_b_])
-            self.gmr = GMM(model.n_states, random_state=0).from_samples(
-                joint, init_params="kmeans++", oracle_approximating_shrinkage=True
-            )
+            fit = GaussianMixture(model.n_states, reg_covar=1e-3 * joint.var(0).mean(),
+                                  random_state=0).fit(joint)  # fmt: skip
+            self.gmr = GMM(model.n_states, fit.weights_, fit.means_, fit.covariances_)
 
     def regression(self, xa: np.ndarray, origin: np.ndarray, yaw: np.ndarray) -> Markers:
         """B by Gaussian mixture regression on A's features ``xa``, placed as the model does."""
@@ -170,6 +174,63 @@ def hand_gaps(
     return out
 
 
+#: The objective observer's windows: frames per window, frames between its samples, and
+#: frames between windows (1 s windows seen at 10 fps, a new one every 1/3 s at 30 fps).
+WINDOW, EVERY, HOP = 30, 3, 10
+
+
+def observer_windows(
+    a: np.ndarray, b: np.ndarray, origin: np.ndarray, yaw: np.ndarray
+) -> np.ndarray:
+    """(windows, dims) what the objective observer sees of a take: how A's and B's points
+    ((F, P, 3) each, in A's ground frame) move over :data:`WINDOW` frames, every
+    :data:`EVERY`th frame (:func:`_motion_in`), a window every :data:`HOP` frames (none if
+    the take is shorter)."""
+    both = np.concatenate([a, b], axis=1) - origin[:, None]
+    both = turn_about_up(both, -yaw)
+    starts = range(0, len(both) - WINDOW + 1, HOP)
+    rows = [_motion_in(both[s : s + WINDOW : EVERY]).ravel() for s in starts]
+    return np.array(rows).reshape(len(rows), -1)
+
+
+def _motion_in(window: np.ndarray) -> np.ndarray:
+    """A window's points about their own mean over the window: how each point moves, not
+    where it is or whose body it is on (people differ by body and place more than the
+    partner differs from a person)."""
+    return window - window.mean(axis=0, keepdims=True)
+
+
+def observer_accuracy(results: Sequence[PairResult], n_folds: int = 5) -> float:
+    """Balanced accuracy of telling the windowed partner from the real B, given A: logistic
+    regression on :func:`observer_windows`, cross-validated with folds by pair of people
+    (by take when all come from one pair). 0.5: the two cannot be told apart (the aim of
+    the observer study of §4); NaN with fewer than two groups."""
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.metrics import balanced_accuracy_score
+    from sklearn.model_selection import GroupKFold, cross_val_predict
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    keyed = [(r.people or r.name, r) for r in results if len(r.windows.get("real", ()))]
+    groups_of = {g for g, _ in keyed}
+    if len(groups_of) < 2:
+        keyed = [(r.name, r) for _, r in keyed]
+        groups_of = {g for g, _ in keyed}
+    if len(groups_of) < 2:
+        return float("nan")
+    x, y, groups = [], [], []
+    for g, r in keyed:
+        for label, key in ((0, "real"), (1, "windowed")):
+            x.append(r.windows[key])
+            y.append(np.full(len(r.windows[key]), label))
+            groups.append(np.full(len(r.windows[key]), g, dtype=object))
+    x, y, groups = np.vstack(x), np.concatenate(y), np.concatenate(groups)
+    model = make_pipeline(StandardScaler(), LogisticRegression(C=0.1, max_iter=5000))
+    folds = GroupKFold(min(n_folds, len(groups_of)))
+    guess = cross_val_predict(model, x, y, groups=groups, cv=folds)
+    return float(balanced_accuracy_score(y, guess))
+
+
 def jump_sizes(points: np.ndarray) -> np.ndarray:
     """(F - 1,) how far the median body point moves between consecutive frames (mm), from
     positions (F, P, 3): a cut between two unrelated poses is a large step."""
@@ -226,6 +287,9 @@ def evaluate_pair(
         res.jumps[k] = jump_sizes(where)
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    where_a = model.body_positions(a)
+    for key, m in (("real", b), ("windowed", generated["windowed"])):
+        res.windows[key] = observer_windows(where_a, model.body_positions(m), origin, yaw)
     gaps = hand_gaps(model, a, b, generated)
     if gaps is not None:
         res.hand_gaps = gaps
@@ -278,6 +342,7 @@ def _summary(results: Sequence[PairResult]) -> dict:
         "median": round(float(np.median(lat)), 1),
         "p99": round(float(np.percentile(lat, 99)), 1),
     }
+    out["observer_accuracy"] = round(observer_accuracy(results), 3)
     out["frames"] = int(sum(len(r.errors["standard"]) for r in results))
     out["pairs"] = len(results)
     return out
