@@ -190,12 +190,13 @@ def test_heading_of_a_skeleton_whose_hip_joints_sit_at_the_pelvis(interactions):
 
 
 def test_b_place_frame_is_chosen_on_the_training_takes(interactions, mocap):
-    """CMU's pulls: B stays in front while A turns side-on, so B's place varies less along
-    the world's axes; salsa partners turn together, so it varies less in A's facing."""
+    """CMU's pulls: B stays in front while A turns side-on, so the other takes tell B's place
+    better along the world's axes; salsa partners turn together, so in A's facing."""
     pairs = [(a, b) for _, _, a, b in interactions]
     model = DualHMM(n_states=4, n_iter=2).fit(pairs)
     assert model.frame_ == "world"
-    salsa = [mocap.load_pair(*p) for p in mocap.pairs(label=["salsa"])[:2]]
+    # (leaving one take out at a time: two 10 s takes nearly tie, four settle it)
+    salsa = [mocap.load_pair(*p) for p in mocap.pairs(label=["salsa"])[:4]]
     salsa = [(a.trim(0, 600), b.trim(0, 600)) for a, b in salsa]
     assert DualHMM(n_states=4, n_iter=2).fit(salsa).frame_ == "heading"
     fixed = DualHMM(n_states=4, n_iter=2, frame="heading").fit(pairs)
