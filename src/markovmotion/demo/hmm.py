@@ -1,5 +1,6 @@
 """Demo steps of the dual-HMM paper: a virtual salsa partner responding to a held-out dancer,
-and a virtual partner shaking hands (the paper's own kind of interaction)."""
+a virtual partner shaking hands (the paper's own kind of interaction), and one shaking hands
+with people it has never seen."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ from rich.console import Console
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.demo.scene import partner_scene
-from markovmotion.evaluate.hmm import evaluate_pair, plot_pair
+from markovmotion.evaluate.hmm import Baselines, both_roles, evaluate_pair, plot_pair
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.progress import track
+from markovmotion.viz import render
 
 LABEL = "salsa"
 TRAIN_TAKES = 4  # a minute at most: four takes, 16 states
@@ -93,3 +95,42 @@ def handshake_step(out: Path, index: MocapIndex, console: Console) -> list[Path]
         f"handshake {test[0].trial} ({seen}): real and virtual partner",
         max_seconds=10.0,
     )
+
+
+def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
+    """A handshake of people the partner has never seen: a dual HMM of the markers-only
+    handshakes of every other pair of people (both roles, ``normalise="person"``,
+    ``output="regression"``: docs/hmm.md, "New people") answers the last pair's first take."""
+    pairs = index.pairs(label=[HANDSHAKE], kind="markers")
+    people = sorted({a.subject for a, _ in pairs})
+    if len(people) < 2:
+        console.print("fewer than two pairs of people with markers handshakes: step skipped")
+        return []
+    held = people[-1]
+    test = next(p for p in pairs if p[0].subject == held)
+    train = [p for p in pairs if p[0].subject != held]
+    takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
+    takes = both_roles(takes)
+    model = DualHMM(normalise="person", output="regression").fit(
+        [(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2
+    )
+    a, b = (m.resample(model.fps) for m in index.load_pair(*test))
+    virtual = model.respond(a, "windowed")
+    quick = Baselines(model, regression=False)  # the GMR baseline: dualhmm crossval
+    res = evaluate_pair(model, a, b, f"{test[0].name}+{test[1].name}", HANDSHAKE, quick)
+    mean = {k: float(res.errors[k].mean()) for k in ("windowed", "mean_pose")}
+    pose = {k: float(res.pose_errors[k].mean()) for k in ("windowed", "mean_pose")}
+    caption = (
+        f"new people ({held}, never seen): windowed {mean['windowed']:.0f} mm, mean pose "
+        f"{mean['mean_pose']:.0f}; body-centred {pose['windowed']:.0f} "
+        f"vs {pose['mean_pose']:.0f} mm"
+    )
+    console.print(
+        f"dual HMM on the markers handshakes of {', '.join(p for p in people if p != held)} "
+        f"in both roles ({len(takes)} takes); {caption}",
+        highlight=False,
+    )
+    a.name, b.name, virtual.name = "A (real)", "B (real)", "B (virtual partner)"
+    gif = out / "handshake-new-people.gif"
+    render([a, b, virtual], gif, max_seconds=10.0, title=caption)
+    return [gif]

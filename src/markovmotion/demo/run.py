@@ -95,6 +95,13 @@ def dual_hmm_handshake(out: Path, index: MocapIndex, console: Console) -> list[P
     return handshake_step(out, index, console)
 
 
+def dual_hmm_new_people(out: Path, index: MocapIndex, console: Console) -> list[Path]:
+    """A virtual partner shaking hands with a pair of people it never saw (markers)."""
+    from markovmotion.demo.hmm import new_people_step
+
+    return new_people_step(out, index, console)
+
+
 def vlmm_routine(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Routines synthesized by VLMMs of CMU dance and martial arts (VLMM paper Figs. 3, 9)."""
     from markovmotion.demo.vlmm import demo_step
@@ -121,6 +128,7 @@ STEPS: list[Step] = [
     pca_energy,
     dual_hmm_partner,
     dual_hmm_handshake,
+    dual_hmm_new_people,
     chain_partner,
     vlmm_routine,
     stylized_walk,

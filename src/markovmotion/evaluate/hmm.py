@@ -85,20 +85,20 @@ class PairResult:
     windows: dict[str, np.ndarray] = field(default_factory=dict)  # A and B, for the observer
 
 
-class _Baselines:
+class Baselines:
     """What the baselines need from a model, computed once: B's mean pose, the nearest
     neighbour in A's features, and (a marker model) Gaussian mixture regression of B's
     features on A's by the ``gmr`` package, with as many components as the model has states
     (fitted on the model's own training features by scikit-learn's EM, seed 0)."""
 
-    def __init__(self, model: DualHMM):
+    def __init__(self, model: DualHMM, regression: bool = True):
         self.model = model
         train_b = model.training_b()
         self.mean_rel = model.body_positions(train_b).mean(axis=0)
         self.mean_pose = model.body_positions(train_b, body_centred=True).mean(axis=0)
         self.nn = NearestNeighbors(n_neighbors=1).fit(model.train_a_)
         self.gmr = None
-        if model.uses_markers:
+        if model.uses_markers and regression:
             from gmr import GMM
             from sklearn.mixture import GaussianMixture
 
@@ -255,12 +255,12 @@ def evaluate_pair(
     b: Motion,
     name: str,
     label: str,
-    baselines: _Baselines | None = None,
+    baselines: Baselines | None = None,
 ) -> PairResult:
     """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take; standard
     and windowed through the model's trellis, and (keys ``"<trellis>/standard"`` ...) through
     each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
-    baselines = baselines or _Baselines(model)
+    baselines = baselines or Baselines(model)
     a, b = model._rate(a), model._rate(b)
     origin, yaw = model.place(a)
     xa, _ = model.features_a(a)
@@ -597,7 +597,7 @@ def evaluate_model(
     ``left_out_training_files`` and ``left_out_other_skeleton``, takes whose person A has
     another skeleton) on the takes of :func:`evaluation_pairs`, and the plots written."""
     index, takes = evaluation_pairs(model, test, labels, trials)
-    baselines = _Baselines(model)
+    baselines = Baselines(model)
     results, plots, kept, incompatible = [], [], [], []
     pairs = track(takes.takes, "evaluating pairs")
     for ea, eb, a, b in pairs_that_fit(model, index, pairs, incompatible):
