@@ -106,13 +106,13 @@ def test_output_below_a_file_names_the_output(tmp_path, capsys):
 
 
 def test_stream_reader_names_the_users_file(tmp_path):
-    """A damaged frame line is repaired in a temporary copy; a file that stays unreadable
-    (the header promises frames that are not there) is reported under the user's path."""
+    """A damaged stream (a NaN frame, the last frame missing) is reported under the user's
+    path."""
     from markovmotion.cli.hmm import read_stream
     from markovmotion.errors import MotionFormatError
 
     lines = bvh_text(make_motion(n_frames=6)).splitlines()
-    lines[-3] = "nan " + lines[-3].split(maxsplit=1)[1]  # one bad frame: repaired
+    lines[-3] = "nan " + lines[-3].split(maxsplit=1)[1]  # one bad frame
     path = tmp_path / "take.bvh"
     path.write_text("\n".join(lines[:-1]) + "\n")  # and the last frame missing
     with pytest.raises(MotionFormatError) as info:
