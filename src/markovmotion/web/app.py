@@ -206,9 +206,18 @@ def create_app(
 
     # ------------------------------------------------------------ pages
     for path, (name, title) in PAGES.items():
-        app.get(path, response_class=HTMLResponse, name=name)(
-            lambda name=name, title=title, path=path: _page(name, title, path)
-        )
+        if path != "/evaluation":
+            app.get(path, response_class=HTMLResponse, name=name)(
+                lambda name=name, title=title, path=path: _page(name, title, path)
+            )
+
+    @app.get("/evaluation", response_class=HTMLResponse)
+    def evaluation_start() -> HTMLResponse:
+        """The studies this server runs; without stimuli, the first page says there are none
+        (and how to start a server with some) instead of offering a Begin that fails."""
+        if not offered:
+            return _page("no-evaluation", "No evaluation", "/evaluation", status=503)
+        return _page(*PAGES["/evaluation"], "/evaluation")
 
     @app.get("/evaluation/{token}", response_class=HTMLResponse)
     def evaluation(token: str) -> HTMLResponse:
