@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -69,19 +66,14 @@ CHROMIUM_ARGS = [
 
 
 def ensure_chromium() -> None:
-    """Debian's Chromium for the browser tests: installed here if missing (as root with apt-get,
-    the way .ci/run does), else the tests fail saying what is missing. Never a silent skip:
-    these are the project's own end-to-end tests."""
-    if CHROMIUM.exists():
-        return
-    if os.geteuid() == 0 and shutil.which("apt-get"):
-        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-        for cmd in (["apt-get", "update", "-q"], ["apt-get", "install", "-y", "-q", "chromium"]):
-            subprocess.run(cmd, env=env, capture_output=True, timeout=900, check=False)
+    """Debian's Chromium for the browser tests, else one failure naming the command that
+    installs it. The tests never install it themselves (the README's test command runs
+    ``scripts/install-test-browser`` first), nor skip: these are the project's own
+    end-to-end tests."""
     if not CHROMIUM.exists():
         pytest.fail(
-            f"the browser tests need headless Chromium at {CHROMIUM}: install Debian's package "
-            "'chromium' (sudo apt-get install chromium), then run the tests again",
+            f"the browser tests need headless Chromium at {CHROMIUM}: run "
+            "scripts/install-test-browser (Debian's package 'chromium'), then the tests again",
             pytrace=False,
         )
 

@@ -437,6 +437,10 @@ def test_evaluate_on_any_index_leaves_training_takes_out(pair_partner, mocap, tm
     assert result["test_files"] == ["takes/new_a.bvh.gz", "takes/new_b.bvh.gz"]
     assert result["left_out_training_files"] == ["takes/seen_a.bvh.gz", "takes/seen_b.bvh.gz"]
     assert 0 < result["single_hypothesis"] < 1000 and 0 < result["mean_shape"] < 1000
+    main([*argv[:-1], "--test", str(tmp_path / "mine" / "INDEX.csv")])  # the table names them
+    err = capsys.readouterr().err
+    (named,) = [ln for ln in err.splitlines() if ln.startswith("test takes: ")]
+    assert named == f"test takes: {', '.join(result['takes'])}" and "seen" not in named
     # only training takes (the ZeroDivisionError of old), or none that fit: one line, exit 2
     _copy_index(tmp_path / "seen", mocap, {"seen": train_trial})
     (tmp_path / "none").mkdir()

@@ -106,13 +106,13 @@ def test_output_below_a_file_names_the_output(tmp_path, capsys):
 
 
 def test_stream_reader_names_the_users_file(tmp_path):
-    """A damaged frame line is repaired in a temporary copy; a file that stays unreadable
-    (the header promises frames that are not there) is reported under the user's path."""
+    """A damaged stream (a NaN frame, the last frame missing) is reported under the user's
+    path."""
     from markovmotion.cli.hmm import read_stream
     from markovmotion.errors import MotionFormatError
 
     lines = bvh_text(make_motion(n_frames=6)).splitlines()
-    lines[-3] = "nan " + lines[-3].split(maxsplit=1)[1]  # one bad frame: repaired
+    lines[-3] = "nan " + lines[-3].split(maxsplit=1)[1]  # one bad frame
     path = tmp_path / "take.bvh"
     path.write_text("\n".join(lines[:-1]) + "\n")  # and the last frame missing
     with pytest.raises(MotionFormatError) as info:
@@ -127,3 +127,29 @@ def test_unknown_test_trial_is_refused(mocap, capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert "trial 99" in err and "Traceback" not in err
+
+
+def test_errors_show_paths_as_the_user_gives_them(tmp_path, monkeypatch, capsys):
+    """A collection file's error names it relative to where the command runs (never the
+    absolute layout) and gives no Python advice (issue 22); the browser sees no server path."""
+    from markovmotion.cli import relative_paths
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.web.library import MotionLibrary
+
+    (tmp_path / "data" / "c").mkdir(parents=True)
+    take = tmp_path / "data" / "c" / "x.c3d"
+    take.write_bytes(b"")
+    (tmp_path / "work").mkdir()
+    monkeypatch.chdir(tmp_path / "work")
+    said = relative_paths(f"no take in '{take}' (see /no/such/place) 3 m/s")
+    assert said == "no take in '../data/c/x.c3d' (see /no/such/place) 3 m/s"
+    with pytest.raises(SystemExit):
+        main(["info", "../data/c/x.c3d"])  # markers where a skeleton is needed
+    with pytest.raises(SystemExit):
+        main(["convert", str(take), "o.bvh"])
+    lines = capsys.readouterr().err.splitlines()
+    assert all(str(tmp_path) not in ln and "markovmotion.io" not in ln for ln in lines), lines
+    assert lines[1].startswith("error: ../data/c/x.c3d: ")
+    library = MotionLibrary(tmp_path / "data")
+    shown = library.public(str(MotionFormatError(take, "bad", 3)))
+    assert shown == "c/x.c3d:3: bad" and str(tmp_path) not in library.public(f"{tmp_path}/data")

@@ -139,7 +139,7 @@ def test_model_file_round_trip(small_model, normal_walks, tmp_path):
         GaitSynthesizer.load(tmp_path / "other.npz")
 
 
-def test_adapt_and_synthesize_commands(small_model, mocap, tmp_path):
+def test_adapt_and_synthesize_commands(small_model, mocap, tmp_path, capsys):
     model = tmp_path / "avg.npz"
     small_model.save(model)
     style = mocap.find("bandai/dataset-2/walk_elderly_001.bvh.gz").path
@@ -149,6 +149,7 @@ def test_adapt_and_synthesize_commands(small_model, mocap, tmp_path):
         + ["--label", "elderly", "--steps", "6", "--out", str(adapted)]
     )
     assert GaitSynthesizer.load(adapted).role_ == "adapted"
+    assert "of 1 walk: walk_elderly_001.bvh.gz" in capsys.readouterr().err  # names what it used
     out = tmp_path / "walk.bvh"
     main(
         ["gait", "synthesize", "--model", str(adapted), "--steps", "6", "--no-gv"]

@@ -245,3 +245,23 @@ def test_gif_keeps_its_frame_rate(tmp_path):
             delays.append(im.info["duration"])
     assert sum(delays) == 2000
     assert set(delays) <= {60, 70}
+
+
+def test_an_animation_beyond_the_frame_limit_is_refused_before_any_work(tmp_path):
+    """``render walk.bvh --data-fps 1e-2``: 2 s of frames become hours of animation; refused in
+    one line naming the output and the limit (issue 22), in the real process, in under 10 s of
+    CPU (``check_clean``), before anything is drawn."""
+    from hostile_corpus import check_clean, run_cli, small_bvh
+
+    take = tmp_path / "walk.bvh"
+    take.write_text(small_bvh(60))  # 60 frames: 5,900 s at 0.01 fps, 88,501 frames at 15 fps
+    out = tmp_path / "o.gif"
+    run = run_cli(["render", str(take), "--out", str(out), "--data-fps", "1e-2"], timeout=30)
+    check_clean(run, "o.gif", "88501 frames", "MARKOVMOTION_MAX_ANIMATION_FRAMES")
+    assert not out.exists()
+    # the limit is the declared one: raised above the animation's length, the same is drawn
+    run = run_cli(
+        ["render", str(take), "--out", str(out), "--data-fps", "1e-2", "--max-seconds", "1"],
+        env={"MARKOVMOTION_MAX_ANIMATION_FRAMES": "10"},
+    )
+    check_clean(run, "o.gif", "15 frames", "MARKOVMOTION_MAX_ANIMATION_FRAMES")

@@ -652,6 +652,17 @@ def test_results_without_stimuli_explain_how_to_start_an_evaluation(tmp_path):
     assert b"No evaluation on this server" in body and b"--stimuli" in body
 
 
+def test_evaluation_without_stimuli_says_so_on_the_first_page(tmp_path):
+    """/evaluation on a server without stimuli: no Begin that then fails, but the page saying
+    there is no evaluation and how to start one (issue 22)."""
+    write_motion(make_motion(n_frames=5), tmp_path / "walk.bvh")
+    with running(create_app(tmp_path, tmp_path / "r.sqlite")) as url:
+        status, body = fetch(f"{url}/evaluation")
+    assert status == 503
+    assert b"No evaluation on this server" in body and b"--stimuli" in body
+    assert b"Begin" not in body and b"evaluation-start.js" not in body
+
+
 def test_live_partner_page_with_a_behaviour_chain(tmp_path, mocap, page):
     """``serve --partner`` takes a behaviour chain: the /live page streams its B frames."""
     from markovmotion.models.chain.partner import VirtualPartner

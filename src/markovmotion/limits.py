@@ -70,8 +70,21 @@ MAX_CHANNELS = Limit("MARKOVMOTION_MAX_CHANNELS", 60_000, "channels of one skele
 MAX_FPS = Limit("MARKOVMOTION_MAX_FPS", 1_000, "frames per second")
 MIN_FPS = Limit("MARKOVMOTION_MIN_FPS", 0.001, "frames per second (lowest)")
 MAX_VALUES = Limit("MARKOVMOTION_MAX_VALUES", 20_000_000, "values of one motion")
+#: An hour at ``render``'s default 15 fps, the longest ``--max-seconds`` allows.
+MAX_ANIMATION_FRAMES = Limit(
+    "MARKOVMOTION_MAX_ANIMATION_FRAMES", 54_000, "frames of one rendered animation"
+)
 
-ALL = (MAX_BYTES, MAX_JOINTS, MAX_FRAMES, MAX_CHANNELS, MAX_FPS, MIN_FPS, MAX_VALUES)
+ALL = (
+    MAX_BYTES,
+    MAX_JOINTS,
+    MAX_FRAMES,
+    MAX_CHANNELS,
+    MAX_FPS,
+    MIN_FPS,
+    MAX_VALUES,
+    MAX_ANIMATION_FRAMES,
+)
 
 
 def max_bytes() -> int:
@@ -100,6 +113,10 @@ def min_fps() -> float:
 
 def max_values() -> int:
     return int(MAX_VALUES)
+
+
+def max_animation_frames() -> int:
+    return int(MAX_ANIMATION_FRAMES)
 
 
 def megabytes(n: float) -> str:

@@ -6,6 +6,9 @@ stderr and exit with code 2; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+import os
+import re
+
 import typer
 
 from markovmotion.errors import MarkovMotionError
@@ -55,8 +58,28 @@ def _register() -> None:
     app._markovmotion_registered = True  # type: ignore[attr-defined]
 
 
+#: An absolute path in a message: after its start, a space, a quote or a bracket.
+_ABSOLUTE = re.compile(r"(?:^|(?<=[\s'\"(\[]))/[^\s'\"():,;\]]+")
+
+
+def relative_paths(message: str) -> str:
+    """``message`` with each absolute path of an existing file or folder written relative to
+    the current folder when that is shorter, as the user gives paths
+    (``../shared/data/mocap/...`` for the collection beside the project); an absolute path the
+    user gave outside (``/data/x.bvh``) stays as it was."""
+
+    def rel(match: re.Match[str]) -> str:
+        path = match.group(0)
+        if not os.path.exists(path):
+            return path
+        return min(path, os.path.relpath(path), key=len)
+
+    return _ABSOLUTE.sub(rel, message)
+
+
 def fail(message: str) -> None:
-    """Print one error line and exit with code 2."""
+    """Print one error line (absolute paths made relative) and exit with code 2."""
+    message = relative_paths(message)
     err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
     raise SystemExit(2)
 

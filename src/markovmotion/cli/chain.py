@@ -250,6 +250,7 @@ def evaluate(
     if dual is not None:
         for person, part in enumerate(result["by_real_person"]):
             _print_errors(part, f"{title}, person {'AB'[person]} real", response)
+    err_console.print(f"test takes: {', '.join(result['takes'])}", highlight=False)
     left = result["left_out_training_files"]
     if left:
         err_console.print(f"left out (training takes): {', '.join(left)}", highlight=False)

@@ -126,7 +126,9 @@ def adapt(
     result.save(out)
     err_console.print(
         f"wrote {out}: {result.role_} {label} model from {result.n_steps_} steps "
-        f"of {len(result.own_files)} walk{'s' if len(result.own_files) != 1 else ''}"
+        f"of {len(result.own_files)} walk{'s' if len(result.own_files) != 1 else ''}: "
+        + ", ".join(result.own_files),
+        highlight=False,
     )
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import typer
 
 from markovmotion.cli.options import choice, kind_option, ranged
-from markovmotion.data.index import listed_entry, read_listed_motion
+from markovmotion.data.index import read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -189,14 +189,16 @@ def train(
 
 
 def read_stream(path: Path, fps: float | None = None):
-    """A BVH replayed as a stream: (Motion, broken) with ``broken`` (F,) marking frames whose
-    line has NaN or missing values; their rotations are NaN, so the partner skips them.
-    A C3D file: (Markers, frames with a marker unseen).
+    """Person A's take as a stream: ``(motion, missing)``, ``missing`` (F,) marking the frames
+    with nothing recorded.
 
-    A file of the collection is read as INDEX.csv says (true frame rate, CMU's reference
-    frame dropped) unless ``fps`` overrides the file's rate.
+    A C3D file: (Markers, frames with a marker unseen), the marker system's own way of
+    saying a sample is missing. A BVH or ASF/AMC file has no such mark: it is read by the
+    same checked reader as every other command (a NaN, infinite, non-numeric or extra value
+    is an error naming the file and line), so none of its frames is missing. A file of the
+    collection is read as INDEX.csv says (true frame rate, CMU's reference frame dropped)
+    unless ``fps`` overrides the file's rate.
     """
-    from markovmotion.io.bvh import read_bvh_stream
     from markovmotion.io.c3d import read_c3d
     from markovmotion.io.files import base_suffix
 
@@ -205,14 +207,8 @@ def read_stream(path: Path, fps: float | None = None):
         if fps is not None:
             markers.fps = float(fps)
         return markers, ~markers.visible().all(axis=1)
-    if base_suffix(path) != ".bvh":  # ASF/AMC: no frame lines to repair
-        motion = read_listed_motion(path, fps=fps)
-        return motion, np.zeros(motion.n_frames, dtype=bool)
-    entry = listed_entry(path) if fps is None else None
-    motion, broken = read_bvh_stream(path, entry.fps if entry else fps)
-    if entry is not None and motion.n_frames > 1:
-        motion, broken = motion.trim(entry.first_frame), broken[entry.first_frame :]
-    return motion, broken
+    motion = read_listed_motion(path, fps=fps)
+    return motion, np.zeros(motion.n_frames, dtype=bool)
 
 
 @app.command()

@@ -37,7 +37,7 @@ def read_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motio
         return motion
     if suffix == ".c3d":
         raise MotionFormatError(
-            path, "C3D holds markers, not a skeleton: read it with markovmotion.io.read_c3d"
+            path, "a C3D file holds markers, not a skeleton: give a BVH or ASF/AMC take"
         )
     raise MotionFormatError(
         path,

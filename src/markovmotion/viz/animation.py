@@ -33,7 +33,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import Motion
+from markovmotion.errors import LimitError
 from markovmotion.io.files import atomic_write
+from markovmotion.limits import MAX_ANIMATION_FRAMES, exceeded, max_animation_frames
 from markovmotion.progress import track
 from markovmotion.viz.plots import check_suffix
 from markovmotion.viz.video import write_mp4
@@ -414,7 +416,11 @@ class _Stage:
 
 
 # ---------------------------------------------------------------- rendering
-def _sample_times(tracks: list[_Track], fps: float, max_seconds: float | None) -> np.ndarray:
+def _sample_times(
+    tracks: list[_Track], fps: float, max_seconds: float | None, path: Path
+) -> np.ndarray:
+    """The animation's frame times, refused (:class:`LimitError` naming ``path``) before any
+    work when there would be more than ``MARKOVMOTION_MAX_ANIMATION_FRAMES`` of them."""
     if fps <= 0:
         raise ValueError(f"frame rate must be positive, got {fps}")
     end = max(t.last_time for t in tracks)
@@ -423,6 +429,9 @@ def _sample_times(tracks: list[_Track], fps: float, max_seconds: float | None) -
         if max_seconds <= 0:
             raise ValueError(f"max_seconds must be positive, got {max_seconds}")
         n = min(n, max(1, round(max_seconds * fps)))
+    if n > max_animation_frames():
+        found = f"{n} frames: {(n - 1) / fps:.6g} s at {fps:g} fps"
+        raise LimitError(f"{path}: {exceeded(MAX_ANIMATION_FRAMES, found)}")
     return np.arange(n) / fps
 
 
@@ -519,7 +528,7 @@ def render(
     path = Path(path)
     suffix = check_output(path)
     tracks = _tracks(items, names)
-    times = _sample_times(tracks, fps, max_seconds)
+    times = _sample_times(tracks, fps, max_seconds, path)
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)

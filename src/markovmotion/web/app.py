@@ -182,7 +182,7 @@ def create_app(
 
     @app.exception_handler(MarkovMotionError)
     async def library_error(request: Request, exc: MarkovMotionError) -> JSONResponse:
-        return JSONResponse({"detail": shown(str(exc), 300)}, 422)
+        return JSONResponse({"detail": shown(lib.public(str(exc)), 300)}, 422)
 
     def need_store() -> EvaluationStore:
         if store is None or stim_lib is None:
@@ -206,9 +206,18 @@ def create_app(
 
     # ------------------------------------------------------------ pages
     for path, (name, title) in PAGES.items():
-        app.get(path, response_class=HTMLResponse, name=name)(
-            lambda name=name, title=title, path=path: _page(name, title, path)
-        )
+        if path != "/evaluation":
+            app.get(path, response_class=HTMLResponse, name=name)(
+                lambda name=name, title=title, path=path: _page(name, title, path)
+            )
+
+    @app.get("/evaluation", response_class=HTMLResponse)
+    def evaluation_start() -> HTMLResponse:
+        """The studies this server runs; without stimuli, the first page says there are none
+        (and how to start a server with some) instead of offering a Begin that fails."""
+        if not offered:
+            return _page("no-evaluation", "No evaluation", "/evaluation", status=503)
+        return _page(*PAGES["/evaluation"], "/evaluation")
 
     @app.get("/evaluation/{token}", response_class=HTMLResponse)
     def evaluation(token: str) -> HTMLResponse:
@@ -238,9 +247,9 @@ def create_app(
         try:
             return Response(lib.json(path), media_type="application/json")
         except LibraryPathError as exc:
-            raise HTTPException(404, str(exc)) from None
+            raise HTTPException(404, shown(lib.public(str(exc)), 300)) from None
         except MarkovMotionError as exc:
-            raise HTTPException(422, shown(str(exc), 300)) from None
+            raise HTTPException(422, shown(lib.public(str(exc)), 300)) from None
         except (RecursionError, MemoryError, ValueError) as exc:
             problem = "nested too deeply" if isinstance(exc, RecursionError) else "cannot be read"
             raise HTTPException(422, f"{shown(path)}: {problem}") from None
@@ -273,7 +282,7 @@ def create_app(
         except UploadTooLargeError as exc:
             raise HTTPException(413, shown(str(exc), 300)) from None
         except MarkovMotionError as exc:
-            raise HTTPException(422, shown(str(exc), 300)) from None
+            raise HTTPException(422, shown(lib.public(str(exc)), 300)) from None
         finally:
             if form is not None:
                 await form.close()
@@ -353,7 +362,7 @@ def create_app(
             try:
                 return Response(clip_json(clip.file_a, clip.file_b), media_type="application/json")
             except LibraryPathError as exc:
-                raise HTTPException(404, str(exc)) from None
+                raise HTTPException(404, shown(stim_lib.public(str(exc)), 300)) from None
             except (RecursionError, MemoryError, ValueError):
                 raise HTTPException(422, f"clip {shown(clip.id)}: cannot be read") from None
         files = (item.file, item.file_b) if item is not None else ()
@@ -362,7 +371,7 @@ def create_app(
         try:
             return Response(stim_lib.json(files[side]), media_type="application/json")
         except LibraryPathError as exc:
-            raise HTTPException(404, str(exc)) from None
+            raise HTTPException(404, shown(stim_lib.public(str(exc)), 300)) from None
 
     @app.post("/api/evaluation/{token}/{test}/{position}")
     def answer(token: str, test: str, position: Position, body: Answer) -> dict:
@@ -371,7 +380,7 @@ def create_app(
                 token, test, position, body.answer, body.unusual, body.comment
             )
         except EvaluationError as exc:
-            raise HTTPException(422, shown(str(exc), 300)) from None
+            raise HTTPException(422, shown(lib.public(str(exc)), 300)) from None
         return {"ok": True}
 
     # ------------------------------------------------------------ results

@@ -137,6 +137,11 @@ class MotionLibrary:
         self._lock = threading.Lock()
         self._building: dict[tuple, threading.Lock] = {}
 
+    def public(self, message: str) -> str:
+        """``message`` as the browser may see it: paths inside the library relative to it, the
+        server's own absolute folder never shown (a reader's error names the file it read)."""
+        return message.replace(f"{self.root}{os.sep}", "").replace(str(self.root), "library")
+
     def files(self) -> list[str]:
         """Every motion file under the folder, as sorted POSIX paths relative to it."""
         out = []

@@ -224,7 +224,7 @@ async def live_session(
         motion, poses_a, partner = await asyncio.to_thread(_stream, msg, library, factory)
     except (_Garbage, MarkovMotionError, TimeoutError, RecursionError, MemoryError) as exc:
         if isinstance(exc, _Garbage | MarkovMotionError):
-            message = str(exc)
+            message = library.public(str(exc))
         elif isinstance(exc, TimeoutError):
             message = "no request in time"
         else:

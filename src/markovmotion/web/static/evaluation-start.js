@@ -22,7 +22,7 @@ document.getElementById("begin-interaction").addEventListener("click", () => beg
     document.getElementById("error").textContent = e.message;
     return;
   }
-  if (!studies.length) return; // no evaluation: the gait page stays, and says so when begun
+  if (!studies.length) return; // the server sends its no-evaluation page instead of this one
   document.getElementById("study-gait").hidden = !studies.includes("gait");
   document.getElementById("study-interaction").hidden = !studies.includes("interaction");
   document.body.dataset.studies = studies.join(" ");
