@@ -124,7 +124,7 @@ def compact_covariances(covars: Any, covariance_type: str, n: int) -> np.ndarray
     if covariance_type == "full" and len(c) != n:
         raise ValueError(f"'full' covars must have shape {want}, got {c.shape}")
     if not np.allclose(mats, np.swapaxes(mats, 1, 2)) or not np.all(np.linalg.eigvalsh(mats) > 0):
-        raise ValueError(f"'{covariance_type}' covars must be symmetric, positive-definite")
+        raise ValueError(f"'{covariance_type}' covars must be symmetric positive definite")
     return c
 
 

@@ -106,8 +106,13 @@ def check_sequences(
     if np.iscomplexobj(x):
         raise ValueError("Complex data not supported: X holds complex numbers")
     x = np.asarray(x, dtype=float)
-    if x.ndim != 2 or len(x) == 0 or x.shape[1] == 0:
-        raise ValueError(f"X must be a non-empty (frames, dims) array, got shape {x.shape}")
+    if x.ndim != 2:
+        raise ValueError(f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data")
+    if len(x) == 0 or x.shape[1] == 0:
+        raise ValueError(
+            f"X has {len(x)} frame(s) and {x.shape[1]} feature(s) (shape={x.shape}) while a "
+            "minimum of 1 is required."
+        )
     if not np.isfinite(x).all():
         raise ValueError("X holds NaN or infinite values")
     with np.errstate(over="ignore"):
@@ -344,8 +349,8 @@ class BaseHMM(BaseEstimator):
         width = self._n_features()
         if width is not None and x.shape[1] != width:
             raise ValueError(
-                f"X has {x.shape[1]} columns but {type(self).__name__} was fitted on "
-                f"{width} features"
+                f"X has {x.shape[1]} features, but {type(self).__name__} is expecting {width} "
+                "features as input"
             )
         return x, lengths
 
@@ -620,9 +625,10 @@ class GaussianHMM(BaseHMM):
     def _init_emissions(
         self, x: np.ndarray, rng: np.random.RandomState, need: dict
     ) -> np.ndarray | None:
-        """Means by k-means, covariances from each cluster's frames (the whole data's
-        where a cluster has too few frames), the floor from the data; returns the frames'
-        labels (k-means, else the nearest mean) when pi or T are to be initialised."""
+        """Means by k-means; every state's covariance the data's (+ ``min_covar`` on the
+        diagonal, as hmmlearn: EM's first posteriors are then soft, not k-means' hard
+        clusters); the floor from the data. Returns the frames' labels (k-means, else the
+        nearest mean), from which pi and T start."""
         check_covariance_type(self.covariance_type)
         self.covar_floor_ = covariance_floor(x, self.min_covar, self.var_floor)
         labels = None
@@ -638,12 +644,7 @@ class GaussianHMM(BaseHMM):
         if need["c"]:
             d = x.shape[1]
             total = np.cov(x, rowvar=False).reshape(d, d) if len(x) > 1 else np.zeros((d, d))
-            covars = np.empty((self.n_components, d, d))
-            for k in range(self.n_components):
-                members = x[labels == k]
-                covars[k] = (
-                    np.cov(members, rowvar=False).reshape(d, d) if len(members) > d else total
-                )
+            covars = np.broadcast_to(total + self.min_covar * np.eye(d), (self.n_components, d, d))
             compact = compact_of_full(covars, self.covariance_type)
             self.covars_ = floor_covariances(compact, self.covar_floor_, self.covariance_type)
         return labels
