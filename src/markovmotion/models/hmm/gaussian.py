@@ -107,7 +107,9 @@ def check_sequences(
         raise ValueError("Complex data not supported: X holds complex numbers")
     x = np.asarray(x, dtype=float)
     if x.ndim != 2:
-        raise ValueError(f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data")
+        raise ValueError(
+            f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data"
+        )
     if len(x) == 0 or x.shape[1] == 0:
         raise ValueError(
             f"X has {len(x)} frame(s) and {x.shape[1]} feature(s) (shape={x.shape}) while a "
