@@ -687,11 +687,8 @@ class GaussianHMM(BaseHMM):
             )
         covars = compact_covariances(self._covars_, self.covariance_type, self.n_components)
         d = self.means_.shape[1]
-        width = {"spherical": None, "diag": covars.shape[-1]}.get(self.covariance_type, None)
-        if self.covariance_type in ("full", "tied"):
-            width = covars.shape[-1]
-        if width is not None and width != d:
-            raise ValueError(f"covars_ are {width}-dimensional but means_ {d}-dimensional")
+        if self.covariance_type != "spherical" and covars.shape[-1] != d:
+            raise ValueError(f"covars_ are {covars.shape[-1]}-dimensional, means_ {d}-dimensional")
 
     def check_state(self) -> None:
         """Raise StateError unless the learnt parameters (as read from a model file) fit:
