@@ -98,7 +98,7 @@ COVARIANCE = typer.Option(
 )
 VAR_FLOOR = ranged(
     "fraction",
-    1e-3,
+    0.3,
     "--var-floor",
     help="Variance floor of each PCA feature, as a fraction of that feature's variance.",
 )
