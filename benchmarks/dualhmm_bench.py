@@ -97,10 +97,14 @@ def bench_windowed(hmm: GaussianHMM, x: np.ndarray, ref_steps: int) -> dict:
 
 
 def bench_em(hmm: GaussianHMM, x: np.ndarray, lengths: list[int], iters: int) -> dict:
-    init = GaussianHMM(N, n_iter=0, var_floor=1e-9, random_state=0).fit(x, lengths)  # k-means
-    params = {k: getattr(init, k).copy() for k in ("startprob_", "transmat_", "means_", "covars_")}
+    init = GaussianHMM(N, n_iter=0, min_covar=1e-9, random_state=0).fit(x, lengths)  # k-means
+    params = {k: getattr(init, k).copy() for k in ("startprob_", "transmat_", "means_", "_covars_")}
+    params["covars_"] = params.pop("_covars_")
 
-    ours = GaussianHMM(N, n_iter=iters, tol=-np.inf, var_floor=1e-9, init_params="")
+    ours = GaussianHMM(
+        N, n_iter=iters, tol=-np.inf, min_covar=1e-9, covars_prior=0.0, covars_weight=0.0
+    )
+    ours.init_params = ""
     for k, v in params.items():
         setattr(ours, k, v.copy())
     t0 = time.perf_counter()

@@ -218,3 +218,14 @@ def test_online_partners_follow_the_protocol(fam, fitted, data):
     assert all(f is None for f in out[: partner.lag])
     assert len(shown) == a.n_frames
     assert all(f.n_frames == 1 and f.skeleton.names == partner.skeleton.names for f in shown)
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_every_verb_before_fit_raises_not_fitted(kind):
+    """scikit-learn's convention (issue 26): NotFittedError, not an AttributeError from inside."""
+    from sklearn.exceptions import NotFittedError
+
+    cls = KINDS[kind]
+    for verb in cls.VERBS:
+        with pytest.raises(NotFittedError, match=f"{cls.__name__} is not fitted"):
+            getattr(cls(), verb)(*([] if verb in ("partner", "generate") else [np.zeros((3, 2))]))

@@ -101,6 +101,32 @@ def test_generated_b_recovers_the_known_function_of_a_state(training, mode, obse
     assert err_win[np.setdiff1d(np.arange(1, 200), jumps)].max() < 1.0
 
 
+@pytest.mark.parametrize(
+    "kind, mode",
+    [("diag", "paper"), ("diag", "joint"), ("tied", "paper"), ("tied", "joint")]
+    + [("spherical", "paper")],  # joint: one variance for A's and B's features mixes them up
+)
+def test_every_covariance_type_recovers_b_and_round_trips(training, kind, mode, tmp_path):
+    """Issue 26: the dual HMM on diagonal, spherical or tied Gaussians (the chains keep the
+    type's compact form, so do their files)."""
+    dual = DualHMM(
+        **TOY, n_states=N_POSES, mode=mode, covariance_type=kind, n_iter=20, placement_window=1
+    ).fit(training)
+    assert dual.lambda_a_.covariance_type == dual.lambda_b_.covariance_type == kind
+    ndim = {"diag": 2, "spherical": 1, "tied": 2}[kind]
+    assert dual.lambda_a_._covars_.ndim == dual.lambda_b_._covars_.ndim == ndim
+    a, b, states = synthetic_pair(200, 9)
+    err = np.linalg.norm(dual.respond(a, "standard").positions() - b.positions(), axis=-1)
+    jumps = np.flatnonzero(np.diff(states)) + 1
+    assert err.mean(axis=1)[np.setdiff1d(np.arange(200), jumps)].max() < 1.0
+    dual.save(tmp_path / "dual.npz")
+    back = DualHMM.load(tmp_path / "dual.npz")
+    np.testing.assert_array_equal(back.lambda_b_._covars_, dual.lambda_b_._covars_)
+    np.testing.assert_allclose(
+        back.respond(a, "windowed").positions(), dual.respond(a, "windowed").positions()
+    )
+
+
 @pytest.mark.parametrize("placement_window", [1, 7, 15])
 def test_partner_streams_what_windowed_generation_gives(model, placement_window, capsys):
     model = copy.copy(model).set_params(placement_window=placement_window)

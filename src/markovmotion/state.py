@@ -267,9 +267,14 @@ def restore_estimator(
         where = f"{field}.learnt.{k}"
         if not (isinstance(k, str) and k.isidentifier() and k.endswith("_")) or k.startswith("_"):
             raise StateError(f"{where}: not a learnt attribute name")
-        if callable(getattr(cls, k, None)) or isinstance(getattr(cls, k, None), property):
+        attr = getattr(cls, k, None)
+        if callable(attr) or (isinstance(attr, property) and attr.fset is None):
+            # a property with a setter (GaussianHMM.covars_) checks what it is given
             raise StateError(f"{where}: would replace a method of {cls.__name__}")
-        setattr(est, k, _from_json(v, arrays, where))
+        try:
+            setattr(est, k, _from_json(v, arrays, where))
+        except ValueError as exc:  # a property's setter refused it
+            raise StateError(f"{where}: {exc}") from None
     check = getattr(est, "check_state", None)
     if callable(check):
         try:

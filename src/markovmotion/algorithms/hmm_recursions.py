@@ -1,6 +1,6 @@
 """Hidden Markov model recursions as pure compiled functions: forward, backward, Viterbi.
 
-Rabiner (1989) in log space. Every function takes the model as explicit
+Rabiner (1989) in log space, and forward-backward also in Rabiner's scaled form (§V.A). Every function takes the model as explicit
 arrays (``log_startprob`` (N,), ``transmat`` or ``log_transmat`` (N, N),
 ``log_frameprob`` (T, N) = log b_j(o_t)) and one sequence; nothing is hidden
 in objects, so the same code serves the Gaussian HMM, the dual HMM and the
@@ -93,6 +93,48 @@ def _transition_counts(
 
 
 @numba.njit(cache=True, nogil=True)
+def _forward_scaling(startprob, transmat, frameprob):  # pragma: no cover - numba
+    n_t, n = frameprob.shape
+    alpha = np.empty((n_t, n))
+    scale = np.empty(n_t)
+    for t in range(n_t):
+        if t == 0:
+            for j in range(n):
+                alpha[0, j] = startprob[j] * frameprob[0, j]
+        else:
+            acc = np.dot(alpha[t - 1], transmat)
+            for j in range(n):
+                alpha[t, j] = acc[j] * frameprob[t, j]
+        total = alpha[t].sum()
+        if not total > 0.0:
+            return alpha, scale, t
+        scale[t] = 1.0 / total
+        alpha[t] *= scale[t]
+    return alpha, scale, -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _backward_scaling(transmat, frameprob, scale):  # pragma: no cover - numba
+    n_t, n = frameprob.shape
+    beta = np.empty((n_t, n))
+    beta[n_t - 1] = scale[n_t - 1]
+    for t in range(n_t - 2, -1, -1):
+        beta[t] = np.dot(transmat, frameprob[t + 1] * beta[t + 1]) * scale[t]
+    return beta
+
+
+@numba.njit(cache=True, nogil=True)
+def _transition_counts_scaling(alpha, beta, transmat, frameprob):  # pragma: no cover - numba
+    n_t, n = frameprob.shape
+    counts = np.zeros((n, n))
+    for t in range(n_t - 1):
+        for i in range(n):
+            for j in range(n):
+                counts[i, j] += alpha[t, i] * transmat[i, j] * frameprob[t + 1, j] * beta[t + 1, j]
+    return counts
+
+
+@numba.njit(cache=True, nogil=True)
 def viterbi_kernel(log_startprob, log_transmat_t, log_frameprob):  # pragma: no cover - numba
     """Compiled Viterbi without checks, for hot loops: the log transition matrix comes
     transposed (C-contiguous, predecessors along rows); returns (path, log probability)."""
@@ -144,18 +186,67 @@ def backward(transmat: np.ndarray, log_frameprob: np.ndarray) -> np.ndarray:
     return _backward(transmat, _check(log_frameprob, len(transmat)))
 
 
+def forward_scaling(
+    startprob: np.ndarray, transmat: np.ndarray, frameprob: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Scaled forward pass (Rabiner eqs. 91-92): alpha-hat (T, N), each row summing to one,
+    the scale factors c_t = 1 / sum_j alpha-tilde_t(j) (T,) and log P(O) = -sum_t log c_t.
+
+    Works on the frame likelihoods b_j(o_t) themselves (no logarithms): faster, but a frame
+    unlikely under every state underflows to zero, which is refused (ValueError) -- the log
+    recursions (:func:`forward`) have no such limit.
+    """
+    frameprob = np.ascontiguousarray(frameprob, dtype=float)
+    startprob = np.ascontiguousarray(startprob, dtype=float)
+    if frameprob.ndim != 2 or frameprob.shape[1] != len(startprob) or len(frameprob) == 0:
+        raise ValueError(f"frameprob must be (T >= 1, {len(startprob)}), got {frameprob.shape}")
+    alpha, scale, bad = _forward_scaling(
+        startprob, np.ascontiguousarray(transmat, float), frameprob
+    )
+    if bad >= 0:
+        raise ValueError(
+            f"scaled forward pass underflowed at frame {bad} (every state's likelihood is 0); "
+            "use implementation='log'"
+        )
+    return alpha, scale, float(-np.log(scale).sum())
+
+
+def backward_scaling(transmat: np.ndarray, frameprob: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Scaled backward pass with the forward pass's scale factors: beta-hat (T, N)."""
+    return _backward_scaling(
+        np.ascontiguousarray(transmat, dtype=float),
+        np.ascontiguousarray(frameprob, dtype=float),
+        np.ascontiguousarray(scale, dtype=float),
+    )
+
+
 def forward_backward(
-    log_startprob: np.ndarray, transmat: np.ndarray, log_frameprob: np.ndarray
+    log_startprob: np.ndarray,
+    transmat: np.ndarray,
+    log_frameprob: np.ndarray,
+    implementation: str = "log",
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """E-step statistics of one sequence (Rabiner eqs. 27, 37-38).
+
+    ``implementation``: ``"log"`` (log space, never underflows) or ``"scaling"`` (Rabiner's
+    scaled recursions on exp(log_frameprob); ValueError when a frame underflows).
 
     Returns:
         log P(O); the state posteriors gamma (T, N); the expected transition
         counts sum_t xi_t(i, j) (N, N).
     """
+    transmat = np.ascontiguousarray(transmat, dtype=float)
+    if implementation == "scaling":
+        frameprob = np.exp(_check(log_frameprob, len(transmat)))
+        alpha, scale, ll = forward_scaling(np.exp(log_startprob), transmat, frameprob)
+        beta = _backward_scaling(transmat, frameprob, scale)
+        gamma = alpha * beta
+        gamma /= gamma.sum(axis=1, keepdims=True)
+        return ll, gamma, _transition_counts_scaling(alpha, beta, transmat, frameprob)
+    if implementation != "log":
+        raise ValueError(f"implementation must be 'log' or 'scaling', got {implementation!r}")
     log_alpha, ll = forward(log_startprob, transmat, log_frameprob)
     log_frameprob = np.ascontiguousarray(log_frameprob, dtype=float)
-    transmat = np.ascontiguousarray(transmat, dtype=float)
     log_beta = _backward(transmat, log_frameprob)
     log_gamma = log_alpha + log_beta
     log_gamma -= log_gamma.max(axis=1, keepdims=True)

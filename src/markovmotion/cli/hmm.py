@@ -89,6 +89,19 @@ INITIAL = typer.Option(
     "the middle state ('middle', eq. 3 as printed).",
 )
 N_ITER = ranged("iterations", 50, help="Most EM iterations.")
+# The choices of algorithms.gaussian.COVARIANCE_TYPES (not imported: the models load lazily)
+COVARIANCE = typer.Option(
+    "full",
+    "--covariance-type",
+    callback=choice(("full", "diag", "spherical", "tied")),
+    help="The states' Gaussians: 'full' (the paper's), 'diag', 'spherical' or 'tied'.",
+)
+VAR_FLOOR = ranged(
+    "fraction",
+    0.3,
+    "--var-floor",
+    help="Variance floor of each PCA feature, as a fraction of that feature's variance.",
+)
 SEED = ranged("seed", 0, help="Random seed (k-means start).")
 JOBS = typer.Option(
     1, "--jobs", min=0, help="Parallel jobs of EM's E-step over the takes (0: all cores)."
@@ -117,6 +130,7 @@ MODEL_OPTIONS = {
             "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
             "normalise", "output",
+            "covariance_type", "var_floor",
         )
     },
 }  # fmt: skip
@@ -158,6 +172,8 @@ def train(
     window: int = WINDOW,
     initial: str = INITIAL,
     n_iter: int = N_ITER,
+    covariance_type: str = COVARIANCE,
+    var_floor: float = VAR_FLOOR,
     seed: int = SEED,
     jobs: int = JOBS,
     kind: str = KIND,
@@ -441,6 +457,8 @@ def crossval(
     window: int = WINDOW,
     initial: str = INITIAL,
     n_iter: int = N_ITER,
+    covariance_type: str = COVARIANCE,
+    var_floor: float = VAR_FLOOR,
     seed: int = SEED,
     jobs: int = JOBS,
     plots: Path = typer.Option(None, help="Folder for the per-frame error plots (Figs. 6-8)."),

@@ -17,7 +17,8 @@ scikit-learn's conventions (``sklearn/base.py``), turned into a model file:
   ``generate`` (new motion), ``predict`` (continue an observed motion),
   ``respond`` (a whole partner motion for a whole input motion), ``score``
   (log-likelihood), and ``partner()`` for the online protocol of
-  :mod:`markovmotion.models.online`. ``VERBS`` lists those a class offers.
+  :mod:`markovmotion.models.online`. ``VERBS`` lists those a class offers;
+  each raises scikit-learn's ``NotFittedError`` before ``fit``.
 
 Randomness: ``random_state`` at construction, ``rng`` (a
 :class:`numpy.random.Generator`) at call time, and ``stochastic=`` where a
@@ -26,19 +27,21 @@ verb can either draw or take the most likely choice.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
 from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError
 from markovmotion.persist import load_npz, save_npz
-from markovmotion.state import estimator_state, register, restore_estimator
+from markovmotion.state import estimator_state, is_fitted, register, restore_estimator
 
 #: Every model kind, by the ``KIND`` its class declares (filled at class creation).
 KINDS: dict[str, type[Model]] = {}
@@ -73,6 +76,10 @@ class Model(BaseEstimator):
         unknown = set(cls.VERBS) - set(ALL_VERBS)
         if unknown:
             raise TypeError(f"{cls.__name__}.VERBS names unknown verbs {sorted(unknown)}")
+        for verb in cls.VERBS:
+            method = cls.__dict__.get(verb)
+            if callable(method):
+                setattr(cls, verb, _fitted_first(method))
 
     # ------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str], **extras: Any) -> None:
@@ -133,6 +140,21 @@ class Model(BaseEstimator):
             rec = file_record(motion)
             seen.setdefault(rec["sha256"], rec)
         self.train_files_ = list(seen.values())
+
+
+def _fitted_first(method: Callable[..., Any]) -> Callable[..., Any]:
+    """``method`` raising scikit-learn's NotFittedError while the model has learnt nothing."""
+
+    @functools.wraps(method)
+    def verb(self: Model, *args: Any, **kwargs: Any) -> Any:
+        if not is_fitted(self):
+            raise NotFittedError(
+                f"This {type(self).__name__} is not fitted yet: call fit (or load a model "
+                f"file) before {method.__name__}"
+            )
+        return method(self, *args, **kwargs)
+
+    return verb
 
 
 def file_record(motion: Motion | Markers) -> dict[str, str]:

@@ -58,9 +58,13 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from markovmotion.algorithms.gaussian import (
+    check_covariance_type,
+    compact_of_full,
+    covariance_floor,
+    floor_covariances,
+    gaussian_m_step,
     precision_cholesky,
     state_regressions,
-    weighted_gaussians,
 )
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
@@ -250,7 +254,15 @@ class DualHMM(Model):
             (:func:`~markovmotion.algorithms.gaussian.state_regressions`, Gaussian mixture
             regression with one component per state), the states decoded by the same
             standard or windowed Viterbi, blended over ``blend_window`` frames.
-        n_iter, tol, var_floor, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
+        var_floor: each state's variance along PCA feature j is kept at or above this
+            fraction of feature j's variance over the training frames (and at least
+            ``GaussianHMM``'s absolute ``min_covar``); :class:`GaussianHMM`. The default 0.3
+            was chosen by leave-one-pair-out on the CMU 18/19 interactions and on salsa
+            (docs/hmm.md, "The variance floor"): with a few hundred frames for 32 states a
+            state's own estimate of a minor PCA feature's variance is unreliable.
+        covariance_type: the states' Gaussians, ``"full"`` (the paper's), ``"diag"``,
+            ``"spherical"`` or ``"tied"`` (:class:`GaussianHMM`).
+        n_iter, tol, random_state, n_jobs: EM settings (:class:`GaussianHMM`).
 
     Learnt: ``lambda_a_`` and ``lambda_b_`` (:class:`GaussianHMM` sharing pi
     and T), ``pipeline_a_`` / ``pipeline_b_`` (features), ``expmaps_b_`` and
@@ -286,7 +298,8 @@ class DualHMM(Model):
         output: str = "frames",
         n_iter: int = 50,
         tol: float = 1e-2,
-        var_floor: float = 1e-3,
+        var_floor: float = 0.3,
+        covariance_type: str = "full",
         random_state: int | None = 0,
         n_jobs: int | None = None,
     ):
@@ -309,6 +322,7 @@ class DualHMM(Model):
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
+        self.covariance_type = covariance_type
         self.random_state = random_state
         self.n_jobs = n_jobs
 
@@ -478,11 +492,13 @@ class DualHMM(Model):
         """lambda_A and lambda_B (eqs. 1-2) from A's and B's training features (``mode``)."""
         self.train_a_, self.train_b_ = xa, xb
         self.train_lengths_ = np.asarray(lengths, dtype=np.int64)
+        kind = check_covariance_type(self.covariance_type)
         hmm = GaussianHMM(
-            self.n_states,
-            self.n_iter,
-            self.tol,
-            self.var_floor,
+            n_components=self.n_states,
+            covariance_type=kind,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            var_floor=self.var_floor,
             random_state=self.random_state,
             n_jobs=self.n_jobs,
         )
@@ -491,8 +507,9 @@ class DualHMM(Model):
             self.lambda_a_ = hmm.fit(xa, lengths)
             hmm.transmat_ = leavable(hmm.transmat_)
             gamma = hmm.predict_proba(xa, lengths)
-            floor = self.var_floor * np.var(xb, axis=0).mean()
-            means_b, covars_b, _ = weighted_gaussians(xb, gamma, floor)
+            floor = covariance_floor(xb, hmm.min_covar, self.var_floor)
+            means_b, covars_b, _ = gaussian_m_step(xb, gamma, kind)
+            covars_b = floor_covariances(covars_b, floor, kind)
             self.lambda_b_ = _sharing_chain(hmm, means_b, covars_b, floor)
             self.train_states_ = hmm.decode(xa, lengths)[1]
         else:
@@ -501,8 +518,9 @@ class DualHMM(Model):
             joint.transmat_ = leavable(joint.transmat_)
             self.train_states_ = joint.decode(xab, lengths)[1]
             m, c, floor = joint.means_, joint.covars_, joint.covar_floor_
-            self.lambda_a_ = _sharing_chain(joint, m[:, :da], c[:, :da, :da], floor)
-            self.lambda_b_ = _sharing_chain(joint, m[:, da:], c[:, da:, da:], floor)
+            for name, part in (("lambda_a_", slice(None, da)), ("lambda_b_", slice(da, None))):
+                compact = compact_of_full(c[:, part, part], kind)
+                setattr(self, name, _sharing_chain(joint, m[:, part], compact, floor[part]))
         self.history_ = hmm.history_
 
     @property
@@ -870,12 +888,14 @@ def _check_one_skeleton_b(
 
 
 def _sharing_chain(
-    hmm: GaussianHMM, means: np.ndarray, covars: np.ndarray, floor: float
+    hmm: GaussianHMM, means: np.ndarray, covars: np.ndarray, floor: np.ndarray
 ) -> GaussianHMM:
-    """lambda = (T, B, pi) with ``hmm``'s pi and T and the Gaussians given (eqs. 1-2)."""
-    out = GaussianHMM(hmm.n_components, hmm.n_iter, hmm.tol, hmm.var_floor, n_jobs=hmm.n_jobs)
+    """lambda = (T, B, pi) with ``hmm``'s pi and T and the Gaussians given (eqs. 1-2; the
+    covariances in ``hmm.covariance_type``'s compact form)."""
+    out = GaussianHMM(**hmm.get_params())
     out.startprob_, out.transmat_ = hmm.startprob_, hmm.transmat_
     out.means_, out.covars_, out.covar_floor_ = means, covars, floor
+    out.n_features_in_ = means.shape[1]
     out.history_, out.n_iter_, out.converged_ = hmm.history_, hmm.n_iter_, hmm.converged_
     return out
 

@@ -1,70 +1,128 @@
-"""Hidden Markov models with full-covariance Gaussian emissions (Rabiner 1989).
+"""Hidden Markov models with Gaussian emissions (Rabiner 1989), to hmmlearn's standard.
 
 The shape is hmmlearn's: one small base class (:class:`BaseHMM`) owns the
 initial distribution pi, the transition matrix T and everything built on
-them -- Baum-Welch EM, scoring, Viterbi decoding, sampling -- and a variant
-supplies its emission model in four methods. Several sequences are one
-concatenated array ``X`` (frames, dims) plus ``lengths``. The recursions are
-the pure functions of :mod:`markovmotion.algorithms.hmm_recursions` (log
-space, no underflow on long sequences). Learnt attributes end in ``_``; the
+them -- Baum-Welch EM, scoring, Viterbi and MAP decoding, sampling, AIC/BIC,
+the stationary distribution -- and a variant supplies its emission model in
+a few methods. Several sequences are one concatenated array ``X`` (frames,
+dims) plus ``lengths``. The recursions are the pure functions of
+:mod:`markovmotion.algorithms.hmm_recursions` (log space by default, no
+underflow on long sequences; Rabiner's scaled form with
+``implementation="scaling"``). Learnt attributes end in ``_``; the
 log-likelihood of every EM iteration is kept in ``history_``.
+
+hmmlearn's meanings are kept, so that its own test suite runs against
+:class:`GaussianHMM` (tests/test_hmmlearn_suite.py): the four covariance types
+and their compact ``covars_`` forms, ``params`` / ``init_params`` letters
+(``s`` pi, ``t`` T, ``m`` means, ``c`` covariances: what EM updates / what
+``fit`` initialises; a parameter not initialised and not set is initialised
+anyway), conjugate priors, ValueError for pi or T that are not distributions.
+Ours besides: the variance floor (:class:`GaussianHMM`, ``min_covar`` and
+``var_floor``), k-means-based initial pi and T, parallel E-step, no pickles.
 """
 
 from __future__ import annotations
 
+import logging
+import sys
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import scipy.sparse
 from sklearn.base import BaseEstimator
 from sklearn.cluster import KMeans
 from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted
 
 from markovmotion.algorithms.gaussian import (
+    check_covariance_type,
+    compact_covariances,
+    compact_of_full,
+    covariance_floor,
     floor_covariances,
-    gaussian_log_density,
-    precision_cholesky,
-    weighted_gaussians,
+    full_covariances,
+    gaussian_m_step,
+    log_density,
 )
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.parallel import map_sequences
-from markovmotion.state import (
-    StateError,
-    check_count,
-    check_distribution_rows,
-    check_shape,
-    register,
-    require,
-)
+from markovmotion.state import StateError, check_count, register, require
+
+_log = logging.getLogger(__name__)
+
+DECODERS = ("viterbi", "map")
+IMPLEMENTATIONS = ("log", "scaling")
 
 
 # ------------------------------------------------------------------ EM bookkeeping
 class ConvergenceMonitor:
-    """Log-likelihood history of EM; converged once an iteration gains less than ``tol``."""
+    """Log-likelihood history of EM (hmmlearn's): EM stops after ``n_iter`` reports or once an
+    iteration gains less than ``tol``; ``verbose`` prints each report to stderr."""
 
-    def __init__(self, tol: float):
+    _template = "{iter:>10d} {log_prob:>16.8f} {delta:>+16.8f}"
+
+    def __init__(self, tol: float, n_iter: int | None = None, verbose: bool = False):
         self.tol = tol
+        self.n_iter = n_iter
+        self.verbose = verbose
         self.history: list[float] = []
+        self.iter = 0
+
+    def _reset(self) -> None:
+        self.iter = 0
+        self.history.clear()
 
     def report(self, log_likelihood: float) -> None:
+        if self.verbose:
+            delta = log_likelihood - self.history[-1] if self.history else np.nan
+            line = self._template.format(iter=self.iter + 1, log_prob=log_likelihood, delta=delta)
+            print(line, file=sys.stderr)
         self.history.append(float(log_likelihood))
+        self.iter += 1
 
     @property
-    def converged(self) -> bool:
+    def gained_less_than_tol(self) -> bool:
         h = self.history
         return len(h) >= 2 and h[-1] - h[-2] < self.tol
 
+    @property
+    def converged(self) -> bool:
+        return self.iter == self.n_iter or self.gained_less_than_tol
+
 
 def check_sequences(
-    x: np.ndarray, lengths: Sequence[int] | None = None
+    x: Any, lengths: Sequence[int] | int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``X`` as a finite float (T, D) array and ``lengths`` as positive ints summing to T."""
+    """``X`` as a finite float (T, D) array and ``lengths`` as positive ints summing to T.
+
+    Refused with one ValueError naming the problem: sparse or complex input, no frames,
+    NaN or infinite values, values so large that their squares (the M-step's second
+    moments) overflow, lengths that do not split the frames.
+    """
+    if scipy.sparse.issparse(x):
+        raise ValueError("X is a sparse matrix: a Gaussian HMM needs dense frames (X.toarray())")
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        raise ValueError("Complex data not supported: X holds complex numbers")
     x = np.asarray(x, dtype=float)
-    if x.ndim != 2 or len(x) == 0:
-        raise ValueError(f"X must be a non-empty (frames, dims) array, got shape {x.shape}")
+    if x.ndim != 2:
+        raise ValueError(
+            f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data"
+        )
+    if len(x) == 0 or x.shape[1] == 0:
+        raise ValueError(
+            f"X has {len(x)} frame(s) and {x.shape[1]} feature(s) (shape={x.shape}) while a "
+            "minimum of 1 is required."
+        )
     if not np.isfinite(x).all():
         raise ValueError("X holds NaN or infinite values")
-    lengths = np.array([len(x)] if lengths is None else lengths, dtype=int)
-    if lengths.sum() != len(x) or np.any(lengths < 1):
+    with np.errstate(over="ignore"):
+        if not np.isfinite(np.einsum("ij,ij->j", x, x)).all():
+            big = float(np.abs(x).max())
+            raise ValueError(f"X holds values too large for a Gaussian (|x| up to {big:.3g})")
+    lengths = np.atleast_1d(np.array([len(x)] if lengths is None else lengths, dtype=int))
+    if lengths.ndim != 1 or lengths.sum() != len(x) or np.any(lengths < 1):
         raise ValueError(f"lengths {lengths.tolist()} do not split {len(x)} frames")
     return x, lengths
 
@@ -80,67 +138,143 @@ def safe_log(p: np.ndarray) -> np.ndarray:
         return np.log(p)
 
 
+def _check_distribution(name: str, p: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``p`` as a float array of ``shape`` whose last axis holds probabilities summing to one
+    (hmmlearn's meaning: ValueError otherwise)."""
+    p = np.asarray(p, dtype=float)
+    if p.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {p.shape}")
+    if not np.isfinite(p).all() or (p < 0).any():
+        raise ValueError(f"{name} must hold probabilities in [0, 1]")
+    sums = p.sum(axis=-1)
+    if not np.allclose(sums, 1):
+        raise ValueError(f"{name} must sum to 1 along its last axis (got {np.round(sums, 4)})")
+    return p
+
+
 # ------------------------------------------------------------------ models
 class BaseHMM(BaseEstimator):
     """pi, T and the algorithms on them; a variant supplies the emission model.
 
     Args:
         n_components: number of hidden states N.
+        startprob_prior, transmat_prior: Dirichlet priors of pi and of T's rows
+            (1: none, maximum likelihood).
+        algorithm: the decoder of ``decode`` and ``predict``: ``"viterbi"`` (the best
+            state path, Rabiner eqs. 32-35) or ``"map"`` (each frame's most probable state).
+        random_state: seed for the initialisation and (by default) sampling.
         n_iter: most EM iterations.
         tol: stop when an iteration gains less log-likelihood than this.
-        init_params: which parameters ``fit`` initialises (``s`` pi, ``t`` T,
-            and the variant's letters); the others are used as already set.
-        random_state: seed for the initialisation and sampling.
+        verbose: print each EM iteration's log-likelihood to stderr.
+        params: which parameters EM updates (``s`` pi, ``t`` T, and the variant's letters).
+        init_params: which parameters ``fit`` initialises; the others are used as already set
+            (and initialised if they are not).
+        implementation: forward-backward in ``"log"`` space or ``"scaling"``.
         n_jobs: parallel jobs of the E-step, over chunks of sequences
             (:mod:`markovmotion.algorithms.parallel`: None is one unless a
             joblib context says otherwise, -1 every core, Dask through joblib).
 
-    Variants implement ``_init_emissions(X, rng) -> labels | None``,
-    ``_log_frameprob(X) -> (T, N)``, ``_m_step_emissions(X, gamma)`` and
-    ``_sample_emission(state, rng)``.
+    Variants implement ``_init_emissions``, ``_log_frameprob(X) -> (T, N)``,
+    ``_m_step_emissions(X, gamma)``, ``_sample_emissions(states, rng)``, ``_check_emissions``
+    and ``_n_fit_scalars_per_param``.
     """
+
+    _CHAIN = {"s": "startprob_", "t": "transmat_"}
+    _EMISSIONS: dict[str, str] = {}
 
     def __init__(
         self,
         n_components: int = 8,
+        startprob_prior: Any = 1.0,
+        transmat_prior: Any = 1.0,
+        algorithm: str = "viterbi",
+        random_state: Any = 0,
         n_iter: int = 50,
         tol: float = 1e-3,
+        verbose: bool = False,
+        params: str = "stmc",
         init_params: str = "stmc",
-        random_state: int | None = 0,
+        implementation: str = "log",
         n_jobs: int | None = None,
     ):
         self.n_components = n_components
+        self.startprob_prior = startprob_prior
+        self.transmat_prior = transmat_prior
+        self.algorithm = algorithm
+        self.random_state = random_state
         self.n_iter = n_iter
         self.tol = tol
+        self.verbose = verbose
+        self.params = params
         self.init_params = init_params
-        self.random_state = random_state
+        self.implementation = implementation
         self.n_jobs = n_jobs
 
     # ---------------------------------------------------------------- fitting
-    def fit(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> BaseHMM:
-        """Baum-Welch EM (Rabiner eqs. 40a-c) from a k-means start; returns ``self``."""
+    def fit(self, x: Any, lengths: Sequence[int] | None = None) -> BaseHMM:
+        """Baum-Welch EM (Rabiner eqs. 40a-c, with the priors' MAP form) after
+        :meth:`_init`; returns ``self``."""
         x, lengths = check_sequences(x, lengths)
-        if len(x) < self.n_components:
-            raise ValueError(f"{len(x)} frames cannot train {self.n_components} states")
-        rng = check_random_state(self.random_state)
-        labels = self._init_emissions(x, rng)
-        self._init_chain(labels, lengths)
-        monitor = ConvergenceMonitor(self.tol)
+        if self.implementation not in IMPLEMENTATIONS:
+            raise ValueError(f"implementation must be one of {IMPLEMENTATIONS}")
+        self._init(x, lengths)
+        self._check()
+        monitor = ConvergenceMonitor(self.tol, self.n_iter, self.verbose)
         for _ in range(self.n_iter):
             ll, gamma, starts, counts = self._e_step(x, lengths)
-            self.startprob_ = starts / starts.sum()
-            self.transmat_ = _normalise_rows(counts, self.transmat_)
-            self._m_step_emissions(x, gamma)
+            self._m_step(x, gamma, starts, counts)
             monitor.report(ll)
             if monitor.converged:
                 break
         self.history_ = np.array(monitor.history)
         self.n_iter_ = len(monitor.history)
-        self.converged_ = monitor.converged
+        self.converged_ = monitor.gained_less_than_tol
         return self
 
-    def _init_chain(self, labels: np.ndarray | None, lengths: np.ndarray) -> None:
-        """pi and T from the k-means labels' first frames and transitions (+1 each), or uniform."""
+    def _needs_init(self, code: str, name: str) -> bool:
+        """Whether ``fit`` initialises parameter ``name`` (letter ``code``): asked to, or not
+        set; says so in the log when a set value is overwritten (as hmmlearn does)."""
+        if code in self.init_params:
+            if hasattr(self, name):
+                _log.warning(
+                    "Even though the %r attribute is set, it will be overwritten during "
+                    "initialization because 'init_params' contains %r",
+                    name,
+                    code,
+                )
+            return True
+        return not hasattr(self, name)
+
+    def _init(self, x: np.ndarray, lengths: Sequence[int] | int | None = None) -> None:
+        """Initialise what ``init_params`` asks for (and what is missing): the variant's
+        emissions, then pi and T from the frames' initial labels (k-means or nearest means);
+        log a warning when there are fewer numbers than free parameters to fit."""
+        x = np.asarray(x, dtype=float)
+        lengths = np.atleast_1d(np.array(len(x) if lengths is None else lengths, dtype=int))
+        if lengths.sum() != len(x):
+            lengths = np.array([len(x)])
+        self._check_and_set_n_features(x)
+        need = {
+            c: self._needs_init(c, name) for c, name in {**self._CHAIN, **self._EMISSIONS}.items()
+        }
+        rng = check_random_state(self.random_state)
+        labels = self._init_emissions(x, rng, need)
+        self._init_chain(labels, lengths, need)
+        per_param = self._n_fit_scalars_per_param()
+        n_fit = sum(per_param.get(p, 0) for p in set(self.params))
+        if x.size < n_fit:
+            _log.warning(
+                "Fitting a model with %d free scalar parameters with only %d data points "
+                "will result in a degenerate solution.",
+                n_fit,
+                x.size,
+            )
+
+    def _check_and_set_n_features(self, x: np.ndarray) -> None:
+        self.n_features_in_ = x.shape[1]
+
+    def _init_chain(self, labels: np.ndarray | None, lengths: np.ndarray, need: dict) -> None:
+        """pi and T from the labels' first frames and transitions (+1 each), or uniform."""
         n = self.n_components
         starts = np.ones(n)
         counts = np.ones((n, n))
@@ -148,9 +282,9 @@ class BaseHMM(BaseEstimator):
             for s, e in _bounds(lengths):
                 starts[labels[s]] += 1
                 np.add.at(counts, (labels[s : e - 1], labels[s + 1 : e]), 1)
-        if "s" in self.init_params:
+        if need.get("s"):
             self.startprob_ = starts / starts.sum()
-        if "t" in self.init_params:
+        if need.get("t"):
             self.transmat_ = counts / counts.sum(axis=1, keepdims=True)
 
     def _e_step(self, x: np.ndarray, lengths: np.ndarray):
@@ -171,24 +305,54 @@ class BaseHMM(BaseEstimator):
         counts = np.zeros((self.n_components, self.n_components))
         total = 0.0
         for s, e in _bounds(lengths):
-            ll, gamma[s:e], xi = forward_backward(log_pi, trans, log_b[s:e])
+            ll, gamma[s:e], xi = forward_backward(log_pi, trans, log_b[s:e], self.implementation)
             total += ll
             starts += gamma[s]
             counts += xi
         return total, gamma, starts, counts
 
-    # ---------------------------------------------------------------- inference
+    def _m_step(self, x: np.ndarray, gamma: np.ndarray, starts: np.ndarray, counts: np.ndarray):
+        """Re-estimate the parameters in ``params``: pi and T as the Dirichlet priors' MAP
+        (negative counts clipped to zero; probabilities that are zero stay zero; a state never
+        left keeps its row), then the emissions."""
+        if "s" in self.params:
+            pi = np.maximum(np.asarray(self.startprob_prior) - 1 + starts, 0)
+            pi = np.where(self.startprob_ == 0, 0, pi)
+            if pi.sum() > 0:
+                self.startprob_ = pi / pi.sum()
+        if "t" in self.params:
+            t = np.maximum(np.asarray(self.transmat_prior) - 1 + counts, 0)
+            t = np.where(self.transmat_ == 0, 0, t)
+            self.transmat_ = _normalise_rows(t, self.transmat_)
+        self._m_step_emissions(x, gamma)
+
+    # ---------------------------------------------------------------- checks
+    def _check(self) -> None:
+        """ValueError unless pi is a distribution over the N states and T's rows are (and the
+        variant's emissions fit); arrays given as lists become arrays."""
+        n = self.n_components
+        self.startprob_ = _check_distribution("startprob_", self.startprob_, (n,))
+        self.transmat_ = _check_distribution("transmat_", self.transmat_, (n, n))
+        self._check_emissions()
+
+    def _check_fitted(self) -> None:
+        """NotFittedError before the model has its parameters, then :meth:`_check`."""
+        check_is_fitted(self, [*self._CHAIN.values(), *self._EMISSIONS.values()])
+        self._check()
+
     def _check_input(
-        self, x: np.ndarray, lengths: Sequence[int] | None = None
+        self, x: Any, lengths: Sequence[int] | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`check_sequences`, and ``X`` as wide as the model's observations (the
-        compiled densities do not check: wider input read past their arrays)."""
+        """The model's parameters checked (:meth:`_check_fitted`), then :func:`check_sequences`,
+        and ``X`` as wide as the model's observations (the compiled densities do not check:
+        wider input read past their arrays)."""
+        self._check_fitted()
         x, lengths = check_sequences(x, lengths)
         width = self._n_features()
         if width is not None and x.shape[1] != width:
             raise ValueError(
-                f"X has {x.shape[1]} columns but {type(self).__name__} was fitted on "
-                f"{width} features"
+                f"X has {x.shape[1]} features, but {type(self).__name__} is expecting {width} "
+                "features as input"
             )
         return x, lengths
 
@@ -196,25 +360,49 @@ class BaseHMM(BaseEstimator):
         """Width of the observations the emission model holds (None: not known yet)."""
         return None
 
-    def log_frameprob(self, x: np.ndarray) -> np.ndarray:
+    # ---------------------------------------------------------------- inference
+    def log_frameprob(self, x: Any) -> np.ndarray:
         """(T, N) log b_j(o_t) of every frame under every state's emission density."""
         return self._log_frameprob(self._check_input(x)[0])
 
-    def score(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> float:
+    def score(self, x: Any, lengths: Sequence[int] | None = None) -> float:
         """log P(X | model), summed over the sequences."""
         x, lengths = self._check_input(x, lengths)
         return self._e_step(x, lengths)[0]
 
-    def predict_proba(self, x: np.ndarray, lengths: Sequence[int] | None = None) -> np.ndarray:
-        """State posteriors gamma (T, N)."""
+    def score_samples(
+        self, x: Any, lengths: Sequence[int] | None = None
+    ) -> tuple[float, np.ndarray]:
+        """(log P(X | model), state posteriors gamma (T, N))."""
         x, lengths = self._check_input(x, lengths)
-        return self._e_step(x, lengths)[1]
+        ll, gamma, _, _ = self._e_step(x, lengths)
+        return ll, gamma
+
+    def predict_proba(self, x: Any, lengths: Sequence[int] | None = None) -> np.ndarray:
+        """State posteriors gamma (T, N)."""
+        return self.score_samples(x, lengths)[1]
+
+    def predict(self, x: Any, lengths: Sequence[int] | None = None) -> np.ndarray:
+        """States (T,) by the model's decoder (``algorithm``)."""
+        return self.decode(x, lengths)[1]
 
     def decode(
-        self, x: np.ndarray, lengths: Sequence[int] | None = None
+        self, x: Any, lengths: Sequence[int] | None = None, algorithm: str | None = None
     ) -> tuple[float, np.ndarray]:
-        """Standard Viterbi: (log probability of the best paths, states (T,))."""
+        """(log probability, states (T,)) by ``algorithm`` (default: the model's).
+
+        ``"viterbi"``: the best state paths and their joint log probability with X;
+        ``"map"``: each frame's most probable state and sum_t log max_j gamma_t(j)
+        (hmmlearn returns sum_t max_j gamma_t(j) there, not a log probability).
+        """
+        algorithm = algorithm or self.algorithm
+        if algorithm not in DECODERS:
+            raise ValueError(f"algorithm must be one of {DECODERS}, got {algorithm!r}")
         x, lengths = self._check_input(x, lengths)
+        if algorithm == "map":
+            gamma = self._e_step(x, lengths)[1]
+            with np.errstate(divide="ignore"):
+                return float(np.log(gamma.max(axis=1)).sum()), gamma.argmax(axis=1)
         log_b = self._log_frameprob(x)
         log_pi, log_t = safe_log(self.startprob_), safe_log(self.transmat_)
         states = np.empty(len(x), dtype=int)
@@ -225,32 +413,73 @@ class BaseHMM(BaseEstimator):
         return total, states
 
     def sample(
-        self, n_samples: int, random_state: int | None = None
+        self, n_samples: int = 1, random_state: Any = None, currstate: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Draw ``n_samples`` frames: observations (n, D) and their states (n,)."""
-        rng = check_random_state(random_state)
-        cum_start = np.cumsum(self.startprob_)
+        """Draw ``n_samples`` frames: observations (n, D) and their states (n,).
+
+        ``random_state`` defaults to the model's; ``currstate`` is the first frame's state
+        (so ``sample(n, currstate=states[-1])`` continues a sample), else drawn from pi.
+        """
+        self._check_fitted()
+        n_samples = check_count("n_samples", n_samples)
+        rng = check_random_state(self.random_state if random_state is None else random_state)
         cum_trans = np.cumsum(self.transmat_, axis=1)
         u = rng.random_sample(n_samples)
         states = np.empty(n_samples, dtype=int)
-        states[0] = min(np.searchsorted(cum_start, u[0], side="right"), self.n_components - 1)
+        if currstate is None:
+            cum_start = np.cumsum(self.startprob_)
+            states[0] = min(np.searchsorted(cum_start, u[0], side="right"), self.n_components - 1)
+        else:
+            states[0] = check_count("currstate", currstate, 0)
+            if states[0] >= self.n_components:
+                raise ValueError(f"currstate {currstate} is not one of {self.n_components} states")
         for t in range(1, n_samples):
             row = cum_trans[states[t - 1]]
             states[t] = min(np.searchsorted(row, u[t], side="right"), self.n_components - 1)
         return self._sample_emissions(states, rng), states
 
+    def get_stationary_distribution(self) -> np.ndarray:
+        """The distribution p with p T = p and sum p = 1 (least squares: exact when the
+        chain has one stationary distribution)."""
+        check_is_fitted(self, "transmat_")
+        trans = np.asarray(self.transmat_, dtype=float)
+        n = len(trans)
+        a = np.vstack([trans.T - np.eye(n), np.ones(n)])
+        b = np.r_[np.zeros(n), 1.0]
+        return np.linalg.lstsq(a, b, rcond=None)[0].astype(float)
+
+    def aic(self, x: Any, lengths: Sequence[int] | None = None) -> float:
+        """Akaike's information criterion -2 log P(X) + 2 k (k free parameters): lower is better."""
+        k = sum(self._n_fit_scalars_per_param().values())
+        return -2 * self.score(x, lengths) + 2 * k
+
+    def bic(self, x: Any, lengths: Sequence[int] | None = None) -> float:
+        """Bayesian information criterion -2 log P(X) + k log T: lower is better."""
+        k = sum(self._n_fit_scalars_per_param().values())
+        return -2 * self.score(x, lengths) + k * np.log(len(np.asarray(x)))
+
     # ---------------------------------------------------------------- emissions
-    def _init_emissions(self, x: np.ndarray, rng: np.random.RandomState) -> np.ndarray | None:
-        raise NotImplementedError
+    def _n_fit_scalars_per_param(self) -> dict[str, int]:
+        n = self.n_components
+        return {"s": n - 1, "t": n * (n - 1)}
+
+    def _init_emissions(
+        self, x: np.ndarray, rng: np.random.RandomState, need: dict
+    ) -> np.ndarray | None:
+        return None
+
+    def _check_emissions(self) -> None:
+        return None
 
     def _log_frameprob(self, x: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
     def _m_step_emissions(self, x: np.ndarray, gamma: np.ndarray) -> None:
-        raise NotImplementedError
+        return None
 
     def _sample_emissions(self, states: np.ndarray, rng: np.random.RandomState) -> np.ndarray:
-        raise NotImplementedError
+        """No emission model: frames of zero features (a state sequence alone)."""
+        return np.empty((len(states), 0))
 
 
 def _add_e_steps(parts: list[tuple]) -> tuple:
@@ -267,85 +496,213 @@ def _normalise_rows(counts: np.ndarray, previous: np.ndarray) -> np.ndarray:
 
 @register
 class GaussianHMM(BaseHMM):
-    """HMM with one full-covariance Gaussian per state (``m`` means, ``c`` covariances).
+    """HMM with one Gaussian per state (``m`` means, ``c`` covariances).
 
     Args:
-        var_floor: every covariance eigenvalue is kept at or above this
-            fraction of the training data's mean per-dimension variance (a
-            variance floor that follows the data's scale: mm or radians alike).
+        covariance_type: ``"full"`` (a covariance matrix per state), ``"diag"`` (variances
+            per state and feature), ``"spherical"`` (one variance per state), ``"tied"``
+            (one matrix for every state); ``covars_`` reads as (N, D, D) matrices whatever
+            the type and is set in the type's compact form: (N, D, D), (N, D), (N,), (D, D).
+        min_covar: absolute variance floor, in the data's squared units (hmmlearn's, 1e-3).
+        var_floor: variance floor relative to each feature's own variance over the
+            training data (0: none). The floor of feature j is
+            ``max(min_covar, var_floor * Var(X[:, j]))`` (``covar_floor_``, (D,)); every
+            covariance is kept at or above it (:func:`~markovmotion.algorithms.gaussian.
+            floor_covariances`: per feature for diag and spherical, along every direction for
+            full and tied). Per feature, so a feature in mm does not floor one in radians;
+            relative to the feature and never to the spread between states' means, it cannot
+            exceed the data's own variance (docs/hmm.md, "The variance floor").
+        means_prior, means_weight: normal prior of the means (weight 0: none).
+        covars_prior, covars_weight: inverse gamma (diag, spherical) or inverse Wishart
+            (full, tied) prior of the covariances (hmmlearn's defaults 1e-2 and 1).
+        Others: :class:`BaseHMM`.
 
-    Learnt: ``startprob_``, ``transmat_``, ``means_`` (N, D), ``covars_``
-    (N, D, D), ``covar_floor_`` (the absolute floor), ``history_``,
-    ``n_iter_``, ``converged_``.
+    Learnt: ``startprob_``, ``transmat_``, ``means_`` (N, D), ``covars_``,
+    ``covar_floor_`` (D,), ``n_features_in_``, ``history_``, ``n_iter_``, ``converged_``.
     """
+
+    _EMISSIONS = {"m": "means_", "c": "covars_"}
 
     def __init__(
         self,
         n_components: int = 8,
+        covariance_type: str = "full",
+        min_covar: float = 1e-3,
+        startprob_prior: Any = 1.0,
+        transmat_prior: Any = 1.0,
+        means_prior: Any = 0.0,
+        means_weight: Any = 0.0,
+        covars_prior: Any = 1e-2,
+        covars_weight: Any = 1.0,
+        algorithm: str = "viterbi",
+        random_state: Any = 0,
         n_iter: int = 50,
         tol: float = 1e-3,
-        var_floor: float = 1e-3,
+        verbose: bool = False,
+        params: str = "stmc",
         init_params: str = "stmc",
-        random_state: int | None = 0,
+        implementation: str = "log",
+        var_floor: float = 0.0,
         n_jobs: int | None = None,
     ):
-        super().__init__(n_components, n_iter, tol, init_params, random_state, n_jobs)
+        super().__init__(
+            n_components,
+            startprob_prior=startprob_prior,
+            transmat_prior=transmat_prior,
+            algorithm=algorithm,
+            random_state=random_state,
+            n_iter=n_iter,
+            tol=tol,
+            verbose=verbose,
+            params=params,
+            init_params=init_params,
+            implementation=implementation,
+            n_jobs=n_jobs,
+        )
+        self.covariance_type = covariance_type
+        self.min_covar = min_covar
+        self.means_prior = means_prior
+        self.means_weight = means_weight
+        self.covars_prior = covars_prior
+        self.covars_weight = covars_weight
         self.var_floor = var_floor
 
-    def _init_emissions(self, x: np.ndarray, rng: np.random.RandomState) -> np.ndarray | None:
-        spread = float(np.var(x, axis=0).mean()) if len(x) > 1 else 0.0
-        # constant input (or one frame) has no scale: then the floor is absolute
-        self.covar_floor_ = float(self.var_floor * (spread if spread > 0 else 1.0))
-        if not {"m", "c", "s", "t"} & set(self.init_params):
-            return None
-        km = KMeans(self.n_components, n_init=2, random_state=rng.randint(2**31 - 1)).fit(x)
-        labels = km.labels_
-        if "m" in self.init_params:
-            self.means_ = km.cluster_centers_.copy()
-        if "c" in self.init_params:
-            d = x.shape[1]
-            total = np.cov(x, rowvar=False).reshape(d, d) if len(x) > 1 else np.zeros((d, d))
-            covars = np.empty((self.n_components, x.shape[1], x.shape[1]))
-            for k in range(self.n_components):
-                members = x[labels == k]
-                covars[k] = (
-                    np.cov(members, rowvar=False).reshape(total.shape)
-                    if len(members) > x.shape[1]
-                    else total
-                )
-            self.covars_ = floor_covariances(covars, self.covar_floor_)
-        return labels
-
-    def check_state(self) -> None:
-        """Raise StateError unless the learnt parameters (as read from a model file) fit:
-        shapes of pi (N,), T (N, N), means (N, D) and covariances (N, D, D), probabilities
-        in [0, 1] summing to one, covariances symmetric positive definite."""
-        n = check_count("n_components", self.n_components)
-        require(self, "startprob_", "transmat_", "means_", "covars_")
-        d = check_shape("means_", self.means_, (n, None)).shape[1]
-        covars = check_shape("covars_", self.covars_, (n, d, d))
-        check_distribution_rows("startprob_", check_shape("startprob_", self.startprob_, (n,)))
-        check_distribution_rows("transmat_", check_shape("transmat_", self.transmat_, (n, n)))
-        if d < 1 or not np.allclose(covars, np.swapaxes(covars, 1, 2), rtol=1e-6, atol=1e-9):
-            raise StateError("covars_: not symmetric")
+    # ---------------------------------------------------------------- covariances
+    @property
+    def covars_(self) -> np.ndarray:
+        """Covariance matrices (N, D, D) whatever ``covariance_type``; set in its compact form."""
         try:
-            np.linalg.cholesky(covars)
-        except np.linalg.LinAlgError:
-            raise StateError("covars_: not positive definite") from None
+            compact = self.__dict__["covars_"]
+        except KeyError:
+            raise AttributeError("covars_") from None
+        return full_covariances(compact, self.covariance_type, self.n_components, self.n_features)
+
+    @covars_.setter
+    def covars_(self, covars: Any) -> None:
+        self.__dict__["covars_"] = compact_covariances(
+            covars, self.covariance_type, self.n_components
+        )
+
+    @property
+    def _covars_(self) -> np.ndarray:
+        """The covariances as stored, in ``covariance_type``'s compact form (hmmlearn's name)."""
+        try:
+            return self.__dict__["covars_"]
+        except KeyError:
+            raise AttributeError("_covars_") from None
+
+    @property
+    def n_features(self) -> int:
+        """D, the width of the frames (hmmlearn's name for ``n_features_in_``)."""
+        if "n_features_in_" in self.__dict__:
+            return int(self.n_features_in_)
+        if "means_" in self.__dict__:
+            return int(np.shape(self.means_)[-1])
+        raise AttributeError("n_features")
+
+    @n_features.setter
+    def n_features(self, value: int) -> None:
+        self.n_features_in_ = int(value)
 
     def _n_features(self) -> int | None:
         means = getattr(self, "means_", None)
         return None if means is None else int(np.shape(means)[-1])
 
-    def _log_frameprob(self, x: np.ndarray) -> np.ndarray:
-        prec, log_det = precision_cholesky(self.covars_)
-        return gaussian_log_density(x, self.means_, prec, log_det)
+    def _check_and_set_n_features(self, x: np.ndarray) -> None:
+        width = self._n_features()
+        if width is not None and "m" not in self.init_params and x.shape[1] != width:
+            raise ValueError(f"X has {x.shape[1]} columns but means_ has {width} features")
+        self.n_features_in_ = x.shape[1]
+
+    def _n_fit_scalars_per_param(self) -> dict[str, int]:
+        n, d = self.n_components, self.n_features
+        cov = {"spherical": n, "diag": n * d, "full": n * d * (d + 1) // 2}
+        return {
+            **super()._n_fit_scalars_per_param(),
+            "m": n * d,
+            "c": cov.get(self.covariance_type, d * (d + 1) // 2),
+        }
+
+    # ---------------------------------------------------------------- EM
+    def _init_emissions(
+        self, x: np.ndarray, rng: np.random.RandomState, need: dict
+    ) -> np.ndarray | None:
+        """Means by k-means; every state's covariance the data's (+ ``min_covar`` on the
+        diagonal, as hmmlearn: EM's first posteriors are then soft, not k-means' hard
+        clusters); the floor from the data. Returns the frames' labels (k-means, else the
+        nearest mean), from which pi and T start."""
+        check_covariance_type(self.covariance_type)
+        self.covar_floor_ = covariance_floor(x, self.min_covar, self.var_floor)
+        labels = None
+        if need["m"]:
+            if len(x) < self.n_components:
+                raise ValueError(f"{len(x)} frames cannot train {self.n_components} states")
+            km = KMeans(self.n_components, n_init=2, random_state=rng.randint(2**31 - 1)).fit(x)
+            labels = km.labels_
+            self.means_ = km.cluster_centers_.copy()
+        if labels is None and (need["c"] or need["s"] or need["t"]):
+            means = np.asarray(self.means_, dtype=float)
+            labels = ((x[:, None, :] - means[None]) ** 2).sum(axis=-1).argmin(axis=1)
+        if need["c"]:
+            d = x.shape[1]
+            total = np.cov(x, rowvar=False).reshape(d, d) if len(x) > 1 else np.zeros((d, d))
+            covars = np.broadcast_to(total + self.min_covar * np.eye(d), (self.n_components, d, d))
+            compact = compact_of_full(covars, self.covariance_type)
+            self.covars_ = floor_covariances(compact, self.covar_floor_, self.covariance_type)
+        return labels
 
     def _m_step_emissions(self, x: np.ndarray, gamma: np.ndarray) -> None:
-        means, covars, mass = weighted_gaussians(x, gamma, self.covar_floor_)
+        """Means and covariances in ``params``: :func:`~markovmotion.algorithms.gaussian.
+        gaussian_m_step` (Rabiner eqs. 52-53 with the priors), floored at ``covar_floor_``;
+        a state no frame visits keeps its Gaussian."""
+        if not {"m", "c"} & set(self.params):
+            return
+        means, covars, mass = gaussian_m_step(
+            x,
+            gamma,
+            self.covariance_type,
+            self.means_prior,
+            self.means_weight,
+            self.covars_prior,
+            self.covars_weight,
+            means=None if "m" in self.params else np.asarray(self.means_, dtype=float),
+        )
         used = mass > 1e-10
-        self.means_ = np.where(used[:, None], means, self.means_)
-        self.covars_ = np.where(used[:, None, None], covars, self.covars_)
+        if "m" in self.params:
+            self.means_ = np.where(used[:, None], means, self.means_)
+        if "c" in self.params:
+            floor = getattr(self, "covar_floor_", self.min_covar)
+            covars = floor_covariances(covars, floor, self.covariance_type)
+            if self.covariance_type != "tied":
+                shape = (-1,) + (1,) * (covars.ndim - 1)
+                covars = np.where(used.reshape(shape), covars, self._covars_)
+            self.__dict__["covars_"] = covars
+
+    def _check_emissions(self) -> None:
+        check_covariance_type(self.covariance_type)
+        self.means_ = np.asarray(self.means_, dtype=float)
+        if self.means_.ndim != 2 or len(self.means_) != self.n_components:
+            raise ValueError(
+                f"means_ must have shape ({self.n_components}, n_features), got {self.means_.shape}"
+            )
+        covars = compact_covariances(self._covars_, self.covariance_type, self.n_components)
+        d = self.means_.shape[1]
+        if self.covariance_type != "spherical" and covars.shape[-1] != d:
+            raise ValueError(f"covars_ are {covars.shape[-1]}-dimensional, means_ {d}-dimensional")
+
+    def check_state(self) -> None:
+        """Raise StateError unless the learnt parameters (as read from a model file) fit:
+        pi (N,) and T (N, N) distributions, means (N, D), covariances of the
+        ``covariance_type``'s compact shape, symmetric positive definite."""
+        check_count("n_components", self.n_components)
+        require(self, "startprob_", "transmat_", "means_", "covars_")
+        try:
+            self._check()
+        except ValueError as exc:
+            raise StateError(str(exc)) from None
+
+    def _log_frameprob(self, x: np.ndarray) -> np.ndarray:
+        return log_density(x, self.means_, self._covars_, self.covariance_type)
 
     def _sample_emissions(self, states: np.ndarray, rng: np.random.RandomState) -> np.ndarray:
         chol = np.linalg.cholesky(self.covars_)
