@@ -344,19 +344,27 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
     main([*args, "--states", "4", "--window", "6", "--placement-window", "1", "--out", str(model)])
     assert model.exists()
 
-    # A stream with a broken frame (NaN values) replayed in real time.
+    # A file with a broken frame (NaN values) is refused as every command refuses it ...
     lines = (data / "a4.bvh").read_text().splitlines()
     n_channels = len(lines[-1].split())
     lines[-20] = " ".join(["nan"] * n_channels)
     stream = tmp_path / "stream.bvh"
     stream.write_text("\n".join(lines) + "\n")
     out = tmp_path / "b.bvh"
+    with pytest.raises(SystemExit) as refused:
+        main(
+            ["dualhmm", "respond", "--model", str(model), "--input", str(stream)]
+            + ["--out", str(out), "--realtime"]
+        )
+    assert refused.value.code == 2 and not out.exists()
+    assert "NaN or infinite" in capsys.readouterr().err
+    # ... and a whole one is replayed in real time
     main(
-        ["dualhmm", "respond", "--model", str(model), "--input", str(stream)]
+        ["dualhmm", "respond", "--model", str(model), "--input", str(data / "a4.bvh")]
         + ["--out", str(out), "--realtime"]
     )
     err = capsys.readouterr().err
-    assert "skipped" in err and "p99" in err and "dropped frames" in err
+    assert "p99" in err and "dropped frames" in err
     assert out.exists()
 
     main(
