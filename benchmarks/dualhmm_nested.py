@@ -68,7 +68,7 @@ def main() -> None:
     parser.add_argument("study", nargs="?", default="energy", choices=("energy", "initial"))
     study = parser.parse_args().study
     idx = MocapIndex.load()
-    pairs = [p for p in idx.pairs() if p[0].label in ("handshake", "pull")]
+    pairs = [p for p in idx.pairs(kind="skeleton") if p[0].label in ("handshake", "pull")]
     takes = [(a.name, a.label, *idx.load_pair(a, b)) for a, b in pairs]
     if study == "energy":
         std, win = nested(takes, ENERGY_GRID, DualHMM, "standard")

@@ -23,8 +23,9 @@ def main() -> None:
     """Print, per take, tracking MPJPE and B's errors from captured and from tracked A."""
     idx = MocapIndex.load()
     for label in ("pull", "handshake"):
-        test = idx.pairs(label=[label])[-1]
-        train = [p for p in idx.pairs() if p[0].subject == test[0].subject and p != test]
+        test = idx.pairs(label=[label], kind="skeleton")[-1]
+        same = idx.pairs(kind="skeleton")
+        train = [p for p in same if p[0].subject == test[0].subject and p != test]
         model = DualHMM().fit([idx.load_pair(*p) for p in train], [p[0].label for p in train])
         a, b = idx.load_pair(*test)
         a, b = a.resample(30.0), b.resample(30.0)

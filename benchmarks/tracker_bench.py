@@ -79,7 +79,7 @@ def main() -> None:
     args = parser.parse_args()
 
     index = MocapIndex.load(args.data)
-    _, test = held_out_pairs(index.pairs(label=list(BODY_LABELS)))
+    _, test = held_out_pairs(index.pairs(label=list(BODY_LABELS), kind="skeleton"))
     chosen = [index.find(f) for f in args.take] if args.take else [a for a, _ in test]
     body = training_body_model(args.data)
     takes = []
