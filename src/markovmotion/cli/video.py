@@ -66,8 +66,26 @@ def track(
     start: Path = typer.Option(
         None, help="First frame's pose (BVH on the body model's skeleton); default: searched."
     ),
+    method: str = typer.Option(
+        "apf",
+        callback=choice(("apf", "monocular")),
+        help="apf: annealed particle filter (all views); monocular: MediaPipe Pose in one "
+        "camera placed by PnP (needs the [camera] extra); --out is then markers (.c3d).",
+    ),
+    stature: float = ranged(
+        "stature",
+        None,
+        help="Monocular: the person's height (mm); default: estimated from the feet on the floor.",
+    ),
+    reference: Path = typer.Option(
+        None, help="Monocular: 3-D reference CSV (frame, <joint>_x/_y/_z): report the error."
+    ),
 ) -> None:
-    """Track person A in multi-view video by annealed particle filtering; write A as BVH."""
+    """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
+    one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
+    if method == "monocular":
+        _track_monocular(video, cameras, out, max_frames, stature, reference, json_out)
+        return
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.multiview import track_take, training_body_model
@@ -92,5 +110,43 @@ def track(
         err_console.print(
             f"tracked {summary['frames']} frames in {summary['views']} views at "
             f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries",
+            highlight=False,
+        )
+
+
+def _track_monocular(
+    video: Path,
+    cameras: Path | None,
+    out: Path | None,
+    max_frames: int | None,
+    stature: float | None,
+    reference: Path | None,
+    json_out: bool,
+) -> None:
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.io.c3d import write_c3d
+    from markovmotion.video.monocular import monocular_markers, track_monocular_video
+
+    if out is not None and out.suffix.lower() != ".c3d":
+        raise MotionFormatError(out, "monocular tracking writes markers: use a .c3d name")
+    if reference is not None and not reference.is_file():
+        raise MotionFormatError(reference, "no such reference file")
+    tr, summary = track_monocular_video(video, cameras, max_frames, stature, reference)
+    if out is not None:
+        write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
+        err_console.print(f"wrote {out}", highlight=False)
+    if json_out:
+        typer.echo(json.dumps(summary))
+    else:
+        err = (
+            f", {summary['aligned_mean_mm']:.1f} mm after rigid alignment "
+            f"({summary['mean_mm']:.1f} mm without)"
+            if "aligned_mean_mm" in summary
+            else ""
+        )
+        err_console.print(
+            f"tracked {summary['frames']} frames ({summary['frames_placed']} placed) of "
+            f"{summary['camera']} at {summary['fps']:.2f} frames/s, scale "
+            f"{summary['scale']:.3f}{err}",
             highlight=False,
         )
