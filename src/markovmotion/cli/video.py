@@ -78,7 +78,13 @@ def track(
         help="Monocular: the person's height (mm); default: estimated from the feet on the floor.",
     ),
     reference: Path = typer.Option(
-        None, help="Monocular: 3-D reference CSV (frame, <joint>_x/_y/_z): report the error."
+        None, help="3-D reference CSV (frame, <joint>_x/_y/_z, mm): report the error against it."
+    ),
+    background: str = typer.Option(
+        "learn",
+        callback=choice(("learn", "median")),
+        help="Cameras without an empty-scene image: learn: the median where MediaPipe finds "
+        "no person, and say if the plain median holds them; median: the plain median.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -86,6 +92,7 @@ def track(
     if method == "monocular":
         _track_monocular(video, cameras, out, max_frames, stature, reference, json_out)
         return
+    from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.multiview import track_take, training_body_model
@@ -96,10 +103,29 @@ def track(
     cams, _ = load_cameras(where)  # a bad camera file or a missing video: fail first
     if not video.is_file():
         camera_videos(where, cams)
+    if reference is not None and not reference.is_file():
+        raise MotionFormatError(reference, "no such reference file")
     body = training_body_model(data)
     motion, _, summary = track_take(
-        video, body, cameras, truth, particles, layers, views, max_frames, seed, start
+        video,
+        body,
+        cameras,
+        truth,
+        particles,
+        layers,
+        views,
+        max_frames,
+        seed,
+        start,
+        background == "learn",
     )
+    for note in summary["background"]:
+        err_console.print(note, highlight=False)
+    if reference is not None:
+        from markovmotion.features.body_points import body_points
+        from markovmotion.video.monocular import reference_errors
+
+        summary["reference"] = reference_errors(body_points(motion), reference)
     if out is not None:
         write_motion(motion, out)
         err_console.print(f"wrote {out}", highlight=False)
@@ -107,6 +133,8 @@ def track(
         typer.echo(json.dumps(summary))
     else:
         err = f", MPJPE {summary['mpjpe_mm']:.1f} mm" if "mpjpe_mm" in summary else ""
+        if "reference" in summary:
+            err += f", {summary['reference']['mean_mm']:.1f} mm from the reference"
         err_console.print(
             f"tracked {summary['frames']} frames in {summary['views']} views at "
             f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries",
