@@ -93,3 +93,18 @@ def test_real_video_median_holds_the_balancing_man():
         return int((np.abs(img.astype(int) - plate.astype(int)).max(axis=2) > 30).sum())
 
     assert off(learnt) < off(plain) / 3
+
+
+def test_track_bad_background_or_reference_is_one_line(tmp_path, capsys):
+    from markovmotion.cli import main
+
+    folder = data_root().parent / "video" / "pose2sim_balancing"
+    for extra, message in (
+        (["--reference", str(tmp_path / "none.csv")], "no such reference file"),
+        (["--background", "plate"], "--background"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["track", "--video", str(folder), *extra])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
