@@ -80,6 +80,11 @@ def track(
     reference: Path = typer.Option(
         None, help="3-D reference CSV (frame, <joint>_x/_y/_z, mm): report the error against it."
     ),
+    body_size: str = typer.Option(
+        "template",
+        help="The person's size: template (the body model's); video (measured by MediaPipe in "
+        "the first camera, needs [camera]); or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
+    ),
     background: str = typer.Option(
         "learn",
         callback=choice(("learn", "median")),
@@ -105,7 +110,24 @@ def track(
         camera_videos(where, cams)
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
+    size = _body_size(body_size)
     body = training_body_model(data)
+    if size == "video":
+        from markovmotion.video.body_size import body_size_from_points
+        from markovmotion.video.monocular import track_monocular_video
+
+        tr, _ = track_monocular_video(video, cameras, max_frames)
+        try:
+            size = body_size_from_points(body, tr.points)
+        except ValueError as exc:
+            raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
+    if size != "template":
+        from markovmotion.video.body_size import scaled_body
+
+        body = scaled_body(body, *size)
+        err_console.print(
+            "body size: scale {:.3f}, legs {:.3f}, arms {:.3f}".format(*size), highlight=False
+        )
     motion, _, summary = track_take(
         video,
         body,
@@ -126,6 +148,8 @@ def track(
         from markovmotion.video.monocular import reference_errors
 
         summary["reference"] = reference_errors(body_points(motion), reference)
+    if size != "template":
+        summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:
         write_motion(motion, out)
         err_console.print(f"wrote {out}", highlight=False)
@@ -178,3 +202,19 @@ def _track_monocular(
             f"{summary['scale']:.3f}{err}",
             highlight=False,
         )
+
+
+def _body_size(text: str) -> str | tuple[float, float, float]:
+    """``--body-size``: template, video, or three factors; bad values are one usage error."""
+    if text in ("template", "video"):
+        return text
+    try:
+        size = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        size = ()
+    if len(size) != 3 or not all(0.5 <= v <= 2.0 for v in size):
+        raise typer.BadParameter(
+            "template, video or SCALE,LEGS,ARMS (three numbers 0.5 to 2)",
+            param_hint="--body-size",
+        )
+    return size  # type: ignore[return-value]
