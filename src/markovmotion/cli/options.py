@@ -94,6 +94,8 @@ RANGES: dict[str, Range] = {
     "time_constant": Range(0, 600, unit="s"),
     # lengths of generated or rendered motion in seconds
     "seconds": Range(0, 3600, lo_open=True, unit="s"),
+    # a person's height in mm
+    "stature": Range(500, 2500, unit="mm"),
     # walking steps to synthesize or adapt on
     "steps": Range(1, 10_000),
     # CONDENSATION hypotheses

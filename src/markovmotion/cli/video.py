@@ -66,8 +66,38 @@ def track(
     start: Path = typer.Option(
         None, help="First frame's pose (BVH on the body model's skeleton); default: searched."
     ),
+    method: str = typer.Option(
+        "apf",
+        callback=choice(("apf", "monocular")),
+        help="apf: annealed particle filter (all views); monocular: MediaPipe Pose in one "
+        "camera placed by PnP (needs the [camera] extra); --out is then markers (.c3d).",
+    ),
+    stature: float = ranged(
+        "stature",
+        None,
+        help="Monocular: the person's height (mm); default: estimated from the feet on the floor.",
+    ),
+    reference: Path = typer.Option(
+        None, help="3-D reference CSV (frame, <joint>_x/_y/_z, mm): report the error against it."
+    ),
+    body_size: str = typer.Option(
+        "template",
+        help="The person's size: template (the body model's); video (measured by MediaPipe in "
+        "the first camera, needs [camera]); or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
+    ),
+    background: str = typer.Option(
+        "learn",
+        callback=choice(("learn", "median")),
+        help="Cameras without an empty-scene image: learn: the median where MediaPipe finds "
+        "no person, and say if the plain median holds them; median: the plain median.",
+    ),
 ) -> None:
-    """Track person A in multi-view video by annealed particle filtering; write A as BVH."""
+    """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
+    one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
+    if method == "monocular":
+        _track_monocular(video, cameras, out, max_frames, stature, reference, json_out)
+        return
+    from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.multiview import track_take, training_body_model
@@ -78,10 +108,48 @@ def track(
     cams, _ = load_cameras(where)  # a bad camera file or a missing video: fail first
     if not video.is_file():
         camera_videos(where, cams)
+    if reference is not None and not reference.is_file():
+        raise MotionFormatError(reference, "no such reference file")
+    size = _body_size(body_size)
     body = training_body_model(data)
+    if size == "video":
+        from markovmotion.video.body_size import body_size_from_points
+        from markovmotion.video.monocular import track_monocular_video
+
+        tr, _ = track_monocular_video(video, cameras, max_frames)
+        try:
+            size = body_size_from_points(body, tr.points)
+        except ValueError as exc:
+            raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
+    if size != "template":
+        from markovmotion.video.body_size import scaled_body
+
+        body = scaled_body(body, *size)
+        err_console.print(
+            "body size: scale {:.3f}, legs {:.3f}, arms {:.3f}".format(*size), highlight=False
+        )
     motion, _, summary = track_take(
-        video, body, cameras, truth, particles, layers, views, max_frames, seed, start
+        video,
+        body,
+        cameras,
+        truth,
+        particles,
+        layers,
+        views,
+        max_frames,
+        seed,
+        start,
+        background == "learn",
     )
+    for note in summary["background"]:
+        err_console.print(note, highlight=False)
+    if reference is not None:
+        from markovmotion.features.body_points import body_points
+        from markovmotion.video.monocular import reference_errors
+
+        summary["reference"] = reference_errors(body_points(motion), reference)
+    if size != "template":
+        summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:
         write_motion(motion, out)
         err_console.print(f"wrote {out}", highlight=False)
@@ -89,8 +157,64 @@ def track(
         typer.echo(json.dumps(summary))
     else:
         err = f", MPJPE {summary['mpjpe_mm']:.1f} mm" if "mpjpe_mm" in summary else ""
+        if "reference" in summary:
+            err += f", {summary['reference']['mean_mm']:.1f} mm from the reference"
         err_console.print(
             f"tracked {summary['frames']} frames in {summary['views']} views at "
             f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries",
             highlight=False,
         )
+
+
+def _track_monocular(
+    video: Path,
+    cameras: Path | None,
+    out: Path | None,
+    max_frames: int | None,
+    stature: float | None,
+    reference: Path | None,
+    json_out: bool,
+) -> None:
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.io.c3d import write_c3d
+    from markovmotion.video.monocular import monocular_markers, track_monocular_video
+
+    if out is not None and out.suffix.lower() != ".c3d":
+        raise MotionFormatError(out, "monocular tracking writes markers: use a .c3d name")
+    if reference is not None and not reference.is_file():
+        raise MotionFormatError(reference, "no such reference file")
+    tr, summary = track_monocular_video(video, cameras, max_frames, stature, reference)
+    if out is not None:
+        write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
+        err_console.print(f"wrote {out}", highlight=False)
+    if json_out:
+        typer.echo(json.dumps(summary))
+    else:
+        err = (
+            f", {summary['aligned_mean_mm']:.1f} mm after rigid alignment "
+            f"({summary['mean_mm']:.1f} mm without)"
+            if "aligned_mean_mm" in summary
+            else ""
+        )
+        err_console.print(
+            f"tracked {summary['frames']} frames ({summary['frames_placed']} placed) of "
+            f"{summary['camera']} at {summary['fps']:.2f} frames/s, scale "
+            f"{summary['scale']:.3f}{err}",
+            highlight=False,
+        )
+
+
+def _body_size(text: str) -> str | tuple[float, float, float]:
+    """``--body-size``: template, video, or three factors; bad values are one usage error."""
+    if text in ("template", "video"):
+        return text
+    try:
+        size = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        size = ()
+    if len(size) != 3 or not all(0.5 <= v <= 2.0 for v in size):
+        raise typer.BadParameter(
+            "template, video or SCALE,LEGS,ARMS (three numbers 0.5 to 2)",
+            param_hint="--body-size",
+        )
+    return size  # type: ignore[return-value]

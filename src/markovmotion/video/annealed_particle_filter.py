@@ -553,6 +553,7 @@ class TrackResult:
     views: int
     recoveries: int
     cpu_seconds: float = 0.0
+    background_notes: list[str] = field(default_factory=list)
 
 
 def multiview_frames(
@@ -579,6 +580,8 @@ class MultiviewVideo:
     frames: Iterator[list[np.ndarray]]
     source: Path
     videos: list[Path]
+    #: One line per camera without an empty-scene image: what its background is.
+    background_notes: list[str] = field(default_factory=list)
 
     def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
         """The features of one frame per camera (checked against the cameras' sizes)."""
@@ -602,11 +605,15 @@ def open_video(
     cameras_file: str | os.PathLike[str] | None = None,
     views: int | None = None,
     max_frames: int | None = None,
+    learn_background: bool = False,
 ) -> MultiviewVideo:
     """A folder with ``cameras.json`` (or that file), or one camera's video file (with
     ``cameras_file``, or ``cameras.json`` beside it: the camera naming the file, else the
     first), ready to track: frames are decoded as they are consumed (no queue).
-    ``views`` keeps only the first cameras.
+    ``views`` keeps only the first cameras. A camera without an empty-scene image gets the
+    median of frames spread over its video, or with ``learn_background`` (and MediaPipe
+    installed) the median where the person is not, and a note saying whether the plain median
+    still holds the person (:mod:`markovmotion.video.background`).
 
     Raises:
         MotionFormatError: a missing or malformed camera file, a missing video or
@@ -622,14 +629,30 @@ def open_video(
     if views is not None:
         cameras, videos = cameras[:views], videos[:views]
     images = camera_videos(cams_path, cameras, "background")
-    backgrounds = [
-        estimate_background(v) if b is None else read_image(b, (c.width, c.height))
-        for v, b, c in zip(videos, images, cameras, strict=True)
-    ]
+    backgrounds, notes = [], []
+    for v, b, c in zip(videos, images, cameras, strict=True):
+        if b is not None:
+            backgrounds.append(read_image(b, (c.width, c.height)))
+        elif learn_background and _has_mediapipe():
+            from markovmotion.video.background import learn_background as learn
+
+            _, learnt, check = learn(v, BACKGROUND_FRAMES)
+            backgrounds.append(learnt)
+            notes.append(check.message(c.name) + "; using the median where the person is not")
+        else:
+            backgrounds.append(estimate_background(v))
+            why = "" if not learn_background else " (MediaPipe not installed)"
+            notes.append(f"{c.name}: median background, not checked for the person{why}")
     frames = multiview_frames(videos, max_frames)
     return MultiviewVideo(
-        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos)
+        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes
     )
+
+
+def _has_mediapipe() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("mediapipe") is not None
 
 
 def track_features(
@@ -661,11 +684,14 @@ def track_video(
     max_frames: int | None = None,
     seed: int = 0,
     start: np.ndarray | None = None,
+    learn_background: bool = False,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given."""
-    mv = open_video(video, cameras_file, views, max_frames)
+    mv = open_video(video, cameras_file, views, max_frames, learn_background)
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start
     )
-    return track_features(mv.features(seed), apf)
+    result = track_features(mv.features(seed), apf)
+    result.background_notes = mv.background_notes
+    return result

@@ -177,6 +177,7 @@ def track_take(
     max_frames: int | None = None,
     seed: int = 0,
     start: str | os.PathLike[str] | None = None,
+    learn_background: bool = False,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
@@ -190,7 +191,9 @@ def track_take(
     first = None
     if start is not None:  # the first frame's pose, on the body model's skeleton
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
-    result = track_video(video, body, cameras, particles, layers, views, max_frames, seed, first)
+    result = track_video(
+        video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background
+    )
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {
         "frames": len(result.states),
@@ -203,6 +206,7 @@ def track_take(
         "dof": body.n_dof,
         "recoveries": result.recoveries,
         "confidence": [round(float(c), 3) for c in result.confidence],
+        "background": result.background_notes,
     }
     if truth is not None:
         _, doc = load_cameras(camera_file(video, cameras))

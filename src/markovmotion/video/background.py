@@ -1,0 +1,144 @@
+"""The empty scene behind a person, and a check of whether a median background still holds them.
+
+The annealed particle filter's foreground is the difference to a background
+(:mod:`~markovmotion.video.annealed_particle_filter`). Without an image of the
+empty scene it takes the per-pixel median of frames spread over the video,
+which is the scene only where the person covers a pixel in fewer than half of
+them: a person who barely moves stays in it (a "ghost"), and the tracker sees
+no foreground where they stand.
+
+Given where the person is in each sampled frame (a mask per frame, here drawn
+from MediaPipe Pose's 2-D landmarks: :func:`person_masks`), :func:`check_background`
+says how much of the person the plain median still holds (the share of their
+mean silhouette covered in more than half of the frames) and how much of it is
+never seen empty (covered in every frame); :func:`person_background` learns the
+background where the person is not: the per-pixel median over the frames in
+which the pixel is uncovered (the plain median where it never is).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from markovmotion.video.monocular import LANDMARKS, MIN_VISIBILITY
+
+#: Limbs drawn as thick lines for a person's mask: pairs of landmark names.
+_LIMBS = tuple(
+    (f"{s}_{a}", f"{s}_{b}")
+    for s in ("left", "right")
+    for a, b in (
+        ("shoulder", "elbow"),
+        ("elbow", "wrist"),
+        ("hip", "knee"),
+        ("knee", "ankle"),
+        ("ankle", "heel"),
+        ("heel", "foot_index"),
+        ("ankle", "foot_index"),
+    )
+)
+_TORSO = ("left_shoulder", "right_shoulder", "right_hip", "left_hip")
+#: Share of the person's mean silhouette the plain median may hold before it is reported.
+HELD_LIMIT = 0.2
+
+
+def person_masks(
+    pixels: np.ndarray, visibility: np.ndarray, shape: tuple[int, int], margin: float = 0.25
+) -> np.ndarray:
+    """(F, H, W) bool: the person of each frame, drawn from (F, 33, 2) landmark pixels: torso
+    polygon, limbs and head as lines and discs ``margin`` times the torso's height thick (a
+    generous outline: better too much person than a ghost left in the background)."""
+    h, w = shape
+    idx = {n: i for i, n in enumerate(LANDMARKS)}
+    out = np.zeros((len(pixels), h, w), dtype=bool)
+    for f in range(len(pixels)):
+        p, seen = pixels[f], visibility[f] >= MIN_VISIBILITY * 0.5
+        if not np.isfinite(p).all() or seen.sum() < 4:
+            continue
+        torso = p[[idx[n] for n in _TORSO]]
+        size = np.linalg.norm(torso[:2].mean(0) - torso[2:].mean(0))
+        thick = max(3, int(round(margin * size)))
+        img = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(img, np.round(torso).astype(np.int32), 1)
+        for a, b in _LIMBS + tuple(zip(_TORSO, _TORSO[1:] + _TORSO[:1], strict=True)):
+            pa, pb = np.round(p[idx[a]]).astype(int), np.round(p[idx[b]]).astype(int)
+            cv2.line(img, tuple(pa.tolist()), tuple(pb.tolist()), 1, thick)
+        head = p[: idx["mouth_right"] + 1]
+        centre = np.round(head.mean(0)).astype(int)
+        radius = int(round(max(np.ptp(head, axis=0).max(), 0.35 * size)))
+        cv2.circle(img, tuple(centre.tolist()), radius, 1, -1)
+        out[f] = img.astype(bool)
+    return out
+
+
+@dataclass(frozen=True)
+class BackgroundCheck:
+    """How much of the person's mean silhouette the plain median holds (``held``, covered in
+    more than half the frames) and never sees empty (``unseen``, covered in every frame)."""
+
+    held: float
+    unseen: float
+    person_area: float
+
+    @property
+    def holds_person(self) -> bool:
+        return self.held > HELD_LIMIT
+
+    def message(self, camera: str) -> str:
+        """One line for the user."""
+        if not self.holds_person:
+            return f"{camera}: the median background is the empty scene (holds {self.held:.0%})"
+        return (
+            f"{camera}: the median background still holds the person ({self.held:.0%} of their "
+            f"silhouette; {self.unseen:.0%} never uncovered): give an empty-scene image "
+            "('background' in cameras.json)"
+        )
+
+
+def check_background(masks: np.ndarray) -> BackgroundCheck:
+    """:class:`BackgroundCheck` of the person masks (F, H, W) of the frames a median is over."""
+    area = float(masks.sum(axis=(1, 2)).mean())
+    if area <= 0:
+        return BackgroundCheck(0.0, 0.0, 0.0)
+    share = masks.mean(axis=0)
+    return BackgroundCheck(
+        float((share > 0.5).sum() / area), float((share >= 1.0).sum() / area), area
+    )
+
+
+def person_background(frames: Sequence[np.ndarray], masks: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8: per pixel, the median of the frames in which the person does not cover
+    it; the plain median where they always do."""
+    stack = np.stack(frames).astype(np.float32)
+    plain = np.median(stack, axis=0)
+    stack[masks] = np.nan
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            clean = np.nanmedian(stack, axis=0)
+    clean = np.where(np.isfinite(clean), clean, plain)
+    return np.round(clean).astype(np.uint8)
+
+
+def learn_background(video, frames: int = 31) -> tuple[np.ndarray, np.ndarray, BackgroundCheck]:
+    """The plain median of up to ``frames`` frames spread over ``video``, the background learnt
+    where MediaPipe Pose finds no person (:func:`person_background`), and the check of the plain
+    median (:func:`check_background`)."""
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.video.monocular import detect_landmarks
+    from markovmotion.video.render import frame_count, read_frames
+
+    n = frame_count(video)
+    keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
+    stack = [f for i, f in enumerate(read_frames(video)) if i in keep]
+    if not stack:
+        raise MotionFormatError(video, "no frames in this video")
+    lm = detect_landmarks(stack)
+    masks = person_masks(lm.pixels, lm.visibility, stack[0].shape[:2])
+    plain = np.median(np.stack(stack), axis=0).astype(np.uint8)
+    return plain, person_background(stack, masks), check_background(masks)

@@ -1,0 +1,468 @@
+"""Monocular 3-D tracking of one person in one calibrated camera: MediaPipe Pose placed by PnP.
+
+The webcam case of the dual-HMM paper's tracker (§3 tracks person A before
+the partner answers): one camera, no background, no body model. Per frame:
+
+1. **Landmarks.** MediaPipe Pose (``mediapipe==0.10.21``, the optional extra
+   ``.[camera]``; its bundled *full* landmark model, which runs offline) gives
+   33 landmarks: 2-D in the image (normalised, with a visibility) and 3-D
+   *world* landmarks in metres, centred between the hips, with the body's
+   size learnt by the network (not measured).
+2. **Body points and markers.** The 33 landmarks map to the project's 19 body
+   points (:data:`~markovmotion.features.body_points.BODY_POINTS`) by one
+   fixed weight matrix (:data:`LANDMARK_WEIGHTS`): shoulders, elbows, wrists,
+   hips, knees and ankles are landmarks; the pelvis and neck are the middles
+   of the hips and shoulders; the spine and chest lie a third and two thirds
+   of the way from pelvis to neck; the head is the middle of the ears; the
+   toe is the foot index. The VLMM paper's 13 markers
+   (:data:`~markovmotion.features.body_points.MARKER_POINTS`) are a subset,
+   written with the marker names the partner models read
+   (:func:`monocular_markers`).
+3. **Placement (depth).** The world landmarks are hip-centred: where the
+   body stands is unknown. It is the rigid pose ``(R, t)`` that projects the
+   world landmarks (mm) onto the 2-D landmarks through the camera's
+   intrinsics ``K``: the perspective-n-point problem, solved by
+   ``cv2.solvePnP`` (SQPnP, then Levenberg-Marquardt from the previous
+   frame's pose) over the landmarks seen with visibility above
+   :data:`MIN_VISIBILITY`. Depth is thus resolved by the body's *size*: a
+   body of the network's size appears that large at that distance, so an
+   error of k % in size is an error of k % in distance along the ray.
+4. **Size (scale).** A calibrated camera knows the floor (world ``Y = 0``).
+   Scaling the body about the camera centre ``C`` by ``s`` leaves the image
+   unchanged, so ``s`` is free; it is chosen so that the lowest foot landmark
+   (heel or foot index) rests on the floor: per frame
+   ``s_t = (floor - C_y) / (y_t - C_y)`` and the video's scale is the median
+   over frames (the person's global size, estimated from the video). A given
+   ``stature`` (mm, from the top of the head to the floor) replaces it.
+
+:func:`track_monocular` returns the body points (F, 19, 3) in the world's mm,
+per-frame confidence (mean landmark visibility) and timing.
+:func:`reference_errors` measures them against a 3-D reference (as the
+triangulated MediaPipe keypoints beside the real 4-view video), per joint,
+after the rigid alignment of each frame (Kabsch, no scale) and without it.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from markovmotion.core.markers import Markers
+from markovmotion.errors import MotionFormatError
+from markovmotion.features.body_points import BODY_POINTS, MARKER_POINTS
+from markovmotion.video.cameras import CalibratedCamera
+from markovmotion.video.render import read_frames
+
+#: The release whose bundled pose models load offline (the 1.x releases ship none).
+MEDIAPIPE_VERSION = "0.10.21"
+#: MediaPipe Pose's 33 landmark names, in its order.
+LANDMARKS: tuple[str, ...] = (
+    "nose",
+    "left_eye_inner",
+    "left_eye",
+    "left_eye_outer",
+    "right_eye_inner",
+    "right_eye",
+    "right_eye_outer",
+    "left_ear",
+    "right_ear",
+    "mouth_left",
+    "mouth_right",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+    "left_pinky",
+    "right_pinky",
+    "left_index",
+    "right_index",
+    "left_thumb",
+    "right_thumb",
+    "left_hip",
+    "right_hip",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_heel",
+    "right_heel",
+    "left_foot_index",
+    "right_foot_index",
+)
+#: Landmarks seen less surely than this do not place the body.
+MIN_VISIBILITY = 0.5
+#: Fewest landmarks that place a body (solvePnP needs at least 4; fewer is a guess).
+MIN_LANDMARKS = 6
+#: The foot landmarks whose lowest rests on the floor.
+FEET = ("left_heel", "right_heel", "left_foot_index", "right_foot_index")
+#: Height of the top of the head above the middle of the ears (mm), for a given stature.
+HEAD_TOP_MM = 120.0
+
+
+def _weights() -> np.ndarray:
+    """(19, 33) rows of landmark weights, one per body point (see the module's docstring)."""
+    idx = {n: i for i, n in enumerate(LANDMARKS)}
+    mid = {
+        "pelvis": {"left_hip": 0.5, "right_hip": 0.5},
+        "neck": {"left_shoulder": 0.5, "right_shoulder": 0.5},
+        "head": {"left_ear": 0.5, "right_ear": 0.5},
+    }
+    mid["spine"] = {
+        k: v * w for part, w in (("pelvis", 2 / 3), ("neck", 1 / 3)) for k, v in mid[part].items()
+    }
+    mid["chest"] = {
+        k: v * w for part, w in (("pelvis", 1 / 3), ("neck", 2 / 3)) for k, v in mid[part].items()
+    }
+    out = np.zeros((len(BODY_POINTS), len(LANDMARKS)))
+    for p, point in enumerate(BODY_POINTS):
+        if point in mid:
+            for name, w in mid[point].items():
+                out[p, idx[name]] += w
+        else:
+            out[p, idx[point.replace("_toe", "_foot_index")]] = 1.0
+    return out
+
+
+#: (19, 33): body points = LANDMARK_WEIGHTS @ landmarks (every row sums to 1).
+LANDMARK_WEIGHTS: np.ndarray = _weights()
+
+
+def to_body_points(landmarks: np.ndarray) -> np.ndarray:
+    """(..., 19, 3) body points of (..., 33, 3) MediaPipe landmarks."""
+    return np.einsum("pl,...lc->...pc", LANDMARK_WEIGHTS, landmarks)
+
+
+def pose_estimator(static: bool = False):
+    """MediaPipe Pose with its bundled full landmark model (offline), or a one-line error.
+
+    Raises:
+        MotionFormatError: mediapipe is not installed (``pip install '.[camera]'``).
+    """
+    try:
+        from mediapipe.python.solutions import pose
+    except ImportError:
+        raise MotionFormatError(
+            "--method monocular",
+            f"needs MediaPipe: pip install 'markovmotion[camera]' (mediapipe=={MEDIAPIPE_VERSION})",
+        ) from None
+    return pose.Pose(
+        static_image_mode=static,
+        model_complexity=1,
+        smooth_landmarks=True,
+        min_detection_confidence=0.5,
+        min_tracking_confidence=0.5,
+    )
+
+
+@dataclass
+class Landmarks:
+    """MediaPipe's answer for a video: per frame (F, 33) pixels (x, y), world points (mm,
+    hip-centred, Y down as MediaPipe's) and visibility; ``found`` (F,) where a person was seen."""
+
+    pixels: np.ndarray
+    world: np.ndarray
+    visibility: np.ndarray
+    found: np.ndarray
+    seconds: float = 0.0
+
+
+def detect_landmarks(frames: Iterable[np.ndarray], max_frames: int | None = None) -> Landmarks:
+    """MediaPipe Pose landmarks of RGB frames, in video mode (tracking between frames)."""
+    pixels, world, vis, found = [], [], [], []
+    t0 = time.perf_counter()
+    with pose_estimator() as est:
+        for i, img in enumerate(frames):
+            if max_frames is not None and i >= max_frames:
+                break
+            res = est.process(np.ascontiguousarray(img))
+            h, w = img.shape[:2]
+            if res.pose_landmarks is None or res.pose_world_landmarks is None:
+                pixels.append(np.full((len(LANDMARKS), 2), np.nan))
+                world.append(np.full((len(LANDMARKS), 3), np.nan))
+                vis.append(np.zeros(len(LANDMARKS)))
+                found.append(False)
+                continue
+            lm = res.pose_landmarks.landmark
+            wl = res.pose_world_landmarks.landmark
+            pixels.append(np.array([(p.x * w - 0.5, p.y * h - 0.5) for p in lm]))
+            world.append(np.array([(p.x, p.y, p.z) for p in wl]) * 1000.0)
+            vis.append(np.array([p.visibility for p in lm]))
+            found.append(True)
+    if not found:
+        raise MotionFormatError("video", "no frames in this video")
+    return Landmarks(
+        np.array(pixels), np.array(world), np.array(vis), np.array(found), time.perf_counter() - t0
+    )
+
+
+def place_body(
+    landmarks: Landmarks, camera: CalibratedCamera, snap: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 33, 3) landmarks in the camera's frame (mm) by PnP of the world landmarks onto the
+    2-D ones (see the module's docstring, step 3), and (F,) whether each frame was placed."""
+    n = len(landmarks.found)
+    out = np.full((n, len(LANDMARKS), 3), np.nan)
+    placed = np.zeros(n, dtype=bool)
+    rvec = tvec = None
+    k = camera.K.astype(np.float64)
+    for f in range(n):
+        use = landmarks.found[f] & (landmarks.visibility[f] >= MIN_VISIBILITY)
+        if use.sum() < MIN_LANDMARKS:
+            continue
+        obj = np.ascontiguousarray(landmarks.world[f, use], dtype=np.float64)
+        img = np.ascontiguousarray(landmarks.pixels[f, use], dtype=np.float64)
+        ok, r, t = cv2.solvePnP(obj, img, k, None, flags=cv2.SOLVEPNP_SQPNP)
+        if not ok:
+            continue
+        # refine from this solution (or last frame's, if that one reprojects better)
+        if rvec is not None:
+            cands = [(r, t), (rvec.copy(), tvec.copy())]
+            errs = [
+                np.linalg.norm(cv2.projectPoints(obj, a, b, k, None)[0][:, 0] - img, axis=1).mean()
+                for a, b in cands
+            ]
+            r, t = cands[int(np.argmin(errs))]
+        ok, r, t = cv2.solvePnP(obj, img, k, None, r, t, True, cv2.SOLVEPNP_ITERATIVE)
+        if not ok or t[2, 0] <= 0:
+            continue
+        rvec, tvec = r, t
+        rot = cv2.Rodrigues(r)[0]
+        out[f] = landmarks.world[f] @ rot.T + t[:, 0]
+        if snap:  # each landmark onto its ray through its 2-D landmark, at its depth
+            ray = np.c_[landmarks.pixels[f], np.ones(len(LANDMARKS))] @ np.linalg.inv(k).T
+            out[f] = ray * out[f, :, 2:3]
+        placed[f] = True
+    return out, placed
+
+
+def to_world(points_cam: np.ndarray, camera: CalibratedCamera) -> np.ndarray:
+    """Camera-frame points (..., 3) in world coordinates (mm, Y up)."""
+    return (points_cam - camera.t) @ camera.R
+
+
+def floor_scale(world: np.ndarray, camera: CalibratedCamera, floor: float = 0.0) -> float:
+    """The scale about the camera centre that puts the lowest foot landmark on the floor
+    (median over frames; 1 if the camera is below the feet or no foot is seen)."""
+    feet = [LANDMARKS.index(n) for n in FEET]
+    low = np.nanmin(world[:, feet, 1], axis=1)  # (F,) lowest foot
+    cy = camera.centre[1]
+    ok = np.isfinite(low) & (np.abs(low - cy) > 1.0) & (np.sign(floor - cy) == np.sign(low - cy))
+    if not ok.any():
+        return 1.0
+    return float(np.median((floor - cy) / (low[ok] - cy)))
+
+
+def stature_scale(world: np.ndarray, stature: float) -> float:
+    """The scale that makes the head's top ``stature`` mm above the lowest foot (median)."""
+    feet = [LANDMARKS.index(n) for n in FEET]
+    ears = [LANDMARKS.index("left_ear"), LANDMARKS.index("right_ear")]
+    height = world[:, ears, 1].mean(axis=1) + HEAD_TOP_MM - np.nanmin(world[:, feet, 1], axis=1)
+    height = height[np.isfinite(height) & (height > 100.0)]
+    if not len(height):
+        return 1.0
+    return float(stature / np.percentile(height, 90))  # the most upright frames
+
+
+@dataclass
+class MonocularTrack:
+    """Body points (F, 19, 3) mm in the world (NaN where no person), confidence (F,) (mean
+    landmark visibility, 0 where none), the scale applied, frame rate and timing."""
+
+    points: np.ndarray
+    confidence: np.ndarray
+    scale: float
+    fps: float
+    seconds: float
+    landmarks: Landmarks = field(repr=False)
+    landmarks_world: np.ndarray = field(repr=False)
+
+    @property
+    def placed(self) -> np.ndarray:
+        return np.isfinite(self.points).all(axis=(1, 2))
+
+
+def track_monocular(
+    video: str | os.PathLike[str],
+    camera: CalibratedCamera,
+    fps: float,
+    max_frames: int | None = None,
+    stature: float | None = None,
+    floor: float | None = 0.0,
+    snap: bool = True,
+) -> MonocularTrack:
+    """Track the person of one camera's video in 3-D (module docstring): body points in the
+    world's mm, scaled so the feet rest on ``floor`` (None: MediaPipe's size), or so the
+    person is ``stature`` mm tall if given."""
+    t0 = time.perf_counter()
+    frames = read_frames(video)
+    first = next(frames)
+    if first.shape[:2] != (camera.height, camera.width):
+        raise MotionFormatError(
+            video,
+            f"camera {camera.name} is {camera.width}x{camera.height} but its video is "
+            f"{first.shape[1]}x{first.shape[0]}",
+        )
+
+    def all_frames():
+        yield first
+        yield from frames
+
+    lm = detect_landmarks(all_frames(), max_frames)
+    cam_pts, placed = place_body(lm, camera, snap)
+    world = to_world(cam_pts, camera)
+    if stature is not None:
+        scale = stature_scale(world, stature)
+    elif floor is not None:
+        scale = floor_scale(world, camera, floor)
+    else:
+        scale = 1.0
+    world = camera.centre + scale * (world - camera.centre)
+    conf = np.where(placed, np.where(lm.found[:, None], lm.visibility, 0.0).mean(axis=1), 0.0)
+    return MonocularTrack(
+        to_body_points(world), conf, scale, fps, time.perf_counter() - t0, lm, world
+    )
+
+
+def monocular_markers(points: np.ndarray, fps: float, name: str = "monocular") -> Markers:
+    """The VLMM paper's 13 markers (named as the virtual suit's first 13, ``HEAD_FRONT``,
+    ``L_SHOULDER`` ...) at the body points of (F, 19, 3) ``points``; NaN where none."""
+    from markovmotion.features.markers import virtual_marker_names
+
+    names = virtual_marker_names(13)
+    side = {"L": "left", "R": "right"}
+    order = []
+    for n in names:
+        if n == "HEAD_FRONT":
+            order.append(BODY_POINTS.index("head"))
+        else:
+            s, part = n.split("_", 1)
+            order.append(BODY_POINTS.index(f"{side[s]}_{part.lower()}"))
+    assert sorted(BODY_POINTS[i] for i in order) == sorted(MARKER_POINTS)
+    return Markers(names, points[:, order], fps, name)
+
+
+# ----------------------------------------------------------------------------- measurement
+#: The joints a MediaPipe-triangulated reference has, in the project's body-point names.
+REFERENCE_JOINTS: tuple[str, ...] = tuple(
+    f"{s}_{p}"
+    for s in ("left", "right")
+    for p in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")
+)
+
+
+def read_reference(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Frames (F,) and (F, 12, 3) positions (mm) of :data:`REFERENCE_JOINTS` from a CSV with
+    columns ``frame`` and ``<joint>_x``, ``_y``, ``_z`` (empty or NaN where unknown)."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MotionFormatError(path, f"cannot read the reference ({exc})") from None
+    cols = [f"{j}_{a}" for j in REFERENCE_JOINTS for a in "xyz"]
+    if not rows or any(c not in rows[0] for c in ["frame", *cols]):
+        raise MotionFormatError(
+            path, f"a reference needs the columns frame, {', '.join(cols[:3])} ..."
+        )
+    try:
+        frames = np.array([int(r["frame"]) for r in rows])
+        pos = np.array([[float(r[c] or "nan") for c in cols] for r in rows])
+    except ValueError as exc:
+        raise MotionFormatError(path, f"not a number ({exc})") from None
+    return frames, pos.reshape(len(rows), len(REFERENCE_JOINTS), 3)
+
+
+def kabsch_align(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """(F, P, 3) ``moving`` rotated and translated per frame onto ``fixed`` (least squares,
+    no scale: the Kabsch algorithm), over the points finite in both."""
+    out = np.full_like(moving, np.nan)
+    for f in range(len(moving)):
+        ok = np.isfinite(moving[f]).all(1) & np.isfinite(fixed[f]).all(1)
+        if ok.sum() < 3:
+            continue
+        a, b = moving[f, ok], fixed[f, ok]
+        ma, mb = a.mean(0), b.mean(0)
+        u, _, vt = np.linalg.svd((a - ma).T @ (b - mb))
+        d = np.sign(np.linalg.det(u @ vt))
+        rot = u @ np.diag([1.0, 1.0, d]) @ vt
+        out[f] = (moving[f] - ma) @ rot + mb
+    return out
+
+
+def reference_errors(
+    points: np.ndarray, reference: str | os.PathLike[str], joints: Sequence[str] = BODY_POINTS
+) -> dict:
+    """Mean error (mm) of (F, P, 3) tracked ``points`` (named ``joints``) against a reference
+    CSV (:func:`read_reference`): over its 12 joints, per joint, with and without each frame's
+    rigid alignment; frames without a tracked body are left out and counted."""
+    frames, ref = read_reference(reference)
+    keep = frames < len(points)
+    frames, ref = frames[keep], ref[keep]
+    idx = [list(joints).index(j) for j in REFERENCE_JOINTS]
+    mine = points[frames][:, idx]
+    ok = np.isfinite(mine).all(axis=(1, 2))
+    raw = np.linalg.norm(mine[ok] - ref[ok], axis=-1)
+    aligned = np.linalg.norm(kabsch_align(mine[ok], ref[ok]) - ref[ok], axis=-1)
+
+    def table(err: np.ndarray) -> dict:
+        return {
+            j: round(float(np.nanmean(e)), 1) for j, e in zip(REFERENCE_JOINTS, err.T, strict=True)
+        }
+
+    return {
+        "frames_compared": int(ok.sum()),
+        "frames_missing": int((~ok).sum()),
+        "mean_mm": round(float(np.nanmean(raw)), 1),
+        "aligned_mean_mm": round(float(np.nanmean(aligned)), 1),
+        "per_joint_mm": table(raw),
+        "aligned_per_joint_mm": table(aligned),
+    }
+
+
+def track_monocular_video(
+    video: str | os.PathLike[str],
+    cameras: str | os.PathLike[str] | None = None,
+    max_frames: int | None = None,
+    stature: float | None = None,
+    reference: str | os.PathLike[str] | None = None,
+) -> tuple[MonocularTrack, dict]:
+    """Track one camera's video (a folder with ``cameras.json``: its first camera; a video
+    file: the camera naming it, see :func:`~markovmotion.video.cameras.camera_of_video`);
+    the track and a JSON-ready summary (with ``reference``, its errors)."""
+    from markovmotion.video.cameras import (
+        camera_file,
+        camera_of_video,
+        camera_videos,
+        load_cameras,
+    )
+
+    where = camera_file(video, cameras)
+    cams, doc = load_cameras(where)
+    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+        cam, path = cams[camera_of_video(cams, video)], Path(video)
+    else:
+        cam, path = cams[0], camera_videos(where, cams[:1])[0]
+    tr = track_monocular(path, cam, float(doc["fps"]), max_frames, stature)
+    n = len(tr.points)
+    summary = {
+        "method": "monocular",
+        "camera": cam.name,
+        "frames": n,
+        "frames_placed": int(tr.placed.sum()),
+        "fps": round(n / max(tr.seconds, 1e-9), 2),
+        "video_fps": tr.fps,
+        "scale": round(tr.scale, 4),
+        "confidence": [round(float(c), 3) for c in tr.confidence],
+    }
+    if reference is not None:
+        summary.update(reference_errors(tr.points, reference))
+    return tr, summary

@@ -1,0 +1,141 @@
+"""Monocular tracking: MediaPipe landmarks to body points and markers, placed by PnP, on real video."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from markovmotion.cli import main
+from markovmotion.data.index import data_root
+from markovmotion.features.body_points import BODY_POINTS, MARKER_POINTS
+from markovmotion.io.c3d import read_c3d
+from markovmotion.video.cameras import look_at
+from markovmotion.video.monocular import (
+    FEET,
+    LANDMARK_WEIGHTS,
+    LANDMARKS,
+    Landmarks,
+    floor_scale,
+    kabsch_align,
+    monocular_markers,
+    place_body,
+    to_body_points,
+    to_world,
+)
+
+
+@pytest.fixture(scope="module")
+def real_video():
+    return data_root().parent / "video" / "pose2sim_balancing"
+
+
+def _standing_landmarks(rng: np.random.Generator, frames: int) -> np.ndarray:
+    """(F, 33, 3) world landmarks (mm, Y up) of a person about 1.75 m tall, feet on Y = 0."""
+    base = rng.uniform([-250, 100, -150], [250, 1700, 150], (len(LANDMARKS), 3))
+    for n in FEET:
+        base[LANDMARKS.index(n), 1] = 0.0
+    out = base + rng.normal(0, 30, (frames, *base.shape))
+    out[:, [LANDMARKS.index(n) for n in FEET], 1] = 0.0
+    return out + [500.0, 0.0, -300.0]
+
+
+def test_landmark_weights_make_the_named_points():
+    assert LANDMARK_WEIGHTS.shape == (len(BODY_POINTS), len(LANDMARKS))
+    assert np.allclose(LANDMARK_WEIGHTS.sum(axis=1), 1.0)
+    lm = np.random.default_rng(0).normal(0, 500, (2, len(LANDMARKS), 3))
+    bp = to_body_points(lm)
+    at = {n: lm[:, i] for i, n in enumerate(LANDMARKS)}
+    assert np.allclose(bp[:, BODY_POINTS.index("pelvis")], (at["left_hip"] + at["right_hip"]) / 2)
+    assert np.allclose(bp[:, BODY_POINTS.index("left_toe")], at["left_foot_index"])
+    assert np.allclose(bp[:, BODY_POINTS.index("right_knee")], at["right_knee"])
+    neck = (at["left_shoulder"] + at["right_shoulder"]) / 2
+    pelvis = bp[:, 0]
+    assert np.allclose(bp[:, BODY_POINTS.index("chest")], pelvis + 2 / 3 * (neck - pelvis))
+
+
+def test_markers_are_the_vlmm_points_by_name():
+    pts = np.random.default_rng(1).normal(0, 300, (5, len(BODY_POINTS), 3))
+    m = monocular_markers(pts, 30.0)
+    assert m.n_markers == len(MARKER_POINTS) == 13
+    assert np.allclose(m.positions[:, m.names.index("L_WRIST")], pts[:, 7])  # left_wrist
+    assert np.allclose(m.positions[:, m.names.index("HEAD_FRONT")], pts[:, 4])  # head
+
+
+def test_pnp_places_the_body_where_it_stands_and_the_floor_fixes_its_size():
+    """The world landmarks, hip-centred and turned, placed back by PnP at their true depth;
+    the same body 10 % too small lands nearer the camera, and the floor scale restores it."""
+    rng = np.random.default_rng(3)
+    truth = _standing_landmarks(rng, 6)
+    cam = look_at(np.array([400.0, 1500.0, 3500.0]), np.array([0, 900, 0]), 272, 480, 420.0)
+    pix, _ = cam.project(truth)
+    hips = [LANDMARKS.index("left_hip"), LANDMARKS.index("right_hip")]
+    turn = Rotation.from_rotvec(rng.normal(0, 1.0, (6, 3))).as_matrix()
+    world = np.einsum("fij,flj->fli", turn, truth - truth[:, hips].mean(1, keepdims=True))
+    vis = np.ones((6, len(LANDMARKS)))
+    found = np.ones(6, dtype=bool)
+    for size, want in ((1.0, 1.0), (0.9, 1 / 0.9)):
+        placed_cam, placed = place_body(Landmarks(pix, world * size, vis, found), cam)
+        assert placed.all()
+        placed_world = to_world(placed_cam, cam)
+        scale = floor_scale(placed_world, cam)
+        assert scale == pytest.approx(want, rel=1e-3)
+        rescaled = cam.centre + scale * (placed_world - cam.centre)
+        assert np.abs(rescaled - truth).max() < 1.0
+
+
+def test_kabsch_recovers_a_rigid_motion():
+    rng = np.random.default_rng(4)
+    fixed = rng.normal(0, 400, (3, 12, 3))
+    rot = Rotation.random(3, random_state=5).as_matrix()
+    moving = np.einsum("fij,fpj->fpi", rot, fixed) + rng.normal(0, 1000, (3, 1, 3))
+    assert np.allclose(kabsch_align(moving, fixed), fixed, atol=1e-6)
+
+
+def test_monocular_track_of_real_video(real_video, tmp_path, capsys):
+    """One real camera (cam0 of the 4-view balancing trial), all 100 frames: within 130 mm of
+    the triangulated reference after per-frame rigid alignment; the 13 markers written."""
+    pytest.importorskip("mediapipe", reason="the [camera] extra (mediapipe==0.10.21)")
+    out = tmp_path / "a.c3d"
+    main(
+        [
+            "track",
+            "--video",
+            str(real_video / "cam0.mp4"),
+            "--method",
+            "monocular",
+            "--reference",
+            str(real_video / "reference_mediapipe_triangulated_mm.csv"),
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["frames"] == summary["frames_placed"] == 100
+    assert summary["aligned_mean_mm"] <= 130.0
+    assert summary["aligned_mean_mm"] < summary["mean_mm"]
+    assert 0.8 < summary["scale"] < 1.25  # the feet on the treadmill: a plausible size
+    markers = read_c3d(out)
+    assert markers.n_frames == 100 and "L_SHOULDER" in markers.names
+    feet = markers.positions[:, [markers.names.index(n) for n in ("L_ANKLE", "R_ANKLE")], 1]
+    assert 0.0 < np.median(feet.min(axis=1)) < 200.0  # ankles just above the floor
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--out", "x.bvh"], "use a .c3d name"),
+        (["--reference", "missing.csv"], "no such reference file"),
+        (["--stature", "90"], "--stature"),
+    ],
+)
+def test_monocular_bad_options_are_one_line(real_video, tmp_path, capsys, extra, message):
+    extra = [str(tmp_path / e) if e.endswith((".bvh", ".csv")) else e for e in extra]
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_video / "cam0.mp4"), "--method", "monocular", *extra])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
