@@ -4,7 +4,7 @@ The webcam case of the dual-HMM paper's tracker (§3 tracks person A before
 the partner answers): one camera, no background, no body model. Per frame:
 
 1. **Landmarks.** MediaPipe Pose (``mediapipe==0.10.21``, the optional extra
-   ``.[camera]``; its bundled *full* landmark model, which runs offline) gives
+   installed by ``scripts/install-camera``; its bundled *full* landmark model, which runs offline) gives
    33 landmarks: 2-D in the image (normalised, with a visibility) and 3-D
    *world* landmarks in metres, centred between the hips, with the body's
    size learnt by the network (not measured).
@@ -145,14 +145,14 @@ def pose_estimator(static: bool = False):
     """MediaPipe Pose with its bundled full landmark model (offline), or a one-line error.
 
     Raises:
-        MotionFormatError: mediapipe is not installed (``pip install '.[camera]'``).
+        MotionFormatError: mediapipe is not installed (``scripts/install-camera``).
     """
     try:
         from mediapipe.python.solutions import pose
     except ImportError:
         raise MotionFormatError(
             "--method monocular",
-            f"needs MediaPipe: pip install 'markovmotion[camera]' (mediapipe=={MEDIAPIPE_VERSION})",
+            f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py flatbuffers 'protobuf<5')",
         ) from None
     return pose.Pose(
         static_image_mode=static,
