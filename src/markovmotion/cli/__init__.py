@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 
 import typer
 
@@ -58,6 +59,9 @@ def _register() -> None:
     app._markovmotion_registered = True  # type: ignore[attr-defined]
 
 
+#: The command line's own words: a path the user typed is shown as typed.
+_GIVEN: set[str] = set()
+
 #: An absolute path in a message: after its start, a space, a quote or a bracket.
 _ABSOLUTE = re.compile(r"(?:^|(?<=[\s'\"(\[]))/[^\s'\"():,;\]]+")
 
@@ -66,11 +70,11 @@ def relative_paths(message: str) -> str:
     """``message`` with each absolute path of an existing file or folder written relative to
     the current folder when that is shorter, as the user gives paths
     (``../shared/data/mocap/...`` for the collection beside the project); an absolute path the
-    user gave outside (``/data/x.bvh``) stays as it was."""
+    user gave (on the command line, or outside: ``/data/x.bvh``) stays as it was."""
 
     def rel(match: re.Match[str]) -> str:
         path = match.group(0)
-        if not os.path.exists(path):
+        if not os.path.exists(path) or path in _GIVEN:
             return path
         return min(path, os.path.relpath(path), key=len)
 
@@ -92,6 +96,8 @@ def main(argv: list[str] | None = None) -> None:
         from click.exceptions import ClickException, UsageError
 
     _register()
+    _GIVEN.clear()
+    _GIVEN.update(sys.argv[1:] if argv is None else argv)
     try:
         code = app(args=argv, prog_name="markovmotion", standalone_mode=False)
     except SystemExit as exc:  # Typer exits even on success; return normally then

@@ -76,8 +76,10 @@ def choose_kind(
         kind = max(usable, key=lambda k: (len(usable[k]), k == "skeleton"))
     kept = by_kind[kind]
     left = [x for x in items if entry(x).kind != kind]
+    if not items:
+        raise DataNotFoundError(f"no {what} among those asked for")
     if not kept:
-        found = ", ".join(f"{len(v)} {k}" for k, v in by_kind.items() if v) or "none"
+        found = ", ".join(f"{len(v)} {k}" for k, v in by_kind.items() if v)
         raise DataNotFoundError(f"no {kind} {what} among those asked for (found: {found})")
     if left:
         other = " and ".join(sorted({entry(x).kind for x in left}))
