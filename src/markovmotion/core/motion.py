@@ -10,9 +10,7 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass
 
-import numba
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from markovmotion.core.skeleton import Skeleton
 
@@ -100,10 +98,14 @@ class Motion:
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: global rotation matrices (F, J, 3, 3) and positions (F, J, 3) mm."""
+        from markovmotion.core.compiled import chain
+
         local = _quat_matrices(self.rotations)
         if local is None:  # a zero quaternion: SciPy's error names it
+            from scipy.spatial.transform import Rotation
+
             Rotation.from_quat(self.rotations.reshape(-1, 4))
-        return _chain(local, self.translations, self.skeleton.parents)
+        return chain(local, self.translations, self.skeleton.parents)
 
     def positions(self) -> np.ndarray:
         """Global joint positions (F, J, 3) in mm."""
@@ -222,6 +224,8 @@ class Motion:
         With ``to_origin``, the pelvis of frame 0 is also moved above the origin
         (its height is kept).
         """
+        from scipy.spatial.transform import Rotation
+
         pos = self.positions()
         turn = Rotation.from_rotvec([0.0, yaw - self.heading(pos[:1])[0], 0.0])
         out = self.copy()
@@ -283,57 +287,13 @@ def _quat_matrices(quats: np.ndarray) -> np.ndarray | None:
 
     Compiled, not SciPy's: the one-frame calls of online partners spent most of
     their forward kinematics in ``Rotation``'s argument checks."""
+    from markovmotion.core.compiled import quat_matrices_into
+
     q = np.ascontiguousarray(quats, dtype=float).reshape(-1, 4)
     out = np.empty((len(q), 3, 3))
-    if not _quat_matrices_into(q, out):
+    if not quat_matrices_into(q, out):
         return None
     return out.reshape(*quats.shape[:-1], 3, 3)
-
-
-@numba.njit(cache=True)
-def _quat_matrices_into(q, out):  # pragma: no cover - compiled
-    for i in range(q.shape[0]):
-        x, y, z, w = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-        n = x * x + y * y + z * z + w * w
-        if n == 0.0:
-            return False
-        s = 2.0 / n
-        out[i, 0, 0] = 1.0 - s * (y * y + z * z)
-        out[i, 0, 1] = s * (x * y - z * w)
-        out[i, 0, 2] = s * (x * z + y * w)
-        out[i, 1, 0] = s * (x * y + z * w)
-        out[i, 1, 1] = 1.0 - s * (x * x + z * z)
-        out[i, 1, 2] = s * (y * z - x * w)
-        out[i, 2, 0] = s * (x * z - y * w)
-        out[i, 2, 1] = s * (y * z + x * w)
-        out[i, 2, 2] = 1.0 - s * (x * x + y * y)
-    return True
-
-
-@numba.njit(cache=True)
-def _chain(local, trans, parents):  # pragma: no cover - compiled
-    """Compose local rotations (F, J, 3, 3) and translations (F, J, 3) down the tree.
-
-    A compiled loop: the per-joint NumPy version spent most of its time in call
-    overhead, which dominated the one-frame calls of online partners.
-    """
-    f, n = local.shape[0], local.shape[1]
-    rot = np.empty_like(local)
-    pos = np.empty((f, n, 3))
-    for t in range(f):
-        rot[t, 0] = local[t, 0]
-        pos[t, 0] = trans[t, 0]
-        for j in range(1, n):
-            p = parents[j]
-            for a in range(3):
-                pos[t, j, a] = pos[t, p, a]
-                for b in range(3):
-                    pos[t, j, a] += rot[t, p, a, b] * trans[t, j, b]
-                    acc = 0.0
-                    for c in range(3):
-                        acc += rot[t, p, a, c] * local[t, j, c, b]
-                    rot[t, j, a, b] = acc
-    return rot, pos
 
 
 _HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int] | None] = weakref.WeakKeyDictionary()
