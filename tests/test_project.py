@@ -70,3 +70,30 @@ def test_benchmarks_import_what_exists(script: Path) -> None:
                 assert hasattr(module, alias.name) or importlib.util.find_spec(
                     f"{node.module}.{alias.name}"
                 ), f"{script.name}: {node.module} has no {alias.name}"
+
+
+HEAVY = ("sklearn", "scipy.stats", "numba")
+START_UP = (
+    "import sys, contextlib, io\n"
+    "import markovmotion.cli as cli\n"
+    "with contextlib.redirect_stdout(io.StringIO()):\n"
+    "    cli.main(['--help'])\n"
+    "    cli.main(['chain', 'train', '--help'])\n"
+    "print(' '.join(m for m in {heavy!r} if m in sys.modules))\n"
+)
+
+
+def test_command_line_starts_without_heavy_imports() -> None:
+    """``markovmotion --help`` (every command registered, its help printed) imports neither
+    scikit-learn, scipy.stats nor numba: the commands import them when they run."""
+    code = START_UP.format(heavy=HEAVY)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert proc.stdout.split() == [], f"imported at start-up: {proc.stdout.strip()}"
+    probe = f"import markovmotion.cli.chain, sys\n{code.splitlines()[-1]}"  # the probe can fail
+    code_with_model = "import markovmotion.models\n" + probe
+    proc = subprocess.run(
+        [sys.executable, "-c", code_with_model], cwd=ROOT, capture_output=True, text=True
+    )
+    assert "sklearn" in proc.stdout.split(), proc.stderr
