@@ -125,7 +125,7 @@ def bench_decode(windows: int, dims: int = 11, n: int = 64, seed: int = 0) -> di
     previous = n // 2
     for w in range(windows):
         window = x[w : w + WINDOW]
-        log_b = ref._compute_log_likelihood(window)
+        log_b = np.ascontiguousarray(ref._compute_log_likelihood(window))  # as our buffer
         start = one_hot_log(n, previous)
         t0 = time.perf_counter_ns()
         path, _ = viterbi_kernel(start, log_t, log_b)
