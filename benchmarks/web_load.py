@@ -29,6 +29,7 @@ import argparse
 import multiprocessing
 import shutil
 import tempfile
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -79,24 +80,30 @@ def dual_hmm(folder: Path, index: MocapIndex, model: Path | None) -> tuple[Path,
     return model, "salsa_a.bvh"
 
 
+def _quantile_ms(values: list[float], q: float) -> str:
+    return f"{np.quantile(values, q):.1f}" if values else "-"
+
+
 def live_table(live, sessions: int, seconds: float, what: str) -> Table:
-    t = Table(title=f"{sessions} live sessions, {what}, {live.fps:.0f} fps, {seconds:g} s each")
+    """The live sessions' measures; '-' where no session received a frame (their failure
+    causes are printed below the tables)."""
+    rate = f"{live.fps:.0f} fps" if live.fps else "no session started"
+    t = Table(title=f"{sessions} live sessions, {what}, {rate}, {seconds:g} s each")
     t.add_column("measure")
     t.add_column("value", justify="right")
+    expected = live.fps * seconds
+    frames = live.frames or [0]
     t.add_row("sessions ended cleanly", f"{live.sessions - len(live.errors)} / {sessions}")
-    t.add_row("frames per session (min / mean)", f"{min(live.frames)} / {np.mean(live.frames):.0f}")
-    t.add_row("frames expected at the frame rate", f"{live.fps * seconds:.0f}")
-    t.add_row(
-        "real-time factor (received / expected)", f"{min(live.frames) / (live.fps * seconds):.2f}"
-    )
+    t.add_row("frames per session (min / mean)", f"{min(frames)} / {np.mean(frames):.0f}")
+    t.add_row("frames expected at the frame rate", f"{expected:.0f}")
+    factor = f"{min(frames) / expected:.2f}" if expected else "-"
+    t.add_row("real-time factor (received / expected)", factor)
     t.add_row(f"stalls (no frame for {1000 * STALL_SECONDS:.0f} ms)", str(live.stalls))
-    t.add_row("partner latency p50 (ms)", f"{np.quantile(live.latency_ms, 0.5):.2f}")
-    t.add_row("partner latency p99 (ms)", f"{np.quantile(live.latency_ms, 0.99):.2f}")
-    t.add_row(
-        "frame late against the stream's clock p99 (ms)", f"{np.quantile(live.late_ms, 0.99):.1f}"
-    )
-    t.add_row("gap between frames p99 (ms)", f"{np.quantile(live.gap_ms, 0.99):.1f}")
-    t.add_row("gap between frames max (ms)", f"{max(live.gap_ms):.1f}")
+    t.add_row("partner latency p50 (ms)", _quantile_ms(live.latency_ms, 0.5))
+    t.add_row("partner latency p99 (ms)", _quantile_ms(live.latency_ms, 0.99))
+    t.add_row("frame late against the stream's clock p99 (ms)", _quantile_ms(live.late_ms, 0.99))
+    t.add_row("gap between frames p99 (ms)", _quantile_ms(live.gap_ms, 0.99))
+    t.add_row("gap between frames max (ms)", _quantile_ms(live.gap_ms, 1.0))
     return t
 
 
@@ -152,8 +159,13 @@ def main() -> None:
     console.print(live_table(live, args.sessions, args.seconds, "stand-in partner"))
     what = f"dual HMM partner, {args.workers} server processes"
     console.print(live_table(dual, args.sessions, args.seconds, what))
-    for e in (ev.errors + live.errors + dual.errors)[:10]:
-        console.print(f"[red]error:[/] {e}")
+    for name, errors in (
+        ("evaluators", ev.errors),
+        ("stand-in", live.errors),
+        ("dual HMM", dual.errors),
+    ):
+        for cause, count in Counter(errors).most_common(5):  # every group's causes, counted
+            console.print(f"[red]error[/] ({name}, {count}x): {cause}")
 
 
 if __name__ == "__main__":

@@ -206,3 +206,40 @@ def test_windowed_decoder_from_the_learnt_pi_follows_viterbi_where_eq3_is_trappe
     middle = windowed_viterbi(start_distribution(log_pi, "middle"), log_t, log_b, 10)
     assert (prior == best).mean() > 0.95
     assert set(middle) <= {2, 3}  # never leaves the part it was started in
+
+
+def numpy_viterbi(log_pi: np.ndarray, log_a: np.ndarray, log_b: np.ndarray) -> np.ndarray:
+    """Textbook Viterbi in NumPy (Rabiner eqs. 32-35), ties to the lowest predecessor."""
+    delta = log_pi + log_b[0]
+    back = []
+    for row in log_b[1:]:
+        scores = delta[:, None] + log_a  # (from i, to j)
+        back.append(np.argmax(scores, axis=0))
+        delta = scores.max(axis=0) + row
+    path = [int(np.argmax(delta))]
+    for b in reversed(back):
+        path.append(int(b[path[-1]]))
+    return np.array(path[::-1])
+
+
+@pytest.mark.parametrize("n", [64, 256])
+@pytest.mark.parametrize("ties", [False, True])
+def test_viterbi_kernel_equals_numpy_viterbi_on_windows(n, ties):
+    """The max-plus kernel on 10-frame windows started one-hot (eq. 4) or from a full pi,
+    on random models, gives the textbook recursion's states, ties included (integer log
+    probabilities make many)."""
+    rng = np.random.default_rng(n)
+    pi, trans = random_chain(rng, n)
+    log_a, log_pi = np.log(trans), np.log(pi)
+    if ties:
+        log_a = -rng.integers(0, 3, (n, n)).astype(float)
+        log_a[rng.random((n, n)) < 0.3] = -np.inf  # forbidden transitions too
+    for w in range(20):
+        log_b = rng.integers(-4, 0, (10, n)).astype(float) if ties else rng.normal(0, 5, (10, n))
+        start = log_pi if w == 0 else one_hot_log(n, int(rng.integers(n)))
+        path, lp = viterbi(start, log_a, log_b)
+        expected = numpy_viterbi(start, log_a, log_b)
+        np.testing.assert_array_equal(path, expected)
+        score = start[path[0]] + log_b[0, path[0]]
+        score += sum(log_a[path[t - 1], path[t]] + log_b[t, path[t]] for t in range(1, 10))
+        assert lp == pytest.approx(score, rel=1e-12)

@@ -110,3 +110,22 @@ def test_forward_kinematics_matches_scipys_rotations_and_refuses_a_zero_quaterni
     m.rotations[2, 1] = 0.0
     with pytest.raises(ValueError, match="zero norm"):
         m.positions()
+
+
+def test_numpy_forward_kinematics_equals_the_compiled_loop(mocap):
+    """``compiled=False`` (NumPy, level by level, for ``info``) gives the compiled loop's
+    rotations and positions on a real take and on random rotations, and refuses a zero
+    quaternion the same way."""
+    from markovmotion.io import read_motion
+
+    walk = read_motion(mocap.root / "bandai/dataset-1/walk_active_001.bvh.gz")
+    m = make_motion(40)
+    m.rotations = np.random.default_rng(1).normal(size=m.rotations.shape)
+    for motion in (walk, m):
+        rot, pos = motion.global_transforms()
+        rot_np, pos_np = motion.global_transforms(compiled=False)
+        np.testing.assert_allclose(rot_np, rot, atol=1e-12)
+        np.testing.assert_allclose(pos_np, pos, atol=1e-9)
+    m.rotations[3, 2] = 0.0
+    with pytest.raises(ValueError, match="zero norm"):
+        m.positions(compiled=False)

@@ -84,3 +84,55 @@ def test_ci_runs_exactly_the_readme_test_command() -> None:
     assert command.startswith("scripts/install-test-browser && ")
     conftest = (ROOT / "tests/conftest.py").read_text()
     assert "apt-get install" not in conftest and "subprocess" not in conftest
+
+
+HEAVY = ("sklearn", "scipy.stats", "numba")
+START_UP = (
+    "import sys, contextlib, io\n"
+    "import markovmotion.cli as cli\n"
+    "with contextlib.redirect_stdout(io.StringIO()):\n"
+    "    cli.main(['--help'])\n"
+    "    cli.main(['chain', 'train', '--help'])\n"
+    "print(' '.join(m for m in {heavy!r} if m in sys.modules))\n"
+)
+
+
+def test_command_line_starts_without_heavy_imports() -> None:
+    """``markovmotion --help`` (every command registered, its help printed) imports neither
+    scikit-learn, scipy.stats nor numba: the commands import them when they run."""
+    code = START_UP.format(heavy=HEAVY)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert proc.stdout.split() == [], f"imported at start-up: {proc.stdout.strip()}"
+    probe = f"import markovmotion.cli.chain, sys\n{code.splitlines()[-1]}"  # the probe can fail
+    code_with_model = "import markovmotion.models\n" + probe
+    proc = subprocess.run(
+        [sys.executable, "-c", code_with_model], cwd=ROOT, capture_output=True, text=True
+    )
+    assert "sklearn" in proc.stdout.split(), proc.stderr
+
+
+def test_every_numba_function_is_cached() -> None:
+    """Every ``numba.njit`` / ``jit`` / ``vectorize`` in the package and benchmarks says
+    ``cache=True``: numba compiles once per machine, not once per run."""
+    missing, seen = [], 0
+    for path in [*(ROOT / "src").rglob("*.py"), *(ROOT / "benchmarks").glob("*.py")]:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            for dec in node.decorator_list:
+                call = dec if isinstance(dec, ast.Call) else None
+                func = call.func if call is not None else dec
+                name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+                if name not in ("njit", "jit", "vectorize", "guvectorize"):
+                    continue
+                seen += 1
+                cached = call is not None and any(
+                    k.arg == "cache" and isinstance(k.value, ast.Constant) and k.value.value is True
+                    for k in call.keywords
+                )
+                if not cached:
+                    missing.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert seen > 10  # the scan finds the compiled recursions
+    assert not missing, "numba functions without cache=True: " + ", ".join(missing)

@@ -695,3 +695,22 @@ def test_live_partner_page_with_a_behaviour_chain(tmp_path, mocap, page):
         assert drawn["blue"] > 50 and drawn["orange"] > 50
         page.screenshot(path=SHOTS / "live-partner-chain.png")
         page.click("#stop")
+
+
+def test_load_table_of_sessions_that_all_failed_reports_without_dividing_by_zero():
+    """A run where no live session started (fps unknown, no frames) still prints its table
+    (the causes are printed beneath it), instead of a ZeroDivisionError."""
+    import importlib.util
+
+    from markovmotion.web.loadtest import LiveLoad
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("web_load", root / "benchmarks/web_load.py")
+    web_load = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(web_load)
+    failed = LiveLoad(sessions=3, frames=[0, 0, 0], errors=["ConnectionClosedError: 1011"] * 3)
+    table = web_load.live_table(failed, 3, 30.0, "dual HMM partner")
+    values = dict(zip(table.columns[0]._cells, table.columns[1]._cells, strict=True))
+    assert values["sessions ended cleanly"] == "0 / 3"
+    assert values["real-time factor (received / expected)"] == "-"
+    assert "no session started" in table.title

@@ -135,27 +135,40 @@ def _transition_counts_scaling(alpha, beta, transmat, frameprob):  # pragma: no 
 
 
 @numba.njit(cache=True, nogil=True)
-def viterbi_kernel(log_startprob, log_transmat_t, log_frameprob):  # pragma: no cover - numba
-    """Compiled Viterbi without checks, for hot loops: the log transition matrix comes
-    transposed (C-contiguous, predecessors along rows); returns (path, log probability)."""
+def viterbi_kernel(log_startprob, log_transmat, log_frameprob):  # pragma: no cover - numba
+    """Compiled Viterbi without checks, for hot loops (the windowed decoder's every frame);
+    returns (path, log probability).
+
+    delta_t(j) = max_i [delta_{t-1}(i) + log a_ij] + log b_j(o_t) (dual-HMM paper eq. 2,
+    Rabiner's recursion in log space) as a max-plus product swept over predecessors i:
+    each row log a_i. (C-contiguous) updates all N destinations at once, a branch-free
+    select that LLVM turns into SIMD max and blend, the argmax kept as an index array.
+    Rows with delta_{t-1}(i) = -inf are skipped (they can never win), so the first
+    transition of a window started one-hot (eq. 4) costs N operations, not N^2. Ties go
+    to the lowest i, as a scalar scan with a strict ``>`` would."""
     n_t, n = log_frameprob.shape
     delta = np.empty(n)
-    new = np.empty(n)
+    best = np.empty(n)
     back = np.empty((n_t, n), dtype=np.int64)
     for j in range(n):
         delta[j] = log_startprob[j] + log_frameprob[0, j]
     for t in range(1, n_t):
+        arg = back[t]
         for j in range(n):
-            best = -np.inf
-            arg = 0
-            for i in range(n):
-                s = delta[i] + log_transmat_t[j, i]
-                if s > best:
-                    best = s
-                    arg = i
-            back[t, j] = arg
-            new[j] = best + log_frameprob[t, j]
-        delta[:] = new
+            best[j] = -np.inf
+            arg[j] = 0
+        for i in range(n):
+            d = delta[i]
+            if d == -np.inf:
+                continue
+            row = log_transmat[i]
+            for j in range(n):
+                s = d + row[j]
+                better = s > best[j]
+                best[j] = s if better else best[j]
+                arg[j] = i if better else arg[j]
+        for j in range(n):
+            delta[j] = best[j] + log_frameprob[t, j]
     path = np.empty(n_t, dtype=np.int64)
     path[n_t - 1] = np.argmax(delta)
     for t in range(n_t - 1, 0, -1):
@@ -265,6 +278,6 @@ def viterbi(
     """
     log_startprob = np.ascontiguousarray(log_startprob, dtype=float)
     log_frameprob = _check(log_frameprob, len(log_startprob))
-    log_transmat_t = np.ascontiguousarray(np.asarray(log_transmat, dtype=float).T)
-    path, lp = viterbi_kernel(log_startprob, log_transmat_t, log_frameprob)
+    log_transmat = np.ascontiguousarray(log_transmat, dtype=float)
+    path, lp = viterbi_kernel(log_startprob, log_transmat, log_frameprob)
     return path, float(lp)

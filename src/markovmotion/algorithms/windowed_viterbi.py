@@ -70,7 +70,7 @@ class WindowedViterbi:
         self.window = int(window)
         self.lag = self.window - 2
         self._log_start = np.ascontiguousarray(log_startprob, dtype=float)
-        self._log_transmat_t = np.ascontiguousarray(np.asarray(log_transmat, dtype=float).T)
+        self._log_transmat = np.ascontiguousarray(log_transmat, dtype=float)
         n = len(self._log_start)
         self._buffer = np.zeros((self.window, n))
         self._count = 0
@@ -88,12 +88,12 @@ class WindowedViterbi:
         if self._count < self.window:
             return []
         if self._count == self.window:
-            self._path, _ = viterbi_kernel(self._log_start, self._log_transmat_t, self._buffer)
+            self._path, _ = viterbi_kernel(self._log_start, self._log_transmat, self._buffer)
             return [int(self._path[0]), int(self._path[1])]
         keep = self._path[1]
         self._one_hot[:] = -np.inf
         self._one_hot[keep] = 0.0
-        self._path, _ = viterbi_kernel(self._one_hot, self._log_transmat_t, self._buffer)
+        self._path, _ = viterbi_kernel(self._one_hot, self._log_transmat, self._buffer)
         return [int(self._path[1])]
 
     @property
@@ -107,7 +107,7 @@ class WindowedViterbi:
             return []
         if self._count < self.window:
             path, _ = viterbi_kernel(
-                self._log_start, self._log_transmat_t, self._buffer[: self._count]
+                self._log_start, self._log_transmat, self._buffer[: self._count]
             )
             return [int(q) for q in path]
         return [int(q) for q in self._path[2:]]

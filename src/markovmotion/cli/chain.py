@@ -18,17 +18,17 @@ from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs
-from markovmotion.errors import DataNotFoundError, MarkovMotionError
-from markovmotion.evaluate.chain import SOURCES, evaluate_model
-from markovmotion.io import write_motion
-from markovmotion.io.files import base_suffix
-from markovmotion.models.chain.condensation import (
+from markovmotion.defaults import (
+    DEFAULT_PROTOTYPES,
     DEFAULT_RESPONSE,
     DEFAULT_RESYNC,
     DEFAULT_SIGMA,
     RESPONSES,
+    SOURCES,
 )
-from markovmotion.models.chain.partner import DEFAULT_PROTOTYPES, KINDS, VirtualPartner
+from markovmotion.errors import DataNotFoundError, MarkovMotionError
+from markovmotion.io import write_motion
+from markovmotion.io.files import base_suffix
 from markovmotion.progress import err_console, track
 
 SIGMA = typer.Option(DEFAULT_SIGMA, min=1e-6, help="Width of the likelihood, eq. 20 (paper: 0.05).")
@@ -61,6 +61,7 @@ def _training_takes(data: Path | None, source: str, label: str, kind: str | None
     says what it leaves out), or tracked silhouette takes."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
+        from markovmotion.models.chain.partner import KINDS
 
         index = MocapIndex.load(data)
         pairs, _ = choose_kind(
@@ -100,6 +101,8 @@ def train(
     kind: str = kind_option(),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded)."""
+    from markovmotion.models.chain.partner import VirtualPartner
+
     _check_source(source)
     takes = _training_takes(data, source, label, kind)
     model = VirtualPartner(
@@ -150,6 +153,8 @@ def respond(
     ),
 ) -> None:
     """Drive a virtual partner from a real person's motion or video."""
+    from markovmotion.models.chain.partner import VirtualPartner
+
     _check_response(response)
     partner_model = VirtualPartner.load(model)
     source = partner_model.source
@@ -225,6 +230,9 @@ def evaluate(
     With --test, the two-person takes of that INDEX.csv that fit the model, minus those it
     trained on (by content); without, the collection's held-out takes.
     """
+    from markovmotion.evaluate.chain import evaluate_model
+    from markovmotion.models.chain.partner import VirtualPartner
+
     _check_response(response)
     partner_model = VirtualPartner.load(model)
     dual = None

@@ -34,7 +34,7 @@ def info(
         return
     motion = read_listed_motion(file, fps=fps)
     sk = motion.skeleton
-    pos = motion.positions()
+    pos = motion.positions(compiled=False)  # one call: not worth importing numba
     extent = pos.reshape(-1, 3).max(0) - pos.reshape(-1, 3).min(0)
     console.print(f"[bold]{file}[/]", highlight=False)
     table = Table(show_header=False)

@@ -42,6 +42,7 @@ from threadpoolctl import threadpool_limits
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.kinds import choose_kind
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.defaults import SOURCES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.evaluate.takes import test_takes
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
@@ -56,8 +57,6 @@ from markovmotion.progress import err_console, track
 
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
-
-SOURCES = ("mocap", "silhouette")
 
 
 def mocap_takes(

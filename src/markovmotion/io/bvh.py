@@ -23,7 +23,6 @@ import os
 from collections import defaultdict, deque
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
 from markovmotion.core.rotations import euler_to_quat
@@ -509,6 +508,8 @@ def read_bvh_stream(
 
 def motion_to_channels(motion: Motion, length_unit: str = "cm") -> np.ndarray:
     """Channel values (F, C) of ``motion`` in its skeleton's BVH channel layout."""
+    from scipy.spatial.transform import Rotation
+
     sk = motion.skeleton
     scale = _unit_scale(length_unit)
     f = motion.n_frames

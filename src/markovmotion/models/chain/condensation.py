@@ -28,24 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markovmotion.defaults import (  # the command line's defaults, defined there
+    DEFAULT_RESPONSE,
+    DEFAULT_RESYNC,
+    DEFAULT_SIGMA,
+    RESPONSES,
+)
 from markovmotion.models.chain.behaviour_chain import BehaviourChain, Hypotheses
-
-RESPONSES = ("ml", "map", "mean")
-#: The response of :class:`MultipleHypotheses` unless told: the paper's maximum-likelihood
-#: hypothesis. With the default 40 + 40 prototypes it beats the weighted mean by
-#: leave-one-take-out over the eight salsa training takes (99.7 against 100.9 mm in 3-D;
-#: with 300 + 300 the weighted mean was ahead, 98.2 against 101.2; see the README).
-DEFAULT_RESPONSE = "ml"
-#: sigma of the likelihood (eq. 20) unless told. The paper's 0.05 (for its
-#: handshake silhouettes) collapses the 200 salsa hypotheses onto one lineage,
-#: so the weighted mean is barely more than the ML hypothesis; 0.15 was the best
-#: of 0.05-1 by leave-one-take-out over the eight salsa training takes in 3-D
-#: (see the README), and no worse on silhouettes.
-DEFAULT_SIGMA = 0.15
-#: Re-synchronisation margin of :class:`SingleHypothesis` unless told (inf: never, the
-#: paper's scheme). 0 (re-enter whenever a fresh chain state matches better) was the best
-#: of 0, 0.02, 0.05, 0.1 and inf by leave-one-take-out over the eight salsa training takes.
-DEFAULT_RESYNC = 0.0
 
 
 def shape_errors(

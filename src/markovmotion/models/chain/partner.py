@@ -23,6 +23,7 @@ import numpy as np
 from markovmotion.algorithms.kinematics import fit_rotations
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.defaults import DEFAULT_PROTOTYPES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.base import FeaturePipeline
 from markovmotion.features.joint_shape import (
@@ -53,10 +54,6 @@ from markovmotion.state import (
     require_types,
 )
 
-#: State and behaviour prototypes unless told. The paper's 300 each (for its handshakes)
-#: give partners that lose to the mean shape on the eight salsa training takes; 40 each
-#: was the best of 20-300 by leave-one-take-out over them (see the README).
-DEFAULT_PROTOTYPES = 40
 #: The paper's frame rate: motion-capture pairs are resampled to it for training.
 DEFAULT_FPS = 25.0
 
