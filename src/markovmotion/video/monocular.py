@@ -152,7 +152,7 @@ def pose_estimator(static: bool = False):
     except ImportError:
         raise MotionFormatError(
             "--method monocular",
-            f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py flatbuffers 'protobuf<5')",
+            f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py attrs flatbuffers 'protobuf<5')",
         ) from None
     return pose.Pose(
         static_image_mode=static,
