@@ -143,34 +143,27 @@ def right_hand(names: Sequence[str]) -> int | None:
 
 
 def hand_gaps(
-    model: DualHMM, a: Motion | Markers, b: Motion | Markers, generated: dict
+    model: DualHMM, a: np.ndarray, b: np.ndarray, generated: dict[str, np.ndarray]
 ) -> dict[str, np.ndarray] | None:
     """How far A's right hand is from B's (mm) in the frames where the real hands touch
-    (closer than :data:`CONTACT_MM`): ``"real"`` and each generated B's. None when the take
-    has no such frame or the people have no right hand by name."""
+    (closer than :data:`CONTACT_MM`): ``"real"`` and each generated B's. ``a``, ``b`` and
+    ``generated`` are the positions the model compares people by (:meth:`DualHMM.body_positions`).
+    None when the take has no such frame or the people have no right hand by name."""
     if model.uses_markers:
         names = list(model.marker_names_b_)
-        k = right_hand(names)
-        try:
-            where_a = model.input_markers(a).select([names[k]]).positions[:, 0]
-        except (KeyError, TypeError, ValueError):  # no right hand by name, or not A's
-            where_a = None
     else:
         names = list(BODY_POINTS) if model.points == "body" else list(model.skeleton_b_.names)
-        k = right_hand(names)
-        where_a = model.body_positions(a)[:, k] if k is not None else None
-    if where_a is None:
+    k = right_hand(names)
+    if k is None:
         return None
-    truth = model.body_positions(b)[:, k]
-    real = np.linalg.norm(truth - where_a, axis=-1)
+    real = np.linalg.norm(b[:, k] - a[:, k], axis=-1)
     contact = real < CONTACT_MM
     if not contact.any():
         return None
     out = {"real": real[contact]}
     for key in ("standard", "windowed", "nearest_neighbour", "gmr"):
         if key in generated:
-            hand = model.body_positions(generated[key])[:, k]
-            out[key] = np.linalg.norm(hand - where_a, axis=-1)[contact]
+            out[key] = np.linalg.norm(generated[key][:, k] - a[:, k], axis=-1)[contact]
     return out
 
 
@@ -280,21 +273,21 @@ def evaluate_pair(
     truth, truth_pose = model.body_positions(b), model.body_positions(b, body_centred=True)
     res = PairResult(name, label, model.fps)
     res.jumps["real"] = jump_sizes(truth)
+    where = {k: model.body_positions(m) for k, m in generated.items()}  # once per output
     for k, m in generated.items():
-        where = model.body_positions(m)
-        res.errors[k] = trial_errors(where, truth)
+        res.errors[k] = trial_errors(where[k], truth)
         res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)
-        res.jumps[k] = jump_sizes(where)
+        res.jumps[k] = jump_sizes(where[k])
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
     where_a = model.body_positions(a)
-    for key, m in (("real", b), ("windowed", generated["windowed"])):
-        res.windows[key] = observer_windows(where_a, model.body_positions(m), origin, yaw)
-    gaps = hand_gaps(model, a, b, generated)
+    for key, points in (("real", truth), ("windowed", where["windowed"])):
+        res.windows[key] = observer_windows(where_a, points, origin, yaw)
+    gaps = hand_gaps(model, where_a, truth, where)
     if gaps is not None:
         res.hand_gaps = gaps
     lag = model.window - 1
-    shown = model.body_positions(generated["windowed"])[: len(truth) - lag]
+    shown = where["windowed"][: len(truth) - lag]
     res.errors["windowed_as_shown"] = trial_errors(shown, truth[lag:])
     res.latencies_us = step_latencies(model, xa)
     return res
