@@ -38,6 +38,14 @@ CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = ranged(
     "window", 19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
+PLACE_MEMORY = ranged(
+    "window",
+    0,
+    min=0,
+    max=3000,
+    help="Frames before each frame over which A's ground frame, through which B is placed, "
+    "is averaged (0: the placement window's; 300 chosen for new people: docs/hmm.md).",
+)
 BLEND_WINDOW = ranged(
     "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
 )
@@ -127,7 +135,8 @@ MODEL_OPTIONS = {
     **{
         k: k
         for k in (
-            "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
+            "mode", "observation", "candidates", "placement_window", "place_memory", "blend_window",
+            "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
             "normalise", "output",
             "covariance_type", "var_floor",
@@ -160,6 +169,7 @@ def train(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    place_memory: int = PLACE_MEMORY,
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
@@ -445,6 +455,7 @@ def crossval(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    place_memory: int = PLACE_MEMORY,
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
@@ -462,10 +473,11 @@ def crossval(
     seed: int = SEED,
     jobs: int = JOBS,
     plots: Path = typer.Option(None, help="Folder for the per-frame error plots (Figs. 6-8)."),
-    choose_placement: str = typer.Option(
+    choose: str = typer.Option(
         None,
-        help="Comma-separated placement windows: each fold picks one on the other takes alone "
-        "(nested leave-one-take-out; ~25 min for 1,9,15,19 on salsa).",
+        help="Settings each fold chooses among on its training takes alone (nested "
+        "leave-one-out, by windowed world error): 'param=v1,v2;param=v1,v2', every "
+        "combination, e.g. 'place_memory=0,300;n_states=16,32' (docs/hmm.md).",
     ),
     json_out: bool = JSON,
     kind: str = KIND,
@@ -475,12 +487,15 @@ def crossval(
     subject; one take when all come from one pair), test on those, for every pair."""
     import joblib
 
-    from markovmotion.evaluate.hmm import crossval_index
+    from markovmotion.evaluate.hmm import crossval_index, parse_grid
 
     model = new_model(locals())
-    windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
+    try:
+        grid = parse_grid(choose) if choose else None
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--choose") from None
     with joblib.parallel_config(n_jobs=jobs or -1):
-        report, written = crossval_index(model, data, _split(labels), plots, windows, kind, roles)
+        report, written = crossval_index(model, data, _split(labels), plots, grid, kind, roles)
     _report(report, written, json_out)
 
 

@@ -79,8 +79,9 @@ class Partner:
         self._emission = (hmm.means_, prec, log_det)
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
         self._half = min(model.placement_window // 2, self.lag)
-        # where A stood in the slice's frames and the ``half`` before
-        self._places: deque = deque(maxlen=window + self._half)
+        self._before = max(self._half, int(getattr(model, "place_memory", 0)))
+        # where A stood in the slice's frames and the ``before`` (place_memory) before them
+        self._places: deque = deque(maxlen=window + self._before)
         self._shown_count = 0
         self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
@@ -255,11 +256,11 @@ class Partner:
         that have arrived (:func:`~markovmotion.models.hmm.trellis.smooth_place`, as
         :meth:`DualHMM.respond` does)."""
         first = self._frames_in - len(self._places)  # stream frame of self._places[0]
-        lo = max(frame - self._half, first)
+        lo = max(frame - self._before, first)
         hi = min(frame + self._half, self._frames_in - 1)
         near = [self._places[f - first] for f in range(lo, hi + 1)]
         origin, yaw = smooth_place(
-            np.array([p[0] for p in near]), np.array([p[1] for p in near]), self._half
+            np.array([p[0] for p in near]), np.array([p[1] for p in near]), self._half, self._before
         )
         return origin[frame - lo], float(yaw[frame - lo])
 
