@@ -534,13 +534,13 @@ def _print_table(report: dict) -> None:
         **report["per_pair"],
     }
     for name, r in rows.items():
-        lat, paper, body = r["latency_us"], r["trellis"]["paper"], r["body_centred"]
+        lat, paper, body = r["latency_us"], r["trellis"].get("paper"), r["body_centred"]
         gap = r.get("hand_gap_in_contact_median_mm")
         table.add_row(
             name,
             *(f"{r[c]:.1f}" for c in cols),
             "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
-            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}",
+            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}" if paper else "-",
             *(f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",
             f"{lat['median']:.0f}/{lat['p99']:.0f}",

@@ -253,7 +253,8 @@ def evaluate_pair(
 ) -> PairResult:
     """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take; standard
     and windowed through the model's trellis, and (keys ``"<trellis>/standard"`` ...) through
-    each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
+    each of :data:`~markovmotion.models.hmm.trellis.TRELLISES` (B by regression: the model's
+    own only, as it passes no trellis)."""
     baselines = baselines or Baselines(model)
     a, b = model._rate(a), model._rate(b)
     origin, yaw = model.placing(a)  # the baselines are placed as the windowed partner is
@@ -263,7 +264,8 @@ def evaluate_pair(
         generated["gmr"] = baselines.regression(xa, origin, yaw)
     own = model.trellis
     try:
-        for kind in TRELLISES:
+        # B by regression passes no trellis: one answer per method
+        for kind in TRELLISES if model.output == "frames" else (own,):
             model.set_params(trellis=kind)
             for method in ("standard", "windowed"):
                 generated[f"{kind}/{method}"] = model.respond(a, method)
@@ -323,6 +325,7 @@ def _summary(results: Sequence[PairResult]) -> dict:
         kind: {f"{m}_mm": mean(f"{kind}/{m}") for m in ("standard", "windowed")}
         | _jumps(results, (f"{kind}/standard", f"{kind}/windowed"))
         for kind in TRELLISES
+        if all(f"{kind}/standard" in r.errors for r in results)
     }
     out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in methods}
     touching = [r for r in results if r.hand_gaps]
