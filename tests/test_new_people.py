@@ -311,3 +311,49 @@ def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people
         fold_inner, i = seen[i : i + 2 * (len(pairs) - 1)], i + 2 * (len(pairs) - 1) + 1
         assert all(group not in s for s in fold_inner)
         assert seen[i - 1] == pairs - {group}
+
+
+def _cli(main, args: list[str]) -> int:
+    """The exit code of the command line on ``args``."""
+    try:
+        main(args)
+    except SystemExit as exit_:
+        return exit_.code or 0
+    return 0
+
+
+def test_train_learns_both_roles_and_chooses_settings_by_leaving_people_out(tmp_path, mocap):
+    """``dualhmm train --roles both`` learns every take twice (it once learnt one role while
+    saying both); ``--choose`` picks among settings by leaving one pair of people out on the
+    training takes and records the pick and every setting's error in the model file."""
+    from markovmotion.cli import main
+
+    base = ["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3"]
+    base += ["--n-iter", "3"]
+    frames = {}
+    for roles in ("one", "both"):
+        out = tmp_path / f"{roles}.npz"
+        assert _cli(main, [*base, "--roles", roles, "--out", str(out)]) == 0
+        model = Model.load(out)
+        frames[roles] = len(model.train_a_)
+        assert model.roles_ == roles
+    assert frames["both"] == 2 * frames["one"]
+    out = tmp_path / "chosen.npz"
+    assert (
+        _cli(main, [*base, "--choose", "roles=one,both;blend_window=1,9", "--out", str(out)]) == 0
+    )
+    model = Model.load(out)
+    inner = model.chosen_["inner_mm"]
+    assert len(inner) == 4 and model.chosen_["settings"]["roles"] == model.roles_
+    pick = min(inner, key=inner.get)
+    assert pick == evaluation._label(model.chosen_["settings"])
+    assert model.blend_window == model.chosen_["settings"]["blend_window"]
+    assert len(model.train_a_) == frames[model.roles_]
+
+
+def test_a_bad_choice_of_settings_is_one_line(capsys):
+    from markovmotion.cli import main
+
+    assert _cli(main, ["dualhmm", "crossval", "--choose", "states=3"]) == 2
+    err = capsys.readouterr().err
+    assert "--choose" in err and "Traceback" not in err

@@ -46,6 +46,13 @@ PLACE_MEMORY = ranged(
     help="Frames before each frame over which A's ground frame, through which B is placed, "
     "is averaged (0: the placement window's; 300 chosen for new people: docs/hmm.md).",
 )
+CHOOSE = typer.Option(
+    None,
+    help="Settings to choose among by leaving one pair of people out on the training takes "
+    "alone (windowed world error): 'param=v1,v2;param=v1,v2', every combination, e.g. "
+    "'roles=one,both;output=frames,regression' (crossval: each fold chooses on its own "
+    "training takes, nested; docs/hmm.md).",
+)
 BLEND_WINDOW = ranged(
     "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
 )
@@ -188,6 +195,7 @@ def train(
     jobs: int = JOBS,
     kind: str = KIND,
     roles: str = ROLES,
+    choose: str = CHOOSE,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
@@ -197,12 +205,23 @@ def train(
     check_model_output(out)
     start = time.perf_counter()
     model = new_model(locals())
+    grid = _grid(choose)
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
-        model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials), kind)
+        model, extras, pairs = fit_on_index(
+            model, data, _split(labels), _split(test_trials), kind, roles, grid
+        )
     model.save(out, **extras)
+    if "chosen" in extras:
+        inner = extras["chosen"]["inner_mm"]
+        err_console.print(
+            f"chose {', '.join(f'{k}={v}' for k, v in extras['chosen']['settings'].items())} "
+            f"by leaving one pair of people out: windowed world error {min(inner.values()):.1f} mm "
+            f"(worst of {len(inner)}: {max(inner.values()):.1f} mm)",
+            highlight=False,
+        )
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
-    both = " in both roles" if roles == "both" else ""
+    both = " in both roles" if extras["roles"] == "both" else ""
     err_console.print(
         f"wrote {out}: {len(pairs)} takes{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
@@ -473,12 +492,7 @@ def crossval(
     seed: int = SEED,
     jobs: int = JOBS,
     plots: Path = typer.Option(None, help="Folder for the per-frame error plots (Figs. 6-8)."),
-    choose: str = typer.Option(
-        None,
-        help="Settings each fold chooses among on its training takes alone (nested "
-        "leave-one-out, by windowed world error): 'param=v1,v2;param=v1,v2', every "
-        "combination, e.g. 'place_memory=0,300;n_states=16,32' (docs/hmm.md).",
-    ),
+    choose: str = CHOOSE,
     json_out: bool = JSON,
     kind: str = KIND,
     roles: str = ROLES,
@@ -487,16 +501,23 @@ def crossval(
     subject; one take when all come from one pair), test on those, for every pair."""
     import joblib
 
-    from markovmotion.evaluate.hmm import crossval_index, parse_grid
+    from markovmotion.evaluate.hmm import crossval_index
 
     model = new_model(locals())
-    try:
-        grid = parse_grid(choose) if choose else None
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--choose") from None
+    grid = _grid(choose)
     with joblib.parallel_config(n_jobs=jobs or -1):
         report, written = crossval_index(model, data, _split(labels), plots, grid, kind, roles)
     _report(report, written, json_out)
+
+
+def _grid(choose: str | None) -> list[dict] | None:
+    """The settings of ``--choose`` (:func:`~markovmotion.evaluate.hmm.parse_grid`)."""
+    from markovmotion.evaluate.hmm import parse_grid
+
+    try:
+        return parse_grid(choose) if choose else None
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--choose") from None
 
 
 def _report(report: dict, written: list[Path], json_out: bool) -> None:

@@ -580,18 +580,25 @@ def fit_on_index(
     test_trials: Sequence[str] | None = None,
     kind: str | None = None,
     roles: str = "one",
+    grid: Sequence[dict] | None = None,
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
     ``test_trials``, of one kind and set (:func:`load_pairs`), in both roles with
-    ``roles="both"`` (:func:`both_roles`). Returns the model, the
-    extras to save with it (``data_index``: the index, ``held_out_files``: the held-out
-    takes' files, which ``evaluate`` without ``--test`` evaluates on) and the training
-    pairs."""
+    ``roles="both"`` (:func:`both_roles`). With ``grid``, the settings are first chosen
+    among it by leave-one-pair-of-people-out on these takes (:func:`choose_settings`).
+    Returns the model, the extras to save with it (``data_index``: the index,
+    ``held_out_files``: the held-out takes' files, which ``evaluate`` without ``--test``
+    evaluates on; ``roles``; ``chosen``, with ``grid``) and the training pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
     pairs, motions = load_pairs(index, pairs, kind)
-    takes = [("", a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
+    takes = [(a.name, a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
     people = [a.subject for a, _ in pairs]
+    chosen: dict = {}
+    if grid:
+        chosen = choose_settings(takes, model, grid, people, roles)
+        roles = _roles(chosen["settings"], roles)
+        model.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
     if roles == "both":
         takes, people = both_roles(takes), people + people
     model.fit(
@@ -602,7 +609,8 @@ def fit_on_index(
         for a, b in select_pairs(index, labels, test_trials, held_out=True):
             if a.kind == pairs[0][0].kind:
                 held += [a.file, b.file]
-    return model, {"data_index": index_record(index), "held_out_files": held}, pairs
+    extras = {"data_index": index_record(index), "held_out_files": held, "roles": roles}
+    return model, extras | ({"chosen": chosen} if chosen else {}), pairs
 
 
 def evaluation_pairs(
