@@ -510,6 +510,7 @@ def cross_validate(
     grid: Sequence[dict] | None = None,
     people: Sequence[str] | None = None,
     roles: str = "one",
+    method: str = "windowed",
 ) -> tuple[list[PairResult], list[Path]]:
     """Leave-one-out over the takes ``(name, label, A, B)``: each is evaluated by a copy of
     ``model`` (same hyper-parameters) trained on the others.
@@ -520,8 +521,8 @@ def cross_validate(
     seen); otherwise one take at a time. ``roles="both"``: each fold also learns from its
     training takes with the roles swapped (:func:`both_roles`). With ``grid`` (settings,
     :func:`parse_grid`), each copy's settings are first chosen among them on its training
-    takes alone (:func:`choose_settings`: nested cross-validation), kept in each result's
-    ``chosen``."""
+    takes alone (:func:`choose_settings` by ``method``'s error: nested cross-validation),
+    kept in each result's ``chosen``."""
     if roles not in ROLES:
         raise ValueError(f"roles must be one of {', '.join(ROLES)}, got {roles!r}")
     groups = _groups(people, len(takes))
@@ -532,7 +533,7 @@ def cross_validate(
         who = [g for g in groups if g != group]
         fold, chosen, learn = clone(model), {}, roles
         if grid:
-            chosen = choose_settings(rest, fold, grid, who, roles)
+            chosen = choose_settings(rest, fold, grid, who, roles, method)
             learn = _roles(chosen["settings"], roles)
             fold.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
         if learn == "both":
