@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from itertools import islice
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,7 +29,7 @@ from markovmotion.features import BodyMotion
 from markovmotion.features.markers import MarkerFeatures
 from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.models.hmm.gaussian import safe_log
-from markovmotion.models.hmm.trellis import blend_positions, smooth_place
+from markovmotion.models.hmm.trellis import blend_positions
 from markovmotion.progress import err_console
 
 if TYPE_CHECKING:
@@ -253,16 +254,18 @@ class Partner:
 
     def _place_of(self, frame: int) -> tuple[np.ndarray, float]:
         """A's place for B's frame ``frame`` of the stream, averaged over the frames around it
-        that have arrived (:func:`~markovmotion.models.hmm.trellis.smooth_place`, as
-        :meth:`DualHMM.respond` does)."""
+        that have arrived (the one frame of
+        :func:`~markovmotion.models.hmm.trellis.smooth_place`, as :meth:`DualHMM.respond`
+        does)."""
         first = self._frames_in - len(self._places)  # stream frame of self._places[0]
         lo = max(frame - self._before, first)
         hi = min(frame + self._half, self._frames_in - 1)
-        near = [self._places[f - first] for f in range(lo, hi + 1)]
-        origin, yaw = smooth_place(
-            np.array([p[0] for p in near]), np.array([p[1] for p in near]), self._half, self._before
-        )
-        return origin[frame - lo], float(yaw[frame - lo])
+        near = list(islice(self._places, lo - first, hi - first + 1))  # a deque indexes in O(n)
+        if len(near) == 1:
+            return near[0]
+        origin = np.mean([p[0] for p in near], axis=0)
+        yaw = np.array([p[1] for p in near])
+        return origin, float(np.arctan2(np.sin(yaw).mean(), np.cos(yaw).mean()))
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""
