@@ -93,3 +93,12 @@ def test_marker_names_that_are_body_points_join_into_a_stick_figure():
     }
     assert point_bones(["m01", "m02", "m03"]).shape == (0, 2)  # nothing known: a point cloud
     assert point_bones(["Head"]).shape == (0, 2)
+
+
+def test_the_right_hand_is_found_by_body_point_names():
+    from markovmotion.evaluate.hmm import right_hand
+
+    assert right_hand(("TORSO", "L_HAND", "R_HAND")) == 2
+    assert right_hand(("LHand", "RHand")) == 1
+    assert right_hand(("left_wrist", "right_wrist")) == 1
+    assert right_hand(("HEAD", "L_HAND")) is None  # no right hand: no hand gap

@@ -104,17 +104,24 @@ PARENT: dict[str, str] = {
 }
 
 
-def point_bones(names: Sequence[str]) -> np.ndarray:
-    """(B, 2) rows (child, parent) of indices into ``names`` joining the named points that
-    are body points (:data:`SYNONYMS`: ``R_SHOULDER``, ``LELB``-style names are not all
-    found) along the body's tree, skipping absent points (a head with no neck hangs from the
-    chest); empty when fewer than two are found. For drawing marker sets as stick figures."""
+def find_points(names: Sequence[str]) -> dict[str, int]:
+    """The body points (:data:`SYNONYMS`) among ``names`` (joint or marker names), each
+    point's index into ``names`` (the first name it is found by; a name serves one point)."""
     found: dict[str, int] = {}
     wanted = {normalise(n): i for i, n in reversed(list(enumerate(names)))}
     for point, synonyms in SYNONYMS.items():
         hit = next((wanted[w] for w in synonyms if w in wanted), None)
         if hit is not None and hit not in found.values():
             found[point] = hit
+    return found
+
+
+def point_bones(names: Sequence[str]) -> np.ndarray:
+    """(B, 2) rows (child, parent) of indices into ``names`` joining the named points that
+    are body points (:data:`SYNONYMS`: ``R_SHOULDER``, ``LELB``-style names are not all
+    found) along the body's tree, skipping absent points (a head with no neck hangs from the
+    chest); empty when fewer than two are found. For drawing marker sets as stick figures."""
+    found = find_points(names)
     rows = []
     for point, index in found.items():
         parent = PARENT.get(point)
