@@ -56,6 +56,7 @@ from markovmotion.web.library import (
     read_upload,
     shown,
 )
+from markovmotion.web.camera import camera_session
 from markovmotion.web.live import PartnerFactory, live_session
 from markovmotion.web.security import UPLOAD_SLACK, Guard
 
@@ -98,11 +99,17 @@ async def _bounded(stream: AsyncIterator[bytes], limit: int) -> AsyncIterator[by
         yield chunk
 
 
-NAV = (("/viewer", "Viewer"), ("/live", "Live partner"), ("/evaluation", "Evaluation"))
+NAV = (
+    ("/viewer", "Viewer"),
+    ("/live", "Live partner"),
+    ("/camera", "Camera partner"),
+    ("/evaluation", "Evaluation"),
+)
 PAGES = {
     "/": ("index", "Home"),
     "/viewer": ("viewer", "Viewer"),
     "/live": ("live", "Live partner"),
+    "/camera": ("camera", "Camera partner"),
     "/evaluation": ("evaluation-start", "Evaluation"),
 }
 """Pages without parameters: path -> (file in ``pages/``, title)."""
@@ -291,6 +298,12 @@ def create_app(
     @app.websocket("/ws/live")
     async def live_ws(ws: WebSocket) -> None:
         await live_session(ws, lib, partner)
+
+    app.state.camera_sessions = []
+
+    @app.websocket("/ws/camera")
+    async def camera_ws(ws: WebSocket) -> None:
+        await camera_session(ws, partner, app.state.camera_sessions)
 
     # ------------------------------------------------------------ evaluation
     @app.get("/api/studies")
