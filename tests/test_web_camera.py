@@ -257,7 +257,9 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         page.goto(f"{camera_server}/camera")
         page.fill("#fov", f"{fov:.2f}")
         page.click("#start")
-        page.wait_for_function("() => Number(document.body.dataset.framesB || 0) > 30", timeout=60000)
+        page.wait_for_function(
+            "() => Number(document.body.dataset.framesB || 0) > 30", timeout=60000
+        )
         data = page.evaluate("() => ({...document.body.dataset})")
         drawn = colours_drawn(page, "#stage")
         assert drawn["blue"] > 50 and drawn["orange"] > 50

@@ -114,8 +114,8 @@ class WebcamTracker:
         feet = [f for f in _FEET if visibility[f] >= MIN_VISIBILITY]
         if feet:
             lift = -float(pts[feet, 1].min())
-            self._lift = lift if self._lift is None else self._lift + FLOOR_RATE * (
-                lift - self._lift
+            self._lift = (
+                lift if self._lift is None else self._lift + FLOOR_RATE * (lift - self._lift)
             )
         elif self._lift is None:
             return self._finish(pts, pixels, visibility, t0, PELVIS_HEIGHT - pts[_HIPS, 1].mean())

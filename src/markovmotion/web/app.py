@@ -46,6 +46,7 @@ from markovmotion.evaluate.perceptual import (
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
 from markovmotion.viz.point_light import point_lights
+from markovmotion.web.camera import camera_session
 from markovmotion.web.library import (
     LibraryPathError,
     MotionLibrary,
@@ -56,7 +57,6 @@ from markovmotion.web.library import (
     read_upload,
     shown,
 )
-from markovmotion.web.camera import camera_session
 from markovmotion.web.live import PartnerFactory, live_session
 from markovmotion.web.security import UPLOAD_SLACK, Guard
 

@@ -191,8 +191,10 @@ def _start(msg: dict, factory: PartnerFactory):
     from markovmotion.video.webcam import DEFAULT_FOV, FOV_RANGE, WebcamTracker
 
     fov = msg.get("fov", DEFAULT_FOV)
-    if isinstance(fov, bool) or not isinstance(fov, int | float) or not (
-        FOV_RANGE[0] <= fov <= FOV_RANGE[1]
+    if (
+        isinstance(fov, bool)
+        or not isinstance(fov, int | float)
+        or not (FOV_RANGE[0] <= fov <= FOV_RANGE[1])
     ):
         raise _Garbage(f"fov: a field of view in degrees from {FOV_RANGE[0]:g} to {FOV_RANGE[1]:g}")
     partner = factory(points_motion(_rest_points()[None], 30.0, "camera"))
