@@ -23,7 +23,7 @@ from markovmotion.video.monocular import LANDMARKS
 from markovmotion.video.multiview import shaded_frames, training_body_model
 from markovmotion.video.render import background, read_frames, silhouette_mask
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
-from markovmotion.video.sides import SideCheck
+from markovmotion.video.sides import SideCheck, SideView
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +170,7 @@ def _sides(points: np.ndarray, cam, swap: bool = False) -> SideCheck:
             k = LANDMARKS.index(f"{other if swap else side}_{part}")
             pixels[:, k] = cam.project(points[:, BODY_POINTS.index(f"{side}_{part}")])[0]
             vis[:, k] = 1.0
-    return SideCheck(cam, pixels, vis)
+    return SideCheck([SideView(cam, pixels, vis)])
 
 
 def _turned_round(points: np.ndarray) -> np.ndarray:

@@ -93,7 +93,7 @@ def track(
     ),
     sides: bool = typer.Option(
         False,
-        help="Catch front/back flips with MediaPipe's left and right in the first camera "
+        help="Catch front/back flips with MediaPipe's left and right in every camera "
         "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
         "lowered.",
     ),

@@ -407,7 +407,7 @@ class AnnealedParticleFilter:
         arms_again: restart the arms' diffusion half way through the layers.
         refine: candidates per limb of the limb search after annealing (0: none).
         start: the first frame's pose (a state), if known; else a coarse search finds it.
-        sides: MediaPipe's left and right in one camera (:class:`~markovmotion.video.sides.SideCheck`):
+        sides: MediaPipe's left and right in the cameras (:class:`~markovmotion.video.sides.SideCheck`):
             a pose it finds turned front to back starts the search again from the pose turned
             round, and a flip the search cannot undo costs ``flip_cost`` (lowers the frame's
             confidence).
@@ -734,14 +734,14 @@ def track_video(
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
-    the first camera catch front/back flips (:mod:`markovmotion.video.sides`, run before the
+    every camera catch front/back flips (:mod:`markovmotion.video.sides`, run before the
     clock starts)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = None
     if sides:
         from markovmotion.video.sides import SideCheck
 
-        check = SideCheck.from_video(mv.videos[0], mv.cameras[0], max_frames)
+        check = SideCheck.from_videos(mv.videos, mv.cameras, max_frames)
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check
     )
