@@ -412,6 +412,8 @@ class AnnealedParticleFilter:
             round, and a flip the search cannot undo costs ``flip_cost`` (lowers the frame's
             confidence).
         flip_cost: added to the best cost of a frame left flipped.
+        flip_slack: how much more the pose turned round may cost and still be taken (the
+            silhouettes fit both about equally; MediaPipe's sides can be wrong too).
     """
 
     body: BodyModel
@@ -428,6 +430,7 @@ class AnnealedParticleFilter:
     start: np.ndarray | None = None
     sides: SideCheck | None = None
     flip_cost: float = 0.3
+    flip_slack: float = 0.05
     evaluations: int = field(default=0, init=False)
     recoveries: int = field(default=0, init=False)
     flips: int = field(default=0, init=False)
@@ -548,7 +551,7 @@ class AnnealedParticleFilter:
     ) -> tuple[np.ndarray, float]:
         """A pose that MediaPipe finds turned front to back: search again around it turned
         round (its heading plus pi), keep that if it is not flipped and costs at most
-        ``flip_cost`` more; else keep the pose and add ``flip_cost`` to its cost."""
+        ``flip_slack`` more; else keep the pose and add ``flip_cost`` to its cost."""
         if self.sides is None or not self.sides.flipped(self.body.joint_positions(est)[0], frame):
             return est, best
         self.flips += 1
@@ -556,7 +559,7 @@ class AnnealedParticleFilter:
         turned = est.copy()
         turned[3] += math.pi
         est2, best2 = self.initialise(feats, turned)
-        if best2 <= best + self.flip_cost and not self.sides.flipped(
+        if best2 <= best + self.flip_slack and not self.sides.flipped(
             self.body.joint_positions(est2)[0], frame
         ):
             return est2, best2

@@ -1,7 +1,7 @@
 // Camera partner page: the webcam's frames (JPEG) go to the server over a WebSocket;
 // the server tracks the person (MediaPipe Pose) and the virtual partner answers. The
 // page draws the frame with the landmarks, and the person and the partner in 3-D.
-import { COLOURS, Stage, bounds, widen } from "/static/stage.js";
+import { COLOURS, Stage, bounds, quantile, setRunning, widen } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const stage = new Stage($("stage"));
@@ -15,17 +15,6 @@ const LINKS = [[11, 13], [13, 15], [12, 14], [14, 16], [11, 12], [11, 23], [12, 
   [23, 25], [25, 27], [24, 26], [26, 28], [27, 29], [29, 31], [27, 31], [28, 30], [30, 32],
   [28, 32], [0, 7], [0, 8]];
 let ws = null, stream = null, session = null;
-
-function quantile(values, q) {
-  if (!values.length) return NaN;
-  const s = [...values].sort((a, b) => a - b);
-  return s[Math.min(s.length - 1, Math.floor(q * s.length))];
-}
-
-function setRunning(running) {
-  $("start").disabled = running;
-  $("stop").disabled = !running;
-}
 
 function stopped(message) {
   setRunning(false);
