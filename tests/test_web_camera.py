@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import cv2
 import numpy as np
@@ -212,6 +213,29 @@ def test_a_bad_frame_ends_the_session_with_one_line(camera_server, payload, code
         with pytest.raises(ConnectionClosed) as closed:
             ws.recv(10)
     assert closed.value.rcvd.code == code
+
+
+def test_a_third_camera_session_is_told_the_server_is_busy(camera_server):
+    first, second = connect(ws_url(camera_server)), connect(ws_url(camera_server))
+    try:
+        for ws in (first, second):
+            ws.send(json.dumps({}))
+            assert json.loads(ws.recv(60))["type"] == "start"
+        with connect(ws_url(camera_server)) as third:
+            third.send(json.dumps({}))
+            error = json.loads(third.recv(60))
+            assert error["type"] == "error" and "busy" in error["message"]
+    finally:
+        first.close()
+        second.close()
+    deadline = time.monotonic() + 30  # the sessions end with their sockets: room again
+    while True:
+        with connect(ws_url(camera_server)) as ws:
+            ws.send(json.dumps({}))
+            if json.loads(ws.recv(60))["type"] == "start" or time.monotonic() > deadline:
+                break
+        time.sleep(0.2)
+    assert time.monotonic() <= deadline
 
 
 def test_a_field_of_view_out_of_range_is_refused(camera_server):

@@ -280,6 +280,8 @@ async def camera_session(ws: WebSocket, factory: PartnerFactory | None, sessions
         await _close(ws)
     except _Garbage as exc:
         await _fail(ws, str(exc), exc.code)
+    except MarkovMotionError as exc:  # the partner cannot take A (one line, internal error)
+        await _fail(ws, str(exc), 1011)
     except (WebSocketDisconnect, RuntimeError, OSError):
         pass
     finally:
