@@ -29,7 +29,7 @@ from markovmotion.features.body_points import (
 )
 from markovmotion.features.markers import virtual_markers
 from markovmotion.models.hmm.dual import DualHMM
-from markovmotion.video.render import read_frames
+from markovmotion.video.render import read_frames, write_y4m
 from markovmotion.web import create_app
 from markovmotion.web.camera import (
     MAX_FRAME_BYTES,
@@ -216,8 +216,7 @@ def test_a_bad_frame_ends_the_session_with_one_line(camera_server, payload, code
 
 
 def test_a_third_camera_session_is_told_the_server_is_busy(camera_server):
-    first, second = connect(ws_url(camera_server)), connect(ws_url(camera_server))
-    try:
+    with connect(ws_url(camera_server)) as first, connect(ws_url(camera_server)) as second:
         for ws in (first, second):
             ws.send(json.dumps({}))
             assert json.loads(ws.recv(60))["type"] == "start"
@@ -225,9 +224,6 @@ def test_a_third_camera_session_is_told_the_server_is_busy(camera_server):
             third.send(json.dumps({}))
             error = json.loads(third.recv(60))
             assert error["type"] == "error" and "busy" in error["message"]
-    finally:
-        first.close()
-        second.close()
     deadline = time.monotonic() + 30  # the sessions end with their sockets: room again
     while True:
         with connect(ws_url(camera_server)) as ws:
@@ -246,15 +242,6 @@ def test_a_field_of_view_out_of_range_is_refused(camera_server):
 
 
 # ---------------------------------------------------------------- the page, fake camera
-def write_y4m(frames: list[np.ndarray], path, fps: int = 30) -> None:
-    """RGB frames as a YUV4MPEG2 file (4:2:0), Chromium's fake camera input."""
-    h, w = frames[0].shape[:2]
-    with open(path, "wb") as fh:
-        fh.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 C420jpeg\n".encode())
-        for f in frames:
-            fh.write(b"FRAME\n" + cv2.cvtColor(f, cv2.COLOR_RGB2YUV_I420).tobytes())
-
-
 def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
     camera_server, video, browser, tmp_path
 ):

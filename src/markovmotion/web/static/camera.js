@@ -8,7 +8,9 @@ const stage = new Stage($("stage"));
 const overlay = $("overlay");
 const video = $("video");
 const grab = document.createElement("canvas");
-const IN_FLIGHT = 2; // frames sent and not yet answered (the next one waits at the server)
+// frames sent and not yet answered (the next one waits at the server); ?inflight=1 for the
+// lowest latency, 2 (default) so that the server never waits for the network
+const IN_FLIGHT = Math.max(1, Math.min(4, Number(new URLSearchParams(location.search).get("inflight")) || 2));
 const MAX_SIDE = 640; // frames are scaled down to at most this many pixels a side
 // MediaPipe's landmark pairs drawn over the frame: arms, trunk, legs, feet, face to ears
 const LINKS = [[11, 13], [13, 15], [12, 14], [14, 16], [11, 12], [11, 23], [12, 24], [23, 24],
