@@ -26,6 +26,11 @@ to track person A before the partner is generated:
    heading and joints spread widely, annealed over twice as many layers.
    The same search is the **recovery** when the weights collapse (the best
    particle's cost above ``recover_cost``).
+6. **Sides** (our addition; optional, ``sides``): silhouettes cannot tell a body
+   from the same body turned round with its limbs mirrored, so a pose that
+   MediaPipe's left and right (:mod:`markovmotion.video.sides`) find turned
+   front to back is searched again from the pose turned round, or, if that
+   fails, has its cost raised by ``flip_cost`` (its confidence lowered).
 
 Without annealing (``layers=1``) this is a plain particle filter
 (SIR/CONDENSATION), the comparison of ``benchmarks/tracker_bench.py``.
