@@ -1,7 +1,7 @@
 // Camera partner page: the webcam's frames (JPEG) go to the server over a WebSocket;
 // the server tracks the person (MediaPipe Pose) and the virtual partner answers. The
 // page draws the frame with the landmarks, and the person and the partner in 3-D.
-import { COLOURS, Stage, bounds, quantile, setRunning, widen } from "/static/stage.js";
+import { COLOURS, Stage, bounds, quantile, received, setRunning, widen } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const stage = new Stage($("stage"));
@@ -88,11 +88,8 @@ function report() {
 }
 
 function onMessage(event) {
-  const msg = JSON.parse(event.data);
-  if (msg.type === "error") {
-    $("error").textContent = msg.message;
-    return;
-  }
+  const msg = received(event);
+  if (!msg) return;
   if (msg.type === "start") {
     session = { ...msg, running: true, pending: [], answers: [], latency: [], seen: 0, sent: 0,
       frames: 0, found: 0, b: 0, track: 0, partner: 0, fitted: false, fittedB: false };

@@ -1,6 +1,6 @@
 // Live partner page: person A streamed by the server at its frame rate through
 // the virtual partner over a WebSocket; A and B drawn as their frames arrive.
-import { COLOURS, Stage, bounds, fetchJSON, quantile, setRunning, widen } from "/static/stage.js";
+import { COLOURS, Stage, bounds, fetchJSON, quantile, received, setRunning, widen } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const stage = new Stage($("stage"));
@@ -19,11 +19,8 @@ function stopped(message) {
 }
 
 function onMessage(event) {
-  const msg = JSON.parse(event.data);
-  if (msg.type === "error") {
-    $("error").textContent = msg.message;
-    return;
-  }
+  const msg = received(event);
+  if (!msg) return;
   if (msg.type === "start") {
     session = { ...msg, frames: 0, latency: [], interval: [], last: null, fitted: false, b: 0 };
     $("lag").textContent = String(msg.lag);

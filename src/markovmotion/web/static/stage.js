@@ -329,6 +329,15 @@ export function quantile(values, q) {
   return s[Math.min(s.length - 1, Math.floor(q * s.length))];
 }
 
+// A WebSocket message of a streaming page as an object; an error message is shown in #error
+// and gives null.
+export function received(event) {
+  const msg = JSON.parse(event.data);
+  if (msg.type !== "error") return msg;
+  document.getElementById("error").textContent = msg.message;
+  return null;
+}
+
 // A streaming page's Start and Stop buttons (#start, #stop): one enabled at a time.
 export function setRunning(running) {
   document.getElementById("start").disabled = running;
