@@ -22,6 +22,7 @@ from pathlib import Path
 from markovmotion.data.index import MocapIndex, data_root
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.video.render import read_frames, write_y4m
+from markovmotion.video.webcam import WebcamTracker
 from markovmotion.web import create_app
 from markovmotion.web.live import model_partner
 from markovmotion.web.server import running
@@ -48,7 +49,7 @@ def main() -> None:
         ).save(tmp / "dual.npz")
         y4m = write_y4m(read_frames(root / cam["video"]), tmp / "cam0.y4m")
         (tmp / "lib").mkdir()
-        app = create_app(tmp / "lib", partner=model_partner(tmp / "dual.npz"))
+        app = create_app(tmp / "lib", partner=model_partner(tmp / "dual.npz"), camera=WebcamTracker)
         flags = ["--headless", "--no-sandbox", "--disable-gpu", "--use-fake-ui-for-media-stream",
                  "--use-fake-device-for-media-stream", f"--use-file-for-fake-video-capture={y4m}"]  # fmt: skip
         with running(app) as url, sync_playwright() as p:

@@ -30,6 +30,7 @@ from markovmotion.features.body_points import (
 from markovmotion.features.markers import virtual_markers
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.video.render import read_frames, write_y4m
+from markovmotion.video.webcam import WebcamTracker
 from markovmotion.web import create_app
 from markovmotion.web.camera import (
     MAX_FRAME_BYTES,
@@ -73,7 +74,7 @@ def camera_server(tmp_path_factory, mocap):
     model.fit([(a.trim(0, 600), b.trim(0, 600)) for a, b in train])
     model.save(root / "dual.npz")
     (root / "lib").mkdir()
-    app = create_app(root / "lib", partner=model_partner(root / "dual.npz"))
+    app = create_app(root / "lib", partner=model_partner(root / "dual.npz"), camera=WebcamTracker)
     with running(app) as url:
         yield url
 
@@ -290,3 +291,15 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         context.close()
     finally:
         fake.close()
+
+
+def test_a_server_without_a_camera_tracker_says_so(tmp_path):
+    from markovmotion.web.loadtest import MirrorPartner
+
+    with running(create_app(tmp_path, partner=MirrorPartner)) as url, connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        error = json.loads(ws.recv(30))
+    assert error == {
+        "type": "error",
+        "message": "this server has no camera tracker (markovmotion serve has one)",
+    }

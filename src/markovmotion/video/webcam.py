@@ -45,8 +45,6 @@ from markovmotion.video.monocular import (
 
 #: Horizontal field of view (degrees) assumed for a webcam without calibration.
 DEFAULT_FOV = 60.0
-#: Fields of view a page may give (degrees).
-FOV_RANGE = (20.0, 120.0)
 #: Where the pelvis stands above the floor (mm) until a foot is seen.
 PELVIS_HEIGHT = 950.0
 #: Weight of a new frame's floor in the running floor (an exponential average).

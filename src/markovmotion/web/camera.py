@@ -3,7 +3,7 @@
 Protocol over the WebSocket ``/ws/camera``:
 
 1. the page sends a JSON text message ``{"fov": 60}`` (the camera's horizontal field of
-   view in degrees, :data:`~markovmotion.video.webcam.FOV_RANGE`; optional);
+   view in degrees, :data:`FOV_RANGE`; optional: the tracker's default);
 2. the server answers ``{"type": "start", "fps", "parents_a", "parents_b", "lag",
    "max_bytes", "max_side"}`` (``fps``: the partner's rate) or ``{"type": "error",
    "message"}`` and closes;
@@ -22,6 +22,10 @@ partner needs A at its own rate (``fps``). Each frame is timed on arrival and th
 is stepped once per tick of its rate that has passed, with A's body points interpolated
 between the last frame and this one (:class:`TickResampler`); a gap of more than
 :data:`MAX_GAP` seconds is told to the partner as frames missed (``skip``).
+
+The tracker is given to the app (``create_app(camera=...)``, a :data:`TrackerFactory`):
+``serve`` gives :class:`markovmotion.video.webcam.WebcamTracker` (the web layer does not
+import the video layer).
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ import asyncio
 import json
 import math
 import time
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -58,6 +64,28 @@ MIN_SIDE = 32
 MAX_SESSIONS = 2
 #: Longest gap between frames (s) over which A is interpolated; longer is frames missed.
 MAX_GAP = 0.5
+#: Fields of view a page may give (degrees).
+FOV_RANGE = (20.0, 120.0)
+
+
+class TrackedFrame(Protocol):
+    """A tracked camera frame: the 19 body points (mm, Y up) and the 33 landmarks' pixels."""
+
+    points: np.ndarray
+    pixels: np.ndarray
+
+
+class FrameTracker(Protocol):
+    """One camera's person, frame by frame (:class:`markovmotion.video.webcam.WebcamTracker`)."""
+
+    def track(self, rgb: np.ndarray) -> TrackedFrame | None: ...
+
+    def close(self) -> None: ...
+
+
+TrackerFactory = Callable[..., FrameTracker]
+"""Builds a session's tracker, with the field of view (degrees) as its argument if the page
+gave one (raising a :class:`MarkovMotionError` if it cannot track, e.g. MediaPipe missing)."""
 
 _SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
@@ -186,19 +214,17 @@ def _rest_points() -> np.ndarray:
     return Motion.from_rotations(POINT_SKELETON, rest).positions()[0]
 
 
-def _start(msg: dict, factory: PartnerFactory):
+def _start(msg: dict, factory: PartnerFactory, camera: TrackerFactory):
     """The session's tracker and partner (in a worker thread: MediaPipe takes a while)."""
-    from markovmotion.video.webcam import DEFAULT_FOV, FOV_RANGE, WebcamTracker
-
-    fov = msg.get("fov", DEFAULT_FOV)
-    if (
+    fov = msg.get("fov")
+    if fov is not None and (
         isinstance(fov, bool)
         or not isinstance(fov, int | float)
-        or not (FOV_RANGE[0] <= fov <= FOV_RANGE[1])
+        or not FOV_RANGE[0] <= fov <= FOV_RANGE[1]
     ):
         raise _Garbage(f"fov: a field of view in degrees from {FOV_RANGE[0]:g} to {FOV_RANGE[1]:g}")
     partner = factory(points_motion(_rest_points()[None], 30.0, "camera"))
-    return WebcamTracker(float(fov)), partner
+    return (camera() if fov is None else camera(float(fov))), partner
 
 
 def _answer(tracker, resampler: TickResampler, data: bytes, number: int, arrived: float) -> str:
@@ -226,21 +252,29 @@ def _answer(tracker, resampler: TickResampler, data: bytes, number: int, arrived
     )
 
 
-async def camera_session(ws: WebSocket, factory: PartnerFactory | None, sessions: list) -> None:
-    """Run one camera session (module protocol) on a WebSocket; ``sessions``: the server's
-    running sessions (one entry each), at most :data:`MAX_SESSIONS`."""
+async def camera_session(
+    ws: WebSocket,
+    factory: PartnerFactory | None,
+    camera: TrackerFactory | None,
+    sessions: list,
+) -> None:
+    """Run one camera session (module protocol) on a WebSocket with the partners of
+    ``factory`` and the trackers of ``camera``; ``sessions``: the server's running sessions
+    (one entry each), at most :data:`MAX_SESSIONS`."""
     await ws.accept()
     tracker = None
     try:
         msg = _parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT))
         if factory is None:
             raise _Garbage("this server has no partner model: start it with --partner MODEL")
+        if camera is None:
+            raise _Garbage("this server has no camera tracker (markovmotion serve has one)")
         if len(sessions) >= MAX_SESSIONS:
             raise _Garbage(
                 f"the server is busy: {MAX_SESSIONS} camera sessions already, try again later"
             )
         sessions.append(ws)
-        tracker, partner = await asyncio.to_thread(_start, msg, factory)
+        tracker, partner = await asyncio.to_thread(_start, msg, factory, camera)
     except (_Garbage, MarkovMotionError, TimeoutError) as exc:
         message = "no request in time" if isinstance(exc, TimeoutError) else str(exc)
         await _fail(ws, message, getattr(exc, "code", 1008))
