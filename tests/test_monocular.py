@@ -25,6 +25,7 @@ from markovmotion.video.monocular import (
     to_body_points,
     to_world,
 )
+from markovmotion.video.render import read_frames
 
 
 @pytest.fixture(scope="module")
@@ -142,3 +143,72 @@ def test_monocular_bad_options_are_one_line(real_video, tmp_path, capsys, extra,
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.fixture(scope="module")
+def partner_models(mocap, tmp_path_factory):
+    """Small dual HMMs on the training handshake and pull takes, B placed by where A faces
+    (``heading``) and along the capture room's axes (``world``)."""
+    from markovmotion.data.splits import held_out_pairs
+    from markovmotion.models.hmm.dual import DualHMM
+
+    train, _ = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
+    pairs = [mocap.load_pair(a, b) for a, b in train]
+    out = {}
+    for frame in ("heading", "world"):
+        path = tmp_path_factory.mktemp("model") / f"{frame}.npz"
+        DualHMM(n_states=4, n_iter=3, window=4, placement_window=3, frame=frame).fit(pairs).save(
+            path
+        )
+        out[frame] = path
+    return out
+
+
+@pytest.mark.parametrize("frame", ["heading", "world"])
+def test_respond_monocular_draws_the_partner_into_the_real_video(
+    real_video, partner_models, tmp_path, capsys, frame
+):
+    """``dualhmm respond --video DIR --method monocular``: A tracked in camera 1 alone, B drawn
+    into its real footage; a model placing B by its capture room's axes gets a note."""
+    out = tmp_path / "composite.mp4"
+    main(["dualhmm", "respond", "--model", str(partner_models[frame]), "--video",
+          str(real_video), "--method", "monocular", "--view", "1", "--max-frames", "12",
+          "--out", str(out)])  # fmt: skip
+    frames = list(read_frames(out))
+    original = list(read_frames(real_video / "cam1.mp4"))[:12]
+    assert len(frames) == 12 and frames[0].shape == original[0].shape
+    changed = [
+        np.abs(f.astype(int) - o).max(axis=2) > 60 for f, o in zip(frames, original, strict=True)
+    ]
+    assert sum(c.sum() for c in changed) > 500  # B drawn (the rest: compression noise)
+    err = capsys.readouterr().err
+    assert "12 frames in camera 1 alone (12 placed" in err
+    assert ("--frame heading" in err) == (frame == "world")
+
+
+def test_respond_monocular_is_not_live(real_video, partner_models, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+              str(real_video), "--method", "monocular", "--realtime",
+              "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert exc.value.code == 2
+    assert "no --method monocular" in capsys.readouterr().err
+
+
+def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():
+    from markovmotion.core.motion import Motion
+    from markovmotion.features.body_points import POINT_SKELETON
+    from markovmotion.video.composite import composite_frames
+
+    rest = Motion.from_rotations(POINT_SKELETON, np.tile([0.0, 0, 0, 1], (1, 19, 1)))
+    body = rest.positions()[0]
+    cam = look_at(np.array([0.0, 1000.0, 4000.0]), np.array([0, 900, 0]), 160, 120, 150.0)
+    frame = np.full((120, 160, 3), 30, np.uint8)
+    b = np.array([body + [0, 0, -800.0]] * 3)  # B behind A, seen through the same pixels
+    a = np.array([body + [0, 0, 300.0], body + [0, 0, -1600.0], np.full_like(body, np.nan)])
+    drawn = [
+        (np.abs(f.astype(int) - frame).max(axis=2) > 10).sum()
+        for f in composite_frames(iter([frame] * 3), cam, a, b)
+    ]
+    assert drawn[0] < drawn[1] / 3  # A in front hides most of B
+    assert drawn[1] == drawn[2] > 0  # A behind B, or not found: all of B

@@ -10,7 +10,7 @@ import pytest
 from markovmotion import read_motion
 from markovmotion.cli import main
 from markovmotion.errors import MotionFormatError
-from markovmotion.features.body_points import body_points
+from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import (
     AnnealedParticleFilter,
     model_coverage,
@@ -19,9 +19,11 @@ from markovmotion.video.annealed_particle_filter import (
 )
 from markovmotion.video.body_model import BODY_SHAPE
 from markovmotion.video.cameras import load_cameras, look_at, ring_of_cameras, save_cameras
+from markovmotion.video.monocular import LANDMARKS
 from markovmotion.video.multiview import shaded_frames, training_body_model
 from markovmotion.video.render import background, read_frames, silhouette_mask
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
+from markovmotion.video.sides import SideCheck, SideView
 
 
 @pytest.fixture(scope="module")
@@ -158,6 +160,67 @@ def test_tracker_converges_on_a_known_pose(body, take):
     assert all(0.0 <= c < 0.5 for c in costs)
 
 
+def _sides(points: np.ndarray, cam, swap: bool = False) -> SideCheck:
+    """MediaPipe's left and right as an oracle: its shoulders and hips where the true ones
+    project (or each side at the other's, ``swap``)."""
+    pixels = np.zeros((len(points), len(LANDMARKS), 2))
+    vis = np.zeros((len(points), len(LANDMARKS)))
+    for side, other in (("left", "right"), ("right", "left")):
+        for part in ("shoulder", "hip"):
+            k = LANDMARKS.index(f"{other if swap else side}_{part}")
+            pixels[:, k] = cam.project(points[:, BODY_POINTS.index(f"{side}_{part}")])[0]
+            vis[:, k] = 1.0
+    return SideCheck([SideView(cam, pixels, vis)])
+
+
+def _turned_round(points: np.ndarray) -> np.ndarray:
+    """Body points (19, 3) turned by pi about the vertical through the pelvis."""
+    out = points.copy()
+    out[:, [0, 2]] = 2 * points[0, [0, 2]] - points[:, [0, 2]]
+    return out
+
+
+def test_side_check_tells_a_body_turned_round(take):
+    motion, _ = take
+    pts = body_points(motion)[:2]
+    check = _sides(pts, _cameras(pts, 3)[1])  # camera 0 sees him edge on
+    assert check.evidence(pts[0], 0) < -1.0 and not check.flipped(pts[0], 0)
+    assert check.flipped(_turned_round(pts[0]), 0)
+    assert check.evidence(pts[0], 2) is None  # no landmarks for that frame: cannot tell
+
+
+def test_a_flip_is_searched_again_or_lowers_the_confidence(body, take):
+    """Started turned round, the tracker keeps the flip without the side check; with it, the
+    flip is found and searched again from the pose turned round; a flip it cannot undo costs
+    the frame ``flip_cost``."""
+    motion, _ = take
+    pts = body_points(motion)[:2]
+    cams = _cameras(pts, 3, (240, 180))
+    bgs = [background((c.width, c.height), k) for k, c in enumerate(cams)]
+    videos = [list(shaded_frames([pts], c, bg, 2.0, k)) for k, (c, bg) in enumerate(zip(cams, bgs, strict=True))]  # fmt: skip
+    truth = body.states_of(motion.trim(0, 1))[0]
+    flipped = truth.copy()
+    flipped[3] += np.pi
+
+    def run(sides):
+        apf = AnnealedParticleFilter(
+            body, cams, 100, 6, fps=30.0, seed=2, start=flipped, sides=sides
+        )
+        out = [apf.step(view_features([v[t] for v in videos], bgs, t)) for t in range(len(pts))]
+        turn = abs(np.angle(np.exp(1j * (out[-1][0][3] - truth[3]))))
+        return apf, turn, [best for _, best in out]
+
+    plain, turn_plain, _ = run(None)
+    checked, turn_checked, _ = run(_sides(pts, cams[1]))
+    assert turn_plain > 2.0 and plain.flips == 0
+    assert checked.flips >= 1 and turn_checked < 1.0 and checked.flipped == 0
+    always = _sides(pts, cams[1])
+    always.flipped = lambda points, frame: True  # a flip no search undoes
+    stuck, _, costs = run(always)
+    assert stuck.flips == stuck.flipped == len(pts)
+    assert min(costs) >= stuck.flip_cost
+
+
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory, take):
     """Two cameras, 0.1 s of the held-out take at 30 fps, 96x72, by the command line."""
@@ -186,6 +249,19 @@ def test_track_command_reports_error_against_truth(rendered, take, tmp_path, cap
     assert summary["mpjpe_mm"] > 0 and len(summary["per_joint_mm"]) == 19
     tracked = read_motion(tmp_path / "a.bvh")
     assert tracked.n_frames == 3 and body_points(tracked).shape == (3, 19, 3)
+
+
+def test_seed_changes_the_draw_and_the_same_seed_repeats_it(rendered, tmp_path):
+    """The tracker's random draws come from ``--seed``: two seeds give two tracks, one seed
+    the same track twice (issue 24: seeds 0 and 1 once gave byte-identical files)."""
+    tracks = {}
+    for name, seed in (("a", 0), ("b", 0), ("c", 1)):
+        out = tmp_path / f"{name}.bvh"
+        main(["track", "--video", str(rendered), "--particles", "20", "--layers", "2",
+              "--seed", str(seed), "--out", str(out)])  # fmt: skip
+        tracks[name] = body_points(read_motion(out))
+    assert np.array_equal(tracks["a"], tracks["b"])
+    assert np.abs(tracks["a"] - tracks["c"]).max() > 1.0
 
 
 @pytest.fixture(scope="module")

@@ -335,6 +335,7 @@ def test_posts_from_the_page_itself_are_accepted(server):
         "/",
         "/viewer",
         "/live",
+        "/camera",
         "/evaluation",
         "/results",
         "/static/style.css",
@@ -365,7 +366,8 @@ def test_the_pages_work_under_the_content_security_policy(server, browser):
     """Every page loads, runs its scripts and fetches its data with no CSP violation."""
     status, _, data = raw(server, "POST", "/api/evaluation", {}, b"")
     token = json.loads(data)["token"]
-    pages = ["/", "/viewer?files=walk.bvh", "/live", "/evaluation", f"/evaluation/{token}"]
+    pages = ["/", "/viewer?files=walk.bvh", "/live", "/camera", "/evaluation"]
+    pages.append(f"/evaluation/{token}")
     pages.append(f"/results?token={ADMIN}")
     context = browser.new_context()
     try:

@@ -298,6 +298,12 @@ def respond(
         help="True frame rate of the input (default: INDEX.csv's for a file of the collection, else the file's).",
     ),
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
+    method: str = typer.Option(
+        "apf",
+        callback=choice(("apf", "monocular")),
+        help="With --video, how A is tracked: apf (annealed particle filter, all views) or "
+        "monocular (MediaPipe Pose in the --view camera alone, needs the [camera] extra).",
+    ),
 ) -> None:
     """Generate person B's response to person A's motion (or markers, for a marker model:
     a C3D file, or a BVH with the model's virtual markers placed on it; B comes out as C3D)."""
@@ -311,10 +317,12 @@ def respond(
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
+    if video is None and method != "apf":
+        raise typer.BadParameter("--method is how A is tracked in --video")
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime,
+            realtime, method,
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -361,20 +369,44 @@ def respond(
 
 
 def _respond_video(
-    model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime
-):
+    model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
+    method,
+):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
-    ``realtime``)."""
+    ``realtime``; A by the monocular front end with ``method="monocular"``)."""
+    from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-    from markovmotion.video.composite import respond_in_video
+    from markovmotion.video.composite import respond_in_video, respond_monocular
     from markovmotion.video.multiview import training_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
+    if realtime and method == "monocular":
+        raise typer.BadParameter(
+            "--realtime tracks with the particle filter: no --method monocular"
+        )
     where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work
+    if getattr(DualHMM.load(model), "frame_", "heading") == "world":
+        err_console.print(
+            f"[yellow]note:[/] {model} places B along its capture room's axes from A "
+            "(frame 'world'), which mean nothing in this video's world: train it with "
+            "--frame heading to place B by where A faces",
+            highlight=False,
+        )
+    if method == "monocular":
+        summary = respond_monocular(
+            model, video, out, cameras, view, max_frames, "standard" if standard else "windowed"
+        )
+        err_console.print(
+            f"tracked A over {summary['frames']} frames in camera {summary['view']} alone "
+            f"({summary['frames_placed']} placed, {summary['fps']:.2f} frames/s), partner "
+            f"{summary['partner_frames']} frames; wrote {summary['out']}",
+            highlight=False,
+        )
+        return
     if realtime:
         live = respond_in_video(
             model, video, out, training_body_model(data), cameras, view, particles, layers,

@@ -60,7 +60,11 @@ def serve(
         sock = listen(host, port, workers)  # before anything is printed or opened: one line, exit 2
     except PortInUseError as exc:
         fail(str(exc))
-    options = AppOptions(library, db, stimuli, admin_token, partner, (host, *allow_host))
+    from markovmotion.video.webcam import WebcamTracker
+
+    options = AppOptions(
+        library, db, stimuli, admin_token, partner, (host, *allow_host), camera=WebcamTracker
+    )
     app = options.build()  # here first, so that a bad option is one line before any worker
     port = sock.getsockname()[1]
     url = f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"

@@ -91,6 +91,12 @@ def track(
         help="Cameras without an empty-scene image: learn: the median where MediaPipe finds "
         "no person, and say if the plain median holds them; median: the plain median.",
     ),
+    sides: bool = typer.Option(
+        False,
+        help="Catch front/back flips with MediaPipe's left and right in every camera "
+        "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
+        "lowered.",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -140,6 +146,7 @@ def track(
         seed,
         start,
         background == "learn",
+        sides,
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -161,7 +168,12 @@ def track(
             err += f", {summary['reference']['mean_mm']:.1f} mm from the reference"
         err_console.print(
             f"tracked {summary['frames']} frames in {summary['views']} views at "
-            f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries",
+            f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries"
+            + (
+                f"; {summary['flips']} flips searched again, {summary['left_flipped']} left"
+                if sides
+                else ""
+            ),
             highlight=False,
         )
 

@@ -198,3 +198,78 @@ def body_points(
     if positions is None:
         positions = motion.body_centred_positions() if body_centred else motion.positions()
     return positions[:, idx]
+
+
+# ------------------------------------------------------------------ a body of points alone
+#: Parent of each body point (index into :data:`BODY_POINTS`, -1 for the pelvis): the
+#: spine up to the head, the arms from the neck, the legs from the pelvis.
+POINT_PARENTS: tuple[int, ...] = tuple(
+    {
+        "pelvis": -1,
+        "spine": 0,
+        "chest": 1,
+        "neck": 2,
+        "head": 3,
+        **{f"{s}_shoulder": 3 for s in ("left", "right")},
+        **{f"{s}_hip": 0 for s in ("left", "right")},
+    }.get(p, BODY_POINTS.index(p) - 1)
+    for p in BODY_POINTS
+)
+
+#: A standing body's rest offsets of the points from their parents (mm, Y up, facing +Z,
+#: the person's left at +X): only what a skeleton needs to tell its legs and sides apart.
+_REST: dict[str, tuple[float, float, float]] = {
+    "pelvis": (0.0, 950.0, 0.0),
+    "spine": (0.0, 100.0, 0.0),
+    "chest": (0.0, 200.0, 0.0),
+    "neck": (0.0, 200.0, 0.0),
+    "head": (0.0, 150.0, 0.0),
+    "shoulder": (170.0, 0.0, 0.0),
+    "elbow": (0.0, -290.0, 0.0),
+    "wrist": (0.0, -250.0, 0.0),
+    "hip": (90.0, -60.0, 0.0),
+    "knee": (0.0, -420.0, 0.0),
+    "ankle": (0.0, -410.0, 0.0),
+    "toe": (0.0, -60.0, 140.0),
+}
+
+
+def _rest_offset(point: str) -> tuple[float, float, float]:
+    side, _, part = point.partition("_")
+    if not part:
+        return _REST[point]
+    x, y, z = _REST[part]
+    return (x if side == "left" else -x, y, z)
+
+
+#: A skeleton whose joints are the 19 body points, named as them (so that
+#: :func:`body_point_index`, the dual HMM's input check and the virtual markers find them).
+POINT_SKELETON = Skeleton(
+    BODY_POINTS,
+    np.array(POINT_PARENTS),
+    np.array([_rest_offset(p) for p in BODY_POINTS]),
+    tuple(
+        ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
+        if j == 0
+        else ("Zrotation", "Xrotation", "Yrotation")
+        for j in range(len(BODY_POINTS))
+    ),
+)
+
+
+def points_motion(points: np.ndarray, fps: float, name: str = "points") -> Motion:
+    """A Motion of :data:`POINT_SKELETON` whose joints are at ``points`` (F, 19, 3) mm (the
+    body points in :data:`BODY_POINTS` order): every rotation the identity, every joint's
+    translation its offset from its parent in that frame. Models that read people by their
+    body points (the dual HMM's ``points="body"``, virtual markers) take it as any capture;
+    the bones' lengths change from frame to frame as the points do, and limbs have no twist
+    (a virtual marker off its bone sits off it in the world's axes)."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 3 or points.shape[1:] != (len(BODY_POINTS), 3):
+        raise ValueError(f"points must be (F, {len(BODY_POINTS)}, 3), got {points.shape}")
+    parents = np.array(POINT_PARENTS)
+    translations = points.copy()
+    translations[:, 1:] -= points[:, parents[1:]]
+    rotations = np.zeros((len(points), len(BODY_POINTS), 4))
+    rotations[..., 3] = 1.0
+    return Motion(POINT_SKELETON, rotations, translations, fps, name)

@@ -26,6 +26,11 @@ to track person A before the partner is generated:
    heading and joints spread widely, annealed over twice as many layers.
    The same search is the **recovery** when the weights collapse (the best
    particle's cost above ``recover_cost``).
+6. **Sides** (our addition; optional, ``sides``): silhouettes cannot tell a body
+   from the same body turned round with its limbs mirrored, so a pose that
+   MediaPipe's left and right (:mod:`markovmotion.video.sides`) find turned
+   front to back is searched again from the pose turned round, or, if that
+   fails, has its cost raised by ``flip_cost`` (its confidence lowered).
 
 Without annealing (``layers=1``) this is a plain particle filter
 (SIR/CONDENSATION), the comparison of ``benchmarks/tracker_bench.py``.
@@ -39,6 +44,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numba
@@ -54,6 +60,9 @@ from markovmotion.video.cameras import (
     load_cameras,
 )
 from markovmotion.video.render import read_frames
+
+if TYPE_CHECKING:
+    from markovmotion.video.sides import SideCheck
 
 #: Foreground threshold on the largest channel difference to the background (grey levels).
 FG_LOW, FG_HIGH = 30.0, 60.0
@@ -403,6 +412,13 @@ class AnnealedParticleFilter:
         arms_again: restart the arms' diffusion half way through the layers.
         refine: candidates per limb of the limb search after annealing (0: none).
         start: the first frame's pose (a state), if known; else a coarse search finds it.
+        sides: MediaPipe's left and right in the cameras (:class:`~markovmotion.video.sides.SideCheck`):
+            a pose it finds turned front to back starts the search again from the pose turned
+            round, and a flip the search cannot undo costs ``flip_cost`` (lowers the frame's
+            confidence).
+        flip_cost: added to the best cost of a frame left flipped.
+        flip_slack: how much more the pose turned round may cost and still be taken (the
+            silhouettes fit both about equally; MediaPipe's sides can be wrong too).
     """
 
     body: BodyModel
@@ -417,8 +433,14 @@ class AnnealedParticleFilter:
     arms_again: bool = True
     refine: int = 30
     start: np.ndarray | None = None
+    sides: SideCheck | None = None
+    flip_cost: float = 0.3
+    flip_slack: float = 0.05
     evaluations: int = field(default=0, init=False)
     recoveries: int = field(default=0, init=False)
+    flips: int = field(default=0, init=False)
+    flipped: int = field(default=0, init=False)
+    frame: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -523,7 +545,34 @@ class AnnealedParticleFilter:
         return est, best
 
     def step(self, feats: ViewFeatures, gap: int = 1) -> tuple[np.ndarray, float]:
-        """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost."""
+        """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost
+        (plus ``flip_cost`` if it stays turned front to back, see ``sides``)."""
+        frame, self.frame = self.frame + gap - 1, self.frame + gap
+        est, best = self._track(feats, gap)
+        return self._check_sides(est, best, feats, frame)
+
+    def _check_sides(
+        self, est: np.ndarray, best: float, feats: ViewFeatures, frame: int
+    ) -> tuple[np.ndarray, float]:
+        """A pose that MediaPipe finds turned front to back: search again around it turned
+        round (its heading plus pi), keep that if it is not flipped and costs at most
+        ``flip_slack`` more; else keep the pose and add ``flip_cost`` to its cost."""
+        if self.sides is None or not self.sides.flipped(self.body.joint_positions(est)[0], frame):
+            return est, best
+        self.flips += 1
+        particles = self.x
+        turned = est.copy()
+        turned[3] += math.pi
+        est2, best2 = self.initialise(feats, turned)
+        if best2 <= best + self.flip_slack and not self.sides.flipped(
+            self.body.joint_positions(est2)[0], frame
+        ):
+            return est2, best2
+        self.x = particles
+        self.flipped += 1
+        return est, best + self.flip_cost
+
+    def _track(self, feats: ViewFeatures, gap: int) -> tuple[np.ndarray, float]:
         if self.x is None:
             return self.initialise(feats, self.start)
         x = self.x
@@ -554,6 +603,9 @@ class TrackResult:
     recoveries: int
     cpu_seconds: float = 0.0
     background_notes: list[str] = field(default_factory=list)
+    #: Frames MediaPipe found turned front to back (searched again), and those left so.
+    flips: int = 0
+    flipped: int = 0
 
 
 def multiview_frames(
@@ -670,8 +722,9 @@ def track_features(
     if not states:
         raise MotionFormatError("video", "no frames in this video")
     return TrackResult(
-        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries, cpu
-    )
+        np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries, cpu,
+        flips=apf.flips, flipped=apf.flipped,
+    )  # fmt: skip
 
 
 def track_video(
@@ -685,12 +738,20 @@ def track_video(
     seed: int = 0,
     start: np.ndarray | None = None,
     learn_background: bool = False,
+    sides: bool = False,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
-    from the pose ``start`` (a state) if given."""
+    from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
+    every camera catch front/back flips (:mod:`markovmotion.video.sides`, run before the
+    clock starts)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
+    check = None
+    if sides:
+        from markovmotion.video.sides import SideCheck
+
+        check = SideCheck.from_videos(mv.videos, mv.cameras, max_frames)
     apf = AnnealedParticleFilter(
-        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start
+        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check
     )
     result = track_features(mv.features(seed), apf)
     result.background_notes = mv.background_notes

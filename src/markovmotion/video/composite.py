@@ -55,7 +55,8 @@ def composite_frames(
             yield frame
             continue
         canvas = DepthCanvas(camera.width, camera.height)
-        canvas.body(a_points[t], camera, BODY_SHAPE, hidden, 0)
+        if np.isfinite(a_points[t]).all():  # A not found in this frame: B hides nothing of A
+            canvas.body(a_points[t], camera, BODY_SHAPE, hidden, 0)
         canvas.body(b_points[t], camera, BODY_SHAPE, colours, 1)
         yield canvas.over(frame, only=1)
 
@@ -105,6 +106,59 @@ def respond_in_video(
         }
     )
     return summary
+
+
+def respond_monocular(
+    model: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    cameras: str | os.PathLike[str] | None = None,
+    view: int = 0,
+    max_frames: int | None = None,
+    method: str = "windowed",
+) -> dict:
+    """:func:`respond_in_video` with A tracked in camera ``view`` alone by the monocular front
+    end (:mod:`markovmotion.video.monocular`: MediaPipe Pose placed by PnP, sized by the
+    floor): A's 19 body points go to the dual HMM as a Motion of them
+    (:func:`~markovmotion.features.body_points.points_motion`), and B is hidden where the
+    body model's capsules on A's points are nearer the camera. Frames where no person is
+    found are missing observations for the partner."""
+    from markovmotion.features.body_points import points_motion
+    from markovmotion.video.monocular import track_monocular
+
+    dual = _load_partner_model(model)
+    where = camera_file(video, cameras)
+    cams, doc = load_cameras(where)
+    if Path(video).is_file():
+        view = camera_of_video(cams, video)
+        path = Path(video)
+    elif not 0 <= view < len(cams):
+        raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
+    else:
+        path = camera_videos(where, cams)[view]
+    start = time.perf_counter()
+    tr = track_monocular(path, cams[view], float(doc["fps"]), max_frames)
+    tracked = time.perf_counter() - start
+    if not tr.placed.any():
+        raise MotionFormatError(path, "no person found in this video")
+    a = points_motion(tr.points, tr.fps, path.name)
+    b = _respond(dual, a, method)
+    written = write_video(
+        composite_frames(read_frames(path), cams[view], tr.points, body_points(b)), out, tr.fps
+    )
+    n = len(tr.points)
+    return {
+        "method": "monocular",
+        "frames": n,
+        "frames_placed": int(tr.placed.sum()),
+        "views": 1,
+        "fps": round(n / max(tracked, 1e-9), 2),
+        "scale": round(tr.scale, 4),
+        "tracking_seconds": round(tracked, 2),
+        "partner_frames": b.n_frames,
+        "out": str(written),
+        "view": view,
+    }
 
 
 def _respond_live(

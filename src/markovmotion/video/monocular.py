@@ -175,6 +175,22 @@ class Landmarks:
     seconds: float = 0.0
 
 
+def frame_landmarks(estimator, rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """One RGB frame through a :func:`pose_estimator`: (33, 2) pixels, (33, 3) world points
+    (mm, hip-centred, Y down as MediaPipe's) and (33,) visibility; None when no person."""
+    res = estimator.process(np.ascontiguousarray(rgb))
+    if res.pose_landmarks is None or res.pose_world_landmarks is None:
+        return None
+    h, w = rgb.shape[:2]
+    lm = res.pose_landmarks.landmark
+    wl = res.pose_world_landmarks.landmark
+    return (
+        np.array([(p.x * w - 0.5, p.y * h - 0.5) for p in lm]),
+        np.array([(p.x, p.y, p.z) for p in wl]) * 1000.0,
+        np.array([p.visibility for p in lm]),
+    )
+
+
 def detect_landmarks(frames: Iterable[np.ndarray], max_frames: int | None = None) -> Landmarks:
     """MediaPipe Pose landmarks of RGB frames, in video mode (tracking between frames)."""
     pixels, world, vis, found = [], [], [], []
@@ -183,20 +199,16 @@ def detect_landmarks(frames: Iterable[np.ndarray], max_frames: int | None = None
         for i, img in enumerate(frames):
             if max_frames is not None and i >= max_frames:
                 break
-            res = est.process(np.ascontiguousarray(img))
-            h, w = img.shape[:2]
-            if res.pose_landmarks is None or res.pose_world_landmarks is None:
-                pixels.append(np.full((len(LANDMARKS), 2), np.nan))
-                world.append(np.full((len(LANDMARKS), 3), np.nan))
-                vis.append(np.zeros(len(LANDMARKS)))
-                found.append(False)
-                continue
-            lm = res.pose_landmarks.landmark
-            wl = res.pose_world_landmarks.landmark
-            pixels.append(np.array([(p.x * w - 0.5, p.y * h - 0.5) for p in lm]))
-            world.append(np.array([(p.x, p.y, p.z) for p in wl]) * 1000.0)
-            vis.append(np.array([p.visibility for p in lm]))
-            found.append(True)
+            got = frame_landmarks(est, img)
+            found.append(got is not None)
+            if got is None:
+                got = (
+                    np.full((len(LANDMARKS), 2), np.nan),
+                    np.full((len(LANDMARKS), 3), np.nan),
+                    np.zeros(len(LANDMARKS)),
+                )
+            for out, value in zip((pixels, world, vis), got, strict=True):
+                out.append(value)
     if not found:
         raise MotionFormatError("video", "no frames in this video")
     return Landmarks(
@@ -204,43 +216,65 @@ def detect_landmarks(frames: Iterable[np.ndarray], max_frames: int | None = None
     )
 
 
+def place_frame(
+    world: np.ndarray,
+    pixels: np.ndarray,
+    visibility: np.ndarray,
+    k: np.ndarray,
+    previous: tuple[np.ndarray, np.ndarray] | None = None,
+    snap: bool = True,
+) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
+    """One frame's (33, 3) landmarks in the camera's frame (mm) by PnP of its world landmarks
+    (33, 3) onto its 2-D ones (33, 2) through intrinsics ``k`` (module docstring, step 3),
+    and the pose ``(rvec, tvec)`` found (to start the next frame's from); None when too few
+    landmarks are seen or the body lands behind the camera. ``previous``: the last frame's
+    pose, kept if it reprojects better than this frame's own SQPnP solution."""
+    use = visibility >= MIN_VISIBILITY
+    if use.sum() < MIN_LANDMARKS:
+        return None
+    obj = np.ascontiguousarray(world[use], dtype=np.float64)
+    img = np.ascontiguousarray(pixels[use], dtype=np.float64)
+    ok, r, t = cv2.solvePnP(obj, img, k, None, flags=cv2.SOLVEPNP_SQPNP)
+    if not ok:
+        return None
+    # refine from this solution (or last frame's, if that one reprojects better)
+    if previous is not None:
+        cands = [(r, t), (previous[0].copy(), previous[1].copy())]
+        errs = [
+            np.linalg.norm(cv2.projectPoints(obj, a, b, k, None)[0][:, 0] - img, axis=1).mean()
+            for a, b in cands
+        ]
+        r, t = cands[int(np.argmin(errs))]
+    ok, r, t = cv2.solvePnP(obj, img, k, None, r, t, True, cv2.SOLVEPNP_ITERATIVE)
+    if not ok or t[2, 0] <= 0:
+        return None
+    out = world @ cv2.Rodrigues(r)[0].T + t[:, 0]
+    if snap:  # each landmark onto its ray through its 2-D landmark, at its depth
+        ray = np.c_[pixels, np.ones(len(pixels))] @ np.linalg.inv(k).T
+        out = ray * out[:, 2:3]
+    return out, (r, t)
+
+
 def place_body(
     landmarks: Landmarks, camera: CalibratedCamera, snap: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """(F, 33, 3) landmarks in the camera's frame (mm) by PnP of the world landmarks onto the
-    2-D ones (see the module's docstring, step 3), and (F,) whether each frame was placed."""
+    2-D ones (see the module's docstring, step 3; :func:`place_frame`), and (F,) whether each
+    frame was placed."""
     n = len(landmarks.found)
     out = np.full((n, len(LANDMARKS), 3), np.nan)
     placed = np.zeros(n, dtype=bool)
-    rvec = tvec = None
+    pose = None
     k = camera.K.astype(np.float64)
     for f in range(n):
-        use = landmarks.found[f] & (landmarks.visibility[f] >= MIN_VISIBILITY)
-        if use.sum() < MIN_LANDMARKS:
+        if not landmarks.found[f]:
             continue
-        obj = np.ascontiguousarray(landmarks.world[f, use], dtype=np.float64)
-        img = np.ascontiguousarray(landmarks.pixels[f, use], dtype=np.float64)
-        ok, r, t = cv2.solvePnP(obj, img, k, None, flags=cv2.SOLVEPNP_SQPNP)
-        if not ok:
-            continue
-        # refine from this solution (or last frame's, if that one reprojects better)
-        if rvec is not None:
-            cands = [(r, t), (rvec.copy(), tvec.copy())]
-            errs = [
-                np.linalg.norm(cv2.projectPoints(obj, a, b, k, None)[0][:, 0] - img, axis=1).mean()
-                for a, b in cands
-            ]
-            r, t = cands[int(np.argmin(errs))]
-        ok, r, t = cv2.solvePnP(obj, img, k, None, r, t, True, cv2.SOLVEPNP_ITERATIVE)
-        if not ok or t[2, 0] <= 0:
-            continue
-        rvec, tvec = r, t
-        rot = cv2.Rodrigues(r)[0]
-        out[f] = landmarks.world[f] @ rot.T + t[:, 0]
-        if snap:  # each landmark onto its ray through its 2-D landmark, at its depth
-            ray = np.c_[landmarks.pixels[f], np.ones(len(LANDMARKS))] @ np.linalg.inv(k).T
-            out[f] = ray * out[f, :, 2:3]
-        placed[f] = True
+        got = place_frame(
+            landmarks.world[f], landmarks.pixels[f], landmarks.visibility[f], k, pose, snap
+        )
+        if got is not None:
+            out[f], pose = got
+            placed[f] = True
     return out, placed
 
 

@@ -178,13 +178,16 @@ def track_take(
     seed: int = 0,
     start: str | os.PathLike[str] | None = None,
     learn_background: bool = False,
+    sides: bool = False,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
     With ``truth`` (the take's BVH), the summary has ``mpjpe_mm`` and per-joint
     errors, the truth aligned by the ``start_frame`` the renderer recorded. ``start``
     (a motion of the body model's skeleton) gives the first frame's pose instead of
-    the coarse search.
+    the coarse search. ``sides``: catch front/back flips with MediaPipe
+    (:func:`~markovmotion.video.annealed_particle_filter.track_video`); the summary then has
+    ``flips`` (frames searched again) and ``left_flipped`` (frames left flipped).
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -192,8 +195,9 @@ def track_take(
     if start is not None:  # the first frame's pose, on the body model's skeleton
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
     result = track_video(
-        video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background
-    )
+        video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background,
+        sides,
+    )  # fmt: skip
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {
         "frames": len(result.states),
@@ -205,6 +209,7 @@ def track_take(
         "layers": layers,
         "dof": body.n_dof,
         "recoveries": result.recoveries,
+        **({"flips": result.flips, "left_flipped": result.flipped} if sides else {}),
         "confidence": [round(float(c), 3) for c in result.confidence],
         "background": result.background_notes,
     }

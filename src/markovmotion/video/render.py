@@ -364,3 +364,16 @@ def video_fps(path: str | os.PathLike[str], default: float = 25.0) -> float:
     fps = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
     cap.release()
     return float(fps) if fps and fps > 0 else default
+
+
+def write_y4m(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps: int = 30) -> Path:
+    """RGB frames (H, W, 3) uint8 as an uncompressed YUV4MPEG2 file (4:2:0, even sizes): what
+    Chromium's fake camera plays (``--use-file-for-fake-video-capture``)."""
+    path = Path(path)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        for k, frame in enumerate(frames):
+            if k == 0:
+                h, w = frame.shape[:2]
+                fh.write(f"YUV4MPEG2 W{w} H{h} F{int(fps)}:1 Ip A1:1 C420jpeg\n".encode())
+            fh.write(b"FRAME\n" + cv2.cvtColor(frame, cv2.COLOR_RGB2YUV_I420).tobytes())
+    return path

@@ -46,6 +46,7 @@ from markovmotion.evaluate.perceptual import (
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
 from markovmotion.viz.point_light import point_lights
+from markovmotion.web.camera import TrackerFactory, camera_session
 from markovmotion.web.library import (
     LibraryPathError,
     MotionLibrary,
@@ -98,11 +99,17 @@ async def _bounded(stream: AsyncIterator[bytes], limit: int) -> AsyncIterator[by
         yield chunk
 
 
-NAV = (("/viewer", "Viewer"), ("/live", "Live partner"), ("/evaluation", "Evaluation"))
+NAV = (
+    ("/viewer", "Viewer"),
+    ("/live", "Live partner"),
+    ("/camera", "Camera partner"),
+    ("/evaluation", "Evaluation"),
+)
 PAGES = {
     "/": ("index", "Home"),
     "/viewer": ("viewer", "Viewer"),
     "/live": ("live", "Live partner"),
+    "/camera": ("camera", "Camera partner"),
     "/evaluation": ("evaluation-start", "Evaluation"),
 }
 """Pages without parameters: path -> (file in ``pages/``, title)."""
@@ -130,6 +137,7 @@ def create_app(
     admin_token: str | None = None,
     partner: PartnerFactory | None = None,
     allow_hosts: Iterable[str] = (),
+    camera: TrackerFactory | None = None,
 ) -> FastAPI:
     """The app serving ``library``; the evaluation runs when a stimuli folder is given
     (default: ``library/stimuli`` if it holds a manifest) and stores answers in ``db``.
@@ -137,7 +145,9 @@ def create_app(
     interaction observer study (:mod:`markovmotion.evaluate.interaction`); either or both.
 
     ``admin_token`` guards the results (a random one if omitted: read it from
-    ``app.state.admin_token``); ``partner`` builds the live partner of a session.
+    ``app.state.admin_token``); ``partner`` builds the live partner of a session;
+    ``camera`` the camera page's tracker (:mod:`markovmotion.web.camera`; ``serve`` gives
+    :class:`markovmotion.video.webcam.WebcamTracker`).
     The server answers to 127.0.0.1, localhost and ::1 and to ``allow_hosts``
     (the bound address, ``serve --allow-host``): see :mod:`markovmotion.web.security`.
     """
@@ -291,6 +301,12 @@ def create_app(
     @app.websocket("/ws/live")
     async def live_ws(ws: WebSocket) -> None:
         await live_session(ws, lib, partner)
+
+    app.state.camera_sessions = []
+
+    @app.websocket("/ws/camera")
+    async def camera_ws(ws: WebSocket) -> None:
+        await camera_session(ws, partner, camera, app.state.camera_sessions)
 
     # ------------------------------------------------------------ evaluation
     @app.get("/api/studies")

@@ -79,7 +79,14 @@ class ModelPartner:
         self.parents = display_parents(skeleton) if skeleton is not None else [-1] * len(names)
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
-        out = self._partner.step(frame_a)
+        return self._positions(self._partner.step(frame_a))
+
+    def skip(self) -> np.ndarray | None:
+        """A frame of A missed (the camera page's frames come when they can)."""
+        return self._positions(self._partner.skip())
+
+    @staticmethod
+    def _positions(out) -> np.ndarray | None:
         if out is None:
             return None
         return out.positions()[0] if isinstance(out, Motion) else out.positions[0]

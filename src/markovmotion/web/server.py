@@ -18,7 +18,7 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -116,6 +116,8 @@ class AppOptions:
     admin_token: str | None = None
     partner: Path | None = None
     allow_hosts: tuple[str, ...] = field(default_factory=tuple)
+    #: The camera page's tracker (a module-level class or function: it goes to the workers).
+    camera: Callable[..., object] | None = None
 
     def build(self) -> FastAPI:
         from markovmotion.web.app import create_app
@@ -128,6 +130,7 @@ class AppOptions:
             admin_token=self.admin_token,
             partner=model_partner(self.partner) if self.partner else None,
             allow_hosts=self.allow_hosts,
+            camera=self.camera,
         )
 
 

@@ -1,26 +1,15 @@
 // Live partner page: person A streamed by the server at its frame rate through
 // the virtual partner over a WebSocket; A and B drawn as their frames arrive.
-import { COLOURS, Stage, bounds, fetchJSON, widen } from "/static/stage.js";
+import { COLOURS, Stage, bounds, fetchJSON, quantile, received, setRunning, widen } from "/static/stage.js";
 
 const $ = (id) => document.getElementById(id);
 const stage = new Stage($("stage"));
 let ws = null;
 let session = null;
 
-function quantile(values, q) {
-  if (!values.length) return NaN;
-  const s = [...values].sort((a, b) => a - b);
-  return s[Math.min(s.length - 1, Math.floor(q * s.length))];
-}
-
 function stats(values) {
   const mean = values.reduce((a, b) => a + b, 0) / Math.max(1, values.length);
   return `mean ${mean.toFixed(2)} · p99 ${quantile(values, 0.99).toFixed(2)}`;
-}
-
-function setRunning(running) {
-  $("start").disabled = running;
-  $("stop").disabled = !running;
 }
 
 function stopped(message) {
@@ -30,11 +19,8 @@ function stopped(message) {
 }
 
 function onMessage(event) {
-  const msg = JSON.parse(event.data);
-  if (msg.type === "error") {
-    $("error").textContent = msg.message;
-    return;
-  }
+  const msg = received(event);
+  if (!msg) return;
   if (msg.type === "start") {
     session = { ...msg, frames: 0, latency: [], interval: [], last: null, fitted: false, b: 0 };
     $("lag").textContent = String(msg.lag);

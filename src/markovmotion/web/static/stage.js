@@ -322,6 +322,28 @@ export class Player {
   }
 }
 
+// The q-quantile of a list of numbers (NaN if empty), for the pages' latency figures.
+export function quantile(values, q) {
+  if (!values.length) return NaN;
+  const s = [...values].sort((a, b) => a - b);
+  return s[Math.min(s.length - 1, Math.floor(q * s.length))];
+}
+
+// A WebSocket message of a streaming page as an object; an error message is shown in #error
+// and gives null.
+export function received(event) {
+  const msg = JSON.parse(event.data);
+  if (msg.type !== "error") return msg;
+  document.getElementById("error").textContent = msg.message;
+  return null;
+}
+
+// A streaming page's Start and Stop buttons (#start, #stop): one enabled at a time.
+export function setRunning(running) {
+  document.getElementById("start").disabled = running;
+  document.getElementById("stop").disabled = !running;
+}
+
 export async function fetchJSON(url, options) {
   const r = await fetch(url, options);
   let body = null;

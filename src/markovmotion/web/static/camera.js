@@ -1,0 +1,154 @@
+// Camera partner page: the webcam's frames (JPEG) go to the server over a WebSocket;
+// the server tracks the person (MediaPipe Pose) and the virtual partner answers. The
+// page draws the frame with the landmarks, and the person and the partner in 3-D.
+import { COLOURS, Stage, bounds, quantile, received, setRunning, widen } from "/static/stage.js";
+
+const $ = (id) => document.getElementById(id);
+const stage = new Stage($("stage"));
+const overlay = $("overlay");
+const video = $("video");
+const grab = document.createElement("canvas");
+// frames sent and not yet answered (the next one waits at the server); ?inflight=1 for the
+// lowest latency, 2 (default) so that the server never waits for the network
+const IN_FLIGHT = Math.max(1, Math.min(4, Number(new URLSearchParams(location.search).get("inflight")) || 2));
+const MAX_SIDE = 640; // frames are scaled down to at most this many pixels a side
+// MediaPipe's landmark pairs drawn over the frame: arms, trunk, legs, feet, face to ears
+const LINKS = [[11, 13], [13, 15], [12, 14], [14, 16], [11, 12], [11, 23], [12, 24], [23, 24],
+  [23, 25], [25, 27], [24, 26], [26, 28], [27, 29], [29, 31], [27, 31], [28, 30], [30, 32],
+  [28, 32], [0, 7], [0, 8]];
+let ws = null, stream = null, session = null;
+
+function stopped(message) {
+  setRunning(false);
+  if (message) $("status").textContent = message;
+  if (stream) for (const t of stream.getTracks()) t.stop();
+  stream = null;
+  ws = null;
+  if (session) session.running = false;
+}
+
+function send() {
+  if (!session || !session.running || session.pending.length >= IN_FLIGHT || !video.videoWidth) return;
+  const scale = Math.min(1, MAX_SIDE / Math.max(video.videoWidth, video.videoHeight));
+  grab.width = Math.round(video.videoWidth * scale);
+  grab.height = Math.round(video.videoHeight * scale);
+  grab.getContext("2d").drawImage(video, 0, 0, grab.width, grab.height);
+  const t = performance.now();
+  session.pending.push(t);
+  session.sent += 1;
+  grab.toBlob(async (blob) => {
+    if (!ws || ws.readyState !== WebSocket.OPEN) return;
+    ws.send(await blob.arrayBuffer());
+  }, "image/jpeg", 0.8);
+}
+
+function onCameraFrame() {
+  if (!session || !session.running) return;
+  session.seen += 1;
+  send();
+  if (video.requestVideoFrameCallback) video.requestVideoFrameCallback(onCameraFrame);
+  else requestAnimationFrame(onCameraFrame);
+}
+
+// The camera's present frame with the landmarks of the last answer (a frame or two older).
+function drawOverlay(msg) {
+  const ctx = overlay.getContext("2d");
+  overlay.width = grab.width;
+  overlay.height = grab.height;
+  ctx.drawImage(video, 0, 0, overlay.width, overlay.height);
+  if (!msg.pixels) return;
+  const sx = overlay.width / msg.width, sy = overlay.height / msg.height;
+  const p = (k) => [(msg.pixels[2 * k] + 0.5) * sx, (msg.pixels[2 * k + 1] + 0.5) * sy];
+  ctx.strokeStyle = COLOURS[0];
+  ctx.lineWidth = 3;
+  for (const [i, j] of LINKS) {
+    const [a, b] = [p(i), p(j)];
+    ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+  }
+}
+
+function report() {
+  const s = session, now = performance.now();
+  while (s.answers.length && s.answers[0] < now - 2000) s.answers.shift();
+  const span = s.answers.length > 1 ? (s.answers[s.answers.length - 1] - s.answers[0]) / 1000 : 0;
+  const fps = span > 0 ? (s.answers.length - 1) / span : 0;
+  const recent = s.latency.slice(-120);
+  const mean = recent.reduce((a, b) => a + b, 0) / Math.max(1, recent.length);
+  $("fps").textContent = fps.toFixed(1);
+  $("dropped").textContent = `camera frames ${s.seen} · sent ${s.sent}`;
+  $("latency").textContent = mean.toFixed(0);
+  $("latency-stats").textContent = `median ${quantile(recent, 0.5).toFixed(0)} · p99 ${quantile(recent, 0.99).toFixed(0)}`;
+  $("work").textContent = `${s.track.toFixed(0)} · ${s.partner.toFixed(1)}`;
+  $("found").textContent = `${Math.round((100 * s.found) / Math.max(1, s.frames))} %`;
+  Object.assign(document.body.dataset, {
+    framesA: String(s.found), framesB: String(s.b), frames: String(s.frames),
+    fps: fps.toFixed(2), latency: mean.toFixed(1), latencyP99: quantile(recent, 0.99).toFixed(1),
+    cameraFrames: String(s.seen), sent: String(s.sent),
+  });
+}
+
+function onMessage(event) {
+  const msg = received(event);
+  if (!msg) return;
+  if (msg.type === "start") {
+    session = { ...msg, running: true, pending: [], answers: [], latency: [], seen: 0, sent: 0,
+      frames: 0, found: 0, b: 0, track: 0, partner: 0, fitted: false, fittedB: false };
+    $("lag").textContent = String(msg.lag);
+    $("status").textContent = `Tracking; the partner answers at ${msg.fps.toFixed(0)} fps, ${msg.lag} frames behind you.`;
+    onCameraFrame();
+    return;
+  }
+  if (msg.type !== "frame" || !session) return;
+  const s = session, now = performance.now();
+  s.latency.push(now - s.pending.shift());
+  s.answers.push(now);
+  s.frames += 1;
+  s.track = msg.track_ms;
+  s.partner = msg.partner_ms;
+  if (msg.a) s.found += 1;
+  if (msg.b) s.b += 1;
+  send();
+  drawOverlay(msg);
+  const figs = [];
+  if (msg.a) figs.push({ positions: msg.a, parents: s.parents_a, colour: COLOURS[0] });
+  if (msg.b) figs.push({ positions: msg.b, parents: s.parents_b, colour: COLOURS[1] });
+  if (figs.length && (!s.fitted || (msg.b && !s.fittedB))) {
+    stage.fit(widen(bounds(figs)));
+    stage.follow = true;
+    s.fitted = true;
+    s.fittedB = Boolean(msg.b);
+  }
+  if (figs.length) stage.draw(figs);
+  report();
+}
+
+async function start() {
+  $("error").textContent = "";
+  const fov = Number($("fov").value);
+  try {
+    stream = await navigator.mediaDevices.getUserMedia({ video: { width: { ideal: 640 }, height: { ideal: 480 }, frameRate: { ideal: 30 } }, audio: false });
+  } catch (e) {
+    $("error").textContent = `The camera cannot be opened: ${e.message || e.name}`;
+    return;
+  }
+  video.srcObject = stream;
+  await video.play();
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  ws = new WebSocket(`${proto}://${location.host}/ws/camera`);
+  ws.binaryType = "arraybuffer";
+  session = null;
+  setRunning(true);
+  $("status").textContent = "Starting the tracker …";
+  ws.onopen = () => ws.send(JSON.stringify({ fov }));
+  ws.onmessage = onMessage;
+  ws.onclose = () => { if (ws) stopped(session ? `Stopped after ${session.frames} frames.` : ""); };
+}
+
+$("start").addEventListener("click", start);
+$("stop").addEventListener("click", () => {
+  if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ type: "stop" }));
+  if (session) session.running = false;
+});
+
+stage.fit({ min: [-1500, 0, -4500], max: [1500, 1800, -1500] });
+stage.draw([]);
