@@ -7,7 +7,12 @@ and their relative scale s (eq. 4). The two people are either silhouettes
 tracked in video (shape = the 32 B-spline control points, reference point = the
 top of the head, person 0 = the left-hand individual) or 3-D motion capture
 (shape = joint positions, reference point = the pelvis on the floor, person 0 =
-the first file of the take). The modelling that follows is the same for both.
+the first file of the take), or named 3-D markers (C3D: shape = the markers, picked
+by name; reference point = their centroid on the floor, heading from the markers
+named left and right shoulder or hip, as the dual HMM's
+:class:`~markovmotion.features.markers.MarkerFeatures`; "height" = the body's size,
+:func:`marker_size`, since markers such as an upper-body tracker's need not show
+the floor). The modelling that follows is the same for all.
 
 Definitions (the equations of eqs. 3-4 are lost from the paper's text; these
 follow its description):
@@ -34,10 +39,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
+from markovmotion.features.markers import MarkerFeatures, fill_gaps
 from markovmotion.features.smoothing import TemporalSmoothing
 from markovmotion.state import StateError, check_count, is_fitted, register, require
 
@@ -139,15 +146,16 @@ class TwoPeople:
     @classmethod
     def from_motions(
         cls,
-        a: Motion,
-        b: Motion,
+        a: Motion | Markers,
+        b: Motion | Markers,
         fps: float | None = 25.0,
         joints: Sequence[str] | None = None,
     ) -> TwoPeople:
-        """Both people of a motion-capture take in one shared world frame (:func:`person_from_motion`)."""
+        """Both people of a motion-capture take in one shared world frame
+        (:func:`person_from_take`: skeletons, or markers picked by the names ``joints``)."""
         people = [m.resample(fps) if fps else m for m in (a, b)]
         n = min(m.n_frames for m in people)
-        one, two = (person_from_motion(m.trim(0, n), joints) for m in people)
+        one, two = (person_from_take(m.trim(0, n), joints) for m in people)
         return cls.from_people(one, two, float(people[0].fps), f"{a.name}+{b.name}")
 
     @classmethod
@@ -186,6 +194,52 @@ def person_from_motion(m: Motion, joints: Sequence[str] | None = None) -> Person
     return Person(
         pos[:, shape_joints(sk, joints)], ref, np.full(m.n_frames, height), m.heading(pos)
     )
+
+
+def marker_size(positions: np.ndarray) -> float:
+    """A person's size from markers (F, M, 3), in mm: the median over frames of the root mean
+    square distance of the markers from their centroid.
+
+    Stands in for the standing height of a skeleton's rest pose, which markers need not
+    show (the Bütepage tracker's 8 upper-body points have no feet and an arbitrary
+    vertical origin). Chosen over a single bone because it needs no names, and over the
+    vertical extent because it hardly depends on the action: on the Bütepage takes it
+    stays within 7 % for one person across handshakes and waves, while the extent, which
+    follows the idle hand, varies by up to 20 %.
+    """
+    centred = positions - positions.mean(axis=1, keepdims=True)
+    return float(np.median(np.sqrt((centred**2).sum(axis=-1).mean(axis=1))))
+
+
+def person_from_markers(m: Markers, names: Sequence[str] | None = None) -> Person:
+    """One person of markers: the markers ``names`` (default: all, in the file's order; gaps
+    filled over time, :func:`~markovmotion.features.markers.fill_gaps`), their centroid on
+    the floor (Y = 0) as reference, the heading of
+    :meth:`MarkerFeatures.place <markovmotion.features.markers.MarkerFeatures.place>` and
+    the size of :func:`marker_size` as height, constant over the take.
+
+    Raises:
+        ValueError: a marker of ``names`` is missing from ``m`` or never seen.
+    """
+    step = MarkerFeatures().fit([m if names is None else _select(m, names)])
+    pos = fill_gaps(step.select(m)).positions
+    origin, yaw = step.place(pos)
+    return Person(pos, origin, np.full(m.n_frames, marker_size(pos)), yaw)
+
+
+def _select(m: Markers, names: Sequence[str]) -> Markers:
+    try:
+        return m.select(list(names))
+    except KeyError as exc:
+        raise ValueError(f"{m.name or 'markers'}: {exc.args[0]}") from None
+
+
+def person_from_take(take: Motion | Markers, names: Sequence[str] | None = None) -> Person:
+    """:func:`person_from_motion` of a skeleton's take (``names``: its shape joints) or
+    :func:`person_from_markers` of markers (``names``: the markers)."""
+    if isinstance(take, Markers):
+        return person_from_markers(take, names)
+    return person_from_motion(take, names)
 
 
 def joints_skeleton(skeleton: Skeleton, joints: Sequence[int]) -> Skeleton:
