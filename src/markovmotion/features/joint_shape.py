@@ -8,11 +8,11 @@ tracked in video (shape = the 32 B-spline control points, reference point = the
 top of the head, person 0 = the left-hand individual) or 3-D motion capture
 (shape = joint positions, reference point = the pelvis on the floor, person 0 =
 the first file of the take), or named 3-D markers (C3D: shape = the markers, picked
-by name; reference point = their centroid on the floor, heading from the markers
-named left and right shoulder or hip, as the dual HMM's
+by name; reference point = their centroid, heading from the markers named left and
+right shoulder or hip, as the dual HMM's
 :class:`~markovmotion.features.markers.MarkerFeatures`; "height" = the body's size,
 :func:`marker_size`, since markers such as an upper-body tracker's need not show
-the floor). The modelling that follows is the same for all.
+the floor: :func:`person_from_markers`). The modelling that follows is the same for all.
 
 Definitions (the equations of eqs. 3-4 are lost from the paper's text; these
 follow its description):
@@ -22,7 +22,9 @@ follow its description):
 - 3-D: d = [R(-yaw_0) (X_1 - X_0) / (h_0 + h_1) on the floor (x, z),
   cos(yaw_1 - yaw_0), sin(yaw_1 - yaw_0)] (separation in person 0's facing
   frame and relative facing), shape points R(-yaw) (P - X) / h with X the
-  pelvis on the floor (heights above the floor are kept).
+  pelvis on the floor (heights above the floor are kept). Where the reference
+  points are not on the floor (markers: the centroid), d also holds their
+  vertical separation (Y_1 - Y_0) / (h_0 + h_1), last (``vertical_``).
 - both: s = h_0 / (h_0 + h_1).
 
 Smoothing, normalisation to [0, 1] and the state vectors F = [C, lambda dC]
@@ -213,18 +215,25 @@ def marker_size(positions: np.ndarray) -> float:
 
 def person_from_markers(m: Markers, names: Sequence[str] | None = None) -> Person:
     """One person of markers: the markers ``names`` (default: all, in the file's order; gaps
-    filled over time, :func:`~markovmotion.features.markers.fill_gaps`), their centroid on
-    the floor (Y = 0) as reference, the heading of
+    filled over time, :func:`~markovmotion.features.markers.fill_gaps`), their centroid as
+    reference, the heading of
     :meth:`MarkerFeatures.place <markovmotion.features.markers.MarkerFeatures.place>` and
     the size of :func:`marker_size` as height, constant over the take.
+
+    The reference keeps its height (unlike a skeleton's pelvis, put on the floor): shapes
+    are scaled about it, and a vertical origin that is not the floor (an upper-body
+    tracker's: the sensor's height) would scale the markers' heights by the person's size.
+    On the Bütepage handshakes and waves, leaving out one pair of people, the mean shape's
+    body-centred error was 5 % lower (139 against 148 mm, both roles learnt) with the
+    centroid than with the centroid on the floor.
 
     Raises:
         ValueError: a marker of ``names`` is missing from ``m`` or never seen.
     """
     step = MarkerFeatures().fit([m if names is None else _select(m, names)])
     pos = fill_gaps(step.select(m)).positions
-    origin, yaw = step.place(pos)
-    return Person(pos, origin, np.full(m.n_frames, marker_size(pos)), yaw)
+    _, yaw = step.place(pos)
+    return Person(pos, pos.mean(axis=1), np.full(m.n_frames, marker_size(pos)), yaw)
 
 
 def _select(m: Markers, names: Sequence[str]) -> Markers:
@@ -295,13 +304,21 @@ class JointShape(FeatureStep):
     """:class:`TwoPeople` -> (F, 2KD + |d| + 1) combined shape vectors C (eqs. 2-4).
 
     Layout: person 0's shape, person 1's shape (K points of D coordinates each),
-    the separation d (1 component for silhouettes, 4 for 3-D) and the scale s.
+    the separation d (1 component for silhouettes, 4 for 3-D, 5 with ``vertical_``) and
+    the scale s.
+
+    Learnt: ``n_points_``, ``n_dims_``, ``vertical_`` (3-D reference points off the floor,
+    as markers' centroids: d holds their vertical separation too; absent from files of
+    older versions: False).
     """
 
     def fit(self, sequences: Sequence[TwoPeople]) -> JointShape:
         first = sequences[0]
         self.n_points_ = int(first.points.shape[2])
         self.n_dims_ = int(first.dims)
+        self.vertical_ = bool(
+            self.n_dims_ == 3 and any(np.any(p.reference[..., 1] != 0) for p in sequences)
+        )
         for p in sequences[1:]:
             if p.points.shape[2:] != first.points.shape[2:]:
                 raise ValueError(f"{p.name}: shape points differ from {first.name}'s")
@@ -338,6 +355,8 @@ class JointShape(FeatureStep):
             local = rotate_yaw(delta, -p.heading[:, 0]) / total[:, None]
             turn = p.heading[:, 1] - p.heading[:, 0]
             sep = np.column_stack([local[:, 0], local[:, 2], np.cos(turn), np.sin(turn)])
+            if getattr(self, "vertical_", False):
+                sep = np.column_stack([sep, local[:, 1]])
         return np.hstack([shapes.reshape(p.n_frames, -1), sep, (h0 / total)[:, None]])
 
     def shape_vectors(self, p: Person) -> np.ndarray:
@@ -373,7 +392,8 @@ class JointShape(FeatureStep):
             points = ref[:, None] + shape * h_other[:, None, None]
             return Person(points, ref, h_other, np.zeros(len(c)))
         turn = np.arctan2(sep[:, 3], sep[:, 2])
-        local = np.column_stack([sep[:, 0], np.zeros(len(c)), sep[:, 1]]) * total[:, None]
+        rise = sep[:, 4] if getattr(self, "vertical_", False) else np.zeros(len(c))
+        local = np.column_stack([sep[:, 0], rise, sep[:, 1]]) * total[:, None]
         if person == 0:
             yaw_other = heading + turn
             ref = reference + rotate_yaw(local, heading)
