@@ -301,6 +301,17 @@ def crossval(
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),
+    choose_prototypes: str = typer.Option(
+        None,
+        help="Comma-separated prototype counts (state and behaviour alike): each fold picks "
+        "one by the same cross-validation on its training takes alone (nested).",
+    ),
+    choose_roles: bool = typer.Option(
+        False,
+        "--choose-roles",
+        help="Each fold picks --roles one or both by the same cross-validation on its "
+        "training takes alone (nested).",
+    ),
     seed: int = SEED,
     kind: str = kind_option(),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON on stdout."),
@@ -314,6 +325,24 @@ def crossval(
     _check_response(response)
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
+    counts = [None]
+    if choose_prototypes:
+        try:
+            counts = [int(x) for x in choose_prototypes.split(",") if x.strip()]
+        except ValueError:
+            raise typer.BadParameter(
+                f"--choose-prototypes: whole numbers separated by commas, got {choose_prototypes!r}"
+            ) from None
+        if not counts or min(counts) < 2:
+            raise typer.BadParameter("--choose-prototypes: counts of at least 2")
+    candidates = [
+        {
+            **({} if n is None else {"n_state_prototypes": n, "n_behaviour_prototypes": n}),
+            **({} if r is None else {"roles": r}),
+        }
+        for n in counts
+        for r in (("one", "both") if choose_roles else (None,))
+    ]
     report = crossval_index(
         model,
         data,
@@ -326,6 +355,7 @@ def crossval(
         resync=resync,
         roles=roles,
         per_label=not one_model,
+        candidates=candidates if len(candidates) > 1 else None,
     )
     if as_json:
         typer.echo(json.dumps(report, indent=2))
@@ -350,6 +380,13 @@ def crossval(
             met = "yes" if r["aim_met"][part] else "no"
             table.add_row(name, *(f"{r[part][k]:.1f}" for k in keys), met, str(r["frames"]))
         print_table(table)
+    for fold in report["folds"]:
+        if "chosen" in fold:
+            err_console.print(
+                f"{fold['label'] or 'all'}, {fold['left_out']} left out: chose "
+                f"{fold['chosen']['settings']} (inner mm: {fold['chosen']['inner_mm']})",
+                highlight=False,
+            )
 
 
 def _print_errors(result: dict, title: str, response: str) -> None:

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+from sklearn.base import clone
 from threadpoolctl import threadpool_limits
 
 from markovmotion.core.markers import Markers
@@ -451,6 +452,7 @@ def cross_validate_people(
     resync: float = DEFAULT_RESYNC,
     roles: str = "one",
     per_label: bool = True,
+    candidates: Sequence[Mapping] | None = None,
 ) -> dict:
     """Leave one pair of people out at a time: each take is answered by a copy of ``model``
     (same settings) trained on the takes of the other pairs of people alone.
@@ -465,13 +467,15 @@ def cross_validate_people(
     (:func:`nearest_partners`), in the world (``world_mm``) and body-centred
     (``body_centred_mm``: each person in its own frame, as the evaluation's pose error).
 
+    ``candidates``: settings to choose from in each fold (dicts of the model's parameters,
+    and optionally ``roles``), by the same cross-validation nested in the fold's training
+    takes alone (:func:`choose_settings`); each fold reports what it chose.
+
     Returns the JSON of ``chain crossval``: ``model`` (settings), ``overall``,
     ``per_label``, ``per_people``, ``per_pair`` (per take), ``folds`` (per fold: the
-    files it trained on, as the fitted copy records them, and the takes it answered),
-    ``left_out`` and ``roles``.
+    files it trained on, as the fitted copy records them, the takes it answered, and
+    with ``candidates`` the settings chosen), ``left_out`` and ``roles``.
     """
-    from sklearn.base import clone
-
     from markovmotion.evaluate.hmm import both_roles
 
     if roles not in ROLES:
@@ -490,17 +494,25 @@ def cross_validate_people(
         for group in track(
             list(dict.fromkeys(groups[i] for i in mine)), f"{scope or 'all'}: folds"
         ):
-            train = [
-                (t[0], t[1], t[3], t[4]) for i in mine if groups[i] != group for t in [takes[i]]
-            ]
+            rest = [takes[i] for i in mine if groups[i] != group]
+            train = [(t[0], t[1], t[3], t[4]) for t in rest]
             test = [i for i in mine if groups[i] == group]
             if not train:
                 raise DataNotFoundError(
                     f"{scope or 'the takes'}: only one pair of people ({group}), nothing to train on"
                 )
-            if roles == "both":
+            fold, fold_roles, chosen = clone(model), roles, {}
+            if candidates:
+                options = dict(
+                    n_hypotheses=n_hypotheses, response=response, seed=seed, sigma=sigma,
+                    resync=resync, per_label=per_label,
+                )  # fmt: skip
+                chosen = choose_settings(rest, fold, candidates, roles, **options)
+                fold_roles = chosen["settings"].get("roles", roles)
+                fold.set_params(**{k: v for k, v in chosen["settings"].items() if k != "roles"})
+            if fold_roles == "both":
                 train = both_roles(train)
-            fold = clone(model).fit([(a, b) for _, _, a, b in train])
+            fold = fold.fit([(a, b) for _, _, a, b in train])
             seen = [fold.two_people(a, b) for _, _, a, b in train]
             for i in test:
                 name, label, people, a, b = takes[i]
@@ -521,6 +533,7 @@ def cross_validate_people(
                     "left_out": group,
                     "trained_on": [r["file"] for r in fold.train_files_],
                     "tested_on": [takes[i][0] for i in test],
+                    **({"chosen": chosen} if chosen else {}),
                 }
             )
     labels = sorted({t[1] for t in takes})
@@ -546,6 +559,41 @@ def cross_validate_people(
         "left_out": "pairs of people" if len(set(t[2] for t in takes)) > 1 else "takes",
         "roles": roles,
     }
+
+
+def _setting_name(settings: Mapping) -> str:
+    return ", ".join(f"{k}={v}" for k, v in settings.items()) or "as given"
+
+
+def choose_settings(
+    takes: Sequence[Take],
+    model: VirtualPartner,
+    candidates: Sequence[Mapping],
+    roles: str = "one",
+    **options,
+) -> dict:
+    """The candidate settings whose multiple-hypothesis partner has the lowest error (world
+    plus body-centred, mm) in :func:`cross_validate_people` over ``takes`` alone (a fold's
+    training takes: leaving out one of their pairs of people at a time, or one take when
+    they come from one pair). Each candidate is a dict of ``model``'s parameters, and
+    optionally ``roles`` (else ``roles``). Returns ``settings`` (the chosen candidate) and
+    ``inner_mm`` (every candidate's error)."""
+    errors = {}
+    for cand in candidates:
+        params = {k: v for k, v in cand.items() if k != "roles"}
+        inner = cross_validate_people(
+            takes,
+            clone(model).set_params(**params),
+            roles=cand.get("roles", roles),
+            **options,
+        )["overall"]
+        errors[_setting_name(cand)] = round(
+            inner["world_mm"]["multiple_hypotheses"]
+            + inner["body_centred_mm"]["multiple_hypotheses"],
+            1,
+        )
+    best = min(range(len(candidates)), key=lambda i: errors[_setting_name(candidates[i])])
+    return {"settings": dict(candidates[best]), "inner_mm": errors}
 
 
 def crossval_index(
