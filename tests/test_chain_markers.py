@@ -37,6 +37,15 @@ def handshakes(mocap) -> list[tuple]:
 
 
 @pytest.fixture(scope="module")
+def short(handshakes) -> list[tuple]:
+    """The handshakes of two pairs of people, 5 s of each (a quick cross-validation)."""
+    two = sorted({t[2] for t in handshakes})[:2]
+    return [
+        (n, lab, p, a.trim(0, 150), b.trim(0, 150)) for n, lab, p, a, b in handshakes if p in two
+    ]
+
+
+@pytest.fixture(scope="module")
 def marker_partner(handshakes) -> VirtualPartner:
     """A small chain fitted on the marker handshakes of every pair of people but the last."""
     last = handshakes[-1][2]
@@ -156,10 +165,9 @@ def test_crossval_leaves_out_every_pair_of_people_once_and_never_trains_on_it(ha
     )
 
 
-def test_crossval_with_both_roles_learns_each_take_twice(handshakes):
-    two = [t for t in handshakes if t[2] != handshakes[0][2]][:2] + handshakes[:1]
-    one = cross_validate_people(two, VirtualPartner(**SMALL), n_hypotheses=6)
-    both = cross_validate_people(two, VirtualPartner(**SMALL), n_hypotheses=6, roles="both")
+def test_crossval_with_both_roles_learns_each_take_twice(short):
+    one = cross_validate_people(short, VirtualPartner(**SMALL), n_hypotheses=6)
+    both = cross_validate_people(short, VirtualPartner(**SMALL), n_hypotheses=6, roles="both")
     assert both["roles"] == "both" and [f["trained_on"] for f in both["folds"]] == [
         f["trained_on"] for f in one["folds"]
     ]  # the same files, each also learnt with the people swapped
@@ -177,3 +185,27 @@ def test_crossval_command_prints_json_and_refuses_unknown_labels(capsys):
     err = capsys.readouterr().err
     assert info.value.code == 2 and "no_such_label" in err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_nested_choice_sees_only_the_folds_training_people(short, monkeypatch):
+    import markovmotion.evaluate.chain as chain_eval
+
+    seen: list[set[str]] = []
+    choose = chain_eval.choose_settings
+
+    def spy(takes, *args, **kwargs):
+        seen.append({t[2] for t in takes})
+        return choose(takes, *args, **kwargs)
+
+    monkeypatch.setattr(chain_eval, "choose_settings", spy)
+    candidates = [{"n_state_prototypes": 4}, {"n_state_prototypes": 6, "roles": "both"}]
+    report = cross_validate_people(
+        short, VirtualPartner(**SMALL), n_hypotheses=4, candidates=candidates
+    )
+    people = {t[2] for t in short}
+    assert [s for s in seen] == [people - {f["left_out"]} for f in report["folds"]]
+    for fold in report["folds"]:
+        chosen = fold["chosen"]
+        assert chosen["settings"] in candidates and len(chosen["inner_mm"]) == 2
+        best = min(chosen["inner_mm"], key=chosen["inner_mm"].get)
+        assert best == chain_eval._setting_name(chosen["settings"])
