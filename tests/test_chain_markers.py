@@ -209,3 +209,25 @@ def test_nested_choice_sees_only_the_folds_training_people(short, monkeypatch):
         assert chosen["settings"] in candidates and len(chosen["inner_mm"]) == 2
         best = min(chosen["inner_mm"], key=chosen["inner_mm"].get)
         assert best == chain_eval._setting_name(chosen["settings"])
+
+
+def test_respond_command_reads_and_writes_c3d_for_a_marker_model(
+    marker_partner, mocap, tmp_path, capsys
+):
+    from markovmotion.io import read_c3d
+
+    model = tmp_path / "m.npz"
+    marker_partner.save(model)
+    a = mocap.pairs(label="handshake", kind="markers")[-1][0]
+    argv = ["chain", "respond", "--model", str(model), "--input", str(a.path)]
+    main([*argv, "--out", str(tmp_path / "b.c3d"), "--hypotheses", "10"])
+    out = read_c3d(tmp_path / "b.c3d")
+    expected = marker_partner.respond(mocap.load_take(a), n_hypotheses=10)
+    assert out.names == expected.names and out.fps == marker_partner.fps_
+    np.testing.assert_allclose(out.positions, expected.positions, atol=0.01)  # float32 file
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as info:
+        main([*argv, "--out", str(tmp_path / "b.bvh")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and ".c3d" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b.bvh").exists()

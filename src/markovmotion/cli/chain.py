@@ -147,8 +147,12 @@ def train(
 @app.command()
 def respond(
     model: Path = typer.Option(..., help="Model from 'chain train'."),
-    input: Path = typer.Option(..., help="The real person: BVH (mocap model) or video."),
-    out: Path = typer.Option(..., help="Output: .bvh (mocap partner) or .mp4 (video)."),
+    input: Path = typer.Option(
+        ..., help="The real person: BVH (skeleton model), C3D (marker model) or video."
+    ),
+    out: Path = typer.Option(
+        ..., help="Output: .bvh (skeleton partner), .c3d (marker partner) or .mp4 (video)."
+    ),
     hypotheses: int = ranged("hypotheses", 200, min=1, help="Hypotheses N (1: single hypothesis)."),
     response: str = typer.Option(
         DEFAULT_RESPONSE,
@@ -184,6 +188,9 @@ def respond(
         "rng": seed,
     }
     suffix = base_suffix(out)
+    if partner_model.uses_markers:
+        _respond_markers(partner_model, input, out, fps, person, realtime, options)
+        return
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
     if realtime and (source != "mocap" or suffix != ".bvh"):
@@ -213,6 +220,32 @@ def respond(
         respond_video(partner_model, input, out, **options)
     else:
         raise MarkovMotionError(f"{out}: a silhouette model writes the partner into an .mp4")
+    err_console.print(f"wrote {out}", highlight=False)
+
+
+def _respond_markers(
+    model, input: Path, out: Path, fps: float | None, person: int, realtime: bool, options: dict
+) -> None:
+    """``chain respond`` with a marker model: C3D in (a file of the collection at INDEX.csv's
+    rate unless ``fps`` says), the partner's markers to a C3D file."""
+    from markovmotion.data.index import listed_entry
+    from markovmotion.io.c3d import check_c3d_output, read_c3d, write_c3d
+
+    if realtime:
+        raise typer.BadParameter("--realtime streams skeletons: a marker model answers whole takes")
+    if base_suffix(input) != ".c3d" or base_suffix(out) != ".c3d":
+        raise MarkovMotionError(
+            f"{input if base_suffix(input) != '.c3d' else out}: the model was trained on "
+            "markers: it reads and writes .c3d files"
+        )
+    check_c3d_output(out)
+    markers = read_c3d(input)
+    entry = listed_entry(input) if fps is None else None
+    rate = fps if fps is not None else entry.fps if entry is not None else None
+    if rate is not None:
+        markers.fps = float(rate)
+    model.check_input(markers)
+    write_c3d(model.respond(markers, person, **options), out)
     err_console.print(f"wrote {out}", highlight=False)
 
 
