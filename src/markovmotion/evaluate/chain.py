@@ -182,11 +182,16 @@ def evaluate_model(
 
 
 def pose_error_mm(model: VirtualPartner, pred: Person, truth: Person) -> float:
-    """Mean joint distance (mm) between two people's poses, each in its own actor-centred frame."""
+    """Mean joint distance (mm) between two people's poses, each in its own frame on the floor:
+    about its reference point with the height kept (a skeleton's pelvis on the floor; markers'
+    centroid on the floor, as the dual HMM's body-centred error), facing +Z."""
     js = model.shape_step
     k = js.n_points_
 
     def pose(p: Person) -> np.ndarray:
+        floor = p.reference.copy()
+        floor[:, 1] = 0.0
+        p = Person(p.points, floor, p.height, p.heading)
         return js.shape_vectors(p).reshape(p.n_frames, k, -1) * p.height[:, None, None]
 
     return float(np.linalg.norm(pose(pred) - pose(truth), axis=-1).mean())
@@ -465,7 +470,7 @@ def cross_validate_people(
     multiple hypotheses with every response, ``response`` repeated as
     ``multiple_hypotheses``; one hypothesis; the mean shape), and by the nearest neighbour
     (:func:`nearest_partners`), in the world (``world_mm``) and body-centred
-    (``body_centred_mm``: each person in its own frame, as the evaluation's pose error).
+    (``body_centred_mm``: each person in its own frame, :func:`pose_error_mm`).
 
     ``candidates``: settings to choose from in each fold (dicts of the model's parameters,
     and optionally ``roles``), by the same cross-validation nested in the fold's training
