@@ -158,6 +158,8 @@ def test_crossval_leaves_out_every_pair_of_people_once_and_never_trains_on_it(ha
         weighted = sum(r[part]["mean_shape"] * r["frames"] for r in report["per_people"].values())
         assert report["overall"][part]["mean_shape"] == pytest.approx(weighted / frames, abs=0.1)
         assert all(0 < v < 2000 for v in report["overall"][part].values())
+    (label,) = report["per_label"]
+    assert set(report["per_label"][label]["per_people"]) == people
     over = report["overall"]
     assert over["aim_met"]["world_mm"] == (
         over["world_mm"]["multiple_hypotheses"]

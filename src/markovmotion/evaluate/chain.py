@@ -477,7 +477,8 @@ def cross_validate_people(
     takes alone (:func:`choose_settings`); each fold reports what it chose.
 
     Returns the JSON of ``chain crossval``: ``model`` (settings), ``overall``,
-    ``per_label``, ``per_people``, ``per_pair`` (per take), ``folds`` (per fold: the
+    ``per_label`` (each with its ``per_people``), ``per_people`` (over every label),
+    ``per_pair`` (per take), ``folds`` (per fold: the
     files it trained on, as the fitted copy records them, the takes it answered, and
     with ``candidates`` the settings chosen), ``left_out`` and ``roles``.
     """
@@ -556,7 +557,15 @@ def cross_validate_people(
         },
         "overall": _pool([rows[n] for n in names]),
         "per_label": {
-            lab: _pool([r for r in rows.values() if r["label"] == lab]) for lab in labels
+            lab: _pool([r for r in rows.values() if r["label"] == lab])
+            | {
+                "per_people": {
+                    p: _pool([r for r in rows.values() if r["label"] == lab and r["people"] == p])
+                    for p in people
+                    if any(r["label"] == lab and r["people"] == p for r in rows.values())
+                }
+            }
+            for lab in labels
         },
         "per_people": {p: _pool([r for r in rows.values() if r["people"] == p]) for p in people},
         "per_pair": per_pair,
