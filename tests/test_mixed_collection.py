@@ -145,32 +145,26 @@ def test_dualhmm_trains_on_the_larger_kind_or_the_one_asked(tmp_path: Path, caps
         assert Model.load(out).uses_markers == (kind == "markers")
 
 
-def test_chain_trains_on_skeletons_and_refuses_markers_in_one_line(tmp_path: Path, capsys, both):
+def test_chain_trains_on_the_larger_kind_or_the_one_asked(tmp_path: Path, capsys, both):
+    from markovmotion.models.chain.partner import VirtualPartner
+
     out = tmp_path / "c.npz"
-    small = ["--prototypes", "8", "--behaviours", "8", "--epochs", "1"]
-    code, err = _run(["chain", "train", "--label", LABEL, *small, "--out", str(out)], capsys)
+    small = ["--prototypes", "8", "--behaviours", "8", "--epochs", "1", "--out", str(out)]
+    code, err = _run(["chain", "train", "--label", LABEL, *small], capsys)
     assert code == 0, err
+    larger = max(both, key=lambda k: (len(both[k]), k == "skeleton"))
+    other = "markers" if larger == "skeleton" else "skeleton"
     (line,) = _notes(err)
-    assert "learns from skeleton takes" in line
-    assert f"left out {len(both['markers'])} markers" in line
-    code, err = _run(
-        [
-            "chain",
-            "train",
-            "--label",
-            LABEL,
-            "--kind",
-            "markers",
-            *small,
-            "--out",
-            str(tmp_path / "d.npz"),
-        ],
-        capsys,
-    )
-    assert code == 2
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "skeleton" in lines[0] and "markers" in lines[0]
-    assert not (tmp_path / "d.npz").exists()
+    assert "both kinds" in line and f"left out {len(both[other])} {other}" in line
+    assert VirtualPartner.load(out).uses_markers == (larger == "markers")
+    for kind in ("skeleton", "markers"):
+        code, err = _run(["chain", "train", "--label", LABEL, "--kind", kind, *small], capsys)
+        assert code == 0, err
+        (line,) = _notes(err)
+        assert f"--kind {kind}" in line
+        model = VirtualPartner.load(out)
+        assert model.uses_markers == (kind == "markers")
+        assert (model.skeletons_ is None) == (kind == "markers")
 
 
 def test_vlmm_learns_markers_or_skeletons_by_kind(tmp_path: Path, capsys, mocap):

@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import kind_option, ranged
+from markovmotion.cli.options import choice, kind_option, ranged
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -38,6 +38,36 @@ RESYNC = typer.Option(
     help="Single hypothesis: re-enter the chain afresh when that matches the real person "
     "better by this margin (eq. 18 error); inf: never (the paper's).",
 )
+
+PROTOTYPES = ranged("states", DEFAULT_PROTOTYPES, min=2, help="State prototypes u (paper: 300).")
+BEHAVIOURS = ranged(
+    "states", DEFAULT_PROTOTYPES, min=2, help="Behaviour prototypes v (paper: 300)."
+)
+GAMMA = typer.Option(0.995, min=0.0, max=1.0, help="Decay constant of eq. 10.")
+LAM = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10).")
+EPOCHS = ranged("iterations", 5, min=1, help="Passes of each competitive learning.")
+SEED = ranged("seed", 0, help="Random seed.")
+HYPOTHESES = ranged("hypotheses", 200, min=2, help="Hypotheses N of the multiple-hypothesis run.")
+RESPONSE = typer.Option(
+    DEFAULT_RESPONSE,
+    help="The response of multiple hypotheses reported as multiple_hypotheses: ml (the "
+    "paper's), map (eq. 21) or mean (likelihood-weighted mean).",
+)
+
+
+def _new_model(prototypes: int, behaviours: int, gamma: float, lam: float, epochs: int, seed: int):
+    """An unfitted :class:`VirtualPartner` with the command line's settings."""
+    from markovmotion.models.chain.partner import VirtualPartner
+
+    return VirtualPartner(
+        lam=lam,
+        n_state_prototypes=prototypes,
+        n_behaviour_prototypes=behaviours,
+        gamma=gamma,
+        n_epochs=epochs,
+        random_state=seed,
+    )
+
 
 app = typer.Typer(
     help="Interaction behaviour models (interaction paper): behaviour chain over two people's "
@@ -88,31 +118,19 @@ def train(
     ),
     source: str = typer.Option("mocap", help="mocap (3-D joints) or silhouette (tracked video)."),
     label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
-    prototypes: int = ranged(
-        "states", DEFAULT_PROTOTYPES, min=2, help="State prototypes u (paper: 300)."
-    ),
-    behaviours: int = ranged(
-        "states", DEFAULT_PROTOTYPES, min=2, help="Behaviour prototypes v (paper: 300)."
-    ),
-    gamma: float = typer.Option(0.995, min=0.0, max=1.0, help="Decay constant of eq. 10."),
-    lam: float = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10)."),
-    epochs: int = ranged("iterations", 5, min=1, help="Passes of each competitive learning."),
-    seed: int = ranged("seed", 0, help="Random seed of the quantisations."),
+    prototypes: int = PROTOTYPES,
+    behaviours: int = BEHAVIOURS,
+    gamma: float = GAMMA,
+    lam: float = LAM,
+    epochs: int = EPOCHS,
+    seed: int = SEED,
     kind: str = kind_option(),
 ) -> None:
-    """Learn a behaviour chain from the training takes (held-out trials excluded)."""
-    from markovmotion.models.chain.partner import VirtualPartner
-
+    """Learn a behaviour chain from the training takes (held-out trials excluded): 3-D
+    skeletons or markers (C3D, picked by name), or tracked silhouettes."""
     _check_source(source)
     takes = _training_takes(data, source, label, kind)
-    model = VirtualPartner(
-        lam=lam,
-        n_state_prototypes=prototypes,
-        n_behaviour_prototypes=behaviours,
-        gamma=gamma,
-        n_epochs=epochs,
-        random_state=seed,
-    )
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
     with err_console.status("learning prototypes and chain"):
         model.fit(takes)
     model.save(out, source=source, labels=[label] if source == "mocap" else [])
@@ -129,8 +147,12 @@ def train(
 @app.command()
 def respond(
     model: Path = typer.Option(..., help="Model from 'chain train'."),
-    input: Path = typer.Option(..., help="The real person: BVH (mocap model) or video."),
-    out: Path = typer.Option(..., help="Output: .bvh (mocap partner) or .mp4 (video)."),
+    input: Path = typer.Option(
+        ..., help="The real person: BVH (skeleton model), C3D (marker model) or video."
+    ),
+    out: Path = typer.Option(
+        ..., help="Output: .bvh (skeleton partner), .c3d (marker partner) or .mp4 (video)."
+    ),
     hypotheses: int = ranged("hypotheses", 200, min=1, help="Hypotheses N (1: single hypothesis)."),
     response: str = typer.Option(
         DEFAULT_RESPONSE,
@@ -166,6 +188,9 @@ def respond(
         "rng": seed,
     }
     suffix = base_suffix(out)
+    if partner_model.uses_markers:
+        _respond_markers(partner_model, input, out, fps, person, realtime, options)
+        return
     if suffix not in (".bvh", ".mp4"):
         raise MarkovMotionError(f"{out}: write the partner as .bvh (mocap) or .mp4")
     if realtime and (source != "mocap" or suffix != ".bvh"):
@@ -198,6 +223,32 @@ def respond(
     err_console.print(f"wrote {out}", highlight=False)
 
 
+def _respond_markers(
+    model, input: Path, out: Path, fps: float | None, person: int, realtime: bool, options: dict
+) -> None:
+    """``chain respond`` with a marker model: C3D in (a file of the collection at INDEX.csv's
+    rate unless ``fps`` says), the partner's markers to a C3D file."""
+    from markovmotion.data.index import listed_entry
+    from markovmotion.io.c3d import check_c3d_output, read_c3d, write_c3d
+
+    if realtime:
+        raise typer.BadParameter("--realtime streams skeletons: a marker model answers whole takes")
+    if base_suffix(input) != ".c3d" or base_suffix(out) != ".c3d":
+        raise MarkovMotionError(
+            f"{input if base_suffix(input) != '.c3d' else out}: the model was trained on "
+            "markers: it reads and writes .c3d files"
+        )
+    check_c3d_output(out)
+    markers = read_c3d(input)
+    entry = listed_entry(input) if fps is None else None
+    rate = fps if fps is not None else entry.fps if entry is not None else None
+    if rate is not None:
+        markers.fps = float(rate)
+    model.check_input(markers)
+    write_c3d(model.respond(markers, person, **options), out)
+    err_console.print(f"wrote {out}", highlight=False)
+
+
 @app.command()
 def evaluate(
     model: Path = typer.Option(..., help="Model from 'chain train'."),
@@ -205,12 +256,8 @@ def evaluate(
         None,
         help="mocap: INDEX.csv or its folder; silhouette: folder written by 'silhouette render'.",
     ),
-    hypotheses: int = ranged(
-        "hypotheses", 200, min=2, help="Hypotheses N of the multiple-hypothesis run."
-    ),
-    response: str = typer.Option(
-        DEFAULT_RESPONSE, help="The response reported as multiple_hypotheses (ml, map or mean)."
-    ),
+    hypotheses: int = HYPOTHESES,
+    response: str = RESPONSE,
     sigma: float = SIGMA,
     resync: float = RESYNC,
     dual_hmm: Path = typer.Option(
@@ -262,6 +309,117 @@ def evaluate(
     left = result["left_out_training_files"]
     if left:
         err_console.print(f"left out (training takes): {', '.join(left)}", highlight=False)
+
+
+@app.command()
+def crossval(
+    data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
+    labels: str = typer.Option(
+        None, help="Comma-separated labels of the two-person takes (default: every interaction)."
+    ),
+    prototypes: int = PROTOTYPES,
+    behaviours: int = BEHAVIOURS,
+    gamma: float = GAMMA,
+    lam: float = LAM,
+    epochs: int = EPOCHS,
+    hypotheses: int = HYPOTHESES,
+    response: str = RESPONSE,
+    sigma: float = SIGMA,
+    resync: float = RESYNC,
+    roles: str = typer.Option(
+        "one",
+        callback=choice(("one", "both")),
+        help="Learn each take as listed ('one') or also with the people swapped ('both').",
+    ),
+    one_model: bool = typer.Option(
+        False, "--one-model", help="One model of every label per fold (default: one per label)."
+    ),
+    choose_prototypes: str = typer.Option(
+        None,
+        help="Comma-separated prototype counts (state and behaviour alike): each fold picks "
+        "one by the same cross-validation on its training takes alone (nested).",
+    ),
+    choose_roles: bool = typer.Option(
+        False,
+        "--choose-roles",
+        help="Each fold picks --roles one or both by the same cross-validation on its "
+        "training takes alone (nested).",
+    ),
+    seed: int = SEED,
+    kind: str = kind_option(),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON on stdout."),
+) -> None:
+    """Leave one pair of people out at a time (INDEX.csv's subject; one take when all come
+    from one pair): train on the other people's takes of each label, answer each person of
+    the left-out takes; multiple hypotheses against one hypothesis, the mean shape and the
+    nearest neighbour, world and body-centred (mm)."""
+    from markovmotion.evaluate.chain import crossval_index
+
+    _check_response(response)
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
+    wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
+    counts = [None]
+    if choose_prototypes:
+        try:
+            counts = [int(x) for x in choose_prototypes.split(",") if x.strip()]
+        except ValueError:
+            raise typer.BadParameter(
+                f"--choose-prototypes: whole numbers separated by commas, got {choose_prototypes!r}"
+            ) from None
+        if not counts or min(counts) < 2:
+            raise typer.BadParameter("--choose-prototypes: counts of at least 2")
+    candidates = [
+        {
+            **({} if n is None else {"n_state_prototypes": n, "n_behaviour_prototypes": n}),
+            **({} if r is None else {"roles": r}),
+        }
+        for n in counts
+        for r in (("one", "both") if choose_roles else (None,))
+    ]
+    report = crossval_index(
+        model,
+        data,
+        wanted,
+        kind,
+        n_hypotheses=hypotheses,
+        response=response,
+        seed=seed,
+        sigma=sigma,
+        resync=resync,
+        roles=roles,
+        per_label=not one_model,
+        candidates=candidates if len(candidates) > 1 else None,
+    )
+    if as_json:
+        typer.echo(json.dumps(report, indent=2))
+        return
+    rows = {
+        "overall": report["overall"],
+        **report["per_label"],
+        **{f"people {p}": r for p, r in report["per_people"].items()},
+        **report["per_pair"],
+    }
+    for part, what in (("world_mm", "world"), ("body_centred_mm", "body-centred")):
+        table = Table(
+            title=f"behaviour chain, {report['left_out']} left out: {what} error of the "
+            "partner (mm)",
+            caption=f"multiple_hypotheses: {hypotheses} hypotheses, {response} response; "
+            "aim: below single_hypothesis and mean_shape",
+        )
+        keys = list(report["overall"][part])
+        for col in ("group", *keys, "aim met", "frames"):
+            table.add_column(col)
+        for name, r in rows.items():
+            met = "yes" if r["aim_met"][part] else "no"
+            table.add_row(name, *(f"{r[part][k]:.1f}" for k in keys), met, str(r["frames"]))
+        print_table(table)
+    for fold in report["folds"]:
+        if "chosen" in fold:
+            err_console.print(
+                f"{fold['label'] or 'all'}, {fold['left_out']} left out: chose "
+                f"{fold['chosen']['settings']} (inner mm: {fold['chosen']['inner_mm']})",
+                highlight=False,
+            )
 
 
 def _print_errors(result: dict, title: str, response: str) -> None:

@@ -2,7 +2,8 @@
 
 :class:`VirtualPartner` chains the joint shape features (§2), the behaviour
 chain (§3-4) and hypothesis propagation (§5): trained on two-person takes
-(pairs of motion-capture takes, or silhouettes tracked in video), it answers
+(pairs of motion-capture takes, skeletons or named markers, or silhouettes tracked
+in video), it answers
 one real person's observed shapes with the partner's shapes, placed in the
 image or the world from the real person's position and height.
 
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markovmotion.algorithms.kinematics import fit_rotations
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.defaults import DEFAULT_PROTOTYPES
@@ -33,6 +35,7 @@ from markovmotion.features.joint_shape import (
     joint_shape_pipeline,
     joints_skeleton,
     person_from_motion,
+    person_from_take,
     shape_joints,
 )
 from markovmotion.models.base import Model, flatten
@@ -76,7 +79,7 @@ class PartnerResponse:
 
 
 #: The kinds of take the behaviour chain learns from (:mod:`markovmotion.data.kinds`).
-KINDS = ("skeleton",)
+KINDS = ("skeleton", "markers")
 
 
 class VirtualPartner(Model):
@@ -93,8 +96,9 @@ class VirtualPartner(Model):
     Learnt: ``pipeline_`` (TwoPeople -> state vectors), ``chain_``,
     ``mean_shape_`` (d,) the mean normalised combined shape (the baseline
     partner), ``centre_``, ``fps_``, ``skeletons_`` (each person's skeleton
-    of shape joints, from motion-capture pairs; None from prepared takes),
-    ``train_files_``.
+    of shape joints, from skeleton pairs; None from markers or prepared takes),
+    ``markers_`` (the marker names each person is seen by, from marker pairs;
+    else None), ``train_files_``.
     """
 
     KIND = "behaviour-chain"
@@ -122,30 +126,47 @@ class VirtualPartner(Model):
         self.random_state = random_state
         self.fps = fps
 
-    def fit(self, takes: Sequence[tuple[Motion, Motion]] | Sequence[TwoPeople]) -> VirtualPartner:
+    def fit(
+        self,
+        takes: Sequence[tuple[Motion, Motion]]
+        | Sequence[tuple[Markers, Markers]]
+        | Sequence[TwoPeople],
+    ) -> VirtualPartner:
         """Learn the feature ranges, both prototype sets and the chain from two-person takes.
 
-        ``takes``: pairs (A, B) of motion-capture takes (resampled to ``fps``;
-        both files recorded in ``train_files_``), or prepared :class:`TwoPeople`
-        (silhouettes tracked in video: their names and a hash of their points
-        are recorded).
+        ``takes``: pairs (A, B) of motion-capture takes, all skeletons or all markers
+        (resampled to ``fps``; both files recorded in ``train_files_``; markers are picked
+        by the names of the first take's A, ``markers_``), or prepared :class:`TwoPeople`
+        (silhouettes tracked in video: their names and a hash of their points are
+        recorded).
         """
         takes = list(takes)
         if not takes:
             raise DataNotFoundError("no two-person takes to learn from")
+        self.skeletons_ = self.markers_ = None
         if all(isinstance(t, TwoPeople) for t in takes):
             people = takes
-            self.skeletons_ = None
             self.train_files_ = [_take_record(t) for t in people]
         else:
             pairs = [tuple(t) for t in takes]
-            if not all(len(t) == 2 and all(isinstance(m, Motion) for m in t) for t in pairs):
-                raise TypeError("fit takes (Motion A, Motion B) pairs or TwoPeople takes")
-            people = [TwoPeople.from_motions(a, b, fps=self.fps) for a, b in pairs]
+            for kind in (Motion, Markers):
+                if all(len(t) == 2 and all(isinstance(m, kind) for m in t) for t in pairs):
+                    break
+            else:
+                raise TypeError(
+                    "fit takes (A, B) pairs, all Motions or all Markers, or TwoPeople takes"
+                )
             a, b = pairs[0]
-            self.skeletons_ = [
-                joints_skeleton(m.skeleton, shape_joints(m.skeleton)) for m in (a, b)
-            ]
+            if kind is Markers:
+                self.markers_ = list(a.names)
+            else:
+                self.skeletons_ = [
+                    joints_skeleton(m.skeleton, shape_joints(m.skeleton)) for m in (a, b)
+                ]
+            try:
+                people = [TwoPeople.from_motions(a, b, self.fps, self.markers_) for a, b in pairs]
+            except ValueError as exc:  # a take without the first one's markers
+                raise SkeletonMismatchError(str(exc)) from None
             self.record_training(flatten(pairs))
         self.pipeline_ = joint_shape_pipeline(people, self.window, self.lam)
         states = self.pipeline_.fit_transform(people)
@@ -172,6 +193,13 @@ class VirtualPartner(Model):
         if not is_fitted(self):
             return
         require(self, "train_files_", "mean_shape_", "centre_", "fps_", "skeletons_")
+        markers = getattr(self, "markers_", None)  # absent from files of older versions
+        if markers is not None and not (
+            isinstance(markers, list)
+            and all(isinstance(n, str) for n in markers)
+            and len(markers) == self.pipeline_.steps[0].n_points_
+        ):
+            raise StateError("markers_: expected none or one name per shape point")
         require_types(self, pipeline_=FeaturePipeline, chain_=BehaviourChain)
         width = self.pipeline_.output_width()
         check_shape("chain_.state_prototypes_", self.chain_.state_prototypes_, (None, width))
@@ -184,6 +212,11 @@ class VirtualPartner(Model):
         ):
             raise StateError("skeletons_: expected none or a skeleton for each of two people")
         check_positive("fps_", self.fps_)
+
+    @property
+    def uses_markers(self) -> bool:
+        """Whether the model sees people as named markers (and answers with Markers)."""
+        return getattr(self, "markers_", None) is not None
 
     @property
     def source(self) -> str:
@@ -249,12 +282,27 @@ class VirtualPartner(Model):
         roles = np.asarray(self.people(person))[matched]
         return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
 
-    def check_input(self, motion: Motion) -> None:
-        """Raise :class:`SkeletonMismatchError` unless this 3-D model can observe ``motion``."""
+    def check_input(self, motion: Motion | Markers) -> None:
+        """Raise :class:`SkeletonMismatchError` unless this 3-D model can observe ``motion``:
+        a skeleton with as many shape joints, or markers with every name of ``markers_``."""
+        where = motion.name or ("markers" if isinstance(motion, Markers) else "motion")
+        if self.uses_markers or isinstance(motion, Markers):
+            if not (self.uses_markers and isinstance(motion, Markers)):
+                learnt = "markers" if self.uses_markers else "skeletons"
+                raise SkeletonMismatchError(
+                    f"{where}: the model was trained on {learnt}, not "
+                    f"{'markers' if isinstance(motion, Markers) else 'a skeleton'}"
+                )
+            missing = [n for n in self.markers_ if n not in motion.names]
+            if missing:
+                raise SkeletonMismatchError(
+                    f"{where}: lacks the model's markers {', '.join(missing)}"
+                )
+            return
         joints = shape_joints(motion.skeleton)
         if len(joints) != self.shape_step.n_points_ or self.shape_step.n_dims_ != 3:
             raise SkeletonMismatchError(
-                f"{motion.name or 'motion'}: {len(joints)} shape joints, but the model was "
+                f"{where}: {len(joints)} shape joints, but the model was "
                 f"trained on {self.shape_step.n_points_} in {self.shape_step.n_dims_}-D"
             )
 
@@ -270,26 +318,39 @@ class VirtualPartner(Model):
             )
         return joints_skeleton(motion.skeleton, shape_joints(motion.skeleton))
 
+    def person(self, take: Motion | Markers) -> Person:
+        """One captured person as the model sees it (its shape joints or markers), at the
+        take's own rate (:func:`~markovmotion.features.joint_shape.person_from_take`)."""
+        return person_from_take(take, self.markers_ if self.uses_markers else None)
+
+    def two_people(self, a: Motion | Markers, b: Motion | Markers) -> TwoPeople:
+        """Both people of a take as the model sees them, at its rate ``fps_``."""
+        return TwoPeople.from_motions(a, b, self.fps_, self.markers_ if self.uses_markers else None)
+
     def respond(
         self,
-        motion: Motion,
+        motion: Motion | Markers,
         person: int = 0,
         rng: np.random.Generator | int | None = None,
         **options,
-    ) -> Motion:
+    ) -> Motion | Markers:
         """The 3-D partner of a captured person over the whole of ``motion``, at ``fps_``.
 
         ``motion`` is resampled to the model's rate. The partner's joint
         positions are turned into rotations by inverse kinematics on the
-        partner's skeleton (:meth:`partner_skeleton`). ``options``: those of
+        partner's skeleton (:meth:`partner_skeleton`); a marker model answers with
+        the partner's markers (``markers_``, mm). ``options``: those of
         :meth:`propagator` (``n_hypotheses``, ``sigma``, ``response``, ``resync``).
         """
         self.check_input(motion)
         motion = motion.resample(self.fps_)
-        resp = self.respond_shapes(person_from_motion(motion), person, rng=rng, **options)
+        resp = self.respond_shapes(self.person(motion), person, rng=rng, **options)
+        name = f"partner of {motion.name}" if motion.name else "virtual partner"
+        if isinstance(motion, Markers):
+            return Markers(tuple(self.markers_), resp.partner.points, self.fps_, name)
         skeleton = self.partner_skeleton(motion, person)
         out = fit_rotations(skeleton, resp.partner.points, fps=self.fps_)
-        out.name = f"partner of {motion.name}" if motion.name else "virtual partner"
+        out.name = name
         return out
 
     def partner(
@@ -359,8 +420,11 @@ class ChainPartner:
         rng: np.random.Generator | int | None = None,
         **options,
     ):
-        if model.shape_step.n_dims_ != 3:
-            raise MarkovMotionError("an online partner needs a model of 3-D motion capture")
+        if model.shape_step.n_dims_ != 3 or model.uses_markers:
+            raise MarkovMotionError(
+                "an online partner needs a model of 3-D skeletons (a marker model answers "
+                "whole takes: respond)"
+            )
         self.model = model
         self.person = person
         self.fps = model.fps_

@@ -1,0 +1,235 @@
+"""The behaviour chain on marker takes (C3D, named points) and its cross-validation by people:
+markers seen by name, placed back exactly, answered with markers; every pair of people left
+out once, never trained on."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from markovmotion.cli import main
+from markovmotion.core.markers import Markers
+from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
+from markovmotion.evaluate.chain import PARTNERS, cross_validate_people
+from markovmotion.features.joint_shape import (
+    JointShape,
+    TwoPeople,
+    marker_size,
+    person_from_markers,
+    rotate_yaw,
+)
+from markovmotion.models.chain.partner import VirtualPartner
+
+SMALL = {"n_state_prototypes": 8, "n_behaviour_prototypes": 8, "n_epochs": 1}
+
+
+@pytest.fixture(scope="module")
+def handshakes(mocap) -> list[tuple]:
+    """The collection's marker handshakes: (name, label, people, A, B), at least two pairs of
+    people (the test says so)."""
+    pairs = mocap.pairs(label="handshake", kind="markers")
+    takes = [(a.file, a.label, a.subject, *mocap.load_pair(a, b)) for a, b in pairs]
+    assert len({t[2] for t in takes}) >= 2, "the marker handshakes should hold two pairs of people"
+    return takes
+
+
+@pytest.fixture(scope="module")
+def short(handshakes) -> list[tuple]:
+    """The handshakes of two pairs of people, 5 s of each (a quick cross-validation)."""
+    two = sorted({t[2] for t in handshakes})[:2]
+    return [
+        (n, lab, p, a.trim(0, 150), b.trim(0, 150)) for n, lab, p, a, b in handshakes if p in two
+    ]
+
+
+@pytest.fixture(scope="module")
+def marker_partner(handshakes) -> VirtualPartner:
+    """A small chain fitted on the marker handshakes of every pair of people but the last."""
+    last = handshakes[-1][2]
+    train = [(a, b) for _, _, people, a, b in handshakes if people != last]
+    return VirtualPartner(**SMALL).fit(train)
+
+
+def test_marker_size_ignores_where_the_body_is_and_scales_with_it():
+    rng = np.random.default_rng(0)
+    pos = rng.normal(size=(20, 8, 3)) * 200
+    moved = rotate_yaw(pos, 0.7) + np.array([1000.0, -300.0, 50.0])
+    assert marker_size(moved) == pytest.approx(marker_size(pos))
+    assert marker_size(2.5 * pos) == pytest.approx(2.5 * marker_size(pos))
+
+
+def test_marker_people_are_placed_back_exactly_with_their_heights(handshakes):
+    _, _, _, a, b = handshakes[0]
+    take = TwoPeople.from_motions(a, b, fps=None)
+    assert take.points.shape[1:] == (2, len(a.names), 3)
+    # the reference is the markers' centroid, off the floor: d holds the vertical separation
+    np.testing.assert_allclose(take.reference[:, 0], a.positions.mean(axis=1))
+    js = JointShape().fit([take])
+    assert js.vertical_
+    c = js.transform([take])[0]
+    assert c.shape[1] == 2 * js.shape_size + 5 + 1
+    for person in (0, 1):
+        partner = js.place(c, person, take.person(person))
+        np.testing.assert_allclose(partner.points, take.points[:, 1 - person], atol=1e-6)
+
+
+def test_marker_person_picks_markers_by_name_and_fills_gaps():
+    rng = np.random.default_rng(1)
+    names = ("HEAD", "L_SHOULDER", "R_SHOULDER", "TORSO")
+    pos = rng.normal(size=(10, 4, 3)) * 100
+    pos[3, 0] = np.nan  # an occluded sample
+    m = Markers(names, pos, 30.0)
+    p = person_from_markers(m, ["TORSO", "HEAD"])
+    assert p.points.shape == (10, 2, 3) and np.isfinite(p.points).all()
+    np.testing.assert_allclose(p.points[3, 1], (pos[2, 0] + pos[4, 0]) / 2)
+    with pytest.raises(ValueError, match="NECK"):
+        person_from_markers(m, ["TORSO", "NECK"])
+
+
+def test_marker_chain_answers_with_markers_and_round_trips(marker_partner, handshakes, tmp_path):
+    model = marker_partner
+    assert model.uses_markers and model.source == "mocap" and model.skeletons_ is None
+    _, _, _, a, b = handshakes[-1]  # a pair of people it has not seen
+    assert model.markers_ == list(a.names)
+    out = model.respond(a, n_hypotheses=10)
+    assert isinstance(out, Markers) and out.names == a.names and out.fps == model.fps_
+    truth = b.resample(model.fps_)
+    assert out.n_frames == truth.n_frames and np.isfinite(out.positions).all()
+    # the partner stands where B stands, not where A does
+    to_b = np.linalg.norm(out.positions - truth.positions, axis=-1).mean()
+    to_a = np.linalg.norm(out.positions - a.resample(model.fps_).positions, axis=-1).mean()
+    assert to_b < 0.5 * to_a
+    model.save(tmp_path / "m.npz")
+    back = VirtualPartner.load(tmp_path / "m.npz")
+    assert back.markers_ == model.markers_ and back.shape_step.vertical_
+    np.testing.assert_allclose(back.respond(a, n_hypotheses=10).positions, out.positions)
+    # markers in another order are picked by name
+    order = list(reversed(range(len(a.names))))
+    shuffled = Markers(tuple(a.names[i] for i in order), a.positions[:, order], a.fps, a.name)
+    np.testing.assert_allclose(back.respond(shuffled, n_hypotheses=10).positions, out.positions)
+
+
+def test_marker_chain_refuses_what_it_cannot_see(marker_partner, handshakes, salsa_pair):
+    _, _, _, a, _ = handshakes[0]
+    with pytest.raises(SkeletonMismatchError, match="R_HAND"):
+        marker_partner.respond(a.select([n for n in a.names if n != "R_HAND"]))
+    with pytest.raises(SkeletonMismatchError, match="trained on markers"):
+        marker_partner.respond(salsa_pair[0])
+    with pytest.raises(MarkovMotionError, match="respond"):
+        marker_partner.partner()
+    with pytest.raises(TypeError, match="all Motions or all Markers"):
+        VirtualPartner(**SMALL).fit([(a, a), salsa_pair])
+
+
+@pytest.fixture(scope="module")
+def salsa_pair(mocap):
+    a, b = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    return a.trim(0, 120), b.trim(0, 120)
+
+
+# ---------------------------------------------------------------- cross-validation by people
+def test_crossval_leaves_out_every_pair_of_people_once_and_never_trains_on_it(handshakes):
+    report = cross_validate_people(handshakes, VirtualPartner(**SMALL), n_hypotheses=6)
+    people = {t[2] for t in handshakes}
+    files: dict[str, set[str]] = {p: set() for p in people}
+    for _, _, p, a, b in handshakes:
+        files[p] |= {Path(a.source).name, Path(b.source).name}
+    held = [f["left_out"] for f in report["folds"]]
+    assert sorted(held) == sorted(people) and report["left_out"] == "pairs of people"
+    for fold in report["folds"]:
+        trained = set(fold["trained_on"])
+        others = set().union(*(files[p] for p in people if p != fold["left_out"]))
+        assert trained == others  # every other take, by what the fitted copy recorded
+        assert not trained & files[fold["left_out"]]
+        assert fold["tested_on"] == [t[0] for t in handshakes if t[2] == fold["left_out"]]
+    # every take answered once, each person masked in turn; pooled by pair, label, overall
+    assert list(report["per_pair"]) == [t[0] for t in handshakes]
+    frames = sum(r["frames"] for r in report["per_pair"].values())
+    assert (
+        report["overall"]["frames"]
+        == frames
+        == sum(r["frames"] for r in report["per_people"].values())
+    )
+    for part in ("world_mm", "body_centred_mm"):
+        assert set(report["overall"][part]) == set(PARTNERS)
+        weighted = sum(r[part]["mean_shape"] * r["frames"] for r in report["per_people"].values())
+        assert report["overall"][part]["mean_shape"] == pytest.approx(weighted / frames, abs=0.1)
+        assert all(0 < v < 2000 for v in report["overall"][part].values())
+    (label,) = report["per_label"]
+    assert set(report["per_label"][label]["per_people"]) == people
+    over = report["overall"]
+    assert over["aim_met"]["world_mm"] == (
+        over["world_mm"]["multiple_hypotheses"]
+        < min(over["world_mm"]["single_hypothesis"], over["world_mm"]["mean_shape"])
+    )
+
+
+def test_crossval_with_both_roles_learns_each_take_twice(short):
+    one = cross_validate_people(short, VirtualPartner(**SMALL), n_hypotheses=6)
+    both = cross_validate_people(short, VirtualPartner(**SMALL), n_hypotheses=6, roles="both")
+    assert both["roles"] == "both" and [f["trained_on"] for f in both["folds"]] == [
+        f["trained_on"] for f in one["folds"]
+    ]  # the same files, each also learnt with the people swapped
+    assert both["overall"]["world_mm"] != one["overall"]["world_mm"]
+
+
+def test_crossval_command_prints_json_and_refuses_unknown_labels(capsys):
+    argv = ["chain", "crossval", "--labels", "handshake", "--kind", "markers", "--prototypes"]
+    main([*argv, "4", "--behaviours", "4", "--epochs", "1", "--hypotheses", "4", "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert report["model"]["n_state_prototypes"] == 4 and report["model"]["hypotheses"] == 4
+    assert set(report["per_label"]) == {"handshake"} and report["folds"]
+    with pytest.raises(SystemExit) as info:
+        main(["chain", "crossval", "--labels", "no_such_label", "--json"])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "no_such_label" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_nested_choice_sees_only_the_folds_training_people(short, monkeypatch):
+    import markovmotion.evaluate.chain as chain_eval
+
+    seen: list[set[str]] = []
+    choose = chain_eval.choose_settings
+
+    def spy(takes, *args, **kwargs):
+        seen.append({t[2] for t in takes})
+        return choose(takes, *args, **kwargs)
+
+    monkeypatch.setattr(chain_eval, "choose_settings", spy)
+    candidates = [{"n_state_prototypes": 4}, {"n_state_prototypes": 6, "roles": "both"}]
+    report = cross_validate_people(
+        short, VirtualPartner(**SMALL), n_hypotheses=4, candidates=candidates
+    )
+    people = {t[2] for t in short}
+    assert [s for s in seen] == [people - {f["left_out"]} for f in report["folds"]]
+    for fold in report["folds"]:
+        chosen = fold["chosen"]
+        assert chosen["settings"] in candidates and len(chosen["inner_mm"]) == 2
+        best = min(chosen["inner_mm"], key=chosen["inner_mm"].get)
+        assert best == chain_eval._setting_name(chosen["settings"])
+
+
+def test_respond_command_reads_and_writes_c3d_for_a_marker_model(
+    marker_partner, mocap, tmp_path, capsys
+):
+    from markovmotion.io import read_c3d
+
+    model = tmp_path / "m.npz"
+    marker_partner.save(model)
+    a = mocap.pairs(label="handshake", kind="markers")[-1][0]
+    argv = ["chain", "respond", "--model", str(model), "--input", str(a.path)]
+    main([*argv, "--out", str(tmp_path / "b.c3d"), "--hypotheses", "10"])
+    out = read_c3d(tmp_path / "b.c3d")
+    expected = marker_partner.respond(mocap.load_take(a), n_hypotheses=10)
+    assert out.names == expected.names and out.fps == marker_partner.fps_
+    np.testing.assert_allclose(out.positions, expected.positions, atol=0.01)  # float32 file
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as info:
+        main([*argv, "--out", str(tmp_path / "b.bvh")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and ".c3d" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b.bvh").exists()
