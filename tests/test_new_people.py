@@ -357,3 +357,11 @@ def test_a_bad_choice_of_settings_is_one_line(capsys):
     assert _cli(main, ["dualhmm", "crossval", "--choose", "states=3"]) == 2
     err = capsys.readouterr().err
     assert "--choose" in err and "Traceback" not in err
+
+
+def test_takes_of_two_actions_with_the_same_file_stems_keep_their_own_names(mocap):
+    pairs = mocap.pairs(label=["handshake", "wave"], kind="markers")
+    names = evaluation.take_names(pairs)
+    assert len(set(names.values())) == len(pairs)  # none hides another in per_pair
+    one = mocap.pairs(label=["handshake"], kind="markers")
+    assert all(n == f"{a.name}+{b.name}" for (a, b), n in evaluation.take_names(one).items())

@@ -547,6 +547,17 @@ def cross_validate(
 Pair = tuple[Entry, Entry]
 
 
+def take_names(pairs: Iterable[Pair]) -> dict[Pair, str]:
+    """Each two-person take's name in reports, ``A+B`` by file stem; the label first when two
+    takes share stems (the Bütepage handshakes and waves do), so no take hides another."""
+    pairs = list(pairs)
+    plain = [f"{a.name}+{b.name}" for a, b in pairs]
+    return {
+        (a, b): f"{a.label} {n}" if plain.count(n) > 1 else n
+        for (a, b), n in zip(pairs, plain, strict=True)
+    }
+
+
 def index_record(index: MocapIndex) -> dict[str, str]:
     """Where an index is and what its INDEX.csv holds (SHA-256), for a model file."""
     path = index.root / INDEX_NAME
@@ -676,7 +687,7 @@ def evaluate_model(
     pairs = track(takes.takes, "evaluating pairs")
     for ea, eb, a, b in pairs_that_fit(model, index, pairs, incompatible):
         kept.append((ea, eb))
-        res = evaluate_pair(model, a, b, f"{ea.name}+{eb.name}", ea.label, baselines)
+        res = evaluate_pair(model, a, b, take_names(takes.takes)[(ea, eb)], ea.label, baselines)
         res.people = ea.subject
         results.append(res)
         if plot_dir is not None:
@@ -706,7 +717,8 @@ def crossval_index(
     the JSON (:func:`summarise`, with ``test_files``, ``left_out`` and ``roles``) and plots."""
     index = MocapIndex.load(data)
     pairs, loaded = load_pairs(index, select_pairs(index, labels, None, held_out=False), kind)
-    takes = [(f"{a.name}+{b.name}", a.label, *ab) for (a, b), ab in zip(pairs, loaded, strict=True)]
+    names = take_names(pairs)
+    takes = [(names[(a, b)], a.label, *ab) for (a, b), ab in zip(pairs, loaded, strict=True)]
     people = [a.subject for a, _ in pairs]
     results, written = cross_validate(takes, model, plot_dir, grid, people, roles)
     report = summarise(results, model)
