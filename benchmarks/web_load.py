@@ -132,6 +132,11 @@ def live_table(live, sessions: int, seconds: float, what: str) -> Table:
     t.add_row("frames expected at the frame rate", f"{expected:.0f}")
     factor = f"{min(frames) / expected:.2f}" if expected else "-"
     t.add_row("real-time factor (received / expected)", factor)
+    skipped = live.skipped or [0]
+    t.add_row(
+        "frames dropped by the server, behind its clock (total / max per session)",
+        f"{sum(skipped)} / {max(skipped)}",
+    )
     t.add_row(f"stalls (no frame for {1000 * STALL_SECONDS:.0f} ms)", str(live.stalls))
     t.add_row("partner latency p50 (ms)", _quantile_ms(live.latency_ms, 0.5))
     t.add_row("partner latency p99 (ms)", _quantile_ms(live.latency_ms, 0.99))

@@ -41,6 +41,11 @@ class MirrorPartner:
         b[:, 2] = 2000.0 - b[:, 2]
         return b
 
+    def skip(self) -> None:
+        """A dropped frame of A: B holds A's last pose seen for it."""
+        if self.poses:
+            self.poses.append(self.poses[-1])
+
 
 STALL_SECONDS = 0.25
 """A live session stalls when no frame arrives for this long (7.5 frames at 30 fps)."""
@@ -131,12 +136,13 @@ def simulate_evaluators(
 
 @dataclass
 class LiveLoad:
-    """What live sessions received: frames, partner latency, gaps between frames, how late
-    frames came against the stream's clock, stalls."""
+    """What live sessions received: frames, frames the server dropped (per session), partner
+    latency, gaps between frames, how late frames came against the stream's clock, stalls."""
 
     sessions: int = 0
     fps: float = 0.0
     frames: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
     latency_ms: list[float] = field(default_factory=list)
     gap_ms: list[float] = field(default_factory=list)
     late_ms: list[float] = field(default_factory=list)
@@ -147,7 +153,7 @@ class LiveLoad:
 
 def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
     ws_url = "ws" + url.removeprefix("http") + "/ws/live"
-    frames, latency, gaps, late, stalls = 0, [], [], [], 0
+    frames, skipped, latency, gaps, late, stalls = 0, 0, [], [], [], 0
     try:
         with connect(ws_url, open_timeout=30, max_size=None) as ws:
             ws.send(json.dumps({"path": path, "loop": True}))
@@ -162,11 +168,13 @@ def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
                 if msg["type"] != "frame":  # the server ended the session: say why
                     raise RuntimeError(f"{msg['type']}: {msg.get('message', msg)}")
                 frames += 1
+                skipped = msg["skipped"]
                 latency.append(msg["latency_ms"])
-                # how late the frame came against the stream's clock (the first frame's arrival
-                # plus i / fps): the end-to-end frame latency beyond the schedule
-                first = now if first is None else first
-                late.append(1000.0 * (now - first - (frames - 1) / start["fps"]))
+                # how late frame i came against the stream's clock (the first frame's arrival
+                # plus i / fps; frames the server dropped still take their time on it): the
+                # end-to-end frame latency beyond the schedule
+                first = (now, msg["i"]) if first is None else first
+                late.append(1000.0 * (now - first[0] - (msg["i"] - first[1]) / start["fps"]))
                 if last is not None:
                     gaps.append(1000.0 * (now - last))
                     stalls += now - last > STALL_SECONDS
@@ -180,6 +188,7 @@ def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
     with lock:
         out.sessions += 1
         out.frames.append(frames)
+        out.skipped.append(skipped)
         out.latency_ms += latency
         out.gap_ms += gaps
         out.late_ms += late
