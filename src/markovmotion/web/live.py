@@ -42,7 +42,7 @@ from markovmotion.web.library import (
     MotionLibrary,
     display_parents,
     encoded_frames,
-    flat_positions,
+    positions_json,
     read_upload,
 )
 
@@ -297,11 +297,7 @@ async def live_session(
             # interpreter lock (40 sessions: 54 ms median latency, real-time factor 0.32)
             pose_b = partner.step(motion.trim(i, i + 1))
             latency = 1000.0 * (time.perf_counter() - t0)
-            b = (
-                "null"
-                if pose_b is None
-                else json.dumps(flat_positions(np.asarray(pose_b)), separators=(",", ":"))
-            )
+            b = "null" if pose_b is None else positions_json(pose_b)
             await ws.send_text(
                 f'{{"type":"frame","i":{frame},"a":{poses_a[i]},"b":{b},'
                 f'"latency_ms":{round(latency, 3)},"skipped":{skipped}}}'

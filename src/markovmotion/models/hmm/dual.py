@@ -784,14 +784,15 @@ class DualHMM(Model):
                 rel = rel - rel.mean(axis=1, keepdims=True) + np.asarray(root)[:, None]
             world = out_of_marker_frame(rel, origin, yaw)
             return Markers(frames.names, world, self.fps, "B")
-        rel = Motion(self.skeleton_b_, frames.rotations[idx], frames.translations[idx], self.fps)
+        # out_of_frame written out on the frames' arrays (one Motion made, not three: online
+        # this runs once per frame)
+        rot = frames.rotations[idx] if rotations is None else np.array(rotations, dtype=float)
+        trans = frames.translations[idx]
         if root is not None:
-            rel.translations[:, 0] = root
-        if rotations is not None:
-            rel.rotations = np.asarray(rotations, dtype=float)
-        out = out_of_frame(rel, origin, yaw)
-        out.fps = self.fps
-        return out
+            trans[:, 0] = root
+        rot[:, 0], trans[:, 0] = _turn_root(rot[:, 0], trans[:, 0], yaw)
+        trans[:, 0] += origin
+        return Motion(self.skeleton_b_, rot, trans, self.fps)
 
     def partner(self, window: int | None = None) -> Partner:
         """An online virtual partner (windowed Viterbi; ``window`` defaults to the model's):

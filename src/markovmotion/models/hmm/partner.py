@@ -13,6 +13,7 @@ takes the model as an argument (this module does not import the model's).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -28,7 +29,7 @@ from markovmotion.features import BodyMotion
 from markovmotion.features.markers import MarkerFeatures
 from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.models.hmm.gaussian import safe_log
-from markovmotion.models.hmm.trellis import blend_positions, smooth_place
+from markovmotion.models.hmm.trellis import blend_positions
 from markovmotion.progress import err_console
 
 if TYPE_CHECKING:
@@ -134,7 +135,7 @@ class Partner:
         """Show the first ``count`` B frames of ``path``, each with its averaged place and
         its blended rotations (over the frames shown last and the path ahead)."""
         shown = list(self._history)
-        roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :])
+        roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :], count)
         rots = self._trellis.blend(path, self._blend, shown[len(shown) - self._blend :], count)
         self._history.extend(int(i) for i in path[:count])
         return list(zip(path[:count].tolist(), roots[:count], rots[:count], strict=True))
@@ -233,7 +234,10 @@ class Partner:
             last, self._last = self._last, now
             if last is not None:
                 now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
-            x = first.rows(*now, frame.fps)
+            # only this frame's row goes on: the steps after the first are row by row (PCA)
+            # or kept across frames (the running centre), so A's features of a frame are
+            # computed once, when it arrives
+            x = first.rows(*now, frame.fps)[-1:]
         for step in rest:
             if isinstance(step, RunningCentre):  # A's running mean: kept across frames
                 self._centre = self._centre or step.online()
@@ -257,11 +261,17 @@ class Partner:
         first = self._frames_in - len(self._places)  # stream frame of self._places[0]
         lo = max(frame - self._half, first)
         hi = min(frame + self._half, self._frames_in - 1)
-        near = [self._places[f - first] for f in range(lo, hi + 1)]
-        origin, yaw = smooth_place(
-            np.array([p[0] for p in near]), np.array([p[1] for p in near]), self._half
-        )
-        return origin[frame - lo], float(yaw[frame - lo])
+        if self._half <= 0 or hi == lo:
+            return self._places[frame - first]
+        # the window about ``frame`` is all of lo .. hi: smooth_place's mean at one frame,
+        # summed here directly (online, one frame's call cost more than the sums)
+        origin, cos, sin = 0.0, 0.0, 0.0
+        for f in range(lo - first, hi - first + 1):
+            o, yaw = self._places[f]
+            origin = origin + o
+            cos += math.cos(yaw)
+            sin += math.sin(yaw)
+        return origin / (hi - lo + 1), math.atan2(sin, cos)
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""
