@@ -380,7 +380,7 @@ def test_live_session_with_the_dual_hmm(dual_server, dual, site):
 
 class SlowPartner(MirrorPartner):
     """A stand-in that falls behind: each step takes 4.5 frames' time at 30 fps. It notes
-    what it was asked, frame by frame: "step" or "skip"."""
+    what it was asked, frame by frame: "step" or "drop"."""
 
     made: list[SlowPartner] = []
 
@@ -394,13 +394,13 @@ class SlowPartner(MirrorPartner):
         time.sleep(0.15)
         return super().step(frame_a)
 
-    def skip(self) -> None:
-        self.calls.append("skip")
-        super().skip()
+    def drop(self) -> None:
+        self.calls.append("drop")
+        super().drop()
 
 
 def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(site):
-    """The server gives the frames it is late with to the partner as skipped, sends only the
+    """The server gives the frames it is late with to the partner as dropped, sends only the
     present frame, and counts what it dropped; it never queues the backlog."""
     app = create_app(site / "lib", admin_token=ADMIN, partner=SlowPartner)
     with running(app) as url, connect(ws_url(url)) as ws:
@@ -411,7 +411,7 @@ def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(si
             frames.append(msg)
     sent = [f["i"] for f in frames]
     calls = SlowPartner.made[-1].calls
-    # every frame of A reached the partner once, in order: stepped and sent, or skipped
+    # every frame of A reached the partner once, in order: stepped and sent, or dropped
     assert len(calls) == 24 and [i for i, c in enumerate(calls) if c == "step"] == sent
     # 4.5 frames' time per step: most frames dropped, the last one still shown
     assert len(sent) <= 12 and sent[0] == 0 and sent[-1] == 23

@@ -14,9 +14,10 @@ Protocol (JSON text messages):
    ``b`` is ``null`` while the partner's window fills. A session that falls
    behind its clock by more than :data:`DROP_LATE` drops frames instead of
    sending a backlog: the frames whose successors are already due are given to
-   the partner as missed (:meth:`LivePartner.skip`, the online protocol's
-   ``skip()``) and not sent, so the next frame sent is the present one;
-   ``skipped`` counts the frames dropped so far (``i`` jumps over them);
+   the partner as dropped (:meth:`LivePartner.drop`, the online protocol's
+   ``drop()``: ``skip()`` without B's answer) and not sent, so the next frame
+   sent is the present one; ``skipped`` counts the frames dropped so far (``i``
+   jumps over them);
 4. ``{"type": "end", "frames", "skipped"}`` when A is over (frames sent, frames
    dropped). The page may send ``{"type": "stop"}``; anything else, or closing
    the tab, ends the session.
@@ -68,9 +69,9 @@ class LivePartner(Protocol):
         """One frame of A (a one-frame Motion) -> B's joint positions (J_B, 3) mm, or None."""
         ...
 
-    def skip(self) -> None:
+    def drop(self) -> None:
         """A frame of A dropped because the session fell behind (the online protocol's
-        ``skip()``): the partner goes on without it; B's frame for it is not wanted."""
+        ``drop()``): the partner goes on without it; B's frame for it is not wanted."""
         ...
 
 
@@ -101,8 +102,8 @@ class ModelPartner:
             return None
         return out.positions()[0] if isinstance(out, Motion) else out.positions[0]
 
-    def skip(self) -> None:
-        self._partner.skip()
+    def drop(self) -> None:
+        self._partner.drop()
 
 
 def load_partner_model(path: str | os.PathLike[str]) -> Model:
@@ -279,7 +280,8 @@ async def live_session(
         while not stop.is_set() and (loop or frame < motion.n_frames):
             # frame k is due at start + k / fps; a session more than DROP_LATE behind its
             # clock drops the frames already overtaken by their successors (the partner
-            # told by skip()) and jumps to the present one, instead of sending a backlog
+            # told by drop(), which costs far less than a step, so catching up does not put
+            # the other sessions behind) and jumps to the present one, never sends a backlog
             now = time.perf_counter() - start
             present = int(now * motion.fps)
             if now - frame / motion.fps <= DROP_LATE:
@@ -287,7 +289,7 @@ async def live_session(
             elif not loop:
                 present = min(present, motion.n_frames - 1)
             while frame < present:
-                partner.skip()
+                partner.drop()
                 frame += 1
                 skipped += 1
             i = frame % motion.n_frames

@@ -92,6 +92,7 @@ class Partner:
         self._checked = None  # A's skeleton, once checked against the model's
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
+        self._unseen = np.zeros(len(hmm.means_))  # log b_j of a missing frame: no evidence
 
     @property
     def skeleton(self) -> Skeleton | None:
@@ -104,7 +105,7 @@ class Partner:
         """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
         frames ago, once one is due, B's training frame and B's root in A's ground frame."""
         if xa is None:
-            log_b = np.zeros(len(self._emission[0]))
+            log_b = self._unseen
         else:
             log_b = gaussian_log_density(xa[None], *self._emission)[0]
         self._places.append(place)
@@ -114,10 +115,7 @@ class Partner:
         self, log_b: np.ndarray, xa: np.ndarray | None
     ) -> tuple[int, np.ndarray, np.ndarray] | None:
         """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
-        self._slice.append((xa, {}))
-        self.decoder.push(log_b)
-        self._frames_in += 1
-        if self._frames_in <= self.lag:
+        if not self._advance(log_b, xa):
             return None
         states = self.decoder.path
         if self.model.output == "regression":
@@ -125,6 +123,13 @@ class Partner:
         cols = self._columns(states, self._slice)
         path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         return self._show(path, 1)[0]
+
+    def _advance(self, log_b: np.ndarray, xa: np.ndarray | None) -> bool:
+        """One frame into the slice and the windowed decoder; whether a B frame is due."""
+        self._slice.append((xa, {}))
+        self.decoder.push(log_b)
+        self._frames_in += 1
+        return self._frames_in > self.lag
 
     @property
     def _shown(self) -> int | None:
@@ -249,6 +254,16 @@ class Partner:
     def skip(self) -> Motion | Markers | None:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
         return self._motion(self.step_features(None, self._place))
+
+    def drop(self) -> None:
+        """A frame a caller dropped and will not show B's answer for (a live session behind
+        its clock): for the decoder a missing frame, as with :meth:`skip`, but B's frame for
+        ``lag`` frames ago is not decided (no trellis, no placement), and the next B frame
+        shown follows on from the last one shown. A decoder step, a tenth of a partner step,
+        so a session that has fallen behind catches up at once."""
+        self._places.append(self._place)
+        if self._advance(self._unseen, None):
+            self._shown_count += 1
 
     def finish(self) -> list[Motion | Markers]:
         """B's frames still owed at the end of the stream."""
