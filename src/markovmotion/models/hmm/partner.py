@@ -81,7 +81,9 @@ class Partner:
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
         self._half = min(model.placement_window // 2, self.lag)
         # where A stood in the slice's frames and the ``half`` before
-        self._places: deque = deque(maxlen=window + self._half)
+        # rows origin (3), yaw, cos yaw, sin yaw: a ring of the last window + half frames
+        self._places = np.zeros((window + self._half, 6))
+        self._places_in = 0
         self._shown_count = 0
         self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
@@ -108,8 +110,14 @@ class Partner:
             log_b = self._unseen
         else:
             log_b = gaussian_log_density(xa[None], *self._emission)[0]
-        self._places.append(place)
+        self._add_place(place)
         return self.step_log_frameprob(log_b, xa)
+
+    def _add_place(self, place: tuple[np.ndarray, float]) -> None:
+        row = self._places[self._places_in % len(self._places)]
+        row[:3], row[3] = place
+        row[4], row[5] = math.cos(place[1]), math.sin(place[1])
+        self._places_in += 1
 
     def step_log_frameprob(
         self, log_b: np.ndarray, xa: np.ndarray | None
@@ -261,7 +269,7 @@ class Partner:
         ``lag`` frames ago is not decided (no trellis, no placement), and the next B frame
         shown follows on from the last one shown. A decoder step, a tenth of a partner step,
         so a session that has fallen behind catches up at once."""
-        self._places.append(self._place)
+        self._add_place(self._place)
         if self._advance(self._unseen, None):
             self._shown_count += 1
 
@@ -273,20 +281,16 @@ class Partner:
         """A's place for B's frame ``frame`` of the stream, averaged over the frames around it
         that have arrived (:func:`~markovmotion.models.hmm.trellis.smooth_place`, as
         :meth:`DualHMM.respond` does)."""
-        first = self._frames_in - len(self._places)  # stream frame of self._places[0]
-        lo = max(frame - self._half, first)
-        hi = min(frame + self._half, self._frames_in - 1)
+        ring = len(self._places)
+        lo = max(frame - self._half, self._places_in - ring)
+        hi = min(frame + self._half, self._places_in - 1)
         if self._half <= 0 or hi == lo:
-            return self._places[frame - first]
+            row = self._places[frame % ring]
+            return row[:3].copy(), float(row[3])
         # the window about ``frame`` is all of lo .. hi: smooth_place's mean at one frame,
         # summed here directly (online, one frame's call cost more than the sums)
-        origin, cos, sin = 0.0, 0.0, 0.0
-        for f in range(lo - first, hi - first + 1):
-            o, yaw = self._places[f]
-            origin = origin + o
-            cos += math.cos(yaw)
-            sin += math.sin(yaw)
-        return origin / (hi - lo + 1), math.atan2(sin, cos)
+        mean = self._places[np.arange(lo, hi + 1) % ring].mean(axis=0)
+        return mean[:3], math.atan2(mean[5], mean[4])
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""
