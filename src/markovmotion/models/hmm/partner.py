@@ -41,6 +41,8 @@ def finite_frames(motion: Motion | Markers) -> np.ndarray:
     finite numbers."""
     if isinstance(motion, Markers):
         return np.isfinite(motion.positions).all(axis=(1, 2))
+    if motion.n_frames == 1:  # online: one frame, one sum (NaN or inf if any value is)
+        return np.array([math.isfinite(motion.rotations.sum() + motion.translations.sum())])
     return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
         axis=(1, 2)
     )
@@ -128,6 +130,7 @@ class Partner:
         states = self.decoder.path
         if self.model.output == "regression":
             return self._regress(states, list(self._slice), 1)[0]
+        states = states.tolist()  # Python ints: the slice's caches are keyed by them
         cols = self._columns(states, self._slice)
         path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         return self._show(path, 1)[0]
@@ -289,7 +292,7 @@ class Partner:
             return row[:3].copy(), float(row[3])
         # the window about ``frame`` is all of lo .. hi: smooth_place's mean at one frame,
         # summed here directly (online, one frame's call cost more than the sums)
-        mean = self._places[np.arange(lo, hi + 1) % ring].mean(axis=0)
+        mean = self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
         return mean[:3], math.atan2(mean[5], mean[4])
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:

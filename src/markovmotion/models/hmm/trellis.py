@@ -199,7 +199,8 @@ def _window_mean(values: np.ndarray, t: np.ndarray, half: int) -> np.ndarray:
     """(len(t), D) the mean of rows t - half .. t + half of ``values`` (F, D) (those that exist)."""
     if len(t) == 1:  # online, one frame shown: its mean directly (cheaper than the cumsum)
         k = int(t[0])
-        return values[max(k - half, 0) : k + half + 1].mean(axis=0, keepdims=True)
+        near = values[max(k - half, 0) : k + half + 1]
+        return near.sum(axis=0, keepdims=True) / len(near)
     csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
     lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(values))
     return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
