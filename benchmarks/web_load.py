@@ -132,7 +132,7 @@ def live_table(live, sessions: int, seconds: float, what: str) -> Table:
     t.add_row("frames expected at the frame rate", f"{expected:.0f}")
     factor = f"{min(frames) / expected:.2f}" if expected else "-"
     t.add_row("real-time factor (received / expected)", factor)
-    skipped = live.skipped or [0]
+    skipped = getattr(live, "skipped", None) or [0]  # none from a version before drops
     t.add_row(
         "frames dropped by the server, behind its clock (total / max per session)",
         f"{sum(skipped)} / {max(skipped)}",
