@@ -177,11 +177,14 @@ def test_nested_cross_validation_picks_the_placement_window_on_the_other_takes()
         for n, seed in ((200, 1), (220, 2), (180, 3))
     ]
     model = DualHMM(n_states=N_POSES, n_iter=10, window=6, **TOY)
-    results, _ = cross_validate(takes, model, placement_windows=[9, 1])
-    assert [r.chosen["placement_window"] for r in results] == [1] * 3
+    results, _ = cross_validate(
+        takes, model, grid=[{"placement_window": 9}, {"placement_window": 1}]
+    )
+    assert [r.chosen["settings"]["placement_window"] for r in results] == [1] * 3
     chosen = summarise(results, model)["per_pair"]["t2"]["chosen"]
-    assert chosen["placement_window"] == 1
-    assert min(chosen["inner_mm"], key=chosen["inner_mm"].get) == "1"  # the pick is the best
+    assert chosen["settings"] == {"placement_window": 1}
+    best = min(chosen["inner_mm"], key=chosen["inner_mm"].get)
+    assert best == "placement_window=1"  # the pick is the best
     assert np.median(np.concatenate([r.errors["standard"] for r in results])) < 1.0
 
 

@@ -207,3 +207,153 @@ def test_regression_output_needs_markers(people):
     m = make_motion(30)
     with pytest.raises(SkeletonMismatchError, match="regression"):
         DualHMM(n_states=2, output="regression").fit([(m, m)])
+
+
+# ------------------------------------------------------------------ place_memory
+def test_smooth_place_with_a_memory_is_the_mean_over_the_frames_before_and_after():
+    from markovmotion.models.hmm.trellis import smooth_place
+
+    rng = np.random.default_rng(5)
+    origin, yaw = rng.normal(size=(40, 3)) * 100, rng.normal(size=40) * 0.3
+    got_o, got_y = smooth_place(origin, yaw, 2, 10)
+    for t in (0, 5, 20, 39):  # brute force: frames t - 10 .. t + 2 that exist
+        lo, hi = max(t - 10, 0), min(t + 3, 40)
+        np.testing.assert_allclose(got_o[t], origin[lo:hi].mean(0), atol=1e-9)
+        c, s = np.cos(yaw[lo:hi]).mean(), np.sin(yaw[lo:hi]).mean()
+        np.testing.assert_allclose(got_y[t], np.arctan2(s, c), atol=1e-9)
+    same = smooth_place(origin, yaw, 4)  # no memory given: centred, as before
+    np.testing.assert_allclose(same[0], smooth_place(origin, yaw, 4, 4)[0])
+
+
+@pytest.mark.parametrize("output", ["frames", "regression"])
+def test_a_model_with_a_place_memory_streams_what_windowed_respond_gives(people, output):
+    pairs = [(a, b) for _, a, b in people]
+    model = DualHMM(n_states=4, n_iter=5, place_memory=40, output=output).fit(pairs)
+    a = model._rate(people[-1][1])
+    partner = model.partner()
+    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    streamed = np.concatenate([s.positions for s in shown])
+    np.testing.assert_allclose(streamed, model.respond(a, "windowed").positions, atol=1e-9)
+    # A turning on the spot while B stands still: the memory keeps B where A faced
+    short = DualHMM(n_states=4, n_iter=5, output=output).fit(pairs)
+    assert not np.allclose(short.respond(a, "windowed").positions, streamed)
+
+
+def test_place_memory_is_checked():
+    with pytest.raises(ValueError, match="place_memory"):
+        DualHMM(place_memory=-1).fit([])
+
+
+# ------------------------------------------------------------------ nested selection
+def test_parse_grid_gives_every_combination_with_the_parameters_types():
+    grid = evaluation.parse_grid("place_memory=0,300; n-states=16,32")
+    assert grid == [
+        {"place_memory": 0, "n_states": 16},
+        {"place_memory": 0, "n_states": 32},
+        {"place_memory": 300, "n_states": 16},
+        {"place_memory": 300, "n_states": 32},
+    ]
+    assert evaluation.parse_grid("output=frames,regression") == [
+        {"output": "frames"},
+        {"output": "regression"},
+    ]
+    assert evaluation.parse_grid("roles=one,both") == [{"roles": "one"}, {"roles": "both"}]
+    for bad, what in (
+        ("roles=two", "roles are"),
+        ("states=3", "PARAM one of"),
+        ("n_states=a", "int"),
+        ("energy=", "no values"),
+        ("", "no settings"),
+    ):
+        with pytest.raises(ValueError, match=what):
+            evaluation.parse_grid(bad)
+
+
+def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people, monkeypatch):
+    """Each outer fold trains on the other pairs; each of its inner fits on fewer still, and
+    none on the held-out pair: the settings are chosen on training pairs only."""
+    groups = [s for s, _, _ in people]
+    assert len(set(groups)) >= 3  # the collection holds three pairs of handshakes
+    seen = []
+    fit = evaluation._fit_on
+
+    def spy(model, takes, who=None):
+        seen.append(set(who))
+        return fit(model, takes, who)
+
+    monkeypatch.setattr(evaluation, "_fit_on", spy)
+    takes = [(f"t{i}", "handshake", a, b) for i, (_, a, b) in enumerate(people)]
+    grid = [{"place_memory": 0, "blend_window": 1}, {"place_memory": 0, "blend_window": 9},
+            {"place_memory": 30, "blend_window": 9}]  # fmt: skip
+    model = DualHMM(n_states=4, n_iter=5)
+    results, _ = evaluation.cross_validate(takes, model, grid=grid, people=groups)
+    pairs = set(groups)
+    outer = [s for s in seen if len(s) == len(pairs) - 1]
+    inner = [s for s in seen if len(s) < len(pairs) - 1]
+    assert len(outer) == len(pairs)
+    # per outer fold and inner fold, one fit per distinct training setting (blend is reused)
+    assert len(inner) == len(pairs) * (len(pairs) - 1) * 2
+    for r in results:
+        assert r.chosen["settings"] in grid
+        assert set(r.chosen["inner_mm"]) == {evaluation._label(g) for g in grid}
+        assert (
+            r.chosen["settings"]
+            == grid[
+                [evaluation._label(g) for g in grid].index(
+                    min(r.chosen["inner_mm"], key=r.chosen["inner_mm"].get)
+                )
+            ]
+        )
+    # the inner fits of the fold that answers a pair never saw that pair
+    i = 0
+    for group in dict.fromkeys(groups):
+        fold_inner, i = seen[i : i + 2 * (len(pairs) - 1)], i + 2 * (len(pairs) - 1) + 1
+        assert all(group not in s for s in fold_inner)
+        assert seen[i - 1] == pairs - {group}
+
+
+def _cli(main, args: list[str]) -> int:
+    """The exit code of the command line on ``args``."""
+    try:
+        main(args)
+    except SystemExit as exit_:
+        return exit_.code or 0
+    return 0
+
+
+def test_train_learns_both_roles_and_chooses_settings_by_leaving_people_out(tmp_path, mocap):
+    """``dualhmm train --roles both`` learns every take twice (it once learnt one role while
+    saying both); ``--choose`` picks among settings by leaving one pair of people out on the
+    training takes and records the pick and every setting's error in the model file."""
+    from markovmotion.cli import main
+
+    base = ["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3"]
+    base += ["--n-iter", "3"]
+    frames = {}
+    for roles in ("one", "both"):
+        out = tmp_path / f"{roles}.npz"
+        assert _cli(main, [*base, "--roles", roles, "--out", str(out)]) == 0
+        model = Model.load(out)
+        frames[roles] = len(model.train_a_)
+        assert model.roles_ == roles
+    assert frames["both"] == 2 * frames["one"]
+    out = tmp_path / "chosen.npz"
+    assert (
+        _cli(main, [*base, "--choose", "roles=one,both;blend_window=1,9", "--out", str(out)]) == 0
+    )
+    model = Model.load(out)
+    inner = model.chosen_["inner_mm"]
+    assert len(inner) == 4 and model.chosen_["settings"]["roles"] == model.roles_
+    pick = min(inner, key=inner.get)
+    assert pick == evaluation._label(model.chosen_["settings"])
+    assert model.blend_window == model.chosen_["settings"]["blend_window"]
+    assert len(model.train_a_) == frames[model.roles_]
+
+
+def test_a_bad_choice_of_settings_is_one_line(capsys):
+    from markovmotion.cli import main
+
+    assert _cli(main, ["dualhmm", "crossval", "--choose", "states=3"]) == 2
+    err = capsys.readouterr().err
+    assert "--choose" in err and "Traceback" not in err

@@ -38,6 +38,21 @@ CANDIDATES = ranged("count", 10, help="Trellis candidates per frame (§3.2).")
 PLACEMENT_WINDOW = ranged(
     "window", 19, help="Frames over which B's place relative to A is averaged (1: none)."
 )
+PLACE_MEMORY = ranged(
+    "window",
+    0,
+    min=0,
+    max=3000,
+    help="Frames before each frame over which A's ground frame, through which B is placed, "
+    "is averaged (0: the placement window's; 300 chosen for new people: docs/hmm.md).",
+)
+CHOOSE = typer.Option(
+    None,
+    help="Settings to choose among by leaving one pair of people out on the training takes "
+    "alone (windowed world error): 'param=v1,v2;param=v1,v2', every combination, e.g. "
+    "'roles=one,both;output=frames,regression' (crossval: each fold chooses on its own "
+    "training takes, nested; docs/hmm.md).",
+)
 BLEND_WINDOW = ranged(
     "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
 )
@@ -127,7 +142,8 @@ MODEL_OPTIONS = {
     **{
         k: k
         for k in (
-            "mode", "observation", "candidates", "placement_window", "blend_window", "trellis",
+            "mode", "observation", "candidates", "placement_window", "place_memory", "blend_window",
+            "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
             "normalise", "output",
             "covariance_type", "var_floor",
@@ -160,6 +176,7 @@ def train(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    place_memory: int = PLACE_MEMORY,
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
@@ -178,6 +195,7 @@ def train(
     jobs: int = JOBS,
     kind: str = KIND,
     roles: str = ROLES,
+    choose: str = CHOOSE,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
@@ -187,12 +205,23 @@ def train(
     check_model_output(out)
     start = time.perf_counter()
     model = new_model(locals())
+    grid = _grid(choose)
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
-        model, extras, pairs = fit_on_index(model, data, _split(labels), _split(test_trials), kind)
+        model, extras, pairs = fit_on_index(
+            model, data, _split(labels), _split(test_trials), kind, roles, grid
+        )
     model.save(out, **extras)
+    if "chosen" in extras:
+        inner = extras["chosen"]["inner_mm"]
+        err_console.print(
+            f"chose {', '.join(f'{k}={v}' for k, v in extras['chosen']['settings'].items())} "
+            f"by leaving one pair of people out: windowed world error {min(inner.values()):.1f} mm "
+            f"(worst of {len(inner)}: {max(inner.values()):.1f} mm)",
+            highlight=False,
+        )
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
-    both = " in both roles" if roles == "both" else ""
+    both = " in both roles" if extras["roles"] == "both" else ""
     err_console.print(
         f"wrote {out}: {len(pairs)} takes{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
@@ -445,6 +474,7 @@ def crossval(
     observation: str = OBSERVATION,
     candidates: int = CANDIDATES,
     placement_window: int = PLACEMENT_WINDOW,
+    place_memory: int = PLACE_MEMORY,
     blend_window: int = BLEND_WINDOW,
     trellis: str = TRELLIS,
     points: str = POINTS,
@@ -462,11 +492,7 @@ def crossval(
     seed: int = SEED,
     jobs: int = JOBS,
     plots: Path = typer.Option(None, help="Folder for the per-frame error plots (Figs. 6-8)."),
-    choose_placement: str = typer.Option(
-        None,
-        help="Comma-separated placement windows: each fold picks one on the other takes alone "
-        "(nested leave-one-take-out; ~25 min for 1,9,15,19 on salsa).",
-    ),
+    choose: str = CHOOSE,
     json_out: bool = JSON,
     kind: str = KIND,
     roles: str = ROLES,
@@ -478,10 +504,20 @@ def crossval(
     from markovmotion.evaluate.hmm import crossval_index
 
     model = new_model(locals())
-    windows = [int(w) for w in _split(choose_placement)] if choose_placement else None
+    grid = _grid(choose)
     with joblib.parallel_config(n_jobs=jobs or -1):
-        report, written = crossval_index(model, data, _split(labels), plots, windows, kind, roles)
+        report, written = crossval_index(model, data, _split(labels), plots, grid, kind, roles)
     _report(report, written, json_out)
+
+
+def _grid(choose: str | None) -> list[dict] | None:
+    """The settings of ``--choose`` (:func:`~markovmotion.evaluate.hmm.parse_grid`)."""
+    from markovmotion.evaluate.hmm import parse_grid
+
+    try:
+        return parse_grid(choose) if choose else None
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--choose") from None
 
 
 def _report(report: dict, written: list[Path], json_out: bool) -> None:
@@ -519,13 +555,13 @@ def _print_table(report: dict) -> None:
         **report["per_pair"],
     }
     for name, r in rows.items():
-        lat, paper, body = r["latency_us"], r["trellis"]["paper"], r["body_centred"]
+        lat, paper, body = r["latency_us"], r["trellis"].get("paper"), r["body_centred"]
         gap = r.get("hand_gap_in_contact_median_mm")
         table.add_row(
             name,
             *(f"{r[c]:.1f}" for c in cols),
             "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
-            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}",
+            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}" if paper else "-",
             *(f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",
             f"{lat['median']:.0f}/{lat['p99']:.0f}",

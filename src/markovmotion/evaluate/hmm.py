@@ -33,6 +33,7 @@ the model's own held-out takes) and :func:`crossval_index`.
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -252,17 +253,19 @@ def evaluate_pair(
 ) -> PairResult:
     """Errors of standard, windowed, mean-pose and nearest-neighbour B on one take; standard
     and windowed through the model's trellis, and (keys ``"<trellis>/standard"`` ...) through
-    each of :data:`~markovmotion.models.hmm.trellis.TRELLISES`."""
+    each of :data:`~markovmotion.models.hmm.trellis.TRELLISES` (B by regression: the model's
+    own only, as it passes no trellis)."""
     baselines = baselines or Baselines(model)
     a, b = model._rate(a), model._rate(b)
-    origin, yaw = model.place(a)
+    origin, yaw = model.placing(a)  # the baselines are placed as the windowed partner is
     xa, _ = model.features_a(a)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     if baselines.gmr is not None:
         generated["gmr"] = baselines.regression(xa, origin, yaw)
     own = model.trellis
     try:
-        for kind in TRELLISES:
+        # B by regression passes no trellis: one answer per method
+        for kind in TRELLISES if model.output == "frames" else (own,):
             model.set_params(trellis=kind)
             for method in ("standard", "windowed"):
                 generated[f"{kind}/{method}"] = model.respond(a, method)
@@ -322,6 +325,7 @@ def _summary(results: Sequence[PairResult]) -> dict:
         kind: {f"{m}_mm": mean(f"{kind}/{m}") for m in ("standard", "windowed")}
         | _jumps(results, (f"{kind}/standard", f"{kind}/windowed"))
         for kind in TRELLISES
+        if all(f"{kind}/standard" in r.errors for r in results)
     }
     out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in methods}
     touching = [r for r in results if r.hand_gaps]
@@ -364,6 +368,9 @@ def describe(model: DualHMM) -> dict:
         "trellis": model.trellis,
         "blend_window": model.blend_window,
         "placement_window": model.placement_window,
+        "place_memory": model.place_memory,
+        "normalise": model.normalise,
+        "output": model.output,
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
@@ -394,24 +401,96 @@ def _fit_on(
     return clone(model).fit([(a, b) for _, _, a, b in takes], groups=people)
 
 
-def choose_placement(
-    takes: Sequence[tuple[str, str, Motion, Motion]], model: DualHMM, windows: Sequence[int]
+#: DualHMM parameters that change generation, not training: a nested choice among them
+#: reuses each inner fold's fit.
+GENERATION_ONLY = frozenset({"placement_window", "blend_window"})
+
+
+def parse_grid(text: str) -> list[dict]:
+    """Settings to choose among from ``"param=v1,v2;param=v1,v2"`` (DualHMM parameters,
+    ``-`` or ``_``, and ``roles``, :data:`ROLES`; every combination), each value as the
+    parameter's default's type; ValueError naming what is wrong."""
+    defaults = DualHMM().get_params() | {"roles": ROLES[0]}  # roles: which the folds learn
+    axes = []
+    for part in (p.strip() for p in text.split(";") if p.strip()):
+        name, sep, values = part.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or name not in defaults:
+            raise ValueError(
+                f"{part!r}: expected PARAM=V1,V2 with PARAM one of {', '.join(sorted(defaults))}"
+            )
+        kind = type(defaults[name]) if defaults[name] is not None else int
+        try:
+            axes.append([(name, kind(v.strip())) for v in values.split(",") if v.strip()])
+        except ValueError:
+            raise ValueError(f"{part!r}: {name} takes {kind.__name__} values") from None
+        if not axes[-1]:
+            raise ValueError(f"{part!r}: no values")
+        if name == "roles" and not {v for _, v in axes[-1]} <= set(ROLES):
+            raise ValueError(f"{part!r}: roles are {', '.join(ROLES)}")
+    if not axes:
+        raise ValueError("no settings to choose among")
+    return [dict(combo) for combo in itertools.product(*axes)]
+
+
+def _label(settings: dict) -> str:
+    return ",".join(f"{k}={v}" for k, v in settings.items())
+
+
+def _roles(settings: dict, roles: str) -> str:
+    """The roles a fold learns: the setting's own, else ``roles``."""
+    return settings.get("roles", roles)
+
+
+def _groups(people: Sequence[str] | None, n: int) -> list[str]:
+    """The folds of leave-one-out: pairs of people when there are two or more, else takes."""
+    groups = list(people) if people is not None else [""] * n
+    return groups if len(set(groups)) >= 2 else [str(i) for i in range(n)]
+
+
+def choose_settings(
+    takes: Sequence[tuple[str, str, Motion, Motion]],
+    model: DualHMM,
+    grid: Sequence[dict],
+    people: Sequence[str] | None = None,
+    roles: str = "one",
+    method: str = "windowed",
 ) -> dict:
-    """The ``placement_window`` of ``windows`` with the lowest standard-Viterbi error over
-    leave-one-take-out folds of ``takes`` (the window changes generation, not training, so
-    each fold is trained once); returns it and every window's error (mm, ``inner_mm``)."""
-    errors, frames = np.zeros(len(windows)), 0
-    for i, (_, _, a, b) in enumerate(takes):
-        fold = _fit_on(model, [t for j, t in enumerate(takes) if j != i])
-        truth = model.body_positions(model._rate(b))
-        for k, w in enumerate(windows):
-            generated = fold.set_params(placement_window=w).respond(a, "standard")
-            errors[k] += trial_errors(model.body_positions(generated), truth).sum()
-        frames += len(truth)
-    mean = errors / frames
+    """The settings of ``grid`` (dicts of DualHMM parameters) under which ``model`` answers
+    best, by leave-one-out over ``takes`` alone (one pair of people at a time when they come
+    from two or more, else one take): nested cross-validation when ``takes`` are an outer
+    fold's training takes. The score is B's mean world error by ``method`` over the inner
+    held-out frames; each inner fold learns ``roles`` (or the setting's own ``roles``) as
+    the outer one would. Returns
+    ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
+    groups = _groups(people, len(takes))
+    errors, frames = np.zeros(len(grid)), 0
+    for group in dict.fromkeys(groups):
+        rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
+        who = [g for g in groups if g != group]
+        fits: dict[str, DualHMM] = {}
+        for k, settings in enumerate(grid):
+            params = {p: v for p, v in settings.items() if p != "roles"}
+            trained = {p: v for p, v in settings.items() if p not in GENERATION_ONLY}
+            key = _label(trained)
+            if key not in fits:
+                learn = (
+                    (both_roles(rest), who + who)
+                    if _roles(settings, roles) == "both"
+                    else (rest, who)
+                )
+                fits[key] = _fit_on(clone(model).set_params(**params), *learn)
+            fold = fits[key].set_params(**params)
+            for (_, _, a, b), g in zip(takes, groups, strict=True):
+                if g == group:
+                    generated = fold.respond(a, method)
+                    truth = fold.body_positions(fold._rate(b))
+                    errors[k] += trial_errors(fold.body_positions(generated), truth).sum()
+                    frames += len(truth) if k == 0 else 0
+    mean = errors / max(frames, 1)
     return {
-        "placement_window": int(windows[int(np.argmin(mean))]),
-        "inner_mm": {str(w): float(e) for w, e in zip(windows, mean, strict=True)},
+        "settings": dict(grid[int(np.argmin(mean))]),
+        "inner_mm": {_label(s): round(float(e), 2) for s, e in zip(grid, mean, strict=True)},
     }
 
 
@@ -428,9 +507,10 @@ def cross_validate(
     takes: Sequence[tuple[str, str, Motion, Motion]],
     model: DualHMM,
     plot_dir: str | os.PathLike[str] | None = None,
-    placement_windows: Sequence[int] | None = None,
+    grid: Sequence[dict] | None = None,
     people: Sequence[str] | None = None,
     roles: str = "one",
+    method: str = "windowed",
 ) -> tuple[list[PairResult], list[Path]]:
     """Leave-one-out over the takes ``(name, label, A, B)``: each is evaluated by a copy of
     ``model`` (same hyper-parameters) trained on the others.
@@ -439,25 +519,25 @@ def cross_validate(
     pairs of people, each pair of people is left out at once (its takes are evaluated by
     a copy trained on the other people's takes alone: a partner for people it has never
     seen); otherwise one take at a time. ``roles="both"``: each fold also learns from its
-    training takes with the roles swapped (:func:`both_roles`). With
-    ``placement_windows``, each copy's ``placement_window`` is first chosen among them on
-    its training takes alone (:func:`choose_placement`: nested leave-one-take-out)."""
+    training takes with the roles swapped (:func:`both_roles`). With ``grid`` (settings,
+    :func:`parse_grid`), each copy's settings are first chosen among them on its training
+    takes alone (:func:`choose_settings` by ``method``'s error: nested cross-validation),
+    kept in each result's ``chosen``."""
     if roles not in ROLES:
         raise ValueError(f"roles must be one of {', '.join(ROLES)}, got {roles!r}")
-    groups = list(people) if people is not None else [""] * len(takes)
-    if len(set(groups)) < 2:  # one pair of people: one take at a time
-        groups = [str(i) for i in range(len(takes))]
+    groups = _groups(people, len(takes))
     results: list[PairResult | None] = [None] * len(takes)
     plots = []
     for group in track(list(dict.fromkeys(groups)), "leave-one-out"):
         rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
         who = [g for g in groups if g != group]
-        if roles == "both":
+        fold, chosen, learn = clone(model), {}, roles
+        if grid:
+            chosen = choose_settings(rest, fold, grid, who, roles, method)
+            learn = _roles(chosen["settings"], roles)
+            fold.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
+        if learn == "both":
             rest, who = both_roles(rest), who + who
-        fold, chosen = clone(model), {}
-        if placement_windows:
-            chosen = choose_placement(rest, fold, placement_windows)
-            fold.set_params(placement_window=chosen["placement_window"])
         fold = _fit_on(fold, rest, who)
         for i in (i for i, g in enumerate(groups) if g == group):
             name, label, a, b = takes[i]
@@ -467,7 +547,6 @@ def cross_validate(
             if plot_dir is not None:
                 plots.append(plot_pair(res, Path(plot_dir) / f"{name}_error.png"))
     return [r for r in results if r is not None], plots
-    return results, plots
 
 
 # ------------------------------------------------------------------ the command line's set-ups
@@ -502,18 +581,25 @@ def fit_on_index(
     test_trials: Sequence[str] | None = None,
     kind: str | None = None,
     roles: str = "one",
+    grid: Sequence[dict] | None = None,
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
     ``test_trials``, of one kind and set (:func:`load_pairs`), in both roles with
-    ``roles="both"`` (:func:`both_roles`). Returns the model, the
-    extras to save with it (``data_index``: the index, ``held_out_files``: the held-out
-    takes' files, which ``evaluate`` without ``--test`` evaluates on) and the training
-    pairs."""
+    ``roles="both"`` (:func:`both_roles`). With ``grid``, the settings are first chosen
+    among it by leave-one-pair-of-people-out on these takes (:func:`choose_settings`).
+    Returns the model, the extras to save with it (``data_index``: the index,
+    ``held_out_files``: the held-out takes' files, which ``evaluate`` without ``--test``
+    evaluates on; ``roles``; ``chosen``, with ``grid``) and the training pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
     pairs, motions = load_pairs(index, pairs, kind)
-    takes = [("", a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
+    takes = [(a.name, a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
     people = [a.subject for a, _ in pairs]
+    chosen: dict = {}
+    if grid:
+        chosen = choose_settings(takes, model, grid, people, roles)
+        roles = _roles(chosen["settings"], roles)
+        model.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
     if roles == "both":
         takes, people = both_roles(takes), people + people
     model.fit(
@@ -524,7 +610,8 @@ def fit_on_index(
         for a, b in select_pairs(index, labels, test_trials, held_out=True):
             if a.kind == pairs[0][0].kind:
                 held += [a.file, b.file]
-    return model, {"data_index": index_record(index), "held_out_files": held}, pairs
+    extras = {"data_index": index_record(index), "held_out_files": held, "roles": roles}
+    return model, extras | ({"chosen": chosen} if chosen else {}), pairs
 
 
 def evaluation_pairs(
@@ -615,7 +702,7 @@ def crossval_index(
     data: str | os.PathLike[str] | None = None,
     labels: Sequence[str] | None = None,
     plot_dir: str | os.PathLike[str] | None = None,
-    placement_windows: Sequence[int] | None = None,
+    grid: Sequence[dict] | None = None,
     kind: str | None = None,
     roles: str = "one",
 ) -> tuple[dict, list[Path]]:
@@ -627,7 +714,7 @@ def crossval_index(
     pairs, loaded = load_pairs(index, select_pairs(index, labels, None, held_out=False), kind)
     takes = [(f"{a.name}+{b.name}", a.label, *ab) for (a, b), ab in zip(pairs, loaded, strict=True)]
     people = [a.subject for a, _ in pairs]
-    results, written = cross_validate(takes, model, plot_dir, placement_windows, people, roles)
+    results, written = cross_validate(takes, model, plot_dir, grid, people, roles)
     report = summarise(results, model)
     report["left_out"] = "pairs of people" if len(set(people)) > 1 else "takes"
     report["roles"] = roles

@@ -220,6 +220,13 @@ class DualHMM(Model):
             ``2 * lag + 1`` frames: the slice the decoder looks ahead anyway.
             The default, 2 x 9 + 1 for the paper's window, was chosen by
             nested leave-one-pair-out on salsa (README).
+        place_memory: A's ground frame, through which B is placed, is averaged over this
+            many frames before each frame (and ``placement_window // 2`` after, at most the
+            decoder's lag online), in training and in generation; 0 (the default): over
+            ``placement_window`` frames centred on it. People who wave or shake hands turn
+            their shoulders, not their feet: on the Bütepage takes B's bearing from A's
+            facing wobbles by 5-19 degrees within a take while B stands still (docs/hmm.md,
+            "New people"); a long memory places B by where A has stood and faced.
         blend_window: B's joint rotations are blended over this many frames of
             the chosen path, centred on the frame (:meth:`Trellis.blend`; 1:
             none), so that a cut between training frames becomes a short
@@ -295,6 +302,7 @@ class DualHMM(Model):
         initial: str = "prior",
         candidates: int = 10,
         placement_window: int = 19,
+        place_memory: int = 0,
         blend_window: int = 9,
         trellis: str = "path",
         points: str = "body",
@@ -318,6 +326,7 @@ class DualHMM(Model):
         self.initial = initial
         self.candidates = candidates
         self.placement_window = placement_window
+        self.place_memory = place_memory
         self.blend_window = blend_window
         self.trellis = trellis
         self.points = points
@@ -362,6 +371,10 @@ class DualHMM(Model):
             raise ValueError(f"frame must be one of {FRAMES}, got {self.frame!r}")
         if self.normalise not in NORMALISE:
             raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
+        if not (
+            isinstance(self.place_memory, int | np.integer) and 0 <= self.place_memory <= 100_000
+        ):
+            raise ValueError(f"place_memory must be 0 to 100000 frames, got {self.place_memory!r}")
         if self.output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {self.output!r}")
         markers_in = self.markers or (pairs and isinstance(pairs[0][0], Markers))
@@ -427,7 +440,7 @@ class DualHMM(Model):
         self.frame_ = self.frame if self.frame != "auto" else choose_frame(b_in, groups)
         turn = self.frame_ == "heading"
         b_rel = [
-            into_frame(b, origin, yaw if turn else np.zeros_like(yaw))
+            into_frame(b, *self._training_place((origin, yaw if turn else np.zeros_like(yaw))))
             for b, (origin, yaw) in zip(b_rel, grounds, strict=True)
         ]
         self.skeleton_a_ = a_list[0].skeleton
@@ -474,7 +487,9 @@ class DualHMM(Model):
         first.turn = self.frame_ == "heading"
         b_rel = []
         for a, b in zip(a_list, b_list, strict=True):
-            b_rel.append(into_marker_frame(b, *first.place(first.select(a).positions)))
+            b_rel.append(
+                into_marker_frame(b, *self._training_place(first.place(first.select(a).positions)))
+            )
         if self.normalise == "person":
             moved = on_average_body([b.positions for b in b_rel])
             b_rel = [Markers(b.names, p, b.fps, b.name) for b, p in zip(b_rel, moved, strict=True)]
@@ -489,6 +504,13 @@ class DualHMM(Model):
         self.markers_b_ = np.concatenate([b.select(names).positions for b in b_rel])
         self.markers_b_ = self.markers_b_.astype(np.float32)
         return xa, xb, lengths
+
+    def _training_place(
+        self, place: tuple[np.ndarray, np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A's ground frame in a training take as B's place is learnt in it: per frame (the
+        paper's), or with ``place_memory`` averaged as the live partner averages it."""
+        return self.smoothed(*place) if self.place_memory else place
 
     def _centring(self) -> list[RunningCentre]:
         """The last step of A's pipeline with ``normalise="person"``: A's running mean out."""
@@ -659,6 +681,25 @@ class DualHMM(Model):
             return first.place(self.input_markers(x).positions)
         return self.ground(x)
 
+    def placing(
+        self, x: Motion | Markers, method: str = "windowed"
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A's ground frame as B is placed through it by :meth:`respond` (``method``): per
+        frame :meth:`place`, averaged by :meth:`smoothed`."""
+        return self.smoothed(*self.place(x), method)
+
+    def smoothed(
+        self, origin: np.ndarray, yaw: np.ndarray, method: str = "windowed"
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A's ground frame (origin (F, 3), yaw (F,)) averaged over ``place_memory`` frames
+        before (at least ``placement_window // 2``) and ``placement_window // 2`` after each
+        frame (online, ``method="windowed"``, at most the decoder's lag after):
+        :func:`~markovmotion.models.hmm.trellis.smooth_place`."""
+        half = self.placement_window // 2
+        if method != "standard":
+            half = min(half, self.window - 1)
+        return smooth_place(origin, yaw, half, max(half, int(self.place_memory)))
+
     def ground(self, motion: Motion, positions: np.ndarray | None = None):
         """A's ground frame (origin (F, 3), heading (F,)) as the model places B: A's own
         facing, or with ``frame_ == "world"`` the world's axes (heading 0) at A's place."""
@@ -745,9 +786,7 @@ class DualHMM(Model):
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
-        where = self.place(_fill_missing(motion_a, missing))
-        half = self.placement_window // 2
-        where = smooth_place(*where, half if method == "standard" else min(half, self.window - 1))
+        where = self.placing(_fill_missing(motion_a, missing), method)
         return self.frames_to_motion(idx, *where, root, rot)
 
     def regression_positions(

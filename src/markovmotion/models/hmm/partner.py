@@ -82,9 +82,10 @@ class Partner:
         self._emission = (hmm.means_, prec, log_det)
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
         self._half = min(model.placement_window // 2, self.lag)
-        # where A stood in the slice's frames and the ``half`` before
-        # rows origin (3), yaw, cos yaw, sin yaw: a ring of the last window + half frames
-        self._places = np.zeros((window + self._half, 6))
+        self._before = max(self._half, int(getattr(model, "place_memory", 0)))
+        # where A stood in the slice's frames and the ``before`` (place_memory) before them:
+        # a ring of rows origin (3), yaw, cos yaw, sin yaw
+        self._places = np.zeros((window + self._before, 6))
         self._places_in = 0
         self._shown_count = 0
         self._blend = min(model.blend_window // 2, self.lag)
@@ -282,16 +283,15 @@ class Partner:
 
     def _place_of(self, frame: int) -> tuple[np.ndarray, float]:
         """A's place for B's frame ``frame`` of the stream, averaged over the frames around it
-        that have arrived (:func:`~markovmotion.models.hmm.trellis.smooth_place`, as
-        :meth:`DualHMM.respond` does)."""
+        that have arrived (the one frame of
+        :func:`~markovmotion.models.hmm.trellis.smooth_place`, as :meth:`DualHMM.respond`
+        does)."""
         ring = len(self._places)
-        lo = max(frame - self._half, self._places_in - ring)
+        lo = max(frame - self._before, self._places_in - ring, 0)
         hi = min(frame + self._half, self._places_in - 1)
-        if self._half <= 0 or hi == lo:
+        if hi == lo:
             row = self._places[frame % ring]
             return row[:3].copy(), float(row[3])
-        # the window about ``frame`` is all of lo .. hi: smooth_place's mean at one frame,
-        # summed here directly (online, one frame's call cost more than the sums)
         mean = self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
         return mean[:3], math.atan2(mean[5], mean[4])
 

@@ -195,26 +195,36 @@ def blend_positions(
     return root, mean - root[:, None]
 
 
-def _window_mean(values: np.ndarray, t: np.ndarray, half: int) -> np.ndarray:
-    """(len(t), D) the mean of rows t - half .. t + half of ``values`` (F, D) (those that exist)."""
+def _window_mean(
+    values: np.ndarray, t: np.ndarray, half: int, before: int | None = None
+) -> np.ndarray:
+    """(len(t), D) the mean of rows t - before .. t + half of ``values`` (F, D) (those that
+    exist; ``before`` defaults to ``half``)."""
+    before = half if before is None else before
     if len(t) == 1:  # online, one frame shown: its mean directly (cheaper than the cumsum)
         k = int(t[0])
-        near = values[max(k - half, 0) : k + half + 1]
+        near = values[max(k - before, 0) : k + half + 1]
         return near.sum(axis=0, keepdims=True) / len(near)
     csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
-    lo, hi = np.maximum(t - half, 0), np.minimum(t + half + 1, len(values))
+    lo, hi = np.maximum(t - before, 0), np.minimum(t + half + 1, len(values))
     return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
 
 
-def smooth_place(origin: np.ndarray, yaw: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
-    """A's ground frame (origin (F, 3), yaw (F,)) averaged over frames t - half .. t + half
-    (those that exist): origins by their mean, headings by the direction of their mean unit
-    vector. B is placed through it, so that A's heading, which wobbles from frame to frame
-    with the hips, does not swing B around A (B stands a metre away: 3 degrees are 50 mm)."""
-    if half <= 0 or len(yaw) < 2:
+def smooth_place(
+    origin: np.ndarray, yaw: np.ndarray, half: int, before: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A's ground frame (origin (F, 3), yaw (F,)) averaged over frames t - before .. t + half
+    (those that exist; ``before`` defaults to ``half``): origins by their mean, headings by
+    the direction of their mean unit vector. B is placed through it, so that A's heading,
+    which wobbles from frame to frame with the hips, does not swing B around A (B stands a
+    metre away: 3 degrees are 50 mm). A longer ``before`` (``DualHMM(place_memory=...)``)
+    remembers where A has stood and faced: people who wave or shake hands turn their
+    shoulders, not their feet."""
+    before = half if before is None else before
+    if (half <= 0 and before <= 0) or len(yaw) < 2:
         return origin, yaw
     values = np.column_stack([origin, np.cos(yaw), np.sin(yaw)])
-    mean = _window_mean(values, np.arange(len(yaw)), half)
+    mean = _window_mean(values, np.arange(len(yaw)), half, before)
     return mean[:, :3], np.arctan2(mean[:, 4], mean[:, 3])
 
 
