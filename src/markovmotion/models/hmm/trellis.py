@@ -55,7 +55,7 @@ Common to both:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -93,9 +93,13 @@ class Trellis:
     motion_b: Motion | Markers
     successor: np.ndarray | None = None
     kind: str = "path"
+    _unseen: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    """The column of a missing A frame per state, computed once."""
 
     def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
+        if xa is None and state in self._unseen:  # the same for every missing frame
+            return self._unseen[state]
         wa = self.white_a[state]
         k = min(self.size, len(wa))
         if xa is None:
@@ -103,7 +107,12 @@ class Trellis:
         else:
             d4 = whitened_distances(wa, np.asarray(xa, dtype=float), self.prec_a[state])
         pick = np.argpartition(d4, k - 1)[:k] if k < len(wa) else np.arange(len(wa))
-        return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
+        if xa is not None:
+            return self.members[state][pick], d4[pick]
+        # shared by every missing frame's column (no caller writes to a column; read-only
+        # flags would make numba compile its kernels once more for read-only arrays)
+        self._unseen[state] = (self.members[state][pick], np.ones(k))
+        return self._unseen[state]
 
     def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
         """(K, K') Mahalanobis distances D1..DK' between B candidates and those of the column
