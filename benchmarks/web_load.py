@@ -146,14 +146,26 @@ def live_table(live, sessions: int, seconds: float, what: str) -> Table:
     return t
 
 
+def _cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU seconds of processes ``pids`` so far (Linux /proc; 0 elsewhere)."""
+    total = 0.0
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
+
+
 def _load() -> str:
     one, five, _ = os.getloadavg()
     return f"load average {one:.2f} (1 min), {five:.2f} (5 min)"
 
 
-def evaluator_table(ev, stored: int) -> Table:
+def evaluator_table(ev, n: int, stored: int) -> Table:
     """The simulated evaluators' measures."""
-    t = Table(title=f"{ev.evaluators} simulated evaluators, {ev.seconds:.1f} s, loopback")
+    t = Table(title=f"{n} simulated evaluators, {ev.seconds:.1f} s, loopback")
     t.add_column("measure")
     t.add_column("value", justify="right")
     t.add_row("evaluators registered", str(ev.evaluators))
@@ -217,23 +229,33 @@ def main() -> None:
                     ).result()
                     phases.append(("stand-in sessions", _load()))
             options = AppOptions(lib, Path(tmp) / "dual.sqlite", partner=model)
+            before = {p.pid for p in multiprocessing.active_children()}
             with running_workers(options, args.workers) as url:
+                workers = [p.pid for p in multiprocessing.active_children() if p.pid not in before]
                 console.print(
                     f"{args.sessions} dual-HMM live sessions for {args.seconds:g} s, "
                     f"{args.workers} server processes ..."
                 )
+                cpu0, wall0 = _cpu_seconds(workers), time.monotonic()
                 dual = pool.submit(simulate_live, url, salsa, args.sessions, args.seconds).result()
+                cpu, wall = _cpu_seconds(workers) - cpu0, time.monotonic() - wall0
                 phases.append(("dual-HMM sessions", _load()))
 
     groups = [("dual HMM", dual.errors)]
     if ev is not None:
-        console.print(evaluator_table(ev, stored))
+        console.print(evaluator_table(ev, args.evaluators, stored))
         groups.append(("evaluators", ev.errors))
     if live is not None:
         console.print(live_table(live, args.sessions, args.seconds, "stand-in partner"))
         groups.append(("stand-in", live.errors))
     what = f"dual HMM partner, {args.workers} server processes"
     console.print(live_table(dual, args.sessions, args.seconds, what))
+    handled = sum(dual.frames) + sum(dual.skipped)
+    console.print(
+        f"server processes' CPU during the dual-HMM sessions: {cpu:.1f} s in {wall:.1f} s "
+        f"({100 * cpu / wall:.0f} % of one core), "
+        + (f"{1000 * cpu / handled:.2f} ms per frame sent or dropped" if handled else "no frame")
+    )
     console.print(f"meanwhile {args.load} busy-loop process(es); at the end of each phase:")
     for phase, load in phases:
         console.print(f"  {phase}: {load}")
