@@ -75,3 +75,30 @@ def test_positions_are_the_joints_positions(mocap):
     idx = body_point_index(motion.skeleton, MARKER_POINTS)
     np.testing.assert_allclose(pts, motion.positions()[:, idx])
     assert pts.shape == (motion.n_frames, 13, 3)
+
+
+def test_marker_names_that_are_body_points_join_into_a_stick_figure():
+    from markovmotion.features.body_points import point_bones
+
+    names = ("TORSO", "HEAD", "R_SHOULDER", "L_SHOULDER", "R_ELBOW", "L_ELBOW", "R_HAND", "L_HAND")
+    bones = {(names[c], names[p]) for c, p in point_bones(names)}
+    assert bones == {
+        ("HEAD", "TORSO"),  # no neck: the head hangs from the chest
+        ("R_SHOULDER", "TORSO"),
+        ("L_SHOULDER", "TORSO"),
+        ("R_ELBOW", "R_SHOULDER"),
+        ("L_ELBOW", "L_SHOULDER"),
+        ("R_HAND", "R_ELBOW"),
+        ("L_HAND", "L_ELBOW"),
+    }
+    assert point_bones(["m01", "m02", "m03"]).shape == (0, 2)  # nothing known: a point cloud
+    assert point_bones(["Head"]).shape == (0, 2)
+
+
+def test_the_right_hand_is_found_by_body_point_names():
+    from markovmotion.evaluate.hmm import right_hand
+
+    assert right_hand(("TORSO", "L_HAND", "R_HAND")) == 2
+    assert right_hand(("LHand", "RHand")) == 1
+    assert right_hand(("left_wrist", "right_wrist")) == 1
+    assert right_hand(("HEAD", "L_HAND")) is None  # no right hand: no hand gap

@@ -100,7 +100,8 @@ def handshake_step(out: Path, index: MocapIndex, console: Console) -> list[Path]
 def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """A handshake of people the partner has never seen: a dual HMM of the markers-only
     handshakes of every other pair of people (both roles, ``normalise="person"``,
-    ``output="regression"``: docs/hmm.md, "New people") answers the last pair's first take."""
+    ``output="regression"``, ``place_memory=300``: docs/hmm.md, "New people") answers the last
+    pair's first take."""
     pairs = index.pairs(label=[HANDSHAKE], kind="markers")
     people = sorted({a.subject for a, _ in pairs})
     if len(people) < 2:
@@ -111,9 +112,9 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
     train = [p for p in pairs if p[0].subject != held]
     takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
     takes = both_roles(takes)
-    model = DualHMM(normalise="person", output="regression").fit(
-        [(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2
-    )
+    # the setting `dualhmm train --choose` picks for handshakes (docs/hmm.md, "New people")
+    model = DualHMM(normalise="person", output="regression", place_memory=300, frame="heading")
+    model.fit([(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2)
     a, b = (m.resample(model.fps) for m in index.load_pair(*test))
     virtual = model.respond(a, "windowed")
     quick = Baselines(model, regression=False)  # the GMR baseline: dualhmm crossval

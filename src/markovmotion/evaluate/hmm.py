@@ -53,7 +53,7 @@ from markovmotion.data.splits import select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
-from markovmotion.features.body_points import BODY_POINTS
+from markovmotion.features.body_points import BODY_POINTS, find_points
 from markovmotion.features.markers import turn_about_up
 from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.dual import DualHMM
@@ -133,14 +133,8 @@ CONTACT_MM = 150.0
 
 def right_hand(names: Sequence[str]) -> int | None:
     """Index of the right hand among marker or body-point names (``R_HAND``, ``RHand``,
-    ``right_wrist`` ...), or None."""
-    for want in ("hand", "wrist"):
-        for i, name in enumerate(names):
-            n = name.lower().replace("_", "").replace(" ", "")
-            side = n.startswith("r") or n.startswith("right") or n.endswith("r")
-            if want in n and side and not n.startswith("l"):
-                return i
-    return None
+    ``right_wrist`` ...: the body point ``right_wrist``, :func:`find_points`), or None."""
+    return find_points(names).get("right_wrist")
 
 
 def hand_gaps(

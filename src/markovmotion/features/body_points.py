@@ -50,7 +50,7 @@ _SIDED: dict[str, tuple[str, ...]] = {
 _MIDDLE: dict[str, tuple[str, ...]] = {
     "pelvis": ("hips", "hip", "pelvis", "root"),
     "spine": ("spine", "abdomen", "lowerback", "spine1"),
-    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2"),
+    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2", "torso"),
     "neck": ("neck", "lowerneck", "neck1"),
     "head": ("head",),
 }
@@ -81,6 +81,56 @@ BODY_POINTS: tuple[str, ...] = (
     *(f"{s}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "wrist")),
     *(f"{s}_{p}" for s in ("left", "right") for p in ("hip", "knee", "ankle", "toe")),
 )
+
+#: Each body point's parent on the body's tree (the pelvis is the root).
+PARENT: dict[str, str] = {
+    "spine": "pelvis",
+    "chest": "spine",
+    "neck": "chest",
+    "head": "neck",
+    **{
+        f"{s}_{p}": q
+        for s in ("left", "right")
+        for p, q in (
+            ("shoulder", "chest"),
+            ("elbow", f"{s}_shoulder"),
+            ("wrist", f"{s}_elbow"),
+            ("hip", "pelvis"),
+            ("knee", f"{s}_hip"),
+            ("ankle", f"{s}_knee"),
+            ("toe", f"{s}_ankle"),
+        )
+    },
+}
+
+
+def find_points(names: Sequence[str]) -> dict[str, int]:
+    """The body points (:data:`SYNONYMS`) among ``names`` (joint or marker names), each
+    point's index into ``names`` (the first name it is found by; a name serves one point)."""
+    found: dict[str, int] = {}
+    wanted = {normalise(n): i for i, n in reversed(list(enumerate(names)))}
+    for point, synonyms in SYNONYMS.items():
+        hit = next((wanted[w] for w in synonyms if w in wanted), None)
+        if hit is not None and hit not in found.values():
+            found[point] = hit
+    return found
+
+
+def point_bones(names: Sequence[str]) -> np.ndarray:
+    """(B, 2) rows (child, parent) of indices into ``names`` joining the named points that
+    are body points (:data:`SYNONYMS`: ``R_SHOULDER``, ``LELB``-style names are not all
+    found) along the body's tree, skipping absent points (a head with no neck hangs from the
+    chest); empty when fewer than two are found. For drawing marker sets as stick figures."""
+    found = find_points(names)
+    rows = []
+    for point, index in found.items():
+        parent = PARENT.get(point)
+        while parent is not None and parent not in found:
+            parent = PARENT.get(parent)
+        if parent is not None:
+            rows.append((index, found[parent]))
+    return np.array(rows, dtype=int).reshape(-1, 2)
+
 
 #: The VLMM paper's 13 markers (§2.1.2): head, shoulders, elbows, wrists, hips, knees, ankles.
 MARKER_POINTS: tuple[str, ...] = (

@@ -34,6 +34,7 @@ from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import LimitError
+from markovmotion.features.body_points import point_bones
 from markovmotion.io.files import atomic_write
 from markovmotion.limits import MAX_ANIMATION_FRAMES, exceeded, max_animation_frames
 from markovmotion.progress import track
@@ -90,7 +91,7 @@ class _Track:
     name: str
     positions: np.ndarray  # (F, N, 3)
     fps: float
-    bones: np.ndarray  # (B, 2), empty for markers
+    bones: np.ndarray  # (B, 2); for markers, those joining body points (may be empty)
     facing: np.ndarray | None  # (F, 3) horizontal unit vectors
 
     @property
@@ -123,7 +124,8 @@ def _to_track(item: Any, number: int, name: str | None) -> _Track:
         return _Track(label, pos[:, keep:], float(item.fps), bones, facing)
     positions = getattr(item, "positions", None)
     if isinstance(positions, np.ndarray) and positions.ndim == 3 and hasattr(item, "fps"):
-        return _Track(label, positions.astype(float), float(item.fps), np.zeros((0, 2), int), None)
+        names = getattr(item, "names", ())  # marker names that are body points: a stick figure
+        return _Track(label, positions.astype(float), float(item.fps), point_bones(names), None)
     raise TypeError(f"cannot draw {type(item).__name__}: expected a Motion or marker positions")
 
 
@@ -162,7 +164,7 @@ def _finite_mean(a: np.ndarray, axis: int) -> np.ndarray:
 
 def _centre_track(t: _Track) -> np.ndarray:
     """Per-frame horizontal position (F, 2) of the pelvis (of the centroid for markers)."""
-    p = t.positions[:, 0] if len(t.bones) else _finite_mean(t.positions, axis=1)
+    p = t.positions[:, 0] if t.facing is not None else _finite_mean(t.positions, axis=1)
     return p[:, [0, 2]]
 
 
