@@ -250,7 +250,7 @@ def main() -> None:
         groups.append(("stand-in", live.errors))
     what = f"dual HMM partner, {args.workers} server processes"
     console.print(live_table(dual, args.sessions, args.seconds, what))
-    handled = sum(dual.frames) + sum(dual.skipped)
+    handled = sum(dual.frames) + sum(getattr(dual, "skipped", []))
     console.print(
         f"server processes' CPU during the dual-HMM sessions: {cpu:.1f} s in {wall:.1f} s "
         f"({100 * cpu / wall:.0f} % of one core), "
