@@ -220,6 +220,27 @@ def test_online_partners_follow_the_protocol(fam, fitted, data):
     assert all(f.n_frames == 1 and f.skeleton.names == partner.skeleton.names for f in shown)
 
 
+@pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
+def test_online_partners_go_on_after_dropped_frames(fam, fitted, data):
+    """``drop()`` (a live session behind its clock) answers nothing, and the partner goes on
+    in step with the stream: every frame not dropped gets its B frame, the first frame after
+    the drops at once (no new look-ahead), each finite."""
+    model = fitted[fam.name]
+    partner = model.partner()
+    a = _pairs_input(data[fam.data]).resample(partner.fps)
+    dropped = range(partner.lag + 2, partner.lag + 7)
+    out = []
+    for t in range(a.n_frames):
+        if t in dropped:
+            assert partner.drop() is None
+        else:
+            out.append(partner.step(a.trim(t, t + 1)))
+    assert out[partner.lag + 2] is not None  # the frame after the drops
+    shown = [f for f in out if f is not None] + partner.finish()
+    assert len(shown) == a.n_frames - len(dropped)
+    assert all(f.n_frames == 1 and np.isfinite(f.positions()).all() for f in shown)
+
+
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_every_verb_before_fit_raises_not_fitted(kind):
     """scikit-learn's convention (issue 26): NotFittedError, not an AttributeError from inside."""

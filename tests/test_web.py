@@ -342,7 +342,7 @@ def test_live_session_streams_a_and_the_partner(server):
         start = json.loads(ws.recv(10))
         assert start["type"] == "start" and start["frames"] == 24 and start["lag"] == 3
         frames = [json.loads(ws.recv(10)) for _ in range(24)]
-        assert json.loads(ws.recv(10)) == {"type": "end", "frames": 24}
+        assert json.loads(ws.recv(10)) == {"type": "end", "frames": 24, "skipped": 0}
     assert [f["i"] for f in frames] == list(range(24))
     assert all(f["b"] is None for f in frames[:3]) and all(f["b"] is not None for f in frames[3:])
     a = np.array([f["a"] for f in frames]).reshape(24, -1, 3)
@@ -376,6 +376,49 @@ def test_live_session_with_the_dual_hmm(dual_server, dual, site):
         ws.send(json.dumps({"path": "short.bvh"}))
         msg = json.loads(ws.recv(10))
         assert msg["type"] == "error" and "body points" in msg["message"]
+
+
+class SlowPartner(MirrorPartner):
+    """A stand-in that falls behind: each step takes 4.5 frames' time at 30 fps. It notes
+    what it was asked, frame by frame: "step" or "drop"."""
+
+    made: list[SlowPartner] = []
+
+    def __init__(self, motion):
+        super().__init__(motion)
+        self.calls: list[str] = []
+        SlowPartner.made.append(self)
+
+    def step(self, frame_a):
+        self.calls.append("step")
+        time.sleep(0.15)
+        return super().step(frame_a)
+
+    def drop(self) -> None:
+        self.calls.append("drop")
+        super().drop()
+
+
+def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(site):
+    """The server gives the frames it is late with to the partner as dropped, sends only the
+    present frame, and counts what it dropped; it never queues the backlog."""
+    app = create_app(site / "lib", admin_token=ADMIN, partner=SlowPartner)
+    with running(app) as url, connect(ws_url(url)) as ws:
+        ws.send(json.dumps({"path": "short.bvh"}))
+        assert json.loads(ws.recv(10))["frames"] == 24
+        frames = []
+        while (msg := json.loads(ws.recv(10)))["type"] == "frame":
+            frames.append(msg)
+    sent = [f["i"] for f in frames]
+    calls = SlowPartner.made[-1].calls
+    # every frame of A reached the partner once, in order: stepped and sent, or dropped
+    assert len(calls) == 24 and [i for i, c in enumerate(calls) if c == "step"] == sent
+    # 4.5 frames' time per step: most frames dropped, the last one still shown
+    assert len(sent) <= 12 and sent[0] == 0 and sent[-1] == 23
+    assert msg == {"type": "end", "frames": len(sent), "skipped": 24 - len(sent)}
+    # each frame says how many were dropped before it; each jump is to the present frame
+    assert [f["skipped"] for f in frames] == [i - k for k, i in enumerate(sent)]
+    assert all(b - a >= 4 for a, b in zip(sent[:-2], sent[1:-1], strict=True))
 
 
 def test_live_session_from_an_uploaded_bvh(server):

@@ -174,10 +174,9 @@ class Motion:
         if hips is not None:
             pos = self.positions() if positions is None else positions
             lateral = pos[:, hips[0]] - pos[:, hips[1]]
-            forward = np.stack([-lateral[:, 2], np.zeros(len(lateral)), lateral[:, 0]], axis=1)
-        else:
-            rot, _ = self.global_transforms()
-            forward = rot[:, self.skeleton.body_root, :, 2]
+            return np.arctan2(-lateral[:, 2], lateral[:, 0])  # forward = (-lateral_z, 0, lateral_x)
+        rot, _ = self.global_transforms()
+        forward = rot[:, self.skeleton.body_root, :, 2]
         return np.arctan2(forward[:, 0], forward[:, 2])
 
     # ----------------------------------------------------------------- edits

@@ -46,8 +46,13 @@ def ground_travel(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     out = np.zeros((len(yaw), 3))
     out[1:, 0] = c * step[:, 0] - s * step[:, 2]
     out[1:, 1] = s * step[:, 0] + c * step[:, 2]
-    out[1:, 2] = np.angle(np.exp(1j * (yaw[1:] - yaw[:-1])))
+    turn = yaw[1:] - yaw[:-1]
+    out[1:, 2] = np.arctan2(np.sin(turn), np.cos(turn))  # wrapped to [-pi, pi]
     return out
+
+
+_ARC = np.array([1.0, 1.0, 1000.0])
+"""The travel's units to mm: the turn (rad) as arc length at 1 m."""
 
 
 @register
@@ -126,8 +131,7 @@ class BodyMotion(FeatureStep):
         out = np.zeros((len(pose), 2 * d + 3))
         out[:, :d] = pose
         out[1:, d : 2 * d] = (pose[1:] - pose[:-1]) * (self.horizon * fps)
-        travel = ground_travel(origin, yaw) * [1.0, 1.0, 1000.0]
-        out[:, 2 * d :] = travel * (self.travel_horizon * fps)
+        out[:, 2 * d :] = ground_travel(origin, yaw) * (_ARC * (self.travel_horizon * fps))
         return out
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:

@@ -7,7 +7,10 @@ with person B's frame for ``lag`` frames ago:
 - ``step(frame)``: ``frame`` is a one-frame :class:`Motion` of A (or None when
   the frame is missing); returns B's one-frame Motion, or None while the
   partner's look-ahead fills;
-- ``skip()``: a frame the caller could not deliver in time (dropped);
+- ``skip()``: a frame the caller could not deliver in time (dropped); B's frame
+  for ``lag`` frames ago comes out as from ``step``;
+- ``drop()``: a frame the caller dropped and will not show B's answer for (a
+  live session behind its clock): ``skip()`` at the least cost, nothing returned;
 - ``finish()``: B's frames still owed at the end of the stream;
 - ``lag`` (frames), ``fps`` (the partner's rate; A is resampled to it),
   ``skeleton`` (B's skeleton).
@@ -41,6 +44,8 @@ class OnlinePartner(Protocol):
     def step(self, frame: Motion | None) -> Motion | None: ...
 
     def skip(self) -> Motion | None: ...
+
+    def drop(self) -> None: ...
 
     def finish(self) -> list[Motion]: ...
 

@@ -6,6 +6,7 @@ inside it (no ``..``, absolute paths or symbolic links out of it).
 
 from __future__ import annotations
 
+import functools
 import gzip
 import io
 import json
@@ -75,9 +76,23 @@ def flat_positions(positions: np.ndarray) -> list[float]:
     return np.round(positions, 1).ravel().tolist()
 
 
+def positions_json(positions: np.ndarray) -> str:
+    """:func:`flat_positions` as JSON text (a flat array, mm to one decimal), formatted in
+    one ``%`` operation: twice as fast as ``json.dumps`` of the rounded list, which a live
+    session does for B's every frame."""
+    flat = np.asarray(positions, dtype=float).ravel().tolist()
+    return _json_format(len(flat)) % tuple(flat)
+
+
+@functools.lru_cache(maxsize=64)
+def _json_format(n: int) -> str:
+    return "[" + ",".join(["%.1f"] * n) + "]"
+
+
 def encoded_frames(motion: Motion) -> list[str]:
-    """Each frame's :func:`flat_positions` as JSON text, for streaming frame by frame."""
-    return [json.dumps(flat_positions(p), separators=(",", ":")) for p in motion.positions()]
+    """Each frame's positions as JSON text (:func:`positions_json`), for streaming frame by
+    frame."""
+    return [positions_json(p) for p in motion.positions()]
 
 
 def motion_payload(motion: Motion) -> dict:

@@ -8,11 +8,19 @@ Protocol (JSON text messages):
 2. the server answers ``{"type": "start", "fps", "frames", "parents_a",
    "parents_b", "lag"}`` or ``{"type": "error", "message"}`` and closes;
 3. then, at A's frame rate (or the partner's, A resampled to it),
-   ``{"type": "frame", "i", "a", "b", "latency_ms"}``
-   with A's and B's joint positions (mm, flat) and the time the partner took
-   for that frame; ``b`` is ``null`` while the partner's window fills;
-4. ``{"type": "end", "frames"}`` when A is over. The page may send
-   ``{"type": "stop"}``; anything else, or closing the tab, ends the session.
+   ``{"type": "frame", "i", "a", "b", "latency_ms", "skipped"}``
+   with frame ``i`` of the stream (counted on through loops), A's and B's
+   joint positions (mm, flat) and the time the partner took for that frame;
+   ``b`` is ``null`` while the partner's window fills. A session that falls
+   behind its clock by more than :data:`DROP_LATE` drops frames instead of
+   sending a backlog: the frames whose successors are already due are given to
+   the partner as dropped (:meth:`LivePartner.drop`, the online protocol's
+   ``drop()``: ``skip()`` without B's answer) and not sent, so the next frame
+   sent is the present one; ``skipped`` counts the frames dropped so far (``i``
+   jumps over them);
+4. ``{"type": "end", "frames", "skipped"}`` when A is over (frames sent, frames
+   dropped). The page may send ``{"type": "stop"}``; anything else, or closing
+   the tab, ends the session.
 """
 
 from __future__ import annotations
@@ -35,11 +43,16 @@ from markovmotion.web.library import (
     MotionLibrary,
     display_parents,
     encoded_frames,
-    flat_positions,
+    positions_json,
     read_upload,
 )
 
 START_TIMEOUT = 30.0
+
+DROP_LATE = 0.07
+"""A live session that falls further behind its clock than this (seconds; two frames at
+30 fps) drops the frames it is late with (:func:`live_session`); a jitter below it is
+caught up with, frame by frame."""
 
 
 class LivePartner(Protocol):
@@ -54,6 +67,11 @@ class LivePartner(Protocol):
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
         """One frame of A (a one-frame Motion) -> B's joint positions (J_B, 3) mm, or None."""
+        ...
+
+    def drop(self) -> None:
+        """A frame of A dropped because the session fell behind (the online protocol's
+        ``drop()``): the partner goes on without it; B's frame for it is not wanted."""
         ...
 
 
@@ -90,6 +108,9 @@ class ModelPartner:
         if out is None:
             return None
         return out.positions()[0] if isinstance(out, Motion) else out.positions[0]
+
+    def drop(self) -> None:
+        self._partner.drop()
 
 
 def load_partner_model(path: str | os.PathLike[str]) -> Model:
@@ -262,30 +283,42 @@ async def live_session(
             },
         )
         start = time.perf_counter()
-        while not stop.is_set() and (loop or sent < motion.n_frames):
-            i = sent % motion.n_frames
+        frame = skipped = 0  # frames of the stream stepped or skipped; of those, skipped
+        while not stop.is_set() and (loop or frame < motion.n_frames):
+            # frame k is due at start + k / fps; a session more than DROP_LATE behind its
+            # clock drops the frames already overtaken by their successors (the partner
+            # told by drop(), which costs far less than a step, so catching up does not put
+            # the other sessions behind) and jumps to the present one, never sends a backlog
+            now = time.perf_counter() - start
+            present = int(now * motion.fps)
+            if now - frame / motion.fps <= DROP_LATE:
+                present = frame
+            elif not loop:
+                present = min(present, motion.n_frames - 1)
+            while frame < present:
+                partner.drop()
+                frame += 1
+                skipped += 1
+            i = frame % motion.n_frames
             t0 = time.perf_counter()
             # in the event loop's own thread: a step takes well under a millisecond, and
             # a hop to a worker thread per frame made the threads queue on the
             # interpreter lock (40 sessions: 54 ms median latency, real-time factor 0.32)
             pose_b = partner.step(motion.trim(i, i + 1))
             latency = 1000.0 * (time.perf_counter() - t0)
-            b = (
-                "null"
-                if pose_b is None
-                else json.dumps(flat_positions(np.asarray(pose_b)), separators=(",", ":"))
-            )
+            b = "null" if pose_b is None else positions_json(pose_b)
             await ws.send_text(
-                f'{{"type":"frame","i":{sent},"a":{poses_a[i]},"b":{b},'
-                f'"latency_ms":{round(latency, 3)}}}'
+                f'{{"type":"frame","i":{frame},"a":{poses_a[i]},"b":{b},'
+                f'"latency_ms":{round(latency, 3)},"skipped":{skipped}}}'
             )
             sent += 1
-            delay = start + sent / motion.fps - time.perf_counter()
-            # a plain sleep (a stop is seen within a frame); behind, still one frame at a
-            # time between the other sessions' (catching up, never starving them)
+            frame += 1
+            delay = start + frame / motion.fps - time.perf_counter()
+            # a plain sleep (a stop is seen within a frame); behind, sleep(0) still lets
+            # the other sessions' frames go between two of this one's
             await asyncio.sleep(max(delay, 0.0))
         if not stop.is_set():
-            await _send(ws, {"type": "end", "frames": sent})
+            await _send(ws, {"type": "end", "frames": sent, "skipped": skipped})
     except (WebSocketDisconnect, RuntimeError, OSError):
         pass
     finally:

@@ -7,6 +7,7 @@ to ``benchmarks/web_load.py``, a shortened run to the tests.
 
 from __future__ import annotations
 
+import asyncio
 import collections
 import http.client
 import json
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 from urllib.parse import urlsplit
 
 import numpy as np
-from websockets.sync.client import connect
+from websockets.asyncio.client import connect
 
 from markovmotion.core.motion import Motion
 from markovmotion.web.library import display_parents
@@ -40,6 +41,11 @@ class MirrorPartner:
         b = self.poses[0].copy()
         b[:, 2] = 2000.0 - b[:, 2]
         return b
+
+    def drop(self) -> None:
+        """A dropped frame of A: B holds A's last pose seen for it."""
+        if self.poses:
+            self.poses.append(self.poses[-1])
 
 
 STALL_SECONDS = 0.25
@@ -131,12 +137,13 @@ def simulate_evaluators(
 
 @dataclass
 class LiveLoad:
-    """What live sessions received: frames, partner latency, gaps between frames, how late
-    frames came against the stream's clock, stalls."""
+    """What live sessions received: frames, frames the server dropped (per session), partner
+    latency, gaps between frames, how late frames came against the stream's clock, stalls."""
 
     sessions: int = 0
     fps: float = 0.0
     frames: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
     latency_ms: list[float] = field(default_factory=list)
     gap_ms: list[float] = field(default_factory=list)
     late_ms: list[float] = field(default_factory=list)
@@ -145,58 +152,62 @@ class LiveLoad:
     seconds: float = 0.0
 
 
-def _live(url: str, path: str, seconds: float, out: LiveLoad, lock) -> None:
+async def _live(url: str, path: str, seconds: float, out: LiveLoad) -> None:
+    """One simulated page: streams ``path`` in a loop for ``seconds``, noting every frame."""
     ws_url = "ws" + url.removeprefix("http") + "/ws/live"
-    frames, latency, gaps, late, stalls = 0, [], [], [], 0
+    frames, skipped, latency, gaps, late, stalls = 0, 0, [], [], [], 0
     try:
-        with connect(ws_url, open_timeout=30, max_size=None) as ws:
-            ws.send(json.dumps({"path": path, "loop": True}))
-            start = json.loads(ws.recv(timeout=30))
+        async with connect(ws_url, open_timeout=30, max_size=None, compression=None) as ws:
+            await ws.send(json.dumps({"path": path, "loop": True}))
+            start = json.loads(await asyncio.wait_for(ws.recv(), 30))
             if start.get("type") != "start":
                 raise RuntimeError(start.get("message", "no start message"))
             deadline = time.monotonic() + seconds
             last = first = None
             while time.monotonic() < deadline:
-                msg = json.loads(ws.recv(timeout=5))
+                msg = json.loads(await asyncio.wait_for(ws.recv(), 5))
                 now = time.monotonic()
                 if msg["type"] != "frame":  # the server ended the session: say why
                     raise RuntimeError(f"{msg['type']}: {msg.get('message', msg)}")
                 frames += 1
+                skipped = msg["skipped"]
                 latency.append(msg["latency_ms"])
-                # how late the frame came against the stream's clock (the first frame's arrival
-                # plus i / fps): the end-to-end frame latency beyond the schedule
-                first = now if first is None else first
-                late.append(1000.0 * (now - first - (frames - 1) / start["fps"]))
+                # how late frame i came against the stream's clock (the first frame's arrival
+                # plus i / fps; frames the server dropped still take their time on it): the
+                # end-to-end frame latency beyond the schedule
+                first = (now, msg["i"]) if first is None else first
+                late.append(1000.0 * (now - first[0] - (msg["i"] - first[1]) / start["fps"]))
                 if last is not None:
                     gaps.append(1000.0 * (now - last))
                     stalls += now - last > STALL_SECONDS
                 last = now
-            ws.send(json.dumps({"type": "stop"}))
-        with lock:
-            out.fps = start["fps"]
+            await ws.send(json.dumps({"type": "stop"}))
+        out.fps = start["fps"]
     except Exception as exc:  # noqa: BLE001 - a load test reports every failure's cause
-        with lock:
-            out.errors.append(f"{type(exc).__name__}: {exc}")
-    with lock:
-        out.sessions += 1
-        out.frames.append(frames)
-        out.latency_ms += latency
-        out.gap_ms += gaps
-        out.late_ms += late
-        out.stalls += stalls
+        out.errors.append(f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__)
+    out.sessions += 1
+    out.frames.append(frames)
+    out.skipped.append(skipped)
+    out.latency_ms += latency
+    out.gap_ms += gaps
+    out.late_ms += late
+    out.stalls += stalls
 
 
 def simulate_live(url: str, path: str, n: int = 20, seconds: float = 30.0) -> LiveLoad:
-    """``n`` concurrent live-partner sessions streaming library file ``path`` for ``seconds``."""
+    """``n`` concurrent live-partner WebSocket sessions streaming library file ``path`` for
+    ``seconds``. The simulated pages share one event loop in the calling thread (pages in
+    browsers elsewhere cost the server's machine nothing; here every page's CPU is taken
+    from the server under test, 0.12-0.14 ms a frame, a tenth less than with a thread per
+    page)."""
     out = LiveLoad()
-    lock = threading.Lock()
-    threads = [
-        threading.Thread(target=_live, args=(url, path, seconds, out, lock)) for _ in range(n)
-    ]
+
+    async def run() -> None:
+        await asyncio.wait_for(
+            asyncio.gather(*(_live(url, path, seconds, out) for _ in range(n))), seconds + 60
+        )
+
     start = time.monotonic()
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(seconds + 60)
+    asyncio.run(run())
     out.seconds = time.monotonic() - start
     return out

@@ -482,6 +482,11 @@ class ChainPartner:
         """A frame that did not come in time: A's last frame again (nothing before the first)."""
         return None if self._last is None else self.step(self._last)
 
+    def drop(self) -> None:
+        """A frame a caller dropped and will not show B's answer for: :meth:`skip`, its
+        answer unused (the propagation must go on frame by frame)."""
+        self.skip()
+
     def finish(self) -> list[Motion]:
         """B's frames still owed at the end of the stream (the window's edge repeats A's last)."""
         n = self._frames_in

@@ -13,9 +13,9 @@ takes the model as an argument (this module does not import the model's).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
-from itertools import islice
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -41,6 +41,8 @@ def finite_frames(motion: Motion | Markers) -> np.ndarray:
     finite numbers."""
     if isinstance(motion, Markers):
         return np.isfinite(motion.positions).all(axis=(1, 2))
+    if motion.n_frames == 1:  # online: one frame, one sum (NaN or inf if any value is)
+        return np.array([math.isfinite(motion.rotations.sum() + motion.translations.sum())])
     return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
         axis=(1, 2)
     )
@@ -81,8 +83,10 @@ class Partner:
         self._slice: deque = deque(maxlen=window)  # (A's features or None, columns by state)
         self._half = min(model.placement_window // 2, self.lag)
         self._before = max(self._half, int(getattr(model, "place_memory", 0)))
-        # where A stood in the slice's frames and the ``before`` (place_memory) before them
-        self._places: deque = deque(maxlen=window + self._before)
+        # where A stood in the slice's frames and the ``before`` (place_memory) before them:
+        # a ring of rows origin (3), yaw, cos yaw, sin yaw
+        self._places = np.zeros((window + self._before, 6))
+        self._places_in = 0
         self._shown_count = 0
         self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
@@ -93,6 +97,7 @@ class Partner:
         self._checked = None  # A's skeleton, once checked against the model's
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
+        self._unseen = np.zeros(len(hmm.means_))  # log b_j of a missing frame: no evidence
 
     @property
     def skeleton(self) -> Skeleton | None:
@@ -105,27 +110,38 @@ class Partner:
         """Feed A's features (None: missing) and place (origin, yaw); for the frame ``lag``
         frames ago, once one is due, B's training frame and B's root in A's ground frame."""
         if xa is None:
-            log_b = np.zeros(len(self._emission[0]))
+            log_b = self._unseen
         else:
             log_b = gaussian_log_density(xa[None], *self._emission)[0]
-        self._places.append(place)
+        self._add_place(place)
         return self.step_log_frameprob(log_b, xa)
+
+    def _add_place(self, place: tuple[np.ndarray, float]) -> None:
+        row = self._places[self._places_in % len(self._places)]
+        row[:3], row[3] = place
+        row[4], row[5] = math.cos(place[1]), math.sin(place[1])
+        self._places_in += 1
 
     def step_log_frameprob(
         self, log_b: np.ndarray, xa: np.ndarray | None
     ) -> tuple[int, np.ndarray, np.ndarray] | None:
         """:meth:`step_features` from A's log emission probabilities (N,), already computed."""
-        self._slice.append((xa, {}))
-        self.decoder.push(log_b)
-        self._frames_in += 1
-        if self._frames_in <= self.lag:
+        if not self._advance(log_b, xa):
             return None
         states = self.decoder.path
         if self.model.output == "regression":
             return self._regress(states, list(self._slice), 1)[0]
+        states = states.tolist()  # Python ints: the slice's caches are keyed by them
         cols = self._columns(states, self._slice)
         path = self._trellis.best_path(states, cols, self._shown, self._steps(states, cols))
         return self._show(path, 1)[0]
+
+    def _advance(self, log_b: np.ndarray, xa: np.ndarray | None) -> bool:
+        """One frame into the slice and the windowed decoder; whether a B frame is due."""
+        self._slice.append((xa, {}))
+        self.decoder.push(log_b)
+        self._frames_in += 1
+        return self._frames_in > self.lag
 
     @property
     def _shown(self) -> int | None:
@@ -136,7 +152,7 @@ class Partner:
         """Show the first ``count`` B frames of ``path``, each with its averaged place and
         its blended rotations (over the frames shown last and the path ahead)."""
         shown = list(self._history)
-        roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :])
+        roots = self._trellis.placement(path, self._half, shown[len(shown) - self._half :], count)
         rots = self._trellis.blend(path, self._blend, shown[len(shown) - self._blend :], count)
         self._history.extend(int(i) for i in path[:count])
         return list(zip(path[:count].tolist(), roots[:count], rots[:count], strict=True))
@@ -235,7 +251,10 @@ class Partner:
             last, self._last = self._last, now
             if last is not None:
                 now = tuple(np.concatenate(p) for p in zip(last, now, strict=True))
-            x = first.rows(*now, frame.fps)
+            # only this frame's row goes on: the steps after the first are row by row (PCA)
+            # or kept across frames (the running centre), so A's features of a frame are
+            # computed once, when it arrives
+            x = first.rows(*now, frame.fps)[-1:]
         for step in rest:
             if isinstance(step, RunningCentre):  # A's running mean: kept across frames
                 self._centre = self._centre or step.online()
@@ -248,6 +267,16 @@ class Partner:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
         return self._motion(self.step_features(None, self._place))
 
+    def drop(self) -> None:
+        """A frame a caller dropped and will not show B's answer for (a live session behind
+        its clock): for the decoder a missing frame, as with :meth:`skip`, but B's frame for
+        ``lag`` frames ago is not decided (no trellis, no placement), and the next B frame
+        shown follows on from the last one shown. A decoder step, a tenth of a partner step,
+        so a session that has fallen behind catches up at once."""
+        self._add_place(self._place)
+        if self._advance(self._unseen, None):
+            self._shown_count += 1
+
     def finish(self) -> list[Motion | Markers]:
         """B's frames still owed at the end of the stream."""
         return [self._motion(shown) for shown in self.finish_frames()]
@@ -257,15 +286,14 @@ class Partner:
         that have arrived (the one frame of
         :func:`~markovmotion.models.hmm.trellis.smooth_place`, as :meth:`DualHMM.respond`
         does)."""
-        first = self._frames_in - len(self._places)  # stream frame of self._places[0]
-        lo = max(frame - self._before, first)
-        hi = min(frame + self._half, self._frames_in - 1)
-        near = list(islice(self._places, lo - first, hi - first + 1))  # a deque indexes in O(n)
-        if len(near) == 1:
-            return near[0]
-        origin = np.mean([p[0] for p in near], axis=0)
-        yaw = np.array([p[1] for p in near])
-        return origin, float(np.arctan2(np.sin(yaw).mean(), np.cos(yaw).mean()))
+        ring = len(self._places)
+        lo = max(frame - self._before, self._places_in - ring, 0)
+        hi = min(frame + self._half, self._places_in - 1)
+        if hi == lo:
+            row = self._places[frame % ring]
+            return row[:3].copy(), float(row[3])
+        mean = self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
+        return mean[:3], math.atan2(mean[5], mean[4])
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""

@@ -55,7 +55,7 @@ Common to both:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -93,29 +93,35 @@ class Trellis:
     motion_b: Motion | Markers
     successor: np.ndarray | None = None
     kind: str = "path"
+    _unseen: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    """The column of a missing A frame per state, computed once."""
 
     def candidates(self, state: int, xa: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Column entries (K,) for one frame and their D4; a missing A frame gives D4 = 1."""
+        if xa is None and state in self._unseen:  # the same for every missing frame
+            return self._unseen[state]
         wa = self.white_a[state]
         k = min(self.size, len(wa))
         if xa is None:
             d4 = np.linalg.norm(wa - wa.mean(axis=0), axis=1)
         else:
-            d4 = np.linalg.norm(wa - xa @ self.prec_a[state], axis=1)
+            d4 = whitened_distances(wa, np.asarray(xa, dtype=float), self.prec_a[state])
         pick = np.argpartition(d4, k - 1)[:k] if k < len(wa) else np.arange(len(wa))
-        return self.members[state][pick], (np.ones(k) if xa is None else d4[pick])
+        if xa is not None:
+            return self.members[state][pick], d4[pick]
+        # shared by every missing frame's column (no caller writes to a column; read-only
+        # flags would make numba compile its kernels once more for read-only arrays)
+        self._unseen[state] = (self.members[state][pick], np.ones(k))
+        return self._unseen[state]
 
     def distances(self, state: int, idx: np.ndarray, prev: np.ndarray) -> np.ndarray:
         """(K, K') Mahalanobis distances D1..DK' between B candidates and those of the column
         before, under B_B of ``state``. The ``"path"`` trellis measures from the training
         frame that *followed* each earlier candidate (:attr:`successor`), so that going on
         with the same recording costs nothing and a cut costs how far B's pose jumps."""
-        p = self.prec_b[state]
         if self.kind == "path" and self.successor is not None:
             prev = self.successor[prev]
-        return np.linalg.norm(
-            (self.train_b[idx] @ p)[:, None, :] - (self.train_b[prev] @ p)[None, :, :], axis=-1
-        )
+        return pair_distances(self.train_b, idx, prev, self.prec_b[state])
 
     def columns(self, states: Sequence[int], xa: Sequence[np.ndarray | None]) -> list[tuple]:
         """The trellis columns (:meth:`candidates`) of frames in ``states`` seen as ``xa``."""
@@ -172,15 +178,18 @@ class Trellis:
             return quats[frames[t]]
         return blend_quaternions(np.ascontiguousarray(quats, dtype=float), frames, t, half)
 
-    def placement(self, path: np.ndarray, half: int, before: Sequence[int] = ()) -> np.ndarray:
+    def placement(
+        self, path: np.ndarray, half: int, before: Sequence[int] = (), count: int | None = None
+    ) -> np.ndarray:
         """(F, 3) B's root in A's ground frame along ``path``: the mean over frames t - half ..
-        t + half (those that exist; ``before``: frames shown before the path's first)."""
+        t + half (those that exist; ``before``: frames shown before the path's first).
+        ``count``: only the path's first ``count`` frames (as :meth:`blend`)."""
         frames = np.concatenate([before, path]).astype(int)
         if isinstance(self.motion_b, Markers):  # B's centroid
             roots = self.motion_b.positions[frames].mean(axis=1)
         else:
             roots = self.motion_b.translations[frames, 0]
-        return _window_mean(roots, np.arange(len(before), len(roots)), half)
+        return _window_mean(roots, np.arange(len(before), len(roots))[:count], half)
 
 
 def blend_positions(
@@ -201,6 +210,10 @@ def _window_mean(
     """(len(t), D) the mean of rows t - before .. t + half of ``values`` (F, D) (those that
     exist; ``before`` defaults to ``half``)."""
     before = half if before is None else before
+    if len(t) == 1:  # online, one frame shown: its mean directly (cheaper than the cumsum)
+        k = int(t[0])
+        near = values[max(k - before, 0) : k + half + 1]
+        return near.sum(axis=0, keepdims=True) / len(near)
     csum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0)])
     lo, hi = np.maximum(t - before, 0), np.minimum(t + half + 1, len(values))
     return (csum[hi] - csum[lo]) / (hi - lo)[:, None]
@@ -262,6 +275,49 @@ def build_trellis(
     if kind not in TRELLISES:
         raise ValueError(f"trellis must be one of {TRELLISES}, got {kind!r}")
     return Trellis(members, white, prec_a, prec_b, train_b, size, motion_b, successor, kind)
+
+
+@numba.njit(cache=True)
+def whitened_distances(white, x, prec):  # pragma: no cover - numba
+    """(n,) ||white_i - x prec|| for rows ``white`` (n, D) already times ``prec`` (D, D):
+    D4 of every training frame of a state (§3.2). Compiled: online it runs for each new
+    column, where NumPy's calls on a few hundred rows cost more than the sums."""
+    d = len(x)
+    y = np.zeros(d)
+    for a in range(d):
+        for b in range(d):
+            y[b] += x[a] * prec[a, b]
+    out = np.empty(len(white))
+    for i in range(len(white)):
+        acc = 0.0
+        for b in range(d):
+            diff = white[i, b] - y[b]
+            acc += diff * diff
+        out[i] = np.sqrt(acc)
+    return out
+
+
+@numba.njit(cache=True)
+def pair_distances(train, idx, prev, prec):  # pragma: no cover - numba
+    """(K, K') ||train[idx_i] prec - train[prev_j] prec||: the Mahalanobis distances
+    D1..DK' between two trellis columns (:meth:`Trellis.distances`), each row whitened once."""
+    d = train.shape[1]
+    white = np.zeros((len(idx) + len(prev), d))
+    for r in range(len(idx) + len(prev)):
+        row = idx[r] if r < len(idx) else prev[r - len(idx)]
+        for a in range(d):
+            v = train[row, a]
+            for b in range(d):
+                white[r, b] += v * prec[a, b]
+    out = np.empty((len(idx), len(prev)))
+    for i in range(len(idx)):
+        for j in range(len(prev)):
+            acc = 0.0
+            for b in range(d):
+                diff = white[i, b] - white[len(idx) + j, b]
+                acc += diff * diff
+            out[i, j] = np.sqrt(acc)
+    return out
 
 
 @numba.njit(cache=True)

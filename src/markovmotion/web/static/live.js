@@ -52,6 +52,8 @@ function onMessage(event) {
   if (msg.b) figs.push({ positions: msg.b, parents: session.parents_b, colour: COLOURS[1] });
   stage.draw(figs);
   $("frames").textContent = String(session.frames);
+  // frames the server dropped because this session fell behind its clock (not sent)
+  $("dropped").textContent = msg.skipped ? `${msg.skipped} dropped (server behind)` : "";
   $("latency").textContent = msg.latency_ms.toFixed(2);
   $("latency-stats").textContent = stats(session.latency);
   if (session.interval.length) {
