@@ -121,9 +121,23 @@ def check_sequences(
         if not np.isfinite(np.einsum("ij,ij->j", x, x)).all():
             big = float(np.abs(x).max())
             raise ValueError(f"X holds values too large for a Gaussian (|x| up to {big:.3g})")
-    lengths = np.atleast_1d(np.array([len(x)] if lengths is None else lengths, dtype=int))
-    if lengths.ndim != 1 or lengths.sum() != len(x) or np.any(lengths < 1):
-        raise ValueError(f"lengths {lengths.tolist()} do not split {len(x)} frames")
+    given = np.atleast_1d(np.asarray([len(x)] if lengths is None else lengths))
+    lengths = given.astype(int) if given.dtype.kind in "biuf" else given
+    if (
+        lengths.dtype.kind not in "biu"
+        or lengths.ndim != 1
+        or np.any(lengths != given)
+        or lengths.sum() != len(x)
+        or np.any(lengths < 1)
+    ):
+        shown: Any = given.tolist() if given.ndim == 1 else f"of shape {given.shape}"
+        if given.ndim == 1 and len(given) > 8:
+            shown = f"{str(shown[:8])[:-1]}, ...] ({len(given)} values)"
+        raise ValueError(
+            f"lengths {shown} do not split {len(x)} frames: the second argument of fit and "
+            "score is hmmlearn's lengths (whole numbers >= 1 summing to the frames), not "
+            "scikit-learn's y"
+        )
     return x, lengths
 
 
