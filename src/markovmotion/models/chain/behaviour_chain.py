@@ -29,6 +29,7 @@ from markovmotion.algorithms.vector_quantisation import (
     competitive_learning,
     nearest_prototype,
 )
+from markovmotion.core.frames import check_frames
 from markovmotion.state import (
     StateError,
     check_distribution_rows,
@@ -173,7 +174,13 @@ class BehaviourChain(BaseEstimator):
     # ---------------------------------------------------------------- learning
     def fit(self, sequences: Sequence[np.ndarray]) -> BehaviourChain:
         """Learn both sets of prototypes and the chain from state-vector sequences (F_i, D)."""
-        seqs = [np.asarray(s, dtype=float) for s in sequences]
+        seqs = [check_frames(s, f"sequence {i}") for i, s in enumerate(sequences)]
+        widths = {s.shape[1] for s in seqs}
+        if len(widths) != 1:
+            raise ValueError(
+                f"state-vector sequences of one width needed, got widths {sorted(widths)}"
+            )
+        self.n_features_in_ = seqs[0].shape[1]
         self.state_prototypes_ = competitive_learning(
             np.vstack(seqs), self.n_state_prototypes, self.n_epochs, seed=self.random_state
         )

@@ -29,7 +29,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import scipy.sparse
 from sklearn.base import BaseEstimator
 from sklearn.cluster import KMeans
 from sklearn.utils import check_random_state
@@ -47,6 +46,7 @@ from markovmotion.algorithms.gaussian import (
 )
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.parallel import map_sequences
+from markovmotion.core.frames import check_frames
 from markovmotion.state import StateError, check_count, register, require
 
 _log = logging.getLogger(__name__)
@@ -100,23 +100,7 @@ def check_sequences(
     NaN or infinite values, values so large that their squares (the M-step's second
     moments) overflow, lengths that do not split the frames.
     """
-    if scipy.sparse.issparse(x):
-        raise ValueError("X is a sparse matrix: a Gaussian HMM needs dense frames (X.toarray())")
-    x = np.asarray(x)
-    if np.iscomplexobj(x):
-        raise ValueError("Complex data not supported: X holds complex numbers")
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 2:
-        raise ValueError(
-            f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data"
-        )
-    if len(x) == 0 or x.shape[1] == 0:
-        raise ValueError(
-            f"X has {len(x)} frame(s) and {x.shape[1]} feature(s) (shape={x.shape}) while a "
-            "minimum of 1 is required."
-        )
-    if not np.isfinite(x).all():
-        raise ValueError("X holds NaN or infinite values")
+    x = check_frames(x)
     with np.errstate(over="ignore"):
         if not np.isfinite(np.einsum("ij,ij->j", x, x)).all():
             big = float(np.abs(x).max())
