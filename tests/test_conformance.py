@@ -33,6 +33,7 @@ from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.gaussian import GaussianHMM
 from markovmotion.models.online import OnlinePartner, run
 from markovmotion.models.vlmm.behaviour import BehaviourModel
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 
 
@@ -270,3 +271,23 @@ def test_array_input_follows_scikit_learn(name):
         with pytest.raises(ValueError, match=message) as err:
             fit(bad)
         assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: HSMM().score([np.zeros((4, 2))], [np.zeros(1, int)]),
+        lambda: HSMM().sample(np.zeros(2, int), np.random.default_rng(0)),
+        lambda: VLMM().log_likelihood(np.zeros(3, int)),
+        lambda: VLMM().generate(5),
+        lambda: BehaviourChain().recognise(np.zeros((3, 4))),
+        lambda: GaussianHMM(2).score(np.zeros((3, 2))),
+    ],
+    ids=["HSMM.score", "HSMM.sample", "VLMM.log_likelihood", "VLMM.generate", "chain", "hmm"],
+)
+def test_the_models_components_before_fit_raise_not_fitted(call):
+    """The estimators the models are built of follow the same convention (issue 26)."""
+    from sklearn.exceptions import NotFittedError
+
+    with pytest.raises(NotFittedError, match="is not fitted"):
+        call()

@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.hermite import constant_acceleration_intervals, hermite_sample
 from markovmotion.algorithms.vector_quantisation import (
@@ -30,6 +29,7 @@ from markovmotion.algorithms.vector_quantisation import (
     nearest_prototype,
 )
 from markovmotion.core.frames import check_frames
+from markovmotion.models.base import Component
 from markovmotion.state import (
     StateError,
     check_distribution_rows,
@@ -116,7 +116,7 @@ class Hypotheses:
 
 
 @register
-class BehaviourChain(BaseEstimator):
+class BehaviourChain(Component):
     """State prototypes, behaviour prototypes and the Markov chain over them (§3-4).
 
     Args:

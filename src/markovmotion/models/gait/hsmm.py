@@ -22,12 +22,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.gaussian import log_gaussian_diag
 from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.core.frames import check_frames
+from markovmotion.models.base import Component
 from markovmotion.models.gait.context_tree import cluster
 from markovmotion.state import (
     StateError,
@@ -124,7 +124,7 @@ def hard_posteriors(
 
 # ------------------------------------------------------------------ the model
 @register
-class HSMM(BaseEstimator):
+class HSMM(Component):
     """Context-dependent left-to-right HSMMs of units, trained by EM from unit boundaries.
 
     Args:
