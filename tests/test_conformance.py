@@ -25,11 +25,15 @@ from markovmotion.data.walks import gait_entries
 from markovmotion.errors import ModelFormatError
 from markovmotion.models import KINDS, Model
 from markovmotion.models.base import ALL_VERBS
+from markovmotion.models.chain.behaviour_chain import BehaviourChain
 from markovmotion.models.chain.partner import VirtualPartner
+from markovmotion.models.gait.hsmm import HSMM
 from markovmotion.models.gait.synthesizer import GaitSynthesizer
 from markovmotion.models.hmm.dual import DualHMM
+from markovmotion.models.hmm.gaussian import GaussianHMM
 from markovmotion.models.online import OnlinePartner, run
 from markovmotion.models.vlmm.behaviour import BehaviourModel
+from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 
 
@@ -250,3 +254,61 @@ def test_every_verb_before_fit_raises_not_fitted(kind):
     for verb in cls.VERBS:
         with pytest.raises(NotFittedError, match=f"{cls.__name__} is not fitted"):
             getattr(cls(), verb)(*([] if verb in ("partner", "generate") else [np.zeros((3, 2))]))
+
+
+def _contours(n: int = 3, width: int = 8) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    return [np.cumsum(rng.normal(size=(60, width)), axis=0) for _ in range(n)]
+
+
+# Every estimator that learns from arrays of frames, and how to fit it on a list of them.
+ARRAY_ESTIMATORS = {
+    "GaussianHMM": lambda xs: GaussianHMM(2, n_iter=2).fit(xs[0]),
+    "HSMM": lambda xs: HSMM(n_states=2, n_iter=1, n_iter_untied=1).fit(
+        xs, [np.zeros(2, int)] * len(xs), [np.array([0, 30, 60])] * len(xs), 1
+    ),
+    "BehaviourChain": lambda xs: BehaviourChain(n_state_prototypes=5, n_behaviour_prototypes=4).fit(
+        xs
+    ),
+    "BehaviourModel (contour)": lambda xs: BehaviourModel(
+        configuration="contour", n_prototypes=6, max_memory=2, fps=15.0
+    ).fit(xs),
+}
+
+
+@pytest.mark.parametrize("name", ARRAY_ESTIMATORS)
+def test_array_input_follows_scikit_learn(name):
+    """scikit-learn's conventions where a model takes arrays (issue 26): ``n_features_in_``
+    after fit; complex or sparse frames refused in one line (not cast with a warning, not an
+    unrelated error)."""
+    import scipy.sparse
+
+    fit = ARRAY_ESTIMATORS[name]
+    assert fit(_contours()).n_features_in_ == 8
+    for bad, message in (
+        ([x * (1 + 1j) for x in _contours()], "Complex data not supported"),
+        ([scipy.sparse.csr_matrix(x) for x in _contours()], "sparse matrix"),
+    ):
+        with pytest.raises(ValueError, match=message) as err:
+            fit(bad)
+        assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: HSMM().score([np.zeros((4, 2))], [np.zeros(1, int)]),
+        lambda: HSMM().sample(np.zeros(2, int), np.random.default_rng(0)),
+        lambda: VLMM().log_likelihood(np.zeros(3, int)),
+        lambda: VLMM().generate(5),
+        lambda: BehaviourChain().recognise(np.zeros((3, 4))),
+        lambda: GaussianHMM(2).score(np.zeros((3, 2))),
+    ],
+    ids=["HSMM.score", "HSMM.sample", "VLMM.log_likelihood", "VLMM.generate", "chain", "hmm"],
+)
+def test_the_models_components_before_fit_raise_not_fitted(call):
+    """The estimators the models are built of follow the same convention (issue 26)."""
+    from sklearn.exceptions import NotFittedError
+
+    with pytest.raises(NotFittedError, match="is not fitted"):
+        call()

@@ -50,6 +50,27 @@ KINDS: dict[str, type[Model]] = {}
 ALL_VERBS = ("generate", "predict", "respond", "score", "partner")
 
 
+class Component(BaseEstimator):
+    """Base of the estimators the models are built of (HSMM, VLMM, behaviour chain).
+
+    Reading a learnt attribute (a name ending in ``_``, or a property made of them) of one
+    that has learnt nothing raises scikit-learn's ``NotFittedError`` (an ``AttributeError``
+    too, so ``hasattr`` still says False), so every verb used before ``fit`` says so instead
+    of naming an attribute; once fitted, this costs nothing (Python asks ``__getattr__`` only
+    for missing attributes).
+    """
+
+    def __getattr__(self, name: str) -> Any:
+        learnt = name.endswith("_") and not name.startswith("_")
+        derived = isinstance(getattr(type(self), name, None), property)  # it read a learnt one
+        if (learnt or derived) and not is_fitted(self):
+            raise NotFittedError(
+                f"This {type(self).__name__} is not fitted yet: call fit before using it "
+                f"(no {name})"
+            )
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+
 class Model(BaseEstimator):
     """Base of every top-level model (module docstring).
 

@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.hermite import constant_acceleration_intervals, hermite_sample
 from markovmotion.algorithms.vector_quantisation import (
@@ -29,6 +28,8 @@ from markovmotion.algorithms.vector_quantisation import (
     competitive_learning,
     nearest_prototype,
 )
+from markovmotion.core.frames import check_frames
+from markovmotion.models.base import Component
 from markovmotion.state import (
     StateError,
     check_distribution_rows,
@@ -115,7 +116,7 @@ class Hypotheses:
 
 
 @register
-class BehaviourChain(BaseEstimator):
+class BehaviourChain(Component):
     """State prototypes, behaviour prototypes and the Markov chain over them (§3-4).
 
     Args:
@@ -173,7 +174,13 @@ class BehaviourChain(BaseEstimator):
     # ---------------------------------------------------------------- learning
     def fit(self, sequences: Sequence[np.ndarray]) -> BehaviourChain:
         """Learn both sets of prototypes and the chain from state-vector sequences (F_i, D)."""
-        seqs = [np.asarray(s, dtype=float) for s in sequences]
+        seqs = [check_frames(s, f"sequence {i}") for i, s in enumerate(sequences)]
+        widths = {s.shape[1] for s in seqs}
+        if len(widths) != 1:
+            raise ValueError(
+                f"state-vector sequences of one width needed, got widths {sorted(widths)}"
+            )
+        self.n_features_in_ = seqs[0].shape[1]
         self.state_prototypes_ = competitive_learning(
             np.vstack(seqs), self.n_state_prototypes, self.n_epochs, seed=self.random_state
         )

@@ -22,11 +22,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from markovmotion.algorithms.gaussian import log_gaussian_diag
 from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
 from markovmotion.algorithms.parallel import map_sequences
+from markovmotion.core.frames import check_frames
+from markovmotion.models.base import Component
 from markovmotion.models.gait.context_tree import cluster
 from markovmotion.state import (
     StateError,
@@ -123,7 +124,7 @@ def hard_posteriors(
 
 # ------------------------------------------------------------------ the model
 @register
-class HSMM(BaseEstimator):
+class HSMM(Component):
     """Context-dependent left-to-right HSMMs of units, trained by EM from unit boundaries.
 
     Args:
@@ -189,7 +190,9 @@ class HSMM(BaseEstimator):
         """
         if self.dur_var_floor <= 0:
             raise ValueError("dur_var_floor must be positive")
+        sequences = [check_frames(x, f"sequence {i}") for i, x in enumerate(sequences)]
         x_all = np.vstack(sequences)
+        self.n_features_in_ = x_all.shape[1]
         self.var_floor_ = np.maximum(self.var_floor * x_all.var(axis=0), 1e-8)
         lengths = np.concatenate([np.diff(b) for b in boundaries])
         longest = int(np.ceil(0.6 * lengths.max()))

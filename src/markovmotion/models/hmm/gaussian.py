@@ -29,7 +29,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import scipy.sparse
 from sklearn.base import BaseEstimator
 from sklearn.cluster import KMeans
 from sklearn.utils import check_random_state
@@ -47,6 +46,7 @@ from markovmotion.algorithms.gaussian import (
 )
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.parallel import map_sequences
+from markovmotion.core.frames import check_frames
 from markovmotion.state import StateError, check_count, register, require
 
 _log = logging.getLogger(__name__)
@@ -100,30 +100,28 @@ def check_sequences(
     NaN or infinite values, values so large that their squares (the M-step's second
     moments) overflow, lengths that do not split the frames.
     """
-    if scipy.sparse.issparse(x):
-        raise ValueError("X is a sparse matrix: a Gaussian HMM needs dense frames (X.toarray())")
-    x = np.asarray(x)
-    if np.iscomplexobj(x):
-        raise ValueError("Complex data not supported: X holds complex numbers")
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 2:
-        raise ValueError(
-            f"X must be a (frames, dims) array, got shape {x.shape}: Reshape your data"
-        )
-    if len(x) == 0 or x.shape[1] == 0:
-        raise ValueError(
-            f"X has {len(x)} frame(s) and {x.shape[1]} feature(s) (shape={x.shape}) while a "
-            "minimum of 1 is required."
-        )
-    if not np.isfinite(x).all():
-        raise ValueError("X holds NaN or infinite values")
+    x = check_frames(x)
     with np.errstate(over="ignore"):
         if not np.isfinite(np.einsum("ij,ij->j", x, x)).all():
             big = float(np.abs(x).max())
             raise ValueError(f"X holds values too large for a Gaussian (|x| up to {big:.3g})")
-    lengths = np.atleast_1d(np.array([len(x)] if lengths is None else lengths, dtype=int))
-    if lengths.ndim != 1 or lengths.sum() != len(x) or np.any(lengths < 1):
-        raise ValueError(f"lengths {lengths.tolist()} do not split {len(x)} frames")
+    given = np.atleast_1d(np.asarray([len(x)] if lengths is None else lengths))
+    lengths = given.astype(int) if given.dtype.kind in "biuf" else given
+    if (
+        lengths.dtype.kind not in "biu"
+        or lengths.ndim != 1
+        or np.any(lengths != given)
+        or lengths.sum() != len(x)
+        or np.any(lengths < 1)
+    ):
+        shown: Any = given.tolist() if given.ndim == 1 else f"of shape {given.shape}"
+        if given.ndim == 1 and len(given) > 8:
+            shown = f"{str(shown[:8])[:-1]}, ...] ({len(given)} values)"
+        raise ValueError(
+            f"lengths {shown} do not split {len(x)} frames: the second argument of fit and "
+            "score is hmmlearn's lengths (whole numbers >= 1 summing to the frames), not "
+            "scikit-learn's y"
+        )
     return x, lengths
 
 

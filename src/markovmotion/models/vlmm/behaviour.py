@@ -41,6 +41,7 @@ from markovmotion.algorithms.vector_quantisation import (
     kmeans_prototypes,
     nearest_prototype,
 )
+from markovmotion.core.frames import check_frames, is_sparse
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
@@ -137,13 +138,13 @@ def contour_arrays(sequences: Sequence[np.ndarray], width: int | None = None) ->
         raise ValueError("contour configurations: give a list of (frames, 2n) arrays")
     out = []
     for i, s in enumerate(sequences):
-        if not isinstance(s, np.ndarray):
+        if not (isinstance(s, np.ndarray) or is_sparse(s)):
             raise ValueError(
                 f"contour sequence {i}: a contour model takes (frames, 2n) arrays, "
                 f"not {type(s).__name__}"
             )
-        a = np.asarray(s, dtype=float)
-        if a.ndim != 2 or a.shape[1] % 2 or len(a) < 2 or not np.isfinite(a).all():
+        a = check_frames(s, f"contour sequence {i}")
+        if a.shape[1] % 2 or len(a) < 2:
             raise ValueError(
                 f"contour sequence {i}: expected finite (frames >= 2, 2n) values, got {a.shape}"
             )
@@ -255,6 +256,7 @@ class BehaviourModel(Model):
             raise ValueError(f"join must be a time constant >= 0 s, got {self.join}")
         if self.is_contour:
             motions = contour_arrays(motions)
+            self.n_features_in_ = motions[0].shape[1]
             self.train_files_ = [array_record(a, i) for i, a in enumerate(motions)]
             self.skeleton_ = None
         else:

@@ -28,8 +28,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
+from markovmotion.models.base import Component
 from markovmotion.state import (
     StateError,
     check_count,
@@ -148,7 +148,7 @@ _LEARNT = (
 
 
 @register
-class VLMM(BaseEstimator):
+class VLMM(Component):
     """A variable-length Markov model over integer tokens, as a PFSA (§3.1).
 
     Args:
