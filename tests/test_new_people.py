@@ -112,8 +112,10 @@ def test_b_frames_are_on_one_body(normalised):
         np.testing.assert_allclose(m.mean(0), means[0].mean(0), atol=1e-2)
 
 
-def test_crossval_leaves_one_pair_of_people_out(people, monkeypatch):
-    seen = []
+@pytest.fixture
+def fits(monkeypatch) -> list[set]:
+    """The pairs of people of every fit cross-validation makes, in order."""
+    seen: list[set] = []
     fit = evaluation._fit_on
 
     def spy(model, takes, groups=None):
@@ -121,6 +123,11 @@ def test_crossval_leaves_one_pair_of_people_out(people, monkeypatch):
         return fit(model, takes, groups)
 
     monkeypatch.setattr(evaluation, "_fit_on", spy)
+    return seen
+
+
+def test_crossval_leaves_one_pair_of_people_out(people, fits):
+    seen = fits
     takes = [(f"t{i}", "handshake", a, b) for i, (_, a, b) in enumerate(people)]
     groups = [s for s, _, _ in people]
     model = DualHMM(n_states=4, n_iter=5)
@@ -270,19 +277,12 @@ def test_parse_grid_gives_every_combination_with_the_parameters_types():
             evaluation.parse_grid(bad)
 
 
-def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people, monkeypatch):
+def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people, fits):
     """Each outer fold trains on the other pairs; each of its inner fits on fewer still, and
     none on the held-out pair: the settings are chosen on training pairs only."""
     groups = [s for s, _, _ in people]
     assert len(set(groups)) >= 3  # the collection holds three pairs of handshakes
-    seen = []
-    fit = evaluation._fit_on
-
-    def spy(model, takes, who=None):
-        seen.append(set(who))
-        return fit(model, takes, who)
-
-    monkeypatch.setattr(evaluation, "_fit_on", spy)
+    seen = fits
     takes = [(f"t{i}", "handshake", a, b) for i, (_, a, b) in enumerate(people)]
     grid = [{"place_memory": 0, "blend_window": 1}, {"place_memory": 0, "blend_window": 9},
             {"place_memory": 30, "blend_window": 9}]  # fmt: skip

@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import choice, kind_option, ranged
+from markovmotion.cli.options import kind_option, ranged, roles_option
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -326,11 +326,7 @@ def crossval(
     response: str = RESPONSE,
     sigma: float = SIGMA,
     resync: float = RESYNC,
-    roles: str = typer.Option(
-        "one",
-        callback=choice(("one", "both")),
-        help="Learn each take as listed ('one') or also with the people swapped ('both').",
-    ),
+    roles: str = roles_option(),
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),

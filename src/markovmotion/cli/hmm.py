@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from markovmotion.cli.options import choice, kind_option, ranged
+from markovmotion.cli.options import choice, kind_option, ranged, roles_option
 from markovmotion.data.index import read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -44,7 +44,8 @@ PLACE_MEMORY = ranged(
     min=0,
     max=3000,
     help="Frames before each frame over which A's ground frame, through which B is placed, "
-    "is averaged (0: the placement window's; 300 chosen for new people: docs/hmm.md).",
+    "is averaged (0: the placement window's; 300: what train --choose picks for new people "
+    "on the collection's handshakes and waves, docs/hmm.md).",
 )
 CHOOSE = typer.Option(
     None,
@@ -123,12 +124,7 @@ JOBS = typer.Option(
 )
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 KIND = kind_option()
-ROLES = typer.Option(
-    "one",
-    callback=choice(("one", "both")),
-    help="Learn each take as listed ('one': A answered by B) or also with the roles swapped "
-    "('both': for interactions whose roles are alike, such as handshakes and waves).",
-)
+ROLES = roles_option()
 
 
 def _split(values: str | None) -> list[str] | None:

@@ -182,3 +182,15 @@ def kind_option() -> Any:
         help="Learn from 'skeleton' takes (BVH, ASF/AMC) or 'markers' takes (C3D) where the "
         "labels hold both (default: the larger group, said in one line).",
     )
+
+
+def roles_option() -> Any:
+    """``--roles one|both``, one name across the command line: learn each two-person take as
+    listed, or also with the people swapped
+    (:func:`markovmotion.evaluate.hmm.both_roles`)."""
+    return typer.Option(
+        "one",
+        callback=choice(("one", "both")),
+        help="Learn each take as listed ('one': A answered by B) or also with the roles swapped "
+        "('both': for interactions whose roles are alike, such as handshakes and waves).",
+    )

@@ -458,7 +458,7 @@ def choose_settings(
     the outer one would. Returns
     ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
     groups = _groups(people, len(takes))
-    errors, frames = np.zeros(len(grid)), 0
+    errors, frames = np.zeros(len(grid)), np.zeros(len(grid))  # frames: per setting's rate
     for group in dict.fromkeys(groups):
         rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
         who = [g for g in groups if g != group]
@@ -480,8 +480,8 @@ def choose_settings(
                     generated = fold.respond(a, method)
                     truth = fold.body_positions(fold._rate(b))
                     errors[k] += trial_errors(fold.body_positions(generated), truth).sum()
-                    frames += len(truth) if k == 0 else 0
-    mean = errors / max(frames, 1)
+                    frames[k] += len(truth)
+    mean = errors / np.maximum(frames, 1)
     return {
         "settings": dict(grid[int(np.argmin(mean))]),
         "inner_mm": {_label(s): round(float(e), 2) for s, e in zip(grid, mean, strict=True)},
