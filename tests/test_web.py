@@ -10,6 +10,7 @@ Screenshots of every page go to ``test-screenshots/``.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import socket
@@ -112,7 +113,11 @@ def dual(site, mocap):
 
 @pytest.fixture(scope="module")
 def dual_server(site, dual):
-    app = create_app(site / "lib", site / "dual.sqlite", partner=dual_hmm_partner(dual))
+    # every frame kept: these tests compare what is streamed with the offline answer, and
+    # a busy machine must not turn that into a test of the clock
+    app = create_app(
+        site / "lib", site / "dual.sqlite", partner=dual_hmm_partner(dual), drop_late=math.inf
+    )
     with running(app) as url:
         yield url
 
@@ -120,7 +125,11 @@ def dual_server(site, dual):
 @pytest.fixture(scope="module")
 def server(site):
     app = create_app(
-        site / "lib", site / "results.sqlite", admin_token=ADMIN, partner=MirrorPartner
+        site / "lib",
+        site / "results.sqlite",
+        admin_token=ADMIN,
+        partner=MirrorPartner,
+        drop_late=math.inf,
     )
     with running(app) as url:
         yield url
@@ -414,11 +423,13 @@ def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(si
     # every frame of A reached the partner once, in order: stepped and sent, or dropped
     assert len(calls) == 24 and [i for i, c in enumerate(calls) if c == "step"] == sent
     # 4.5 frames' time per step: most frames dropped, the last one still shown
-    assert len(sent) <= 12 and sent[0] == 0 and sent[-1] == 23
+    assert len(sent) <= 12 and sent[-1] == 23
+    # the clock starts when the first frame is out (a first step may load or compile)
+    assert sent[:2] == [0, 1]
     assert msg == {"type": "end", "frames": len(sent), "skipped": 24 - len(sent)}
     # each frame says how many were dropped before it; each jump is to the present frame
     assert [f["skipped"] for f in frames] == [i - k for k, i in enumerate(sent)]
-    assert all(b - a >= 4 for a, b in zip(sent[:-2], sent[1:-1], strict=True))
+    assert all(b - a >= 4 for a, b in zip(sent[1:-2], sent[2:-1], strict=True))
 
 
 def test_live_session_from_an_uploaded_bvh(server):
@@ -717,7 +728,10 @@ def test_live_partner_page_with_a_behaviour_chain(tmp_path, mocap, page):
     (tmp_path / "lib").mkdir()
     write_motion(a.trim(300, 420), tmp_path / "lib" / "salsa_a.bvh")
     app = create_app(
-        tmp_path / "lib", tmp_path / "r.sqlite", partner=model_partner(tmp_path / "chain.npz")
+        tmp_path / "lib",
+        tmp_path / "r.sqlite",
+        partner=model_partner(tmp_path / "chain.npz"),
+        drop_late=math.inf,
     )
     with running(app) as url:
         with connect(ws_url(url)) as ws:

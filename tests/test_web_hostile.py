@@ -422,6 +422,29 @@ def test_serve_on_a_busy_port_is_one_line_before_the_token(site):
     assert "already in use" in out.stderr
 
 
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "soon"])
+def test_serve_with_a_bad_drop_late_is_one_line(site, value):
+    out = subprocess.run(
+        [*CLI, "serve", "--library", str(site / "lib"), "--port", "0", "--drop-late", value],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and out.stdout == ""
+    assert len(out.stderr.strip().splitlines()) == 1 and "--drop-late" in out.stderr
+
+
+def test_serve_drop_late_default_is_the_library_s():
+    import inspect
+
+    from markovmotion.cli.serve import serve
+    from markovmotion.web.live import DROP_LATE
+    from markovmotion.web.server import AppOptions
+
+    default = inspect.signature(serve).parameters["drop_late"].default.default
+    assert default == DROP_LATE == AppOptions(Path(".")).drop_late
+
+
 def test_evaluation_stimuli_with_nothing_to_add_writes_nothing(tmp_path):
     out = subprocess.run(
         [*CLI, "evaluation", "stimuli", str(tmp_path / "stimuli")],

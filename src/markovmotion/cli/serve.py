@@ -40,6 +40,12 @@ def serve(
         "localhost, ::1 and --host).",
         metavar="NAME",
     ),
+    drop_late: float = typer.Option(
+        0.07,
+        help="Seconds a live session may fall behind its clock before it drops frames "
+        "(the partner told, no backlog sent); inf keeps every frame, however late.",
+        metavar="SECONDS",
+    ),
 ) -> None:
     """Serve the viewer, the live partner and the perceptual evaluation in a browser."""
     from markovmotion.cli import fail
@@ -54,6 +60,8 @@ def serve(
 
     if not 0 <= port <= 65535:
         fail(f"--port {port}: must be between 0 and 65535")
+    if not drop_late > 0:  # also NaN
+        fail(f"--drop-late {drop_late}: must be a positive number of seconds (inf: never drop)")
     if not 1 <= workers <= 64:
         fail(f"--workers {workers}: must be between 1 and 64")
     try:
@@ -63,7 +71,14 @@ def serve(
     from markovmotion.video.webcam import WebcamTracker
 
     options = AppOptions(
-        library, db, stimuli, admin_token, partner, (host, *allow_host), camera=WebcamTracker
+        library,
+        db,
+        stimuli,
+        admin_token,
+        partner,
+        (host, *allow_host),
+        camera=WebcamTracker,
+        drop_late=drop_late,
     )
     app = options.build()  # here first, so that a bad option is one line before any worker
     port = sock.getsockname()[1]

@@ -57,7 +57,7 @@ from markovmotion.web.library import (
     read_upload,
     shown,
 )
-from markovmotion.web.live import PartnerFactory, live_session
+from markovmotion.web.live import DROP_LATE, PartnerFactory, live_session
 from markovmotion.web.security import UPLOAD_SLACK, Guard
 
 HERE = Path(__file__).parent
@@ -138,6 +138,7 @@ def create_app(
     partner: PartnerFactory | None = None,
     allow_hosts: Iterable[str] = (),
     camera: TrackerFactory | None = None,
+    drop_late: float = DROP_LATE,
 ) -> FastAPI:
     """The app serving ``library``; the evaluation runs when a stimuli folder is given
     (default: ``library/stimuli`` if it holds a manifest) and stores answers in ``db``.
@@ -150,6 +151,8 @@ def create_app(
     :class:`markovmotion.video.webcam.WebcamTracker`).
     The server answers to 127.0.0.1, localhost and ::1 and to ``allow_hosts``
     (the bound address, ``serve --allow-host``): see :mod:`markovmotion.web.security`.
+    ``drop_late`` (seconds, ``math.inf`` for never): when a live session behind its clock
+    drops frames (:func:`markovmotion.web.live.live_session`).
     """
     lib = library if isinstance(library, MotionLibrary) else MotionLibrary(library)
     if stimuli is None and any(
@@ -300,7 +303,7 @@ def create_app(
 
     @app.websocket("/ws/live")
     async def live_ws(ws: WebSocket) -> None:
-        await live_session(ws, lib, partner)
+        await live_session(ws, lib, partner, drop_late)
 
     app.state.camera_sessions = []
 

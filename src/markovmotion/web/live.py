@@ -12,7 +12,9 @@ Protocol (JSON text messages):
    with frame ``i`` of the stream (counted on through loops), A's and B's
    joint positions (mm, flat) and the time the partner took for that frame;
    ``b`` is ``null`` while the partner's window fills. A session that falls
-   behind its clock by more than :data:`DROP_LATE` drops frames instead of
+   behind its clock by more than :data:`DROP_LATE` (``serve --drop-late``; the clock
+   starts when the first frame is sent, as a first step may load or compile) drops
+   frames instead of
    sending a backlog: the frames whose successors are already due are given to
    the partner as dropped (:meth:`LivePartner.drop`, the online protocol's
    ``drop()``: ``skip()`` without B's answer) and not sent, so the next frame
@@ -241,9 +243,15 @@ async def _listen(ws: WebSocket, stop: asyncio.Event, garbage: list[_Garbage]) -
 
 
 async def live_session(
-    ws: WebSocket, library: MotionLibrary, factory: PartnerFactory | None
+    ws: WebSocket,
+    library: MotionLibrary,
+    factory: PartnerFactory | None,
+    drop_late: float = DROP_LATE,
 ) -> None:
-    """Run one live-partner session on an accepted-to-be WebSocket (see the module protocol)."""
+    """Run one live-partner session on an accepted-to-be WebSocket (see the module protocol).
+
+    ``drop_late``: how far (seconds) the session may fall behind its clock before it drops
+    frames; ``math.inf`` never drops (every frame stepped and sent, however late)."""
     await ws.accept()
     try:
         msg = _parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT))
@@ -291,7 +299,7 @@ async def live_session(
             # the other sessions behind) and jumps to the present one, never sends a backlog
             now = time.perf_counter() - start
             present = int(now * motion.fps)
-            if now - frame / motion.fps <= DROP_LATE:
+            if now - frame / motion.fps <= drop_late:
                 present = frame
             elif not loop:
                 present = min(present, motion.n_frames - 1)
@@ -313,6 +321,8 @@ async def live_session(
             )
             sent += 1
             frame += 1
+            if sent == 1:  # the clock starts with the first frame out (loading, compiling)
+                start = time.perf_counter() - 1.0 / motion.fps
             delay = start + frame / motion.fps - time.perf_counter()
             # a plain sleep (a stop is seen within a frame); behind, sleep(0) still lets
             # the other sessions' frames go between two of this one's

@@ -26,6 +26,8 @@ from pathlib import Path
 import uvicorn
 from fastapi import FastAPI
 
+from markovmotion.web.live import DROP_LATE
+
 
 class PortInUseError(OSError):
     """The address cannot be listened on (port taken, address not local, no permission)."""
@@ -118,6 +120,8 @@ class AppOptions:
     allow_hosts: tuple[str, ...] = field(default_factory=tuple)
     #: The camera page's tracker (a module-level class or function: it goes to the workers).
     camera: Callable[..., object] | None = None
+    #: Seconds a live session may fall behind its clock before it drops frames.
+    drop_late: float = DROP_LATE
 
     def build(self) -> FastAPI:
         from markovmotion.web.app import create_app
@@ -131,6 +135,7 @@ class AppOptions:
             partner=model_partner(self.partner) if self.partner else None,
             allow_hosts=self.allow_hosts,
             camera=self.camera,
+            drop_late=self.drop_late,
         )
 
 
