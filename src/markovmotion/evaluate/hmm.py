@@ -61,7 +61,10 @@ from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 
-METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr")
+METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr", "known_motion")
+#: Not a partner but a reference: B's real motion on the training people's mean pose
+#: (:func:`known_motion`).
+REFERENCES = ("known_motion",)
 #: Which roles of each two-person take a partner learns from: as listed (A answered by
 #: B), or ``"both"`` (also B answered by A: :func:`both_roles`).
 ROLES = ("one", "both")
@@ -237,6 +240,20 @@ def step_latencies(model: DualHMM, xa: np.ndarray) -> np.ndarray:
     return out
 
 
+def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(F, P, 3) B's real points ``truth`` moved so that their mean over the take is the
+    training people's ``mean`` pose (P, 3) or mean placed pose (F, P, 3): what a partner
+    that knew every move of the real B, but not B's own posture and place, would show.
+
+    A reference beside the mean pose, not a partner: the people in a collection differ
+    in posture (how they hold the arm that does not shake, the tracker's view of their
+    shoulders and head), and no partner can learn a new person's posture from the other
+    person. Its error is about how far below the mean pose a perfect partner of that kind
+    could come (Bütepage markers, leave one pair out: 18 % body-centred in handshakes,
+    22 % in waves; docs/hmm.md, "New people")."""
+    return truth - truth.mean(axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
+
+
 def evaluate_pair(
     model: DualHMM,
     a: Motion,
@@ -277,6 +294,11 @@ def evaluate_pair(
         res.jumps[k] = jump_sizes(where[k])
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    placed = baselines.mean_world(origin, yaw)
+    res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
+    res.pose_errors["known_motion"] = trial_errors(
+        known_motion(baselines.mean_pose, truth_pose), truth_pose
+    )
     where_a = model.body_positions(a)
     for key, points in (("real", truth), ("windowed", where["windowed"])):
         res.windows[key] = observer_windows(where_a, points, origin, yaw)
