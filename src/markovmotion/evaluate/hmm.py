@@ -477,7 +477,10 @@ def choose_settings(
     from two or more, else one take): nested cross-validation when ``takes`` are an outer
     fold's training takes. The score is B's mean world error by ``method`` over the inner
     held-out frames; each inner fold learns ``roles`` (or the setting's own ``roles``) as
-    the outer one would. Returns
+    the outer one would. With ``roles="both"`` (the interaction's roles are alike) the
+    inner held-out takes are answered in both roles too: with a few pairs of people an
+    inner fold has little to score a setting on, and the same people's other role doubles
+    it. Returns
     ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
     groups = _groups(people, len(takes))
     errors, frames = np.zeros(len(grid)), np.zeros(len(grid))  # frames: per setting's rate
@@ -497,12 +500,12 @@ def choose_settings(
                 )
                 fits[key] = _fit_on(clone(model).set_params(**params), *learn)
             fold = fits[key].set_params(**params)
-            for (_, _, a, b), g in zip(takes, groups, strict=True):
-                if g == group:
-                    generated = fold.respond(a, method)
-                    truth = fold.body_positions(fold._rate(b))
-                    errors[k] += trial_errors(fold.body_positions(generated), truth).sum()
-                    frames[k] += len(truth)
+            held = [t for t, g in zip(takes, groups, strict=True) if g == group]
+            for _, _, a, b in both_roles(held) if roles == "both" else held:
+                generated = fold.respond(a, method)
+                truth = fold.body_positions(fold._rate(b))
+                errors[k] += trial_errors(fold.body_positions(generated), truth).sum()
+                frames[k] += len(truth)
     mean = errors / np.maximum(frames, 1)
     return {
         "settings": dict(grid[int(np.argmin(mean))]),
