@@ -250,12 +250,17 @@ def test_known_motion_is_the_real_motion_about_the_mean_pose():
     np.testing.assert_allclose(known_motion(placed, truth).mean(0), placed.mean(0), atol=1e-9)
 
 
-def test_the_live_page_draws_a_marker_partner_as_points(model, takes):
+def test_the_live_page_draws_a_marker_partner_as_a_stick_figure(model, takes):
+    from markovmotion.features.body_points import point_bones
     from markovmotion.web.live import ModelPartner
 
     a = model._rate(takes[0][0])
     live = ModelPartner(model, a)
-    assert live.parents == [-1] * 30 and live.lag == model.window - 1
+    assert len(live.parents) == 30 and live.lag == model.window - 1
+    # the markers named as body points joined along the body; the others drawn as points
+    bones = point_bones(model.marker_names_b_)
+    assert len(bones) >= 5
+    assert {(c, p) for c, p in enumerate(live.parents) if p >= 0} == set(map(tuple, bones.tolist()))
     shown = [live.step(a.trim(t, t + 1)) for t in range(live.lag + 2)]
     assert shown[0] is None and shown[-1].shape == (30, 3)
 
