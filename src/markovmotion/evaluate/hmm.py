@@ -249,8 +249,8 @@ def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
     in posture (how they hold the arm that does not shake, the tracker's view of their
     shoulders and head), and no partner can learn a new person's posture from the other
     person. Its error is about how far below the mean pose a perfect partner of that kind
-    could come (Bütepage markers, leave one pair out: 18 % body-centred in handshakes,
-    22 % in waves; docs/hmm.md, "New people")."""
+    could come (Bütepage markers, leave one pair out, the new-people options: 24 %
+    body-centred in handshakes, 28 % in waves; docs/hmm.md, "New people")."""
     return truth - truth.mean(axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
 
 
