@@ -102,7 +102,9 @@ def track(
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
     if method in ("monocular", "triangulate"):
-        _track_landmarks(method, video, cameras, out, max_frames, stature, views, reference, json_out)
+        _track_landmarks(
+            method, video, cameras, out, max_frames, stature, views, reference, json_out
+        )
         return
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion

@@ -192,9 +192,7 @@ class Triangulated:
         self.points = landmarks_to_body_points(self.landmarks)
 
 
-def triangulate_views(
-    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY
-) -> Triangulated:
+def triangulate_views(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY) -> Triangulated:
     """Every frame's landmarks triangulated from the views that see them
     (:func:`triangulate_points`, weighted by visibility)."""
     v_n, f_n, l_n = views.visibility.shape
