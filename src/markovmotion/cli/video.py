@@ -98,9 +98,19 @@ def track(
         "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
         "lowered.",
     ),
+    guide: str = typer.Option(
+        "none",
+        callback=choice(("none", "mediapipe")),
+        help="mediapipe: MediaPipe Pose in every camera (needs [camera]), triangulated to "
+        "reject the views that disagree, pulls the particles' joints towards its landmarks.",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
+    if method != "apf" and guide != "none":
+        raise typer.BadParameter(
+            "guides the particle filter: use it with --method apf", param_hint="--guide"
+        )
     if method in ("monocular", "triangulate"):
         _track_landmarks(
             method, video, cameras, out, max_frames, stature, views, reference, json_out
@@ -150,6 +160,7 @@ def track(
         start,
         background == "learn",
         sides,
+        guide == "mediapipe",
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)

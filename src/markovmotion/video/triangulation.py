@@ -40,6 +40,7 @@ import numpy as np
 
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS
+from markovmotion.video.body_model import BodyModel
 from markovmotion.video.cameras import CalibratedCamera
 from markovmotion.video.monocular import (
     LANDMARK_WEIGHTS,
@@ -58,8 +59,8 @@ from markovmotion.video.render import read_frames
 OUTLIER_ANGLE = 0.03
 #: Scale of the guide's robust distance, in focal lengths (0.025: 10 px at focal 400 px).
 GUIDE_ANGLE = 0.025
-#: The guide's weight against the image cost (silhouette, coverage, edges; both in [0, 1]).
-GUIDE_WEIGHT = 1.0
+#: Scale (mm) of the robust loss fitting the body model to the triangulated points.
+FIT_SCALE = 50.0
 
 
 def _dlt(proj: list[np.ndarray], xy: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -220,6 +221,9 @@ class Guide:
     weights: np.ndarray
     angle: float = GUIDE_ANGLE
     seconds: float = 0.0
+    #: The triangulated body points (F, 19, 3) mm, NaN where unknown: the poses the filter
+    #: is restarted from (:meth:`pose`); None: the 2-D term only.
+    points: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.index = np.array([BODY_POINTS.index(p) for p in GUIDE_POINTS])
@@ -233,7 +237,8 @@ class Guide:
         w = np.where(views.visibility >= MIN_VISIBILITY, views.visibility, 0.0)[..., lm]
         if tri is not None:
             w = np.where(tri.used[..., lm], w, 0.0)
-        return cls(views.cameras, views.pixels[:, :, lm], w, seconds=views.seconds)
+        pts = None if tri is None else tri.points
+        return cls(views.cameras, views.pixels[:, :, lm], w, seconds=views.seconds, points=pts)
 
     @property
     def frames(self) -> int:
@@ -257,6 +262,45 @@ class Guide:
             d2 = ((p - self.pixels[v, frame]) ** 2).sum(axis=-1)
             out += (np.nan_to_num(d2 / (d2 + self.sigma2[v]), nan=1.0) * w[v]).sum(axis=1)
         return out / total
+
+    def pose(self, body: BodyModel, frame: int, start: np.ndarray) -> np.ndarray | None:
+        """The body model's state (D,) nearest the triangulated guide points of ``frame``
+        (:func:`fit_state` from ``start``), or None when fewer than 6 of them are known."""
+        if self.points is None or not 0 <= frame < self.frames:
+            return None
+        return fit_state(body, self.points[frame], start)
+
+
+def fit_state(
+    body: BodyModel, target: np.ndarray, start: np.ndarray, scale: float = FIT_SCALE
+) -> np.ndarray | None:
+    """The state (D,) within the body model's limits whose :data:`GUIDE_POINTS` lie nearest
+    the body points ``target`` (19, 3) mm (NaN: unknown), by robust least squares (soft L1,
+    ``scale`` mm) from ``start`` (D,); None when fewer than 6 of them are known."""
+    from scipy.optimize import least_squares
+
+    idx = np.array([BODY_POINTS.index(p) for p in GUIDE_POINTS])
+    goal = target[idx]
+    known = np.isfinite(goal).all(axis=1)
+    if known.sum() < 6:
+        return None
+    lo, hi = body.lower, body.upper
+    inside = 1e-6 * np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    x0 = np.clip(start, lo + inside, hi - inside)  # least_squares starts strictly inside
+    step = np.where(np.arange(len(x0)) < 3, 1.0, 1e-3)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        return (body.joint_positions(x)[0, idx][known] - goal[known]).ravel()
+
+    def jacobian(x: np.ndarray) -> np.ndarray:  # forward differences, all at once
+        xs = x + np.vstack([np.zeros(len(x)), np.diag(step)])
+        r = (body.joint_positions(xs)[:, idx][:, known] - goal[known]).reshape(len(xs), -1)
+        return ((r[1:] - r[0]) / step[:, None]).T
+
+    fit = least_squares(
+        residual, x0, jac=jacobian, bounds=(lo, hi), loss="soft_l1", f_scale=scale, max_nfev=30
+    )
+    return fit.x
 
 
 def guide_of_videos(
