@@ -35,7 +35,9 @@ to track person A before the partner is generated:
    (:class:`~markovmotion.video.triangulation.Guide`) add a term ``G(x)`` in [0, 1] for the
    distance of the particle's projected limb joints to them; the weighting function is then
    ``w = exp(-beta (E + g G) / (1 + g))`` with ``g`` = ``guide_weight``, so costs, recovery
-   and confidence stay on the same [0, 1] scale.
+   and confidence stay on the same [0, 1] scale (a frame without landmarks: ``E`` alone).
+   Each frame a share ``restart`` of the particles starts again from the body model fitted
+   to the triangulated points (:func:`~markovmotion.video.triangulation.fit_state`).
 
 Without annealing (``layers=1``) this is a plain particle filter
 (SIR/CONDENSATION), the comparison of ``benchmarks/tracker_bench.py``.
@@ -489,7 +491,7 @@ class AnnealedParticleFilter:
         if self.guide is None:
             return e
         g = self.guide.cost(joints, self._current)
-        return (e + self.guide_weight * g) / (1.0 + self.guide_weight)
+        return e if g is None else (e + self.guide_weight * g) / (1.0 + self.guide_weight)
 
     def _anneal(
         self, x: np.ndarray, feats: ViewFeatures, layers: int, std: np.ndarray

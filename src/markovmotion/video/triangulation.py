@@ -278,16 +278,17 @@ class Guide:
     def frames(self) -> int:
         return self.pixels.shape[1]
 
-    def cost(self, joints: np.ndarray, frame: int) -> np.ndarray:
+    def cost(self, joints: np.ndarray, frame: int) -> np.ndarray | None:
         """(M,) cost in [0, 1] of body points (M, 19, 3) in ``frame``: the visibility-weighted
-        mean over views and guide points of ``d^2 / (d^2 + sigma^2)``; 0 without landmarks."""
-        out = np.zeros(len(joints))
+        mean over views and guide points of ``d^2 / (d^2 + sigma^2)``; None when MediaPipe
+        gave no landmark for that frame (the filter then goes by the images alone)."""
         if not 0 <= frame < self.frames:
-            return out
+            return None
         w = self.weights[:, frame]  # (V, J)
         total = w.sum()
         if total <= 0:
-            return out
+            return None
+        out = np.zeros(len(joints))
         pts = joints[:, self.index]
         for v, cam in enumerate(self.cameras):
             if not w[v].any():
