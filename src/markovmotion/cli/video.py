@@ -99,12 +99,12 @@ def track(
         "lowered.",
     ),
     guide: str = typer.Option(
-        "auto",
-        callback=choice(("auto", "mediapipe", "none")),
+        "none",
+        callback=choice(("none", "mediapipe")),
         help="mediapipe: MediaPipe Pose in every camera (needs [camera]), triangulated to "
         "reject the views that disagree, pulls the particles' joints towards its landmarks "
-        "and restarts some from its pose; none: the images alone; auto: mediapipe when "
-        "installed.",
+        "and restarts some from its pose (for real people: it misreads rendered ones); "
+        "none: the images alone.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -132,7 +132,6 @@ def track(
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     size = _body_size(body_size)
-    guided = _guided(guide)
     body = training_body_model(data)
     if size == "video":
         from markovmotion.video.body_size import body_size_from_points
@@ -163,7 +162,7 @@ def track(
         start,
         background == "learn",
         sides,
-        guided,
+        guide == "mediapipe",
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -243,22 +242,6 @@ def _track_landmarks(
             f"{where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
-
-
-def _guided(guide: str) -> bool:
-    """``--guide``: whether MediaPipe guides the filter (``auto``: when installed, else a note)."""
-    if guide != "auto":
-        return guide == "mediapipe"
-    import importlib.util
-
-    if importlib.util.find_spec("mediapipe") is None:
-        err_console.print(
-            "note: MediaPipe is not installed (scripts/install-camera): tracking by the images "
-            "alone, without --guide mediapipe",
-            highlight=False,
-        )
-        return False
-    return True
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:
