@@ -15,7 +15,7 @@ from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, view_features
 from markovmotion.video.cameras import ring_of_cameras
 from markovmotion.video.monocular import LANDMARKS
-from markovmotion.video.multiview import shaded_frames, training_body_model
+from markovmotion.video.multiview import shaded_frames
 from markovmotion.video.render import background
 from markovmotion.video.triangulation import (
     GUIDE_POINTS,
@@ -88,19 +88,6 @@ def test_body_points_of_landmarks_are_missing_only_where_their_landmarks_are():
     assert missing == {"left_wrist"}
 
 
-@pytest.fixture(scope="module")
-def body(mocap):
-    return training_body_model(mocap.root)
-
-
-@pytest.fixture(scope="module")
-def take(mocap):
-    from markovmotion.data.splits import held_out_pairs
-
-    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
-    return mocap.load_motion(test[0][0]).resample(30.0)
-
-
 def _guide_of(points: np.ndarray, cams, wrong_view: int | None = None) -> Guide:
     """MediaPipe as an oracle: the guide points where the true body points project; in
     ``wrong_view`` every landmark 80 px to the side, with weight 0 (as triangulation drops it)."""
@@ -114,7 +101,7 @@ def _guide_of(points: np.ndarray, cams, wrong_view: int | None = None) -> Guide:
 
 
 def test_guide_cost_is_least_at_the_truth_and_ignores_dropped_views(body, take):
-    pts = body_points(take)[:2]
+    pts = body_points(take[0])[:2]
     cams = _cameras(3, (240, 180))
     guide = _guide_of(pts, cams, wrong_view=2)
     moved = pts[0].copy()
@@ -126,7 +113,7 @@ def test_guide_cost_is_least_at_the_truth_and_ignores_dropped_views(body, take):
 
 def test_fitted_state_reaches_the_points_of_a_known_pose(body, take):
     """The body model fitted to a captured pose's points, from the standing pose beside it."""
-    truth = body.states_of(take.trim(0, 1))[0]
+    truth = body.states_of(take[0].trim(0, 1))[0]
     pts = body.joint_positions(truth)[0]
     start = body.standing(truth[:3] + [80.0, 0.0, 50.0], truth[3] + 0.3)
     x = fit_state(body, pts, start)
@@ -143,7 +130,7 @@ def test_the_guided_filter_tracks_a_rendered_take_better(body, take):
     """Rendered from three cameras with a small search (60 particles x 3 layers): the filter
     guided by the true joints' projections (a view of them wrong and dropped) ends nearer the
     truth than the same filter unguided, for two seeds."""
-    pts = body_points(take)[:6]
+    pts = body_points(take[0])[:6]
     cams = _cameras(3, (240, 180))
     bgs = [background((c.width, c.height), k) for k, c in enumerate(cams)]
     videos = [
@@ -219,15 +206,12 @@ def test_triangulated_track_of_real_video(real_video, tmp_path, capsys):
     assert out.is_file()
 
 
-def test_guide_option_reaches_the_tracker(tmp_path, take, mocap, capsys):
+def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
     """``--guide mediapipe`` on a tiny rendered video: MediaPipe runs over every view before
     the clock (its time reported apart), the summary says so."""
     _need_mediapipe()
-    from markovmotion.data.splits import held_out_pairs
-
-    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
     out = tmp_path / "take"
-    main(["video", "render", str(mocap.root / test[0][0].file), "--out", str(out), "--views",
+    main(["video", "render", str(take[1]), "--out", str(out), "--views",
           "2", "--seconds", "0.1", "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
     main(["track", "--video", str(out), "--json", "--particles", "10", "--layers", "2",
           "--guide", "mediapipe"])  # fmt: skip
