@@ -18,6 +18,24 @@ def mocap() -> MocapIndex:
     return MocapIndex.load()
 
 
+@pytest.fixture(scope="module")
+def body(mocap):
+    """The tracker's body model learnt from the collection's training handshake and pull takes."""
+    from markovmotion.video.multiview import training_body_model
+
+    return training_body_model(mocap.root)
+
+
+@pytest.fixture(scope="module")
+def take(mocap):
+    """Person A of the held-out pull take at 30 fps, and its file."""
+    from markovmotion.data.splits import held_out_pairs
+
+    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
+    entry = test[0][0]
+    return mocap.load_motion(entry).resample(30.0), mocap.root / entry.file
+
+
 def make_skeleton() -> Skeleton:
     """A small five-joint skeleton with mixed channel orders and an end site (offsets in mm)."""
     return Skeleton(

@@ -7,12 +7,6 @@ import pytest
 
 from markovmotion.features.body_points import BODY_POINTS
 from markovmotion.video.body_size import body_size_from_points, scaled_body
-from markovmotion.video.multiview import training_body_model
-
-
-@pytest.fixture(scope="module")
-def body(mocap):
-    return training_body_model(mocap.root)
 
 
 def _bone(points: np.ndarray, a: str, b: str) -> np.ndarray:

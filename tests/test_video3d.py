@@ -20,25 +20,10 @@ from markovmotion.video.annealed_particle_filter import (
 from markovmotion.video.body_model import BODY_SHAPE
 from markovmotion.video.cameras import load_cameras, look_at, ring_of_cameras, save_cameras
 from markovmotion.video.monocular import LANDMARKS
-from markovmotion.video.multiview import shaded_frames, training_body_model
+from markovmotion.video.multiview import shaded_frames
 from markovmotion.video.render import background, read_frames, silhouette_mask
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
 from markovmotion.video.sides import SideCheck, SideView
-
-
-@pytest.fixture(scope="module")
-def body(mocap):
-    return training_body_model(mocap.root)
-
-
-@pytest.fixture(scope="module")
-def take(mocap):
-    """Person A of the held-out pull take at 30 fps, and its file."""
-    from markovmotion.data.splits import held_out_pairs
-
-    _, test = held_out_pairs(mocap.pairs(label=["handshake", "pull"], kind="skeleton"))
-    entry = test[0][0]
-    return mocap.load_motion(entry).resample(30.0), mocap.root / entry.file
 
 
 def _cameras(points, views=3, size=(160, 120)):

@@ -68,9 +68,10 @@ def track(
     ),
     method: str = typer.Option(
         "apf",
-        callback=choice(("apf", "monocular")),
+        callback=choice(("apf", "monocular", "triangulate")),
         help="apf: annealed particle filter (all views); monocular: MediaPipe Pose in one "
-        "camera placed by PnP (needs the [camera] extra); --out is then markers (.c3d).",
+        "camera placed by PnP; triangulate: MediaPipe Pose in every camera, triangulated "
+        "(both need the [camera] extra; --out is then markers, .c3d).",
     ),
     stature: float = ranged(
         "stature",
@@ -97,11 +98,25 @@ def track(
         "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
         "lowered.",
     ),
+    guide: str = typer.Option(
+        "none",
+        callback=choice(("none", "mediapipe")),
+        help="mediapipe: MediaPipe Pose in every camera (needs [camera]), triangulated to "
+        "reject the views that disagree, pulls the particles' joints towards its landmarks "
+        "and restarts some from its pose (for real people: it misreads rendered ones); "
+        "none: the images alone.",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
-    if method == "monocular":
-        _track_monocular(video, cameras, out, max_frames, stature, reference, json_out)
+    if method != "apf" and guide == "mediapipe":
+        raise typer.BadParameter(
+            "guides the particle filter: use it with --method apf", param_hint="--guide"
+        )
+    if method in ("monocular", "triangulate"):
+        _track_landmarks(
+            method, video, cameras, out, max_frames, stature, views, reference, json_out
+        )
         return
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
@@ -147,6 +162,7 @@ def track(
         start,
         background == "learn",
         sides,
+        guide == "mediapipe",
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -178,24 +194,37 @@ def track(
         )
 
 
-def _track_monocular(
+def _track_landmarks(
+    method: str,
     video: Path,
     cameras: Path | None,
     out: Path | None,
     max_frames: int | None,
     stature: float | None,
+    views: int | None,
     reference: Path | None,
     json_out: bool,
 ) -> None:
+    """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
+    body points, written as the 13 markers."""
     from markovmotion.errors import MotionFormatError
     from markovmotion.io.c3d import write_c3d
     from markovmotion.video.monocular import monocular_markers, track_monocular_video
 
     if out is not None and out.suffix.lower() != ".c3d":
-        raise MotionFormatError(out, "monocular tracking writes markers: use a .c3d name")
+        raise MotionFormatError(out, f"{method} tracking writes markers: use a .c3d name")
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
-    tr, summary = track_monocular_video(video, cameras, max_frames, stature, reference)
+    if method == "triangulate":
+        if stature is not None:
+            raise typer.BadParameter("is for --method monocular", param_hint="--stature")
+        from markovmotion.video.triangulation import track_triangulated_video
+
+        tr, summary = track_triangulated_video(video, cameras, max_frames, reference, views)
+        where = f"{summary['views']} views"
+    else:
+        tr, summary = track_monocular_video(video, cameras, max_frames, stature, reference)
+        where = f"{summary['camera']}, scale {summary['scale']:.3f}"
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)
@@ -210,8 +239,7 @@ def _track_monocular(
         )
         err_console.print(
             f"tracked {summary['frames']} frames ({summary['frames_placed']} placed) of "
-            f"{summary['camera']} at {summary['fps']:.2f} frames/s, scale "
-            f"{summary['scale']:.3f}{err}",
+            f"{where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
 

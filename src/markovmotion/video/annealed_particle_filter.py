@@ -31,6 +31,13 @@ to track person A before the partner is generated:
    MediaPipe's left and right (:mod:`markovmotion.video.sides`) find turned
    front to back is searched again from the pose turned round, or, if that
    fails, has its cost raised by ``flip_cost`` (its confidence lowered).
+7. **Guide** (our addition; optional, ``guide``): MediaPipe's 2-D landmarks in every view
+   (:class:`~markovmotion.video.triangulation.Guide`) add a term ``G(x)`` in [0, 1] for the
+   distance of the particle's projected limb joints to them; the weighting function is then
+   ``w = exp(-beta (E + g G) / (1 + g))`` with ``g`` = ``guide_weight``, so costs, recovery
+   and confidence stay on the same [0, 1] scale (a frame without landmarks: ``E`` alone).
+   Each frame a share ``restart`` of the particles starts again from the body model fitted
+   to the triangulated points (:func:`~markovmotion.video.triangulation.fit_state`).
 
 Without annealing (``layers=1``) this is a plain particle filter
 (SIR/CONDENSATION), the comparison of ``benchmarks/tracker_bench.py``.
@@ -63,6 +70,7 @@ from markovmotion.video.render import read_frames
 
 if TYPE_CHECKING:
     from markovmotion.video.sides import SideCheck
+    from markovmotion.video.triangulation import Guide
 
 #: Foreground threshold on the largest channel difference to the background (grey levels).
 FG_LOW, FG_HIGH = 30.0, 60.0
@@ -329,9 +337,16 @@ def costs(
     body: BodyModel, states: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
 ) -> np.ndarray:
     """E(x) (M,) in [0, 1] of particles (M, D) against one frame's features."""
+    return joint_costs(body.joint_positions(states), cameras, feats)
+
+
+def joint_costs(
+    joints: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
+) -> np.ndarray:
+    """E (M,) in [0, 1] of body points (M, 19, 3) mm against one frame's features."""
     seg, _ = BODY_SHAPE.segments()
-    pix, rad, _ = project_model(body.joint_positions(states), cameras)
-    out = np.empty(len(states))
+    pix, rad, _ = project_model(joints, cameras)
+    out = np.empty(len(joints))
     _costs(pix, rad, seg, feats.fg, feats.edge, feats.samples, feats.n_samples, EDGE_WEIGHT, out)
     return out
 
@@ -419,6 +434,10 @@ class AnnealedParticleFilter:
         flip_cost: added to the best cost of a frame left flipped.
         flip_slack: how much more the pose turned round may cost and still be taken (the
             silhouettes fit both about equally; MediaPipe's sides can be wrong too).
+        guide: MediaPipe's 2-D landmarks in the views (module docstring, 7), or None.
+        guide_weight: the guide term's weight ``g`` against the image cost.
+        restart: with a guide, the share of particles started again each frame from the body
+            model fitted to the triangulated points (module docstring, 7).
     """
 
     body: BodyModel
@@ -436,6 +455,9 @@ class AnnealedParticleFilter:
     sides: SideCheck | None = None
     flip_cost: float = 0.3
     flip_slack: float = 0.05
+    guide: Guide | None = None
+    guide_weight: float = 3.0
+    restart: float = 0.25
     evaluations: int = field(default=0, init=False)
     recoveries: int = field(default=0, init=False)
     flips: int = field(default=0, init=False)
@@ -445,6 +467,8 @@ class AnnealedParticleFilter:
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
         self.x: np.ndarray | None = None
+        self._current = 0  # the frame being tracked (the guide's)
+        self._last: np.ndarray | None = None  # the last frame's pose
         self.second_pass = self.body.limb_mask(("elbow", "wrist")) if self.arms_again else None
         self.limbs = [
             m
@@ -462,7 +486,12 @@ class AnnealedParticleFilter:
 
     def _score(self, x: np.ndarray, feats: ViewFeatures) -> np.ndarray:
         self.evaluations += len(x)
-        return costs(self.body, x, self.cameras, feats)
+        joints = self.body.joint_positions(x)
+        e = joint_costs(joints, self.cameras, feats)
+        if self.guide is None:
+            return e
+        g = self.guide.cost(joints, self._current)
+        return e if g is None else (e + self.guide_weight * g) / (1.0 + self.guide_weight)
 
     def _anneal(
         self, x: np.ndarray, feats: ViewFeatures, layers: int, std: np.ndarray
@@ -548,8 +577,11 @@ class AnnealedParticleFilter:
         """Track one frame, ``gap`` frames after the last: the pose (D,) and the best cost
         (plus ``flip_cost`` if it stays turned front to back, see ``sides``)."""
         frame, self.frame = self.frame + gap - 1, self.frame + gap
+        self._current = frame
         est, best = self._track(feats, gap)
-        return self._check_sides(est, best, feats, frame)
+        est, best = self._check_sides(est, best, feats, frame)
+        self._last = est
+        return est, best
 
     def _check_sides(
         self, est: np.ndarray, best: float, feats: ViewFeatures, frame: int
@@ -576,6 +608,13 @@ class AnnealedParticleFilter:
         if self.x is None:
             return self.initialise(feats, self.start)
         x = self.x
+        if self.guide is not None and self.restart > 0:
+            # some particles start again from the body model fitted to MediaPipe's points
+            fitted = self.guide.pose(self.body, self._current, self._last)
+            if fitted is not None:
+                k = int(round(self.restart * len(x)))
+                x = x.copy()
+                x[self.rng.choice(len(x), k, replace=False)] = fitted
         est, best = self._anneal(x, feats, self.layers, self.step_std * max(gap, 1))
         if self.refine:
             est, best = self._refine_limbs(est, feats)
@@ -606,6 +645,8 @@ class TrackResult:
     #: Frames MediaPipe found turned front to back (searched again), and those left so.
     flips: int = 0
     flipped: int = 0
+    #: Seconds MediaPipe took over every view for the guide (before the clock starts).
+    guide_seconds: float = 0.0
 
 
 def multiview_frames(
@@ -739,20 +780,29 @@ def track_video(
     start: np.ndarray | None = None,
     learn_background: bool = False,
     sides: bool = False,
+    guide: bool = False,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
-    every camera catch front/back flips (:mod:`markovmotion.video.sides`, run before the
-    clock starts)."""
+    every camera catch front/back flips (:mod:`markovmotion.video.sides`); with ``guide``,
+    MediaPipe's landmarks in every camera, triangulated to reject the views that disagree,
+    guide the filter (:mod:`markovmotion.video.triangulation`). MediaPipe runs before the
+    clock starts (``guide_seconds`` of the result)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
-    check = None
+    check = guided = None
     if sides:
         from markovmotion.video.sides import SideCheck
 
         check = SideCheck.from_videos(mv.videos, mv.cameras, max_frames)
+    if guide:
+        from markovmotion.video.triangulation import guide_of_videos
+
+        guided = guide_of_videos(mv.videos, mv.cameras, max_frames)
     apf = AnnealedParticleFilter(
-        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check
-    )
+        body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
+        guide=guided,
+    )  # fmt: skip
     result = track_features(mv.features(seed), apf)
     result.background_notes = mv.background_notes
+    result.guide_seconds = guided.seconds if guided is not None else 0.0
     return result

@@ -151,7 +151,7 @@ def pose_estimator(static: bool = False):
         from mediapipe.python.solutions import pose
     except ImportError:
         raise MotionFormatError(
-            "--method monocular",
+            "MediaPipe Pose (--method monocular or triangulate, --guide, --sides)",
             f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py attrs flatbuffers 'protobuf<5')",
         ) from None
     return pose.Pose(

@@ -179,6 +179,7 @@ def track_take(
     start: str | os.PathLike[str] | None = None,
     learn_background: bool = False,
     sides: bool = False,
+    guide: bool = False,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
@@ -188,6 +189,8 @@ def track_take(
     the coarse search. ``sides``: catch front/back flips with MediaPipe
     (:func:`~markovmotion.video.annealed_particle_filter.track_video`); the summary then has
     ``flips`` (frames searched again) and ``left_flipped`` (frames left flipped).
+    ``guide``: MediaPipe in every view guides the filter; the summary then has
+    ``guide_seconds`` (MediaPipe's time, not in ``fps``) and ``fps_with_guide``.
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -196,7 +199,7 @@ def track_take(
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
     result = track_video(
         video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background,
-        sides,
+        sides, guide,
     )  # fmt: skip
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {
@@ -210,6 +213,17 @@ def track_take(
         "dof": body.n_dof,
         "recoveries": result.recoveries,
         **({"flips": result.flips, "left_flipped": result.flipped} if sides else {}),
+        **(
+            {
+                "guide": "mediapipe",
+                "guide_seconds": round(result.guide_seconds, 1),
+                "fps_with_guide": round(
+                    len(result.states) / max(result.seconds + result.guide_seconds, 1e-9), 2
+                ),
+            }
+            if guide
+            else {}
+        ),
         "confidence": [round(float(c), 3) for c in result.confidence],
         "background": result.background_notes,
     }

@@ -1,0 +1,411 @@
+"""MediaPipe in every calibrated view, triangulated; and the guide it gives the particle filter.
+
+Issue 24 asks for MediaPipe Pose "alone and to start or guide the annealed particle filter in
+multi-view video" (the dual-HMM paper's tracker, §3, Deutscher et al. 2000). Two uses:
+
+1. **Triangulation** (``track --method triangulate``). MediaPipe Pose
+   (:mod:`markovmotion.video.monocular`) runs over each camera's video; each of the 33
+   landmarks is triangulated per frame from the views that see it (visibility at least
+   :data:`~markovmotion.video.monocular.MIN_VISIBILITY`) by the linear (DLT) method with each
+   view's two rows weighted by its visibility: for a camera ``P = [R | t]`` and the landmark's
+   normalised image point ``(x, y) = K^-1 (u, v, 1)``, the rows ``w (x P_3 - P_1)`` and
+   ``w (y P_3 - P_2)`` of ``A``, and the point is the right singular vector of ``A`` with the
+   smallest singular value (Hartley and Zisserman, *Multiple View Geometry*, §12.2), refined by
+   three Gauss-Newton steps on the visibility-weighted squared reprojection error (the
+   geometric error of their §12.1).
+   **Robust** (MSAC, Torr and Zisserman 2000): every subset of 2 or more of the seeing views
+   is triangulated and scored over all seeing views by ``sum_v w_v min(e_v^2, tau^2)``, with
+   ``e_v`` the reprojection error in pixels and ``tau`` :data:`OUTLIER_ANGLE` focal lengths;
+   the best subset's inliers (``e_v < tau``) are triangulated again. A view whose MediaPipe put
+   the landmark elsewhere (a left/right swap seen from behind, an arm hidden by the body) is
+   thus rejected when the others agree. (Dropping the worst view greedily while 3 or more
+   remain, tried first, can end on a wrong pair: on the real video's frame 80 it kept two
+   views that put the right wrist on the floor.) The landmarks map to the 19 body points by
+   the monocular path's weight matrix (:func:`~markovmotion.video.monocular.to_body_points`).
+2. **Guide** (``track --guide mediapipe``). :class:`Guide` adds to the particle filter's cost
+   (the ``E`` of ``w = exp(-beta E)``) a term for the distance between a particle's 12 limb
+   joints projected into each view and MediaPipe's 2-D landmarks there, weighted by
+   visibility and by whether triangulation kept that view: per view and joint the robust
+   ``d^2 / (d^2 + sigma^2)`` with ``sigma`` = :data:`GUIDE_ANGLE` focal lengths, averaged, so
+   the term lies in [0, 1] and one wrong landmark costs at most its share.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from markovmotion.errors import MotionFormatError
+from markovmotion.features.body_points import BODY_POINTS
+from markovmotion.video.body_model import BodyModel
+from markovmotion.video.cameras import CalibratedCamera
+from markovmotion.video.monocular import (
+    LANDMARK_WEIGHTS,
+    LANDMARKS,
+    MIN_VISIBILITY,
+    REFERENCE_JOINTS,
+    Landmarks,
+    detect_landmarks,
+    reference_errors,
+)
+from markovmotion.video.render import read_frames
+
+#: A view whose reprojection error exceeds this many focal lengths (radians) is dropped when
+#: at least 3 views see the landmark (0.03: 12 px at the real video's 272x480, focal ~400 px;
+#: its reference's own residual is about 5 px).
+OUTLIER_ANGLE = 0.03
+#: Scale of the guide's robust distance, in focal lengths (0.025: 10 px at focal 400 px).
+GUIDE_ANGLE = 0.025
+#: Scale (mm) of the robust loss fitting the body model to the triangulated points.
+FIT_SCALE = 50.0
+
+
+def _dlt(proj: list[np.ndarray], xy: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Points (N, 3) by the weighted DLT (module docstring) from normalised image points
+    ``xy`` (V, N, 2) with weights ``w`` (V, N) (0: view not used); NaN where fewer than 2
+    views are used."""
+    v_n, n = w.shape
+    rows = np.zeros((n, 2 * v_n, 4))
+    for v in range(v_n):
+        rows[:, 2 * v] = w[v, :, None] * (xy[v, :, :1] * proj[v][2] - proj[v][0])
+        rows[:, 2 * v + 1] = w[v, :, None] * (xy[v, :, 1:] * proj[v][2] - proj[v][1])
+    out = np.full((n, 3), np.nan)
+    ok = (w > 0).sum(axis=0) >= 2
+    if ok.any():
+        h = np.linalg.svd(rows[ok])[2][:, -1]
+        out[ok] = h[:, :3] / np.where(np.abs(h[:, 3:]) > 1e-12, h[:, 3:], 1e-12)
+    return out
+
+
+def _refine(
+    cameras: Sequence[CalibratedCamera],
+    pixels: np.ndarray,
+    w: np.ndarray,
+    points: np.ndarray,
+    steps: int = 3,
+) -> np.ndarray:
+    """Points (N, 3) moved by Gauss-Newton steps to minimise the weighted squared reprojection
+    error ``sum_v w_v |pi_v(X) - x_v|^2`` from the DLT's (the geometric error, Hartley and
+    Zisserman §12.1, rather than the DLT's algebraic one)."""
+    ok = np.isfinite(points).all(axis=1) & ((w > 0).sum(axis=0) >= 2)
+    x = points[ok].copy()
+    for _ in range(steps):
+        jtj = np.zeros((len(x), 3, 3))
+        jtr = np.zeros((len(x), 3))
+        for c, pix, wv in zip(cameras, pixels[:, ok], w[:, ok], strict=True):
+            cam = x @ c.R.T + c.t
+            z = np.maximum(cam[:, 2:], 1.0)
+            res = np.nan_to_num(c.project(x)[0] - pix)  # (n, 2)
+            ju = c.K[0, 0] * (c.R[0] - cam[:, :1] / z * c.R[2]) / z  # (n, 3)
+            jv = c.K[1, 1] * (c.R[1] - cam[:, 1:2] / z * c.R[2]) / z
+            jac = np.stack([ju, jv], axis=1) * wv[:, None, None] ** 0.5  # (n, 2, 3)
+            jtj += np.einsum("nki,nkj->nij", jac, jac)
+            jtr += np.einsum("nki,nk->ni", jac, res * wv[:, None] ** 0.5)
+        x -= np.linalg.solve(jtj + 1e-9 * np.eye(3), jtr[..., None])[..., 0]
+    out = points.copy()
+    out[ok] = x
+    return out
+
+
+def triangulate_points(
+    cameras: Sequence[CalibratedCamera],
+    pixels: np.ndarray,
+    weights: np.ndarray,
+    outlier_angle: float = OUTLIER_ANGLE,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (N, 3) triangulated from ``pixels`` (V, N, 2) seen with ``weights`` (V, N) (0: not
+    seen) by the weighted DLT, robustly (module docstring): every subset of 2 or more seeing
+    views is a candidate, scored over all seeing views by ``sum w min(e^2, tau^2)`` (MSAC;
+    ``e`` the reprojection error, ``tau`` = ``outlier_angle`` focal lengths); the best one's
+    inliers (``e < tau``, at least its own views) are triangulated again. Also the views used
+    (V, N) and their largest reprojection error (N,) in pixels. Points seen by fewer than 2
+    views are NaN."""
+    from itertools import combinations
+
+    v_n, n = weights.shape
+    if len(cameras) != v_n or pixels.shape != (v_n, n, 2):
+        raise ValueError("one pixel array and one weight row per camera")
+    seen = (weights > 0) & np.isfinite(pixels).all(axis=-1)
+    w = np.where(seen, weights, 0.0)
+    proj = [np.c_[c.R, c.t] for c in cameras]  # (3, 4) in normalised coordinates
+    xy = np.stack(
+        [
+            (np.c_[np.nan_to_num(p), np.ones(n)] @ np.linalg.inv(c.K).T)[:, :2]
+            for p, c in zip(pixels, cameras, strict=True)
+        ]
+    )
+    tau2 = np.array([(outlier_angle * c.focal) ** 2 for c in cameras])[:, None]
+
+    def errors2(points: np.ndarray) -> np.ndarray:  # (V, N) squared pixel errors
+        return np.stack(
+            [
+                ((c.project(np.nan_to_num(points))[0] - np.nan_to_num(p)) ** 2).sum(-1)
+                for c, p in zip(cameras, pixels, strict=True)
+            ]
+        )
+
+    best = np.full(n, np.inf)
+    choice = np.zeros((v_n, n), bool)
+    for k in range(2, v_n + 1):
+        for subset in combinations(range(v_n), k):
+            mask = np.zeros((v_n, 1), bool)
+            mask[list(subset)] = True
+            ok = seen[list(subset)].all(axis=0)
+            if not ok.any():
+                continue
+            pts = _dlt(proj, xy, np.where(mask & ok, w, 0.0))
+            score = (w * np.minimum(errors2(pts), tau2)).sum(axis=0)
+            score = np.where(ok, score - 1e-9 * k, np.inf)  # ties: the larger subset
+            better = score < best
+            best = np.where(better, score, best)
+            inl = seen & ((errors2(pts) < tau2) | mask)
+            choice[:, better] = inl[:, better]
+    used = choice & seen
+    points = _refine(
+        cameras, pixels, np.where(used, w, 0.0), _dlt(proj, xy, np.where(used, w, 0.0))
+    )
+    used &= np.isfinite(points).all(axis=1)[None]
+    worst = np.where(used, errors2(points), -1.0).max(axis=0)
+    worst = np.where(used.any(axis=0), np.sqrt(np.maximum(worst, 0.0)), np.nan)
+    return points, used, worst
+
+
+def landmarks_to_body_points(landmarks: np.ndarray) -> np.ndarray:
+    """(..., 19, 3) body points of (..., 33, 3) landmarks; NaN only where a landmark a point
+    is made of is NaN (the others do not spread)."""
+    known = np.isfinite(landmarks).all(axis=-1)  # (..., 33)
+    pts = np.einsum("pl,...lc->...pc", LANDMARK_WEIGHTS, np.nan_to_num(landmarks))
+    missing = np.einsum("pl,...l->...p", (LANDMARK_WEIGHTS > 0).astype(float), (~known) * 1.0)
+    return np.where(missing[..., None] > 0, np.nan, pts)
+
+
+@dataclass
+class ViewLandmarks:
+    """MediaPipe's 2-D landmarks in every camera: ``pixels`` (V, F, 33, 2), ``visibility``
+    (V, F, 33) (0 where no person was found), and the seconds MediaPipe took."""
+
+    cameras: list[CalibratedCamera]
+    pixels: np.ndarray
+    visibility: np.ndarray
+    seconds: float = 0.0
+
+    @classmethod
+    def from_videos(
+        cls,
+        videos: Sequence[str | os.PathLike[str]],
+        cameras: Sequence[CalibratedCamera],
+        max_frames: int | None = None,
+    ) -> ViewLandmarks:
+        """MediaPipe Pose over each camera's video (``scripts/install-camera``), cut to the
+        shortest."""
+        got: list[Landmarks] = [detect_landmarks(read_frames(v), max_frames) for v in videos]
+        n = min(len(g.found) for g in got)
+        return cls(
+            list(cameras),
+            np.stack([g.pixels[:n] for g in got]),
+            np.stack([np.where(g.found[:n, None], g.visibility[:n], 0.0) for g in got]),
+            sum(g.seconds for g in got),
+        )
+
+
+@dataclass
+class Triangulated:
+    """Landmarks (F, 33, 3) mm triangulated from :class:`ViewLandmarks`, the views kept
+    (V, F, 33), the largest reprojection error (F, 33) px, and the body points (F, 19, 3)."""
+
+    landmarks: np.ndarray
+    used: np.ndarray
+    residual: np.ndarray
+    points: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.points = landmarks_to_body_points(self.landmarks)
+
+
+def triangulate_views(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY) -> Triangulated:
+    """Every frame's landmarks triangulated from the views that see them
+    (:func:`triangulate_points`, weighted by visibility)."""
+    v_n, f_n, l_n = views.visibility.shape
+    w = np.where(views.visibility >= min_visibility, views.visibility, 0.0)
+    pts, used, worst = triangulate_points(
+        views.cameras, views.pixels.reshape(v_n, f_n * l_n, 2), w.reshape(v_n, f_n * l_n)
+    )
+    return Triangulated(
+        pts.reshape(f_n, l_n, 3), used.reshape(v_n, f_n, l_n), worst.reshape(f_n, l_n)
+    )
+
+
+#: The body points the guide compares (each one MediaPipe landmark).
+GUIDE_POINTS: tuple[str, ...] = REFERENCE_JOINTS
+
+
+@dataclass
+class Guide:
+    """The particle filter's MediaPipe term (module docstring, 2): 2-D targets ``pixels``
+    (V, F, J, 2) of the :data:`GUIDE_POINTS` in each camera, with ``weights`` (V, F, J) (0:
+    not seen, or rejected by triangulation)."""
+
+    cameras: list[CalibratedCamera]
+    pixels: np.ndarray
+    weights: np.ndarray
+    angle: float = GUIDE_ANGLE
+    seconds: float = 0.0
+    #: The triangulated body points (F, 19, 3) mm, NaN where unknown: the poses the filter
+    #: is restarted from (:meth:`pose`); None: the 2-D term only.
+    points: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.index = np.array([BODY_POINTS.index(p) for p in GUIDE_POINTS])
+        self.sigma2 = np.array([(self.angle * c.focal) ** 2 for c in self.cameras])
+
+    @classmethod
+    def from_views(cls, views: ViewLandmarks, tri: Triangulated | None = None) -> Guide:
+        """The guide of MediaPipe's landmarks in every view; with ``tri``, only the views its
+        triangulation kept (a landmark MediaPipe put elsewhere in one view does not pull)."""
+        lm = [LANDMARKS.index(p) for p in GUIDE_POINTS]
+        w = np.where(views.visibility >= MIN_VISIBILITY, views.visibility, 0.0)[..., lm]
+        if tri is not None:
+            w = np.where(tri.used[..., lm], w, 0.0)
+        pts = None if tri is None else tri.points
+        return cls(views.cameras, views.pixels[:, :, lm], w, seconds=views.seconds, points=pts)
+
+    @property
+    def frames(self) -> int:
+        return self.pixels.shape[1]
+
+    def cost(self, joints: np.ndarray, frame: int) -> np.ndarray | None:
+        """(M,) cost in [0, 1] of body points (M, 19, 3) in ``frame``: the visibility-weighted
+        mean over views and guide points of ``d^2 / (d^2 + sigma^2)``; None when MediaPipe
+        gave no landmark for that frame (the filter then goes by the images alone)."""
+        if not 0 <= frame < self.frames:
+            return None
+        w = self.weights[:, frame]  # (V, J)
+        total = w.sum()
+        if total <= 0:
+            return None
+        out = np.zeros(len(joints))
+        pts = joints[:, self.index]
+        for v, cam in enumerate(self.cameras):
+            if not w[v].any():
+                continue
+            p, _ = cam.project(pts)  # (M, J, 2)
+            d2 = ((p - self.pixels[v, frame]) ** 2).sum(axis=-1)
+            out += (np.nan_to_num(d2 / (d2 + self.sigma2[v]), nan=1.0) * w[v]).sum(axis=1)
+        return out / total
+
+    def pose(self, body: BodyModel, frame: int, start: np.ndarray) -> np.ndarray | None:
+        """The body model's state (D,) nearest the triangulated guide points of ``frame``
+        (:func:`fit_state` from ``start``), or None when fewer than 6 of them are known."""
+        if self.points is None or not 0 <= frame < self.frames:
+            return None
+        return fit_state(body, self.points[frame], start)
+
+
+def fit_state(
+    body: BodyModel, target: np.ndarray, start: np.ndarray, scale: float = FIT_SCALE
+) -> np.ndarray | None:
+    """The state (D,) within the body model's limits whose :data:`GUIDE_POINTS` lie nearest
+    the body points ``target`` (19, 3) mm (NaN: unknown), by robust least squares (soft L1,
+    ``scale`` mm) from ``start`` (D,); None when fewer than 6 of them are known."""
+    from scipy.optimize import least_squares
+
+    idx = np.array([BODY_POINTS.index(p) for p in GUIDE_POINTS])
+    goal = target[idx]
+    known = np.isfinite(goal).all(axis=1)
+    if known.sum() < 6:
+        return None
+    lo, hi = body.lower, body.upper
+    inside = 1e-6 * np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    x0 = np.clip(start, lo + inside, hi - inside)  # least_squares starts strictly inside
+    step = np.where(np.arange(len(x0)) < 3, 1.0, 1e-3)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        return (body.joint_positions(x)[0, idx][known] - goal[known]).ravel()
+
+    def jacobian(x: np.ndarray) -> np.ndarray:  # forward differences, all at once
+        xs = x + np.vstack([np.zeros(len(x)), np.diag(step)])
+        r = (body.joint_positions(xs)[:, idx][:, known] - goal[known]).reshape(len(xs), -1)
+        return ((r[1:] - r[0]) / step[:, None]).T
+
+    fit = least_squares(
+        residual, x0, jac=jacobian, bounds=(lo, hi), loss="soft_l1", f_scale=scale, max_nfev=30
+    )
+    return fit.x
+
+
+def guide_of_videos(
+    videos: Sequence[str | os.PathLike[str]],
+    cameras: Sequence[CalibratedCamera],
+    max_frames: int | None = None,
+) -> Guide:
+    """MediaPipe over every camera's video, triangulated to reject the views that disagree,
+    as a :class:`Guide`."""
+    views = ViewLandmarks.from_videos(videos, cameras, max_frames)
+    return Guide.from_views(views, triangulate_views(views))
+
+
+@dataclass
+class TriangulatedTrack:
+    """Body points (F, 19, 3) mm (NaN where fewer than 2 views saw them), confidence (F,)
+    (mean visibility over views and landmarks), frame rate and timing."""
+
+    points: np.ndarray
+    confidence: np.ndarray
+    fps: float
+    seconds: float
+    triangulated: Triangulated = field(repr=False)
+
+    @property
+    def placed(self) -> np.ndarray:
+        return np.isfinite(self.points).all(axis=(1, 2))
+
+
+def track_triangulated_video(
+    video: str | os.PathLike[str],
+    cameras: str | os.PathLike[str] | None = None,
+    max_frames: int | None = None,
+    reference: str | os.PathLike[str] | None = None,
+    views: int | None = None,
+) -> tuple[TriangulatedTrack, dict]:
+    """Track a multi-view video (a folder with ``cameras.json``, or that file) by MediaPipe in
+    every view, triangulated (module docstring, 1); the track and a JSON-ready summary (with
+    ``reference``, its errors)."""
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+
+    t0 = time.perf_counter()
+    where = camera_file(video, cameras)
+    cams, doc = load_cameras(where)
+    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+        raise MotionFormatError(video, "--method triangulate needs the folder of every camera")
+    videos = camera_videos(where, cams)
+    if views is not None:
+        cams, videos = cams[:views], videos[:views]
+    if len(cams) < 2:
+        raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
+    lm = ViewLandmarks.from_videos(videos, cams, max_frames)
+    tri = triangulate_views(lm)
+    seconds = time.perf_counter() - t0
+    conf = lm.visibility.mean(axis=(0, 2))
+    tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
+    n = len(tr.points)
+    seen = (lm.visibility >= MIN_VISIBILITY).sum()
+    summary = {
+        "method": "triangulate",
+        "views": len(cams),
+        "frames": n,
+        "frames_placed": int(tr.placed.sum()),
+        "fps": round(n / max(seconds, 1e-9), 2),
+        "video_fps": tr.fps,
+        "landmark_views_dropped": int(seen - tri.used.sum()),
+        "landmarks_seen": int(seen),
+        "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
+        "confidence": [round(float(c), 3) for c in conf],
+    }
+    if reference is not None:
+        summary.update(reference_errors(tr.points, reference))
+    return tr, summary

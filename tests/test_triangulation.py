@@ -1,0 +1,220 @@
+"""MediaPipe in every view: robust triangulation (``track --method triangulate``) and the guide
+it gives the annealed particle filter (``track --guide mediapipe``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from markovmotion.cli import main
+from markovmotion.data.index import data_root
+from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, view_features
+from markovmotion.video.cameras import ring_of_cameras
+from markovmotion.video.monocular import LANDMARKS
+from markovmotion.video.multiview import shaded_frames
+from markovmotion.video.render import background
+from markovmotion.video.triangulation import (
+    GUIDE_POINTS,
+    OUTLIER_ANGLE,
+    Guide,
+    fit_state,
+    landmarks_to_body_points,
+    triangulate_points,
+)
+
+
+def _cameras(views: int = 4, size: tuple[int, int] = (272, 480)):
+    return ring_of_cameras(np.array([0.0, 900.0, 0.0]), 3500.0, views, size)
+
+
+def _project(cams, points: np.ndarray) -> np.ndarray:
+    return np.stack([c.project(points)[0] for c in cams])
+
+
+def test_triangulation_recovers_points_and_agrees_with_brute_force():
+    """Exact projections give the points back; noisy ones give what minimising the
+    reprojection error by brute force (nonlinear least squares from the truth) gives."""
+    rng = np.random.default_rng(0)
+    truth = rng.uniform([-600, 0, -600], [600, 1800, 600], (40, 3))
+    cams = _cameras(4)
+    pix = _project(cams, truth)
+    pts, used, worst = triangulate_points(cams, pix, np.ones((4, 40)))
+    assert np.allclose(pts, truth, atol=1e-3) and used.all() and worst.max() < 1e-3
+    noisy = pix + rng.normal(0, 1.5, pix.shape)
+    pts, used, _ = triangulate_points(cams, noisy, np.ones((4, 40)))
+    assert used.all()  # 1.5 px of noise is no outlier
+    best = np.array(
+        [
+            least_squares(lambda y, q=q: (_project(cams, y[None])[:, 0] - q).ravel(), x).x
+            for x, q in zip(truth, noisy.transpose(1, 0, 2), strict=True)
+        ]
+    )
+    apart = np.linalg.norm(pts - best, axis=1)
+    assert apart.max() < 0.1  # mm, at 3.5 m; both about 18 mm from the truth
+    # a point seen by one view only cannot be placed
+    one = np.zeros((4, 40))
+    one[0] = 1.0
+    pts, used, _ = triangulate_points(cams, pix, one)
+    assert np.isnan(pts).all() and not used.any()
+
+
+@pytest.mark.parametrize("views", [3, 4])
+def test_a_view_with_a_wrong_landmark_is_rejected(views):
+    rng = np.random.default_rng(1)
+    truth = rng.uniform([-400, 200, -400], [400, 1600, 400], (20, 3))
+    cams = _cameras(views)
+    pix = _project(cams, truth) + rng.normal(0, 0.5, (views, 20, 2))
+    bad = pix.copy()
+    bad[1, :, 0] += 60.0  # camera 1 puts every landmark 60 px to the side
+    assert 60.0 > 2 * OUTLIER_ANGLE * min(c.focal for c in cams)
+    pts, used, worst = triangulate_points(cams, bad, np.ones((views, 20)))
+    assert not used[1].any() and used[[v for v in range(views) if v != 1]].all()
+    assert np.linalg.norm(pts - truth, axis=1).max() < 30.0
+    assert worst.max() < 5.0
+    # without the rejection (everything an inlier) the wrong view pulls the points away
+    pulled, used, _ = triangulate_points(cams, bad, np.ones((views, 20)), outlier_angle=1e6)
+    assert used.all() and np.linalg.norm(pulled - truth, axis=1).mean() > 50.0
+
+
+def test_body_points_of_landmarks_are_missing_only_where_their_landmarks_are():
+    lm = np.random.default_rng(2).normal(0, 300, (len(LANDMARKS), 3))
+    lm[LANDMARKS.index("left_wrist")] = np.nan
+    pts = landmarks_to_body_points(lm)
+    missing = {p for p, row in zip(BODY_POINTS, pts, strict=True) if np.isnan(row).any()}
+    assert missing == {"left_wrist"}
+
+
+def _guide_of(points: np.ndarray, cams, wrong_view: int | None = None) -> Guide:
+    """MediaPipe as an oracle: the guide points where the true body points project; in
+    ``wrong_view`` every landmark 80 px to the side, with weight 0 (as triangulation drops it)."""
+    idx = [BODY_POINTS.index(p) for p in GUIDE_POINTS]
+    pix = np.stack([c.project(points[:, idx])[0] for c in cams])  # (V, F, J, 2)
+    w = np.ones(pix.shape[:3])
+    if wrong_view is not None:
+        pix[wrong_view, ..., 0] += 80.0
+        w[wrong_view] = 0.0
+    return Guide(list(cams), pix, w, points=points)
+
+
+def test_guide_cost_is_least_at_the_truth_and_ignores_dropped_views(body, take):
+    pts = body_points(take[0])[:2]
+    cams = _cameras(3, (240, 180))
+    guide = _guide_of(pts, cams, wrong_view=2)
+    moved = pts[0].copy()
+    moved[BODY_POINTS.index("left_wrist")] += [300.0, 0.0, 0.0]
+    c = guide.cost(np.stack([pts[0], moved]), 0)
+    assert c[0] < 1e-9 < c[1] <= 1.0
+    assert guide.cost(pts[:1], 5) is None  # no landmarks for that frame: images alone
+
+
+def test_fitted_state_reaches_the_points_of_a_known_pose(body, take):
+    """The body model fitted to a captured pose's points, from the standing pose beside it."""
+    truth = body.states_of(take[0].trim(0, 1))[0]
+    pts = body.joint_positions(truth)[0]
+    start = body.standing(truth[:3] + [80.0, 0.0, 50.0], truth[3] + 0.3)
+    x = fit_state(body, pts, start)
+    idx = [BODY_POINTS.index(p) for p in GUIDE_POINTS]
+    err = np.linalg.norm(body.joint_positions(x)[0, idx] - pts[idx], axis=-1).mean()
+    before = np.linalg.norm(body.joint_positions(start)[0, idx] - pts[idx], axis=-1).mean()
+    assert err < 25.0 < before
+    few = np.full_like(pts, np.nan)
+    few[:3] = pts[:3]
+    assert fit_state(body, few, start) is None
+
+
+def test_the_guided_filter_tracks_a_rendered_take_better(body, take):
+    """Rendered from three cameras with a small search (60 particles x 3 layers): the filter
+    guided by the true joints' projections (a view of them wrong and dropped) ends nearer the
+    truth than the same filter unguided, for two seeds."""
+    pts = body_points(take[0])[:6]
+    cams = _cameras(3, (240, 180))
+    bgs = [background((c.width, c.height), k) for k, c in enumerate(cams)]
+    videos = [
+        list(shaded_frames([pts], c, bg, 2.0, k))
+        for k, (c, bg) in enumerate(zip(cams, bgs, strict=True))
+    ]
+    feats = [view_features([v[t] for v in videos], bgs, t) for t in range(len(pts))]
+
+    def error(guide: Guide | None, seed: int) -> float:
+        apf = AnnealedParticleFilter(body, cams, 60, 3, fps=30.0, seed=seed, guide=guide)
+        x = np.array([apf.step(f)[0] for f in feats])
+        return float(np.linalg.norm(body.joint_positions(x) - pts, axis=-1).mean())
+
+    for seed in (0, 1):
+        plain, guided = error(None, seed), error(_guide_of(pts, cams, wrong_view=1), seed)
+        assert guided < 0.7 * plain, (seed, plain, guided)
+
+
+@pytest.fixture(scope="module")
+def real_video():
+    return data_root().parent / "video" / "pose2sim_balancing"
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--method", "monocular", "--guide", "mediapipe"], "use it with --method apf"),
+        (["--guide", "openpose"], "--guide"),
+        (["--method", "triangulate", "--stature", "1700"], "--method monocular"),
+        (["--method", "triangulate", "--out", "x.bvh"], "use a .c3d name"),
+    ],
+)
+def test_bad_guide_and_triangulate_options_are_one_line(
+    real_video, tmp_path, capsys, extra, message
+):
+    extra = [str(tmp_path / e) if e.endswith(".bvh") else e for e in extra]
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_video), *extra])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_triangulate_needs_every_camera(real_video, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_video / "cam0.mp4"), "--method", "triangulate"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "every camera" in err and len(err.splitlines()) == 1
+
+
+def _need_mediapipe() -> None:
+    try:
+        import mediapipe  # noqa: F401
+    except ImportError:
+        pytest.fail("these tests need MediaPipe: run scripts/install-camera", pytrace=False)
+
+
+def test_triangulated_track_of_real_video(real_video, tmp_path, capsys):
+    """MediaPipe in the 4 real views, triangulated: every frame placed, views consistent to a
+    few pixels, within 110 mm of the reference (itself MediaPipe triangulated at full
+    resolution, wrong for one side in frames 42-72) and within 60 mm of it in most frames."""
+    _need_mediapipe()
+    out = tmp_path / "a.c3d"
+    main(["track", "--video", str(real_video), "--method", "triangulate", "--json",
+          "--reference", str(real_video / "reference_mediapipe_triangulated_mm.csv"),
+          "--out", str(out)])  # fmt: skip
+    s = json.loads(capsys.readouterr().out)
+    assert s["method"] == "triangulate" and s["views"] == 4
+    assert s["frames"] == s["frames_placed"] == 100
+    assert s["median_residual_px"] < 8.0 and 0 < s["landmark_views_dropped"]
+    assert s["mean_mm"] <= 110.0
+    assert out.is_file()
+
+
+def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
+    """``--guide mediapipe`` on a tiny rendered video: MediaPipe runs over every view before
+    the clock (its time reported apart), the summary says so."""
+    _need_mediapipe()
+    out = tmp_path / "take"
+    main(["video", "render", str(take[1]), "--out", str(out), "--views",
+          "2", "--seconds", "0.1", "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
+    main(["track", "--video", str(out), "--json", "--particles", "10", "--layers", "2",
+          "--guide", "mediapipe"])  # fmt: skip
+    s = json.loads(capsys.readouterr().out)
+    assert s["guide"] == "mediapipe" and s["guide_seconds"] >= 0.0
+    assert s["frames"] == 3 and 0 < s["fps_with_guide"] <= s["fps"]
