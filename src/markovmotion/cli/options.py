@@ -187,7 +187,7 @@ def kind_option() -> Any:
 def roles_option() -> Any:
     """``--roles one|both``, one name across the command line: learn each two-person take as
     listed, or also with the people swapped
-    (:func:`markovmotion.evaluate.hmm.both_roles`)."""
+    (:func:`markovmotion.evaluate.choose.both_roles`)."""
     return typer.Option(
         "one",
         callback=choice(("one", "both")),
