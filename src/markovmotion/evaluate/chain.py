@@ -617,6 +617,27 @@ def choose_settings(
     return choose.choose_settings(grid, groups, fit, score)
 
 
+def fit_takes(
+    model: VirtualPartner,
+    takes: Sequence[Take],
+    roles: str = "one",
+    grid: Sequence[Mapping] | None = None,
+    **scoring,
+) -> tuple[VirtualPartner, dict]:
+    """``chain train`` on two-person takes ``(name, label, people, A, B)``: ``model`` fitted on
+    every take in ``roles``; with ``grid``, the setting (and roles) first chosen among it by
+    leaving one pair of people out on these takes (:func:`choose_settings`, with ``scoring``:
+    ``n_hypotheses``, ``response``, ``seed``, ``sigma``). Returns the model and the extras to
+    save with it: ``roles`` and, with ``grid``, ``chosen`` (the pick and every setting's
+    error)."""
+    chosen: dict = {}
+    if grid:
+        chosen = choose_settings(takes, model, grid, roles, **scoring)
+        roles = chosen["settings"].get("roles", roles)
+        model.set_params(**choose.model_params(chosen["settings"]))
+    return _fit_on(model, takes, roles), {"roles": roles} | ({"chosen": chosen} if chosen else {})
+
+
 def crossval_index(
     model: VirtualPartner,
     data: str | os.PathLike[str] | None = None,
