@@ -359,7 +359,7 @@ def test_train_learns_both_roles_and_chooses_settings_by_leaving_people_out(tmp_
         (["dualhmm", "crossval"], "states=3", "states=3"),
         (["dualhmm", "train", "--out", "x.npz"], "n_states=a", "n_states takes int"),
         (["chain", "crossval"], "prototypes=3", "prototypes=3"),
-        (["chain", "train", "--out", "x.npz"], "n_state_prototypes+lam=4,x", "lam takes float"),
+        (["chain", "train", "--out", "x.npz"], "lam=0.5,x", "lam takes float"),
         (["chain", "crossval"], "roles=two", "roles are one, both"),
     ],
 )
