@@ -12,7 +12,7 @@ import pytest
 
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
-from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
+from markovmotion.errors import SkeletonMismatchError
 from markovmotion.evaluate.chain import PARTNERS, cross_validate_people
 from markovmotion.features.joint_shape import (
     JointShape,
@@ -118,8 +118,6 @@ def test_marker_chain_refuses_what_it_cannot_see(marker_partner, handshakes, sal
         marker_partner.respond(a.select([n for n in a.names if n != "R_HAND"]))
     with pytest.raises(SkeletonMismatchError, match="trained on markers"):
         marker_partner.respond(salsa_pair[0])
-    with pytest.raises(MarkovMotionError, match="respond"):
-        marker_partner.partner()
     with pytest.raises(TypeError, match="all Motions or all Markers"):
         VirtualPartner(**SMALL).fit([(a, a), salsa_pair])
 
@@ -281,3 +279,90 @@ def test_respond_command_reads_and_writes_c3d_for_a_marker_model(
     err = capsys.readouterr().err
     assert info.value.code == 2 and ".c3d" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "b.bvh").exists()
+
+
+def test_the_online_marker_partner_streams_what_respond_gives(marker_partner, handshakes):
+    """Frame by frame on markers: with the person's size given, the frames respond gives;
+    without, the size is the median of the frames so far (causal), which ends at respond's."""
+    from markovmotion.web.live import ModelPartner
+
+    _, _, _, a, _ = handshakes[-1]
+    a = a.trim(0, 90).resample(marker_partner.fps_)
+    whole = marker_partner.respond(a, n_hypotheses=10, rng=3)
+    size = marker_size(a.select(marker_partner.markers_).positions)
+    partner = marker_partner.partner(rng=3, size=size, n_hypotheses=10)
+    assert partner.skeleton is None and partner.lag == 2
+    out = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    assert out[:2] == [None, None]
+    streamed = [f for f in out if f is not None] + partner.finish()
+    assert all(isinstance(f, Markers) and f.names == whole.names for f in streamed)
+    np.testing.assert_allclose(
+        np.concatenate([f.positions for f in streamed]), whole.positions, atol=1e-6
+    )
+    # the size unknown: the running median of the frames' sizes, the take's once all are in
+    causal = marker_partner.partner(rng=3, n_hypotheses=10)
+    for t in range(a.n_frames):
+        causal.step(a.trim(t, t + 1))
+    assert np.median(causal._sizes) == pytest.approx(size)
+    assert causal._people[-1].height[0] == pytest.approx(size)
+    # a frame with a marker unseen is a missing frame: A's last frame again
+    seen = a.trim(0, 1).positions.copy()
+    seen[0, 0] = np.nan
+    assert causal.step(Markers(a.names, seen, a.fps)) is not None
+    # the live page draws the chain's markers as points
+    live = ModelPartner(marker_partner, a)
+    names = marker_partner.markers_
+    assert live.parents[names.index("R_HAND")] == names.index("R_ELBOW")
+    assert live.step(a.trim(0, 1)) is None
+    with pytest.raises(ValueError, match="size"):
+        marker_partner.partner(size=-1.0)
+
+
+def test_the_live_page_streams_a_c3d_take_to_a_partner_of_markers(
+    marker_partner, handshakes, tmp_path
+):
+    """``serve --partner`` with a model of markers takes a C3D file of the library as person A:
+    A and B drawn as stick figures of their named points, B's frames the online partner's."""
+    import json
+
+    from websockets.sync.client import connect
+
+    from markovmotion.io.c3d import write_c3d
+    from markovmotion.web.app import create_app
+    from markovmotion.web.server import running
+
+    _, _, _, a, _ = handshakes[-1]
+    a = a.trim(0, 60)
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    write_c3d(a, lib / "a.c3d")
+    marker_partner.save(tmp_path / "chain.npz")
+    from markovmotion.web.live import model_partner
+
+    partner = model_partner(tmp_path / "chain.npz")
+    app = create_app(lib, tmp_path / "r.sqlite", partner=partner, drop_late=float("inf"))
+    with running(app) as url, connect("ws" + url.removeprefix("http") + "/ws/live") as ws:
+        ws.send(json.dumps({"path": "a.c3d"}))
+        start = json.loads(ws.recv(30))
+        frames = []
+        while (msg := json.loads(ws.recv(30)))["type"] == "frame":
+            frames.append(msg)
+    a25 = a.resample(marker_partner.fps_)
+    assert start["frames"] == a25.n_frames == len(frames) and start["lag"] == 2
+    # TORSO is the root; the shoulders and the head hang from it, each arm down its chain
+    names = list(a.names)
+    assert start["parents_a"] == start["parents_b"]
+    assert start["parents_a"][names.index("R_HAND")] == names.index("R_ELBOW")
+    assert start["parents_a"][names.index("TORSO")] == -1
+    np.testing.assert_allclose(
+        np.array([f["a"] for f in frames]).reshape(a25.n_frames, -1, 3), a25.positions, atol=0.051
+    )
+    online = marker_partner.partner()
+    expected = [online.step(a25.trim(t, t + 1)) for t in range(a25.n_frames)]
+    got = [f["b"] for f in frames]
+    assert [g is None for g in got] == [e is None for e in expected]
+    np.testing.assert_allclose(
+        np.array([g for g in got if g is not None]).reshape(-1, len(names), 3),
+        np.concatenate([e.positions for e in expected if e is not None]),
+        atol=0.051,
+    )

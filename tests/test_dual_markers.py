@@ -227,14 +227,40 @@ def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes,
     report = json.loads(capsys.readouterr().out)
     assert report["overall"]["frames"] == FRAMES // 4
     assert report["overall"]["standard_mm"] < report["overall"]["mean_pose_mm"] * 2
+    # the reference of B's real motion on the mean pose: never above the mean pose itself,
+    # body-centred (per point, the mean distance to the frames >= the distance to their mean)
+    body = report["overall"]["body_centred"]
+    assert 0 < body["known_motion_mm"] <= body["mean_pose_mm"] + 0.05
 
 
-def test_the_live_page_draws_a_marker_partner_as_points(model, takes):
+def test_known_motion_is_the_real_motion_about_the_mean_pose():
+    from markovmotion.evaluate.hmm import known_motion, trial_errors
+
+    rng = np.random.default_rng(3)
+    truth = rng.normal(size=(40, 5, 3)) * 30 + rng.normal(size=(1, 5, 3)) * 200
+    mean = rng.normal(size=(5, 3)) * 200
+    shown = known_motion(mean, truth)
+    np.testing.assert_allclose(shown.mean(axis=0), mean, atol=1e-9)
+    np.testing.assert_allclose(np.diff(shown, axis=0), np.diff(truth, axis=0), atol=1e-9)
+    # its error is the same in every frame: the posture's offset, the motion being exact
+    err = trial_errors(shown, truth)
+    np.testing.assert_allclose(err, np.linalg.norm(mean - truth.mean(0), axis=-1).mean())
+    assert err.mean() <= trial_errors(np.broadcast_to(mean, truth.shape), truth).mean()
+    placed = mean + rng.normal(size=(40, 1, 3)) * 50  # a mean pose placed frame by frame
+    np.testing.assert_allclose(known_motion(placed, truth).mean(0), placed.mean(0), atol=1e-9)
+
+
+def test_the_live_page_draws_a_marker_partner_as_a_stick_figure(model, takes):
+    from markovmotion.features.body_points import point_bones
     from markovmotion.web.live import ModelPartner
 
     a = model._rate(takes[0][0])
     live = ModelPartner(model, a)
-    assert live.parents == [-1] * 30 and live.lag == model.window - 1
+    assert len(live.parents) == 30 and live.lag == model.window - 1
+    # the markers named as body points joined along the body; the others drawn as points
+    bones = point_bones(model.marker_names_b_)
+    assert len(bones) >= 5
+    assert {(c, p) for c, p in enumerate(live.parents) if p >= 0} == set(map(tuple, bones.tolist()))
     shown = [live.step(a.trim(t, t + 1)) for t in range(live.lag + 2)]
     assert shown[0] is None and shown[-1].shape == (30, 3)
 

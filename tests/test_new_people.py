@@ -315,6 +315,32 @@ def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people
         assert seen[i - 1] == pairs - {group}
 
 
+@pytest.mark.parametrize("roles", ["one", "both"])
+def test_inner_folds_answer_the_held_out_takes_in_both_roles_when_roles_are_alike(
+    people, monkeypatch, roles
+):
+    """With ``roles="both"`` an inner fold scores a setting on each held-out take answered
+    in both roles (twice the evidence from few pairs of people); with ``"one"``, as listed."""
+    takes = [(f"t{i}", "handshake", a, b) for i, (_, a, b) in enumerate(people)]
+    groups = [s for s, _, _ in people]
+    answered: list[int] = []
+    respond = DualHMM.respond
+
+    def spy(self, motion_a, method="standard"):
+        answered.append(id(motion_a))
+        return respond(self, motion_a, method)
+
+    monkeypatch.setattr(DualHMM, "respond", spy)
+    evaluation.choose_settings(
+        takes, DualHMM(n_states=3, n_iter=3), [{"blend_window": 1}], groups, roles
+    )
+    as_a = {id(a) for _, a, _ in people}
+    as_b = {id(b) for _, _, b in people}
+    assert as_a <= set(answered)  # every take is held out once, A answered
+    assert (as_b <= set(answered)) == (roles == "both")
+    assert len(answered) == len(people) * (2 if roles == "both" else 1)
+
+
 def _cli(main, args: list[str]) -> int:
     """The exit code of the command line on ``args``."""
     try:

@@ -564,7 +564,8 @@ def _print_table(report: dict) -> None:
     if "gmr_mm" in report["overall"]:
         cols = (*cols, "gmr_mm")
     jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
-    heads = ("group", *cols, "body-centred std/win/mean", "paper trellis std/win", *jumps)
+    heads = ("group", *cols, "body-centred std/win/mean", "known motion world/body")
+    heads = (*heads, "paper trellis std/win", *jumps)
     for c in (*heads, "hand gap real/win", "latency median/p99 (µs)"):
         table.add_column(c)
     rows = {
@@ -580,6 +581,7 @@ def _print_table(report: dict) -> None:
             name,
             *(f"{r[c]:.1f}" for c in cols),
             "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
+            f"{r['known_motion_mm']:.1f}/{body['known_motion_mm']:.1f}",
             f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}" if paper else "-",
             *(f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",

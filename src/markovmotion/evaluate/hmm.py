@@ -62,7 +62,10 @@ from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
 from markovmotion.progress import track
 from markovmotion.viz.plots import new_figure, save_figure
 
-METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr")
+METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr", "known_motion")
+#: Not a partner but a reference: B's real motion on the training people's mean pose
+#: (:func:`known_motion`).
+REFERENCES = ("known_motion",)
 #: A step of the median body point larger than this between frames is a jump (mm).
 JUMP_MM = 100.0
 
@@ -235,6 +238,20 @@ def step_latencies(model: DualHMM, xa: np.ndarray) -> np.ndarray:
     return out
 
 
+def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(F, P, 3) B's real points ``truth`` moved so that their mean over the take is the
+    training people's ``mean`` pose (P, 3) or mean placed pose (F, P, 3): what a partner
+    that knew every move of the real B, but not B's own posture and place, would show.
+
+    A reference beside the mean pose, not a partner: the people in a collection differ
+    in posture (how they hold the arm that does not shake, the tracker's view of their
+    shoulders and head), and no partner can learn a new person's posture from the other
+    person. Its error is about how far below the mean pose a perfect partner of that kind
+    could come (Bütepage markers, leave one pair out, the new-people options: 24 %
+    body-centred in handshakes, 28 % in waves; docs/hmm.md, "New people")."""
+    return truth - truth.mean(axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
+
+
 def evaluate_pair(
     model: DualHMM,
     a: Motion,
@@ -275,6 +292,11 @@ def evaluate_pair(
         res.jumps[k] = jump_sizes(where[k])
     res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    placed = baselines.mean_world(origin, yaw)
+    res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
+    res.pose_errors["known_motion"] = trial_errors(
+        known_motion(baselines.mean_pose, truth_pose), truth_pose
+    )
     where_a = model.body_positions(a)
     for key, points in (("real", truth), ("windowed", where["windowed"])):
         res.windows[key] = observer_windows(where_a, points, origin, yaw)
@@ -418,7 +440,10 @@ def choose_settings(
     :func:`markovmotion.evaluate.choose.choose_settings`): nested cross-validation when
     ``takes`` are an outer fold's training takes. The score is B's mean world error by
     ``method`` over the inner held-out frames; each inner fold learns ``roles`` (or the
-    setting's own ``roles``) as the outer one would. Returns
+    setting's own ``roles``) as the outer one would. With ``roles="both"`` (the
+    interaction's roles are alike) the inner held-out takes are answered in both roles too:
+    with a few pairs of people an inner fold has little to score a setting on, and the same
+    people's other role doubles it. Returns
     ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
     groups = choose.fold_groups(people, [t[0] for t in takes])
 
@@ -430,7 +455,8 @@ def choose_settings(
     def score(fold: DualHMM, settings: dict, test: list[int]) -> tuple[float, int]:
         fold.set_params(**choose.model_params(settings))
         error, frames = 0.0, 0
-        for _, _, a, b in (takes[i] for i in test):
+        held = [takes[i] for i in test]
+        for _, _, a, b in choose.both_roles(held) if roles == "both" else held:
             truth = fold.body_positions(fold._rate(b))
             error += float(trial_errors(fold.body_positions(fold.respond(a, method)), truth).sum())
             frames += len(truth)

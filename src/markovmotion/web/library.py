@@ -15,7 +15,7 @@ import tempfile
 import threading
 import zlib
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar
 
@@ -60,12 +60,26 @@ class UploadTooLargeError(MotionFormatError):
     """An upload above :func:`max_upload_bytes` (before or after decompression)."""
 
 
-def display_parents(skeleton: Skeleton) -> list[int]:
+def display_parents(skeleton: Skeleton | Sequence[str]) -> list[int]:
     """Parents of the bones to draw: none above the pelvis (Bandai's ground-level
-    ``joint_Root`` would otherwise be linked to the hips by a long false bone)."""
+    ``joint_Root`` would otherwise be linked to the hips by a long false bone). For marker
+    names, the bones between the named body points
+    (:func:`~markovmotion.features.body_points.point_bones`; none if none are named)."""
+    if not isinstance(skeleton, Skeleton):
+        from markovmotion.features.body_points import point_bones
+
+        parents = [-1] * len(skeleton)
+        for child, parent in point_bones(list(skeleton)).tolist():
+            parents[child] = parent
+        return parents
     parents = skeleton.parents.tolist()
     parents[skeleton.body_root] = -1
     return parents
+
+
+def figure_parents(take: Motion | Markers) -> list[int]:
+    """:func:`display_parents` of a take's skeleton, or of its marker names."""
+    return display_parents(take.names if isinstance(take, Markers) else take.skeleton)
 
 
 T = TypeVar("T")
@@ -89,10 +103,11 @@ def _json_format(n: int) -> str:
     return "[" + ",".join(["%.1f"] * n) + "]"
 
 
-def encoded_frames(motion: Motion) -> list[str]:
+def encoded_frames(motion: Motion | Markers) -> list[str]:
     """Each frame's positions as JSON text (:func:`positions_json`), for streaming frame by
-    frame."""
-    return [positions_json(p) for p in motion.positions()]
+    frame (markers: their positions; a live take's gaps are filled first, :meth:`stream`)."""
+    pos = motion.positions if isinstance(motion, Markers) else motion.positions()
+    return [positions_json(p) for p in pos]
 
 
 def motion_payload(motion: Motion) -> dict:
@@ -123,6 +138,16 @@ def markers_payload(markers: Markers) -> dict:
         "parents": [-1] * pos.shape[1],
         "positions": flat,
     }
+
+
+def _filled(markers: Markers) -> Markers:
+    """``markers`` with gaps filled over time; a marker never seen: one line naming it."""
+    from markovmotion.features.markers import fill_gaps
+
+    try:
+        return fill_gaps(markers)
+    except ValueError as exc:
+        raise MotionFormatError(markers.name or "markers", str(exc)) from None
 
 
 def _markers_payload(path: Path) -> dict:
@@ -193,25 +218,34 @@ class MotionLibrary:
             raise LibraryPathError(f"{name}: no such motion file in the library")
         return path
 
-    def motion(self, relative: str) -> Motion:
-        """The skeletal motion at ``relative`` (BVH or ASF/AMC), cached by mtime: the same
-        object for every caller, which must not change it."""
+    def motion(self, relative: str) -> Motion | Markers:
+        """The take at ``relative``, cached by mtime: the same object for every caller, which
+        must not change it. A skeletal motion (BVH or ASF/AMC) or, from a C3D file, its
+        markers with their gaps filled over time (what a live partner of markers is shown:
+        :func:`~markovmotion.features.markers.fill_gaps`)."""
         return self._cached(relative, "motion", lambda path: self._read(path))
 
-    def _read(self, path: Path) -> Motion:
+    def _read(self, path: Path) -> Motion | Markers:
         if self.index is not None:
             rel = path.relative_to(self.root).as_posix()
             entry = next((e for e in self.index if e.file == rel), None)
             if entry is not None:
-                return self.index.load_motion(entry)
+                take = self.index.load_motion(entry)
+                return _filled(take) if isinstance(take, Markers) else take
+        if base_suffix(path) == ".c3d":
+            from markovmotion.io.c3d import read_c3d
+
+            markers = read_c3d(path)
+            markers.name = path.name
+            return _filled(markers)
         return read_motion(path)
 
-    def stream(self, relative: str, fps: float | None = None) -> tuple[Motion, list[str]]:
+    def stream(self, relative: str, fps: float | None = None) -> tuple[Motion | Markers, list[str]]:
         """The motion at ``relative`` at ``fps`` (its own if None) and each frame's joint
         positions as JSON text (mm, flat, one decimal), cached by mtime: a live session's
         person A, read, resampled and encoded once for every session that streams it."""
 
-        def build(path: Path) -> tuple[Motion, list[str]]:
+        def build(path: Path) -> tuple[Motion | Markers, list[str]]:
             motion = self.motion(relative)
             motion = motion.resample(fps) if fps else motion  # the same arrays at its own rate
             return motion, encoded_frames(motion)

@@ -2,7 +2,8 @@
 
 Protocol (JSON text messages):
 
-1. the page sends ``{"path": "walk.bvh"}`` (a library file) or
+1. the page sends ``{"path": "walk.bvh"}`` (a library file: a skeleton's take, or a C3D
+   file's markers for a partner of markers, their gaps filled) or
    ``{"bvh": "<file text>", "name": "mine.bvh"}`` (an upload), optionally
    with ``"loop": true`` to repeat A until the page stops;
 2. the server answers ``{"type": "start", "fps", "frames", "parents_a",
@@ -38,6 +39,7 @@ from typing import Protocol
 import numpy as np
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MarkovMotionError, ModelFormatError
 from markovmotion.models.base import KINDS, Model
@@ -45,6 +47,7 @@ from markovmotion.web.library import (
     MotionLibrary,
     display_parents,
     encoded_frames,
+    figure_parents,
     positions_json,
     read_upload,
 )
@@ -95,8 +98,10 @@ class ModelPartner:
         self.lag = int(self._partner.lag)
         self.fps = float(self._partner.fps)
         skeleton = self._partner.skeleton  # None: B comes as markers, drawn without bones
-        names = getattr(model, "marker_names_b_", ())
-        self.parents = display_parents(skeleton) if skeleton is not None else [-1] * len(names)
+        # B's markers: the dual HMM's marker_names_b_, the chain's markers_ (both people's)
+        names = getattr(model, "marker_names_b_", None) or getattr(model, "markers_", None) or ()
+        # B's markers as a stick figure where their names say which body point they are
+        self.parents = display_parents(skeleton if skeleton is not None else list(names))
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
         return self._positions(self._partner.step(frame_a))
@@ -182,7 +187,7 @@ def _parse(text: str) -> dict:
     return msg
 
 
-def _motion_of(msg: dict, library: MotionLibrary) -> Motion:
+def _motion_of(msg: dict, library: MotionLibrary) -> Motion | Markers:
     if isinstance(msg.get("path"), str):
         return library.motion(msg["path"])
     if isinstance(msg.get("bvh"), str):
@@ -285,7 +290,7 @@ async def live_session(
                 "type": "start",
                 "fps": motion.fps,
                 "frames": motion.n_frames,
-                "parents_a": display_parents(motion.skeleton),
+                "parents_a": figure_parents(motion),
                 "parents_b": list(partner.parents),
                 "lag": int(partner.lag),
             },

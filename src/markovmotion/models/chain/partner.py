@@ -34,10 +34,12 @@ from markovmotion.features.joint_shape import (
     TwoPeople,
     joint_shape_pipeline,
     joints_skeleton,
+    marker_size,
     person_from_motion,
     person_from_take,
     shape_joints,
 )
+from markovmotion.features.markers import MarkerFeatures
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.chain.behaviour_chain import BehaviourChain
 from markovmotion.models.chain.condensation import (
@@ -357,10 +359,12 @@ class VirtualPartner(Model):
         self,
         person: int = 0,
         rng: np.random.Generator | int | None = None,
+        size: float | None = None,
         **options,
     ) -> ChainPartner:
-        """An online partner (:class:`ChainPartner`) answering ``person`` frame by frame."""
-        return ChainPartner(self, person, rng, **options)
+        """An online partner (:class:`ChainPartner`) answering ``person`` frame by frame
+        (``size``: a marker model's size of the person, :class:`ChainPartner`)."""
+        return ChainPartner(self, person, rng, size=size, **options)
 
     def place(self, shapes: np.ndarray, roles: np.ndarray, real: Person) -> Person:
         """Partners of ``real`` from normalised combined shapes (T, d), real person's roles (T,)."""
@@ -411,6 +415,13 @@ class ChainPartner:
     frames = 0.08 s at 25 fps with the paper's w = 5); over a whole motion the
     frames equal :meth:`VirtualPartner.respond`'s. A missing or dropped frame
     repeats A's last one.
+
+    A model of markers takes A's one-frame Markers and answers with B's markers
+    (``markers_``). The person's size (:func:`marker_size`, which a whole take gives
+    at once) is ``size`` if known, else the median of the frames' sizes so far: causal,
+    and once the take is in, the size :meth:`VirtualPartner.respond` uses (with
+    ``size`` given, the frames equal respond's). A frame with a marker unseen counts
+    as missing (respond fills such gaps over time; online the future is not there).
     """
 
     def __init__(
@@ -418,20 +429,31 @@ class ChainPartner:
         model: VirtualPartner,
         person: int = 0,
         rng: np.random.Generator | int | None = None,
+        size: float | None = None,
         **options,
     ):
-        if model.shape_step.n_dims_ != 3 or model.uses_markers:
+        if model.shape_step.n_dims_ != 3:
             raise MarkovMotionError(
-                "an online partner needs a model of 3-D skeletons (a marker model answers "
-                "whole takes: respond)"
+                "an online partner needs a model of 3-D people (skeletons or markers), "
+                "not of silhouettes"
             )
+        if size is not None and not (np.isfinite(size) and size > 0):
+            raise ValueError(f"size must be a positive number of mm, got {size}")
         self.model = model
         self.person = person
         self.fps = model.fps_
         w = self._window = int(model.window)
         self._behind = w // 2  # frames of the centred window before its frame
         self.lag = w - 1 - self._behind
-        self._skeleton = model.partner_skeleton(None, person)
+        self._markers = list(model.markers_) if model.uses_markers else None
+        self._size, self._sizes = size, []  # markers: the size given, or each frame's
+        if self._markers is not None:
+            self._skeleton = None
+            self._place_step = MarkerFeatures().fit(
+                [Markers(tuple(self._markers), np.zeros((1, len(self._markers), 3)), self.fps)]
+            )
+        else:
+            self._skeleton = model.partner_skeleton(None, person)
         self._propagator = model.propagator(person, rng=rng, **options)
         self._propagator.reset()
         self._shapes: deque = deque(maxlen=w)  # A's last raw shape vectors
@@ -443,21 +465,28 @@ class ChainPartner:
         self._frames_in = 0
 
     @property
-    def skeleton(self) -> Skeleton:
-        """B's skeleton (the partner's shape joints)."""
+    def skeleton(self) -> Skeleton | None:
+        """B's skeleton (the partner's shape joints; None for a model of markers)."""
         return self._skeleton
 
-    def step(self, frame: Motion | None) -> Motion | None:
+    def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
         """One frame of A in (None: missing); B's frame for ``lag`` frames ago out."""
-        if frame is None or not (
-            np.isfinite(frame.rotations).all() and np.isfinite(frame.translations).all()
-        ):
+        if frame is None:
             return self.skip()
-        if frame.skeleton is not self._checked:
+        kind = frame.names if isinstance(frame, Markers) else frame.skeleton
+        if kind is not self._checked:
             self.model.check_input(frame)
-            self._checked = frame.skeleton
+            self._checked = kind
+        if isinstance(frame, Markers):
+            pos = frame.select(self._markers).positions
+            if not np.isfinite(pos).all():
+                return self.skip()
+            real = self._marker_person(pos)
+        elif np.isfinite(frame.rotations).all() and np.isfinite(frame.translations).all():
+            real = self._person(frame)
+        else:
+            return self.skip()
         self._last = frame
-        real = self._person(frame)
         s = self.model.shape_step.shape_vectors(real)[0]
         if self._first is None:
             self._first = s
@@ -478,7 +507,15 @@ class ChainPartner:
         joints = shape_joints(frame.skeleton)
         return Person(pos[:, joints], ref, self._height[1], frame.heading(pos))
 
-    def skip(self) -> Motion | None:
+    def _marker_person(self, pos: np.ndarray) -> Person:
+        """:func:`person_from_markers` of one frame (1, M, 3): the size given, or the median
+        of every frame's so far (:func:`marker_size` of the frames seen)."""
+        self._sizes.append(marker_size(pos))
+        size = self._size if self._size is not None else float(np.median(self._sizes))
+        _, yaw = self._place_step.place(pos)
+        return Person(pos, pos.mean(axis=1), np.full(1, size), yaw)
+
+    def skip(self) -> Motion | Markers | None:
         """A frame that did not come in time: A's last frame again (nothing before the first)."""
         return None if self._last is None else self.step(self._last)
 
@@ -487,12 +524,12 @@ class ChainPartner:
         answer unused (the propagation must go on frame by frame)."""
         self.skip()
 
-    def finish(self) -> list[Motion]:
+    def finish(self) -> list[Motion | Markers]:
         """B's frames still owed at the end of the stream (the window's edge repeats A's last)."""
         n = self._frames_in
         return [self._answer(t, n - 1) for t in range(max(n - self.lag, 0), n)]
 
-    def _answer(self, t: int, newest: int) -> Motion:
+    def _answer(self, t: int, newest: int) -> Motion | Markers:
         """B's frame for A's frame ``t``, given A's frames up to ``newest``."""
         shapes = list(self._shapes)  # A's frames newest - len + 1 .. newest
         oldest = newest - len(shapes) + 1
@@ -504,4 +541,6 @@ class ChainPartner:
         real = self._people[t - (newest - len(self._people) + 1)]
         role = np.asarray(self.model.people(self.person))[[r.role]]
         placed = self.model.place(r.shape[None], role, real)
+        if self._markers is not None:
+            return Markers(tuple(self._markers), placed.points, self.fps, "virtual partner")
         return fit_rotations(self._skeleton, placed.points, fps=self.fps)
