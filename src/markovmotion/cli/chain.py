@@ -388,15 +388,12 @@ def crossval(
     _check_response(response)
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
-    old = [
-        *(
-            [f"n_state_prototypes+n_behaviour_prototypes={choose_prototypes}"]
-            if choose_prototypes
-            else []
-        ),
-        *(["roles=one,both"] if choose_roles else []),
-    ]  # the old flags, as the grid they stand for
-    grid = grid_of("chain", ";".join([choose, *old] if choose else old))
+    parts = [choose] if choose else []  # and the old flags, as the grid they stand for
+    if choose_prototypes:
+        parts.append(f"n_state_prototypes+n_behaviour_prototypes={choose_prototypes}")
+    if choose_roles:
+        parts.append("roles=one,both")
+    grid = grid_of("chain", ";".join(parts))
     report = crossval_index(
         model,
         data,
