@@ -24,6 +24,7 @@ import numpy as np
 
 from markovmotion.data import MocapIndex
 from markovmotion.evaluate.hmm import cross_validate
+from markovmotion.evaluate.takes import take_names
 from markovmotion.models.hmm.dual import DualHMM
 
 ENERGY_GRID = [{"energy": e, "blend_window": b} for e, b in itertools.product((0.95, 0.99), (1, 9))]
@@ -47,7 +48,8 @@ def main() -> None:
     study = parser.parse_args().study
     idx = MocapIndex.load()
     pairs = [p for p in idx.pairs(kind="skeleton") if p[0].label in ("handshake", "pull")]
-    takes = [(a.name, a.label, *idx.load_pair(a, b)) for a, b in pairs]
+    names = take_names(pairs)
+    takes = [(names[p], p[0].label, *idx.load_pair(*p)) for p in pairs]
     if study == "energy":
         nested(takes, ENERGY_GRID, DualHMM(), "standard")
         return

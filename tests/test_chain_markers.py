@@ -187,28 +187,76 @@ def test_crossval_command_prints_json_and_refuses_unknown_labels(capsys):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
-def test_nested_choice_sees_only_the_folds_training_people(short, monkeypatch):
+@pytest.fixture
+def chain_fits(monkeypatch) -> list[set[str]]:
+    """The pairs of people of every fit a chain cross-validation or choice makes, in order."""
     import markovmotion.evaluate.chain as chain_eval
 
     seen: list[set[str]] = []
-    choose = chain_eval.choose_settings
+    fit = chain_eval._fit_on
 
-    def spy(takes, *args, **kwargs):
+    def spy(model, takes, roles):
         seen.append({t[2] for t in takes})
-        return choose(takes, *args, **kwargs)
+        return fit(model, takes, roles)
 
-    monkeypatch.setattr(chain_eval, "choose_settings", spy)
-    candidates = [{"n_state_prototypes": 4}, {"n_state_prototypes": 6, "roles": "both"}]
-    report = cross_validate_people(
-        short, VirtualPartner(**SMALL), n_hypotheses=4, candidates=candidates
-    )
-    people = {t[2] for t in short}
-    assert [s for s in seen] == [people - {f["left_out"]} for f in report["folds"]]
-    for fold in report["folds"]:
+    monkeypatch.setattr(chain_eval, "_fit_on", spy)
+    return seen
+
+
+def test_nested_choice_never_sees_the_pair_of_people_it_is_reported_on(handshakes, chain_fits):
+    """Each outer fold trains on the other pairs; each of its inner fits on fewer still (one
+    per inner fold and setting), none on the held-out pair: settings are chosen on training
+    pairs only, and the pick is the setting with the lowest inner error."""
+    from markovmotion.evaluate import choose
+
+    people = {t[2] for t in handshakes}
+    assert len(people) >= 3  # the collection holds three pairs of handshakes
+    short = [(n, lab, p, a.trim(0, 90), b.trim(0, 90)) for n, lab, p, a, b in handshakes]
+    grid = [{"n_state_prototypes": 4}, {"n_state_prototypes": 6, "roles": "both"}]
+    report = cross_validate_people(short, VirtualPartner(**SMALL), n_hypotheses=4, grid=grid)
+    per_fold = len(grid) * (len(people) - 1) + 1  # inner fits, then the outer one
+    assert len(chain_fits) == len(people) * per_fold
+    for k, fold in enumerate(report["folds"]):
+        fits = chain_fits[k * per_fold : (k + 1) * per_fold]
+        held = fold["left_out"]
+        assert all(held not in s for s in fits)
+        assert all(len(s) == len(people) - 2 for s in fits[:-1])  # inner: one more pair out
+        assert fits[-1] == people - {held}
         chosen = fold["chosen"]
-        assert chosen["settings"] in candidates and len(chosen["inner_mm"]) == 2
+        assert chosen["settings"] in grid and len(chosen["inner_mm"]) == len(grid)
         best = min(chosen["inner_mm"], key=chosen["inner_mm"].get)
-        assert best == chain_eval._setting_name(chosen["settings"])
+        assert best == choose.setting_label(chosen["settings"])
+
+
+def test_train_chooses_settings_by_leaving_people_out_and_records_the_pick(tmp_path):
+    """``chain train --choose`` picks among settings by leaving one pair of people out on the
+    training takes, trains with the pick and records it and every setting's error."""
+    out = tmp_path / "chosen.npz"
+    argv = ["chain", "train", "--label", "handshake", "--kind", "markers", "--epochs", "1"]
+    argv += ["--prototypes", "4", "--behaviours", "4", "--hypotheses", "4", "--out", str(out)]
+    main([*argv, "--choose", "n_state_prototypes+n_behaviour_prototypes=4,6;roles=one,both"])
+    model = VirtualPartner.load(out)
+    inner = model.chosen_["inner_mm"]
+    assert len(inner) == 4
+    pick = model.chosen_["settings"]
+    assert min(inner, key=inner.get) == ",".join(f"{k}={v}" for k, v in pick.items())
+    assert model.roles_ == pick["roles"]
+    assert model.n_state_prototypes == model.n_behaviour_prototypes == pick["n_state_prototypes"]
+    assert len(model.chain_.state_prototypes_) == pick["n_state_prototypes"]
+
+
+def test_the_old_choice_flags_are_the_grid_they_stand_for(monkeypatch, capsys):
+    """``--choose-prototypes N,M --choose-roles`` (hidden) pass the same grid as --choose."""
+    import markovmotion.evaluate.chain as chain_eval
+
+    grids = []
+    monkeypatch.setattr(
+        chain_eval, "crossval_index", lambda *a, **k: grids.append(k["grid"]) or {"x": 1}
+    )
+    argv = ["chain", "crossval", "--json"]
+    main([*argv, "--choose-prototypes", "20,40", "--choose-roles"])
+    main([*argv, "--choose", "n_state_prototypes+n_behaviour_prototypes=20,40;roles=one,both"])
+    assert grids[0] == grids[1] and len(grids[0]) == 4
 
 
 def test_respond_command_reads_and_writes_c3d_for_a_marker_model(

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from markovmotion.core.markers import Markers
+from markovmotion.evaluate import choose
 from markovmotion.evaluate import hmm as evaluation
+from markovmotion.evaluate.takes import take_names
 from markovmotion.features.person import RunningCentre, on_average_body
 from markovmotion.models.base import Model
 from markovmotion.models.hmm.dual import DualHMM, choose_frame
@@ -144,7 +146,7 @@ def test_crossval_leaves_one_pair_of_people_out(people, fits):
 def test_both_roles_swaps_a_and_b():
     a = Markers(("x",), np.zeros((3, 1, 3)), 30.0, "a")
     b = Markers(("x",), np.ones((3, 1, 3)), 30.0, "b")
-    (one, two) = evaluation.both_roles([("t", "wave", a, b)])
+    (one, two) = choose.both_roles([("t", "wave", a, b)])
     assert one[2] is a and one[3] is b and two[2] is b and two[3] is a
 
 
@@ -296,11 +298,11 @@ def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people
     assert len(inner) == len(pairs) * (len(pairs) - 1) * 2
     for r in results:
         assert r.chosen["settings"] in grid
-        assert set(r.chosen["inner_mm"]) == {evaluation._label(g) for g in grid}
+        assert set(r.chosen["inner_mm"]) == {choose.setting_label(g) for g in grid}
         assert (
             r.chosen["settings"]
             == grid[
-                [evaluation._label(g) for g in grid].index(
+                [choose.setting_label(g) for g in grid].index(
                     min(r.chosen["inner_mm"], key=r.chosen["inner_mm"].get)
                 )
             ]
@@ -372,22 +374,47 @@ def test_train_learns_both_roles_and_chooses_settings_by_leaving_people_out(tmp_
     inner = model.chosen_["inner_mm"]
     assert len(inner) == 4 and model.chosen_["settings"]["roles"] == model.roles_
     pick = min(inner, key=inner.get)
-    assert pick == evaluation._label(model.chosen_["settings"])
+    assert pick == choose.setting_label(model.chosen_["settings"])
     assert model.blend_window == model.chosen_["settings"]["blend_window"]
     assert len(model.train_a_) == frames[model.roles_]
 
 
-def test_a_bad_choice_of_settings_is_one_line(capsys):
+@pytest.mark.parametrize(
+    "command, bad, named",
+    [
+        (["dualhmm", "crossval"], "states=3", "states=3"),
+        (["dualhmm", "train", "--out", "x.npz"], "n_states=a", "n_states takes int"),
+        (["chain", "crossval"], "prototypes=3", "prototypes=3"),
+        (["chain", "train", "--out", "x.npz"], "lam=0.5,x", "lam takes float"),
+        (["chain", "crossval"], "roles=two", "roles are one, both"),
+    ],
+)
+def test_a_bad_choice_of_settings_is_one_line(capsys, command, bad, named):
+    """Both families parse ``--choose`` alike, before any work: one line naming the part and
+    the parameter at fault, exit 2."""
     from markovmotion.cli import main
 
-    assert _cli(main, ["dualhmm", "crossval", "--choose", "states=3"]) == 2
+    assert _cli(main, [*command, "--choose", bad]) == 2
     err = capsys.readouterr().err
-    assert "--choose" in err and "Traceback" not in err
+    assert "--choose" in err and named in err and "Traceback" not in err
+    assert len([line for line in err.splitlines() if "--choose" in line]) == 1
+
+
+def test_the_chain_grid_ties_parameters_and_types_them_from_its_defaults():
+    from markovmotion.evaluate import chain
+
+    grid = chain.parse_grid("n_state_prototypes+n_behaviour_prototypes=20,40; roles=one,both")
+    assert grid == [
+        {"n_state_prototypes": n, "n_behaviour_prototypes": n, "roles": r}
+        for n in (20, 40)
+        for r in ("one", "both")
+    ]
+    assert chain.parse_grid("gamma=0.99") == [{"gamma": 0.99}]
 
 
 def test_takes_of_two_actions_with_the_same_file_stems_keep_their_own_names(mocap):
     pairs = mocap.pairs(label=["handshake", "wave"], kind="markers")
-    names = evaluation.take_names(pairs)
+    names = take_names(pairs)
     assert len(set(names.values())) == len(pairs)  # none hides another in per_pair
     one = mocap.pairs(label=["handshake"], kind="markers")
-    assert all(n == f"{a.name}+{b.name}" for (a, b), n in evaluation.take_names(one).items())
+    assert all(n == f"{a.name}+{b.name}" for (a, b), n in take_names(one).items())

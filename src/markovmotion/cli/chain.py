@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import kind_option, ranged, roles_option
+from markovmotion.cli.options import choose_option, grid_of, kind_option, ranged, roles_option
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -48,6 +48,11 @@ LAM = typer.Option(10.0, min=0.0, help="Weight lambda of dC (paper: 10).")
 EPOCHS = ranged("iterations", 5, min=1, help="Passes of each competitive learning.")
 SEED = ranged("seed", 0, help="Random seed.")
 HYPOTHESES = ranged("hypotheses", 200, min=2, help="Hypotheses N of the multiple-hypothesis run.")
+CHOOSE = choose_option(
+    "chain",
+    "world plus body-centred error of the multiple hypotheses",
+    "n_state_prototypes+n_behaviour_prototypes=20,40,80;roles=one,both",
+)
 RESPONSE = typer.Option(
     DEFAULT_RESPONSE,
     help="The response of multiple hypotheses reported as multiple_hypotheses: ml (the "
@@ -87,10 +92,13 @@ def _check_response(response: str) -> None:
 
 
 def _training_takes(data: Path | None, source: str, label: str, kind: str | None = None):
-    """Motion-capture (A, B) pairs (skeletons: :func:`~markovmotion.data.kinds.choose_kind`
-    says what it leaves out), or tracked silhouette takes."""
+    """Motion-capture takes ``(name, label, people, A, B)`` (names by
+    :func:`~markovmotion.evaluate.takes.take_names`; skeletons:
+    :func:`~markovmotion.data.kinds.choose_kind` says what it leaves out), or tracked
+    silhouette takes."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
+        from markovmotion.evaluate.takes import take_names
         from markovmotion.models.chain.partner import KINDS
 
         index = MocapIndex.load(data)
@@ -102,7 +110,11 @@ def _training_takes(data: Path | None, source: str, label: str, kind: str | None
             raise DataNotFoundError(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
             )
-        return [index.load_pair(a, b) for a, b in track(train, "reading takes")]
+        names = take_names(train)
+        return [
+            (names[(a, b)], a.label, a.subject, *index.load_pair(a, b))
+            for a, b in track(train, "reading takes")
+        ]
     from markovmotion.video.dataset import silhouette_takes
 
     return silhouette_takes(data, split="train")
@@ -125,19 +137,45 @@ def train(
     epochs: int = EPOCHS,
     seed: int = SEED,
     kind: str = kind_option(),
+    roles: str = roles_option(),
+    choose: str = CHOOSE,
+    hypotheses: int = ranged(
+        "hypotheses", 200, min=2, help="--choose: hypotheses N of the multiple-hypothesis runs."
+    ),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded): 3-D
     skeletons or markers (C3D, picked by name), or tracked silhouettes."""
     _check_source(source)
+    if source != "mocap" and (choose or roles != "one"):
+        raise typer.BadParameter(
+            "--choose and --roles both learn from motion capture's pairs of people: --source mocap"
+        )
+    grid = grid_of("chain", choose)
     takes = _training_takes(data, source, label, kind)
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
+    extras: dict = {}
     with err_console.status("learning prototypes and chain"):
-        model.fit(takes)
-    model.save(out, source=source, labels=[label] if source == "mocap" else [])
+        if source == "mocap":
+            from markovmotion.evaluate.chain import fit_takes
+
+            model, extras = fit_takes(model, takes, roles, grid, n_hypotheses=hypotheses, seed=seed)
+        else:
+            model.fit(takes)
+    model.save(out, source=source, labels=[label] if source == "mocap" else [], **extras)
+    if "chosen" in extras:
+        inner = extras["chosen"]["inner_mm"]
+        err_console.print(
+            f"chose {', '.join(f'{k}={v}' for k, v in extras['chosen']['settings'].items())} "
+            "by leaving one pair of people out: world + body-centred error of the multiple "
+            f"hypotheses {min(inner.values()):.1f} mm (worst of {len(inner)}: "
+            f"{max(inner.values()):.1f} mm)",
+            highlight=False,
+        )
     ch = model.chain_
-    seconds = sum(t[0].duration if isinstance(t, tuple) else t.n_frames / t.fps for t in takes)
+    seconds = sum(t[3].duration if isinstance(t, tuple) else t.n_frames / t.fps for t in takes)
+    both = " in both roles" if extras.get("roles") == "both" else ""
     err_console.print(
-        f"wrote {out}: {len(takes)} takes, {seconds:.0f} s at {model.fps_:g} fps, "
+        f"wrote {out}: {len(takes)} takes{both}, {seconds:.0f} s at {model.fps_:g} fps, "
         f"{ch.state_prototypes_.shape} state prototypes, "
         f"{len(ch.behaviour_prototypes_) + 1}-state chain",
         highlight=False,
@@ -330,16 +368,12 @@ def crossval(
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),
+    choose: str = CHOOSE,
     choose_prototypes: str = typer.Option(
-        None,
-        help="Comma-separated prototype counts (state and behaviour alike): each fold picks "
-        "one by the same cross-validation on its training takes alone (nested).",
+        None, hidden=True, help="Old spelling of --choose 'n_state_prototypes+...=N1,N2'."
     ),
     choose_roles: bool = typer.Option(
-        False,
-        "--choose-roles",
-        help="Each fold picks --roles one or both by the same cross-validation on its "
-        "training takes alone (nested).",
+        False, "--choose-roles", hidden=True, help="Old spelling of --choose 'roles=one,both'."
     ),
     seed: int = SEED,
     kind: str = kind_option(),
@@ -354,24 +388,12 @@ def crossval(
     _check_response(response)
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
-    counts = [None]
+    parts = [choose] if choose else []  # and the old flags, as the grid they stand for
     if choose_prototypes:
-        try:
-            counts = [int(x) for x in choose_prototypes.split(",") if x.strip()]
-        except ValueError:
-            raise typer.BadParameter(
-                f"--choose-prototypes: whole numbers separated by commas, got {choose_prototypes!r}"
-            ) from None
-        if not counts or min(counts) < 2:
-            raise typer.BadParameter("--choose-prototypes: counts of at least 2")
-    candidates = [
-        {
-            **({} if n is None else {"n_state_prototypes": n, "n_behaviour_prototypes": n}),
-            **({} if r is None else {"roles": r}),
-        }
-        for n in counts
-        for r in (("one", "both") if choose_roles else (None,))
-    ]
+        parts.append(f"n_state_prototypes+n_behaviour_prototypes={choose_prototypes}")
+    if choose_roles:
+        parts.append("roles=one,both")
+    grid = grid_of("chain", ";".join(parts))
     report = crossval_index(
         model,
         data,
@@ -384,7 +406,7 @@ def crossval(
         resync=resync,
         roles=roles,
         per_label=not one_model,
-        candidates=candidates if len(candidates) > 1 else None,
+        grid=grid,
     )
     if as_json:
         typer.echo(json.dumps(report, indent=2))

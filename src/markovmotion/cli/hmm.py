@@ -9,7 +9,14 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from markovmotion.cli.options import choice, kind_option, ranged, roles_option
+from markovmotion.cli.options import (
+    choice,
+    choose_option,
+    grid_of,
+    kind_option,
+    ranged,
+    roles_option,
+)
 from markovmotion.data.index import read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -47,13 +54,7 @@ PLACE_MEMORY = ranged(
     "is averaged (0: the placement window's; 300: what train --choose picks for new people "
     "on the collection's handshakes and waves, docs/hmm.md).",
 )
-CHOOSE = typer.Option(
-    None,
-    help="Settings to choose among by leaving one pair of people out on the training takes "
-    "alone (windowed world error): 'param=v1,v2;param=v1,v2', every combination, e.g. "
-    "'roles=one,both;output=frames,regression' (crossval: each fold chooses on its own "
-    "training takes, nested; docs/hmm.md).",
-)
+CHOOSE = choose_option("hmm", "windowed world error", "roles=one,both;output=frames,regression")
 BLEND_WINDOW = ranged(
     "window", 9, help="Frames over which B's pose is blended across cuts (1: none)."
 )
@@ -201,7 +202,7 @@ def train(
     check_model_output(out)
     start = time.perf_counter()
     model = new_model(locals())
-    grid = _grid(choose)
+    grid = grid_of("hmm", choose)
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(
             model, data, _split(labels), _split(test_trials), kind, roles, grid
@@ -532,20 +533,10 @@ def crossval(
     from markovmotion.evaluate.hmm import crossval_index
 
     model = new_model(locals())
-    grid = _grid(choose)
+    grid = grid_of("hmm", choose)
     with joblib.parallel_config(n_jobs=jobs or -1):
         report, written = crossval_index(model, data, _split(labels), plots, grid, kind, roles)
     _report(report, written, json_out)
-
-
-def _grid(choose: str | None) -> list[dict] | None:
-    """The settings of ``--choose`` (:func:`~markovmotion.evaluate.hmm.parse_grid`)."""
-    from markovmotion.evaluate.hmm import parse_grid
-
-    try:
-        return parse_grid(choose) if choose else None
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--choose") from None
 
 
 def _report(report: dict, written: list[Path], json_out: bool) -> None:

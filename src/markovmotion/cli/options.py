@@ -187,10 +187,49 @@ def kind_option() -> Any:
 def roles_option() -> Any:
     """``--roles one|both``, one name across the command line: learn each two-person take as
     listed, or also with the people swapped
-    (:func:`markovmotion.evaluate.hmm.both_roles`)."""
+    (:func:`markovmotion.evaluate.choose.both_roles`)."""
     return typer.Option(
         "one",
         callback=choice(("one", "both")),
         help="Learn each take as listed ('one': A answered by B) or also with the roles swapped "
         "('both': for interactions whose roles are alike, such as handshakes and waves).",
     )
+
+
+def choose_option(family: str, criterion: str, example: str) -> Any:
+    """``--choose GRID``, one option across the two-person families: settings to choose among
+    by leaving one pair of people out on the training takes alone
+    (:mod:`markovmotion.evaluate.choose`), checked when the options are parsed by
+    ``markovmotion.evaluate.<family>.parse_grid`` (a bad grid: one line naming the parameter,
+    exit 2, before any work)."""
+
+    def check(param: typer.CallbackParam, value: str | None) -> str | None:
+        if value:
+            grid_of(family, value)
+        return value
+
+    return typer.Option(
+        None,
+        "--choose",
+        callback=check,
+        help="Settings to choose among by leaving one pair of people out on the training takes "
+        f"alone ({criterion}): 'param=v1,v2;param=v1,v2', every combination; 'a+b=v1,v2' sets "
+        f"two parameters together; 'roles=one,both' too. E.g. {example!r} (crossval: each "
+        "fold chooses on its own training takes, nested; train: the model file records the "
+        "pick and every setting's error as 'chosen').",
+    )
+
+
+def grid_of(family: str, choose: str | None) -> list[dict] | None:
+    """The settings of ``--choose`` for ``family`` (``hmm`` or ``chain``:
+    ``markovmotion.evaluate.<family>.parse_grid``), None without; BadParameter naming
+    ``--choose`` and the part at fault."""
+    if not choose:
+        return None
+    import importlib
+
+    parse = importlib.import_module(f"markovmotion.evaluate.{family}").parse_grid
+    try:
+        return parse(choose)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--choose") from None

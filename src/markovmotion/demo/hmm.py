@@ -12,7 +12,8 @@ from rich.console import Console
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.demo.scene import partner_scene
-from markovmotion.evaluate.hmm import Baselines, both_roles, evaluate_pair, plot_pair
+from markovmotion.evaluate.choose import both_roles
+from markovmotion.evaluate.hmm import Baselines, evaluate_pair, plot_pair
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.progress import track
 from markovmotion.viz import render

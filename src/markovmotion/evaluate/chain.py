@@ -47,7 +47,9 @@ from markovmotion.data.kinds import choose_kind
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.defaults import SOURCES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
-from markovmotion.evaluate.takes import test_takes
+from markovmotion.evaluate import choose
+from markovmotion.evaluate.choose import ROLES
+from markovmotion.evaluate.takes import take_names, test_takes
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
 from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
@@ -368,9 +370,6 @@ def evaluate_partner(
 
 
 # ------------------------------------------------------------------ new people: crossval
-#: Which roles of each two-person take the chain learns from in a cross-validation: as
-#: listed, or ``"both"`` (also with A and B swapped, :func:`markovmotion.evaluate.hmm.both_roles`).
-ROLES = ("one", "both")
 #: The partners a cross-validation reports, in its tables' order: the multiple hypotheses
 #: with the response asked for, the other responses, one hypothesis, and the baselines.
 PARTNERS = (
@@ -405,11 +404,12 @@ def nearest_partners(
     return out[0], out[1]
 
 
-def _fold_groups(takes: Sequence[Take]) -> list[str]:
-    """Per take, the group a fold leaves out: its pair of people when the takes come from two
-    or more, else the take itself (one pair of people: leave one take out)."""
-    people = [p for _, _, p, _, _ in takes]
-    return people if len(set(people)) > 1 else [name for name, *_ in takes]
+def _fit_on(model: VirtualPartner, takes: Sequence[Take], roles: str) -> VirtualPartner:
+    """``model`` (unfitted) trained on ``takes`` in ``roles``
+    (:func:`markovmotion.evaluate.choose.learnt`): every fit of a cross-validation."""
+    learn, _ = choose.learnt([(t[0], t[1], t[3], t[4]) for t in takes], [t[2] for t in takes],
+                             roles)  # fmt: skip
+    return model.fit([(a, b) for _, _, a, b in learn])
 
 
 def _scores(result: Mapping, frames: int) -> dict:
@@ -457,7 +457,7 @@ def cross_validate_people(
     resync: float = DEFAULT_RESYNC,
     roles: str = "one",
     per_label: bool = True,
-    candidates: Sequence[Mapping] | None = None,
+    grid: Sequence[Mapping] | None = None,
 ) -> dict:
     """Leave one pair of people out at a time: each take is answered by a copy of ``model``
     (same settings) trained on the takes of the other pairs of people alone.
@@ -472,18 +472,16 @@ def cross_validate_people(
     (:func:`nearest_partners`), in the world (``world_mm``) and body-centred
     (``body_centred_mm``: each person in its own frame, :func:`pose_error_mm`).
 
-    ``candidates``: settings to choose from in each fold (dicts of the model's parameters,
-    and optionally ``roles``), by the same cross-validation nested in the fold's training
-    takes alone (:func:`choose_settings`); each fold reports what it chose.
+    ``grid``: settings to choose from in each fold (dicts of the model's parameters, and
+    optionally ``roles``: :func:`parse_grid`), by leaving pairs of people out on the fold's
+    training takes alone (:func:`choose_settings`: nested); each fold reports what it chose.
 
     Returns the JSON of ``chain crossval``: ``model`` (settings), ``overall``,
     ``per_label`` (each with its ``per_people``), ``per_people`` (over every label),
     ``per_pair`` (per take), ``folds`` (per fold: the
     files it trained on, as the fitted copy records them, the takes it answered, and
-    with ``candidates`` the settings chosen), ``left_out`` and ``roles``.
+    with ``grid`` the settings chosen), ``left_out`` and ``roles``.
     """
-    from markovmotion.evaluate.hmm import both_roles
-
     if roles not in ROLES:
         raise ValueError(f"roles must be one of {', '.join(ROLES)}, got {roles!r}")
     if not takes:
@@ -491,7 +489,7 @@ def cross_validate_people(
     names = [t[0] for t in takes]
     if len(set(names)) < len(names):
         raise ValueError("the takes' names must be unique (they key the report)")
-    groups = _fold_groups(takes)
+    groups = choose.fold_groups([t[2] for t in takes], names)
     scopes = sorted({t[1] for t in takes}) if per_label else [None]
     rows: dict[str, dict] = {}
     folds = []
@@ -501,25 +499,22 @@ def cross_validate_people(
             list(dict.fromkeys(groups[i] for i in mine)), f"{scope or 'all'}: folds"
         ):
             rest = [takes[i] for i in mine if groups[i] != group]
-            train = [(t[0], t[1], t[3], t[4]) for t in rest]
             test = [i for i in mine if groups[i] == group]
-            if not train:
+            if not rest:
                 raise DataNotFoundError(
                     f"{scope or 'the takes'}: only one pair of people ({group}), nothing to train on"
                 )
             fold, fold_roles, chosen = clone(model), roles, {}
-            if candidates:
-                options = dict(
-                    n_hypotheses=n_hypotheses, response=response, seed=seed, sigma=sigma,
-                    resync=resync, per_label=per_label,
-                )  # fmt: skip
-                chosen = choose_settings(rest, fold, candidates, roles, **options)
+            if grid:
+                chosen = choose_settings(
+                    rest, fold, grid, roles, n_hypotheses, response, seed, sigma
+                )
                 fold_roles = chosen["settings"].get("roles", roles)
-                fold.set_params(**{k: v for k, v in chosen["settings"].items() if k != "roles"})
+                fold.set_params(**choose.model_params(chosen["settings"]))
+            fold = _fit_on(fold, rest, fold_roles)
+            seen = [fold.two_people(t[3], t[4]) for t in rest]
             if fold_roles == "both":
-                train = both_roles(train)
-            fold = fold.fit([(a, b) for _, _, a, b in train])
-            seen = [fold.two_people(a, b) for _, _, a, b in train]
+                seen += [fold.two_people(t[4], t[3]) for t in rest]
             for i in test:
                 name, label, people, a, b = takes[i]
                 take = fold.two_people(a, b)
@@ -575,39 +570,72 @@ def cross_validate_people(
     }
 
 
-def _setting_name(settings: Mapping) -> str:
-    return ", ".join(f"{k}={v}" for k, v in settings.items()) or "as given"
+def parse_grid(text: str) -> list[dict]:
+    """Settings of a behaviour chain to choose among, ``"param=v1,v2;param=v1,v2"``
+    (:func:`markovmotion.evaluate.choose.parse_grid` over VirtualPartner's parameters and
+    ``roles``; ``n_state_prototypes+n_behaviour_prototypes=20,40`` ties the two counts)."""
+    return choose.parse_grid(text, choose.grid_defaults(VirtualPartner()))
 
 
 def choose_settings(
     takes: Sequence[Take],
     model: VirtualPartner,
-    candidates: Sequence[Mapping],
+    grid: Sequence[Mapping],
     roles: str = "one",
-    **options,
+    n_hypotheses: int = 200,
+    response: str = DEFAULT_RESPONSE,
+    seed: int = 0,
+    sigma: float = DEFAULT_SIGMA,
 ) -> dict:
-    """The candidate settings whose multiple-hypothesis partner has the lowest error (world
-    plus body-centred, mm) in :func:`cross_validate_people` over ``takes`` alone (a fold's
-    training takes: leaving out one of their pairs of people at a time, or one take when
-    they come from one pair). Each candidate is a dict of ``model``'s parameters, and
-    optionally ``roles`` (else ``roles``). Returns ``settings`` (the chosen candidate) and
-    ``inner_mm`` (every candidate's error)."""
-    errors = {}
-    for cand in candidates:
-        params = {k: v for k, v in cand.items() if k != "roles"}
-        inner = cross_validate_people(
-            takes,
-            clone(model).set_params(**params),
-            roles=cand.get("roles", roles),
-            **options,
-        )["overall"]
-        errors[_setting_name(cand)] = round(
-            inner["world_mm"]["multiple_hypotheses"]
-            + inner["body_centred_mm"]["multiple_hypotheses"],
-            1,
-        )
-    best = min(range(len(candidates)), key=lambda i: errors[_setting_name(candidates[i])])
-    return {"settings": dict(candidates[best]), "inner_mm": errors}
+    """The setting of ``grid`` (dicts of ``model``'s parameters, and optionally ``roles``,
+    else ``roles``) whose multiple-hypothesis partner (``n_hypotheses``, ``response``,
+    ``sigma``, eq. 20) has the lowest error, world plus body-centred (mm, frame-weighted, each
+    person of a take masked in turn as in :func:`evaluate_partner`), by leaving one pair of
+    people out at a time on ``takes`` alone (a fold's training takes; one take at a time when
+    they come from one pair): :func:`markovmotion.evaluate.choose.choose_settings`.
+    Returns ``settings`` (the pick) and ``inner_mm`` (every setting's error)."""
+    groups = choose.fold_groups([t[2] for t in takes], [t[0] for t in takes])
+
+    def fit(settings: Mapping, train: list[int]) -> VirtualPartner:
+        copy = clone(model).set_params(**choose.model_params(settings))
+        return _fit_on(copy, [takes[i] for i in train], settings.get("roles", roles))
+
+    def score(fold: VirtualPartner, settings: Mapping, test: list[int]) -> tuple[float, int]:
+        error, frames = 0.0, 0
+        with threadpool_limits(1):
+            for i in test:
+                take = fold.two_people(takes[i][3], takes[i][4])
+                for person in (0, 1):
+                    real, truth = take.person(person), take.person(1 - person)
+                    options = dict(n_hypotheses=n_hypotheses, response=response, sigma=sigma)
+                    pred = fold.respond_shapes(real, person, rng=seed, **options).partner
+                    body, world = _errors(fold, "mocap", pred, truth)
+                    error += (body + (world or 0.0)) * take.n_frames
+                    frames += take.n_frames
+        return error, frames
+
+    return choose.choose_settings(grid, groups, fit, score)
+
+
+def fit_takes(
+    model: VirtualPartner,
+    takes: Sequence[Take],
+    roles: str = "one",
+    grid: Sequence[Mapping] | None = None,
+    **scoring,
+) -> tuple[VirtualPartner, dict]:
+    """``chain train`` on two-person takes ``(name, label, people, A, B)``: ``model`` fitted on
+    every take in ``roles``; with ``grid``, the setting (and roles) first chosen among it by
+    leaving one pair of people out on these takes (:func:`choose_settings`, with ``scoring``:
+    ``n_hypotheses``, ``response``, ``seed``, ``sigma``). Returns the model and the extras to
+    save with it: ``roles`` and, with ``grid``, ``chosen`` (the pick and every setting's
+    error)."""
+    chosen: dict = {}
+    if grid:
+        chosen = choose_settings(takes, model, grid, roles, **scoring)
+        roles = chosen["settings"].get("roles", roles)
+        model.set_params(**choose.model_params(chosen["settings"]))
+    return _fit_on(model, takes, roles), {"roles": roles} | ({"chosen": chosen} if chosen else {})
 
 
 def crossval_index(
@@ -626,10 +654,8 @@ def crossval_index(
 
     index = MocapIndex.load(data)
     pairs, loaded = load_pairs(index, select_pairs(index, labels, None, held_out=False), kind)
-    takes = [
-        (f"{a.label} {a.name}+{b.name}", a.label, a.subject, *ab)
-        for (a, b), ab in zip(pairs, loaded, strict=True)
-    ]
+    names = take_names(pairs)
+    takes = [(names[p], p[0].label, p[0].subject, *ab) for p, ab in zip(pairs, loaded, strict=True)]
     report = cross_validate_people(takes, model, **options)
     report["test_files"] = [e.file for pair in pairs for e in pair]
     return report

@@ -33,7 +33,6 @@ the model's own held-out takes) and :func:`crossval_index`.
 
 from __future__ import annotations
 
-import itertools
 import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -51,7 +50,9 @@ from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.data.kinds import choose_kind, largest_group
 from markovmotion.data.splits import select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
-from markovmotion.evaluate.takes import TestTakes, test_takes
+from markovmotion.evaluate import choose
+from markovmotion.evaluate.choose import ROLES
+from markovmotion.evaluate.takes import TestTakes, take_names, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.features.body_points import BODY_POINTS, find_points
 from markovmotion.features.markers import turn_about_up
@@ -65,9 +66,6 @@ METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr", "kno
 #: Not a partner but a reference: B's real motion on the training people's mean pose
 #: (:func:`known_motion`).
 REFERENCES = ("known_motion",)
-#: Which roles of each two-person take a partner learns from: as listed (A answered by
-#: B), or ``"both"`` (also B answered by A: :func:`both_roles`).
-ROLES = ("one", "both")
 #: A step of the median body point larger than this between frames is a jump (mm).
 JUMP_MM = 100.0
 
@@ -423,45 +421,9 @@ GENERATION_ONLY = frozenset({"placement_window", "blend_window"})
 
 
 def parse_grid(text: str) -> list[dict]:
-    """Settings to choose among from ``"param=v1,v2;param=v1,v2"`` (DualHMM parameters,
-    ``-`` or ``_``, and ``roles``, :data:`ROLES`; every combination), each value as the
-    parameter's default's type; ValueError naming what is wrong."""
-    defaults = DualHMM().get_params() | {"roles": ROLES[0]}  # roles: which the folds learn
-    axes = []
-    for part in (p.strip() for p in text.split(";") if p.strip()):
-        name, sep, values = part.partition("=")
-        name = name.strip().replace("-", "_")
-        if not sep or name not in defaults:
-            raise ValueError(
-                f"{part!r}: expected PARAM=V1,V2 with PARAM one of {', '.join(sorted(defaults))}"
-            )
-        kind = type(defaults[name]) if defaults[name] is not None else int
-        try:
-            axes.append([(name, kind(v.strip())) for v in values.split(",") if v.strip()])
-        except ValueError:
-            raise ValueError(f"{part!r}: {name} takes {kind.__name__} values") from None
-        if not axes[-1]:
-            raise ValueError(f"{part!r}: no values")
-        if name == "roles" and not {v for _, v in axes[-1]} <= set(ROLES):
-            raise ValueError(f"{part!r}: roles are {', '.join(ROLES)}")
-    if not axes:
-        raise ValueError("no settings to choose among")
-    return [dict(combo) for combo in itertools.product(*axes)]
-
-
-def _label(settings: dict) -> str:
-    return ",".join(f"{k}={v}" for k, v in settings.items())
-
-
-def _roles(settings: dict, roles: str) -> str:
-    """The roles a fold learns: the setting's own, else ``roles``."""
-    return settings.get("roles", roles)
-
-
-def _groups(people: Sequence[str] | None, n: int) -> list[str]:
-    """The folds of leave-one-out: pairs of people when there are two or more, else takes."""
-    groups = list(people) if people is not None else [""] * n
-    return groups if len(set(groups)) >= 2 else [str(i) for i in range(n)]
+    """Settings of a DualHMM to choose among, ``"param=v1,v2;param=v1,v2"``
+    (:func:`markovmotion.evaluate.choose.parse_grid` over DualHMM's parameters and ``roles``)."""
+    return choose.parse_grid(text, choose.grid_defaults(DualHMM()))
 
 
 def choose_settings(
@@ -472,54 +434,35 @@ def choose_settings(
     roles: str = "one",
     method: str = "windowed",
 ) -> dict:
-    """The settings of ``grid`` (dicts of DualHMM parameters) under which ``model`` answers
-    best, by leave-one-out over ``takes`` alone (one pair of people at a time when they come
-    from two or more, else one take): nested cross-validation when ``takes`` are an outer
-    fold's training takes. The score is B's mean world error by ``method`` over the inner
-    held-out frames; each inner fold learns ``roles`` (or the setting's own ``roles``) as
-    the outer one would. With ``roles="both"`` (the interaction's roles are alike) the
-    inner held-out takes are answered in both roles too: with a few pairs of people an
-    inner fold has little to score a setting on, and the same people's other role doubles
-    it. Returns
+    """The settings of ``grid`` (dicts of DualHMM parameters, and ``roles``) under which
+    ``model`` answers best, by leave-one-out over ``takes`` alone (one pair of people at a
+    time when they come from two or more, else one take:
+    :func:`markovmotion.evaluate.choose.choose_settings`): nested cross-validation when
+    ``takes`` are an outer fold's training takes. The score is B's mean world error by
+    ``method`` over the inner held-out frames; each inner fold learns ``roles`` (or the
+    setting's own ``roles``) as the outer one would. With ``roles="both"`` (the
+    interaction's roles are alike) the inner held-out takes are answered in both roles too:
+    with a few pairs of people an inner fold has little to score a setting on, and the same
+    people's other role doubles it. Returns
     ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
-    groups = _groups(people, len(takes))
-    errors, frames = np.zeros(len(grid)), np.zeros(len(grid))  # frames: per setting's rate
-    for group in dict.fromkeys(groups):
-        rest = [t for t, g in zip(takes, groups, strict=True) if g != group]
-        who = [g for g in groups if g != group]
-        fits: dict[str, DualHMM] = {}
-        for k, settings in enumerate(grid):
-            params = {p: v for p, v in settings.items() if p != "roles"}
-            trained = {p: v for p, v in settings.items() if p not in GENERATION_ONLY}
-            key = _label(trained)
-            if key not in fits:
-                learn = (
-                    (both_roles(rest), who + who)
-                    if _roles(settings, roles) == "both"
-                    else (rest, who)
-                )
-                fits[key] = _fit_on(clone(model).set_params(**params), *learn)
-            fold = fits[key].set_params(**params)
-            held = [t for t, g in zip(takes, groups, strict=True) if g == group]
-            for _, _, a, b in both_roles(held) if roles == "both" else held:
-                generated = fold.respond(a, method)
-                truth = fold.body_positions(fold._rate(b))
-                errors[k] += trial_errors(fold.body_positions(generated), truth).sum()
-                frames[k] += len(truth)
-    mean = errors / np.maximum(frames, 1)
-    return {
-        "settings": dict(grid[int(np.argmin(mean))]),
-        "inner_mm": {_label(s): round(float(e), 2) for s, e in zip(grid, mean, strict=True)},
-    }
+    groups = choose.fold_groups(people, [t[0] for t in takes])
 
+    def fit(settings: dict, train: list[int]) -> DualHMM:
+        learn = choose.learnt([takes[i] for i in train], [groups[i] for i in train],
+                              settings.get("roles", roles))  # fmt: skip
+        return _fit_on(clone(model).set_params(**choose.model_params(settings)), *learn)
 
-def both_roles(
-    takes: Sequence[tuple[str, str, Motion, Motion]],
-) -> list[tuple[str, str, Motion, Motion]]:
-    """Each take ``(name, label, A, B)`` and the same take with the roles swapped (B as
-    person A, A as the partner): twice the people to learn a partner from, for
-    interactions whose roles are alike (a handshake, a wave; not a pull)."""
-    return [*takes, *((f"{n} (B as A)", lab, b, a) for n, lab, a, b in takes)]
+    def score(fold: DualHMM, settings: dict, test: list[int]) -> tuple[float, int]:
+        fold.set_params(**choose.model_params(settings))
+        error, frames = 0.0, 0
+        held = [takes[i] for i in test]
+        for _, _, a, b in choose.both_roles(held) if roles == "both" else held:
+            truth = fold.body_positions(fold._rate(b))
+            error += float(trial_errors(fold.body_positions(fold.respond(a, method)), truth).sum())
+            frames += len(truth)
+        return error, frames
+
+    return choose.choose_settings(grid, groups, fit, score, GENERATION_ONLY)
 
 
 def cross_validate(
@@ -531,20 +474,21 @@ def cross_validate(
     roles: str = "one",
     method: str = "windowed",
 ) -> tuple[list[PairResult], list[Path]]:
-    """Leave-one-out over the takes ``(name, label, A, B)``: each is evaluated by a copy of
-    ``model`` (same hyper-parameters) trained on the others.
+    """Leave-one-out over the takes ``(name, label, A, B)`` (names unique): each is evaluated
+    by a copy of ``model`` (same hyper-parameters) trained on the others.
 
     ``people`` (per take, INDEX.csv's ``subject``): when the takes come from two or more
     pairs of people, each pair of people is left out at once (its takes are evaluated by
     a copy trained on the other people's takes alone: a partner for people it has never
-    seen); otherwise one take at a time. ``roles="both"``: each fold also learns from its
-    training takes with the roles swapped (:func:`both_roles`). With ``grid`` (settings,
+    seen); otherwise one take at a time (:func:`markovmotion.evaluate.choose.fold_groups`).
+    ``roles="both"``: each fold also learns from its training takes with the roles swapped
+    (:func:`~markovmotion.evaluate.choose.both_roles`). With ``grid`` (settings,
     :func:`parse_grid`), each copy's settings are first chosen among them on its training
     takes alone (:func:`choose_settings` by ``method``'s error: nested cross-validation),
     kept in each result's ``chosen``."""
     if roles not in ROLES:
         raise ValueError(f"roles must be one of {', '.join(ROLES)}, got {roles!r}")
-    groups = _groups(people, len(takes))
+    groups = choose.fold_groups(people, [t[0] for t in takes])
     results: list[PairResult | None] = [None] * len(takes)
     plots = []
     for group in track(list(dict.fromkeys(groups)), "leave-one-out"):
@@ -553,11 +497,9 @@ def cross_validate(
         fold, chosen, learn = clone(model), {}, roles
         if grid:
             chosen = choose_settings(rest, fold, grid, who, roles, method)
-            learn = _roles(chosen["settings"], roles)
-            fold.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
-        if learn == "both":
-            rest, who = both_roles(rest), who + who
-        fold = _fit_on(fold, rest, who)
+            learn = chosen["settings"].get("roles", roles)
+            fold.set_params(**choose.model_params(chosen["settings"]))
+        fold = _fit_on(fold, *choose.learnt(rest, who, learn))
         for i in (i for i, g in enumerate(groups) if g == group):
             name, label, a, b = takes[i]
             res = evaluate_pair(fold, a, b, name, label)
@@ -570,17 +512,6 @@ def cross_validate(
 
 # ------------------------------------------------------------------ the command line's set-ups
 Pair = tuple[Entry, Entry]
-
-
-def take_names(pairs: Iterable[Pair]) -> dict[Pair, str]:
-    """Each two-person take's name in reports, ``A+B`` by file stem; the label first when two
-    takes share stems (the Bütepage handshakes and waves do), so no take hides another."""
-    pairs = list(pairs)
-    plain = [f"{a.name}+{b.name}" for a, b in pairs]
-    return {
-        (a, b): f"{a.label} {n}" if plain.count(n) > 1 else n
-        for (a, b), n in zip(pairs, plain, strict=True)
-    }
 
 
 def index_record(index: MocapIndex) -> dict[str, str]:
@@ -615,23 +546,24 @@ def fit_on_index(
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
     ``test_trials``, of one kind and set (:func:`load_pairs`), in both roles with
-    ``roles="both"`` (:func:`both_roles`). With ``grid``, the settings are first chosen
-    among it by leave-one-pair-of-people-out on these takes (:func:`choose_settings`).
+    ``roles="both"`` (:func:`~markovmotion.evaluate.choose.both_roles`). With ``grid``, the
+    settings are first chosen among it by leave-one-pair-of-people-out on these takes
+    (:func:`choose_settings`).
     Returns the model, the extras to save with it (``data_index``: the index,
     ``held_out_files``: the held-out takes' files, which ``evaluate`` without ``--test``
     evaluates on; ``roles``; ``chosen``, with ``grid``) and the training pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
     pairs, motions = load_pairs(index, pairs, kind)
-    takes = [(a.name, a.label, *ab) for (a, _), ab in zip(pairs, motions, strict=True)]
+    names = take_names(pairs)
+    takes = [(names[p], p[0].label, *ab) for p, ab in zip(pairs, motions, strict=True)]
     people = [a.subject for a, _ in pairs]
     chosen: dict = {}
     if grid:
         chosen = choose_settings(takes, model, grid, people, roles)
-        roles = _roles(chosen["settings"], roles)
-        model.set_params(**{p: v for p, v in chosen["settings"].items() if p != "roles"})
-    if roles == "both":
-        takes, people = both_roles(takes), people + people
+        roles = chosen["settings"].get("roles", roles)
+        model.set_params(**choose.model_params(chosen["settings"]))
+    takes, people = choose.learnt(takes, people, roles)
     model.fit(
         [(a, b) for _, _, a, b in takes], labels=[lab for _, lab, _, _ in takes], groups=people
     )

@@ -11,7 +11,7 @@ line). Every family's JSON carries :meth:`TestTakes.report`'s two lists.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -82,3 +82,19 @@ def test_takes(
             f"every {what} of {where} that fits the model is one it trained on: {names}"
         )
     return TestTakes(keep, left)
+
+
+def take_names(pairs: Iterable[tuple[Entry, Entry]]) -> dict[tuple[Entry, Entry], str]:
+    """Each two-person take's name in every family's reports (per-take rows, plots), ``A+B``
+    by file stem; the label first when two takes share stems (the Bütepage handshakes and
+    waves do), and the files (paths in the index) when label and stems together still do,
+    so no take hides another."""
+    pairs = list(pairs)
+    plain = [f"{a.name}+{b.name}" for a, b in pairs]
+    labelled = [f"{a.label} {n}" for (a, _), n in zip(pairs, plain, strict=True)]
+    files = [f"{a.file}+{b.file}" for a, b in pairs]
+    names = [
+        n if plain.count(n) == 1 else lab if labelled.count(lab) == 1 else f
+        for n, lab, f in zip(plain, labelled, files, strict=True)
+    ]
+    return dict(zip(pairs, names, strict=True))
