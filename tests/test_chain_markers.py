@@ -366,3 +366,25 @@ def test_the_live_page_streams_a_c3d_take_to_a_partner_of_markers(
         np.concatenate([e.positions for e in expected if e is not None]),
         atol=0.051,
     )
+
+
+def test_chain_train_takes_several_labels_as_dualhmm_does(tmp_path):
+    """``chain train --labels handshake,wave``: one model of both actions' takes, both
+    labels recorded (``--label`` is the same option)."""
+    out = tmp_path / "both.npz"
+    argv = ["chain", "train", "--labels", "handshake,wave", "--kind", "markers", "--epochs", "1"]
+    main([*argv, "--prototypes", "4", "--behaviours", "4", "--out", str(out)])
+    model = VirtualPartner.load(out)
+    assert model.labels_ == ["handshake", "wave"]
+    from markovmotion.data import MocapIndex
+    from markovmotion.data.splits import held_out_pairs
+    from markovmotion.models.base import file_sha256
+
+    index = MocapIndex.load()
+    wanted = {
+        sha
+        for lab in ("handshake", "wave")
+        for a, b in held_out_pairs(index.pairs(label=lab, kind="markers"))[0]
+        for sha in (file_sha256(a.path), file_sha256(b.path))
+    }
+    assert {f["sha256"] for f in model.train_files_} == wanted

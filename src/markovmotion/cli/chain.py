@@ -91,7 +91,9 @@ def _check_response(response: str) -> None:
         raise typer.BadParameter(f"response must be one of {', '.join(RESPONSES)}")
 
 
-def _training_takes(data: Path | None, source: str, label: str, kind: str | None = None):
+def _training_takes(
+    data: Path | None, source: str, label: str | list[str], kind: str | None = None
+):
     """Motion-capture takes ``(name, label, people, A, B)`` (names by
     :func:`~markovmotion.evaluate.takes.take_names`; skeletons:
     :func:`~markovmotion.data.kinds.choose_kind` says what it leaves out), or tracked
@@ -129,7 +131,13 @@ def train(
         "silhouette: folder written by 'silhouette render'.",
     ),
     source: str = typer.Option("mocap", help="mocap (3-D joints) or silhouette (tracked video)."),
-    label: str = typer.Option("salsa", help="Label of the two-person takes (mocap)."),
+    label: str = typer.Option(
+        "salsa",
+        "--label",
+        "--labels",
+        help="Label of the two-person takes (mocap; several comma-separated: one model of all, "
+        "as dualhmm train --labels).",
+    ),
     prototypes: int = PROTOTYPES,
     behaviours: int = BEHAVIOURS,
     gamma: float = GAMMA,
@@ -151,7 +159,8 @@ def train(
             "--choose and --roles both learn from motion capture's pairs of people: --source mocap"
         )
     grid = grid_of("chain", choose)
-    takes = _training_takes(data, source, label, kind)
+    labels = [x.strip() for x in label.split(",") if x.strip()] or [label]
+    takes = _training_takes(data, source, labels if len(labels) > 1 else labels[0], kind)
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
     extras: dict = {}
     with err_console.status("learning prototypes and chain"):
@@ -161,7 +170,7 @@ def train(
             model, extras = fit_takes(model, takes, roles, grid, n_hypotheses=hypotheses, seed=seed)
         else:
             model.fit(takes)
-    model.save(out, source=source, labels=[label] if source == "mocap" else [], **extras)
+    model.save(out, source=source, labels=labels if source == "mocap" else [], **extras)
     if "chosen" in extras:
         inner = extras["chosen"]["inner_mm"]
         err_console.print(
