@@ -281,6 +281,44 @@ def test_respond_draws_the_partner_into_the_video(rendered, dual_model, tmp_path
     assert ("skipped" in err) == live
 
 
+def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path, monkeypatch):
+    """``dualhmm respond --video DIR --guide mediapipe``: A is tracked with MediaPipe's guide
+    (what ``track --guide`` does; the tracker itself is tested in test_triangulation)."""
+    import markovmotion.video.composite as composite
+
+    seen = []
+
+    class Tracked(Exception):
+        pass
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("guide"))
+        raise Tracked
+
+    monkeypatch.setattr(composite, "track_take", spy)
+    args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+            "--out", str(tmp_path / "c.mp4")]  # fmt: skip
+    for extra in ([], ["--guide", "mediapipe"]):
+        with pytest.raises(Tracked):
+            main(args + extra)
+    assert seen == [False, True]
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--guide", "mediapipe", "--realtime"], ["--guide", "mediapipe", "--method", "monocular"]],
+)
+def test_respond_guide_only_with_the_whole_video_filter(
+    rendered, dual_model, tmp_path, capsys, extra
+):
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+              "--out", str(tmp_path / "c.mp4"), *extra])  # fmt: skip
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "--guide" in err and len(err.splitlines()) == 1
+
+
 def test_respond_needs_one_source_of_a(dual_model, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["dualhmm", "respond", "--model", str(dual_model), "--out", str(tmp_path / "c.mp4")])

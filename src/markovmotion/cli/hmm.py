@@ -13,6 +13,7 @@ from markovmotion.cli.options import (
     choice,
     choose_option,
     grid_of,
+    guide_option,
     kind_option,
     ranged,
     roles_option,
@@ -301,6 +302,7 @@ def respond(
         help="With --video, how A is tracked: apf (annealed particle filter, all views) or "
         "monocular (MediaPipe Pose in the --view camera alone, needs the [camera] extra).",
     ),
+    guide: str = guide_option(),
 ) -> None:
     """Generate person B's response to person A's motion (or markers, for a marker model:
     a C3D file, or a BVH with the model's virtual markers placed on it; B comes out as C3D)."""
@@ -314,12 +316,17 @@ def respond(
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
-    if video is None and method != "apf":
-        raise typer.BadParameter("--method is how A is tracked in --video")
+    if video is None and (method != "apf" or guide != "none"):
+        raise typer.BadParameter("--method and --guide are how A is tracked in --video")
+    if guide != "none" and (method != "apf" or realtime):
+        raise typer.BadParameter(
+            "guides the particle filter over the whole video: --method apf, no --realtime",
+            param_hint="--guide",
+        )
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime, method,
+            realtime, method, guide == "mediapipe",
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -367,7 +374,7 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method,
+    method, guide=False,
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
@@ -419,7 +426,7 @@ def _respond_video(
         return
     summary = respond_in_video(
         model, video, out, training_body_model(data), cameras, view, particles, layers,
-        max_frames, "standard" if standard else "windowed",
+        max_frames, "standard" if standard else "windowed", guide=guide,
     )  # fmt: skip
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "

@@ -196,6 +196,19 @@ def roles_option() -> Any:
     )
 
 
+def guide_option() -> Any:
+    """``--guide``: what guides the annealed particle filter besides the images (``track``
+    and ``dualhmm respond --video``)."""
+    return typer.Option(
+        "none",
+        callback=choice(("none", "mediapipe")),
+        help="mediapipe: MediaPipe Pose in every camera (needs the camera extra), triangulated to "
+        "reject the views that disagree, pulls the particles' joints towards its landmarks "
+        "and restarts some from its pose (for real people: it misreads rendered ones); "
+        "none: the images alone.",
+    )
+
+
 def choose_option(family: str, criterion: str, example: str) -> Any:
     """``--choose GRID``, one option across the two-person families: settings to choose among
     by leaving one pair of people out on the training takes alone

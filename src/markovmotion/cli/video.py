@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from markovmotion.cli.options import choice, ranged
+from markovmotion.cli.options import choice, guide_option, ranged
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -98,14 +98,7 @@ def track(
         "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
         "lowered.",
     ),
-    guide: str = typer.Option(
-        "none",
-        callback=choice(("none", "mediapipe")),
-        help="mediapipe: MediaPipe Pose in every camera (needs [camera]), triangulated to "
-        "reject the views that disagree, pulls the particles' joints towards its landmarks "
-        "and restarts some from its pose (for real people: it misreads rendered ones); "
-        "none: the images alone.",
-    ),
+    guide: str = guide_option(),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""

@@ -73,11 +73,15 @@ def respond_in_video(
     max_frames: int | None = None,
     method: str = "windowed",
     live: bool = False,
+    guide: bool = False,
 ) -> dict:
     """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
     ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
     to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
-    frame at the video's rate, through the online partner (:func:`_respond_live`)."""
+    frame at the video's rate, through the online partner (:func:`_respond_live`).
+    ``guide``: MediaPipe guides the tracking of A (:func:`track_take`; not live)."""
+    if live and guide:
+        raise ValueError("the MediaPipe guide runs over the whole video: not live")
     if live:
         return _respond_live(model, video, out, body, cameras, view, particles, layers, max_frames)
     dual = _load_partner_model(model)
@@ -89,7 +93,9 @@ def respond_in_video(
     if not 0 <= view < len(cams):
         raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
     start = time.perf_counter()
-    a, result, summary = track_take(video, body, cameras, None, particles, layers, None, max_frames)
+    a, result, summary = track_take(
+        video, body, cameras, None, particles, layers, None, max_frames, guide=guide
+    )
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
     video_path = Path(video) if single else camera_videos(where, cams)[view]
