@@ -77,6 +77,19 @@ class LivePartner(Protocol):
         ...
 
 
+def _one_frame_steps(partner: LivePartner, motion: Motion) -> Callable[[int], np.ndarray | None]:
+    """Frame ``i`` of ``motion`` to ``partner.step`` as a one-frame Motion."""
+    return lambda i: partner.step(motion.trim(i, i + 1))
+
+
+def stepper(partner: LivePartner, motion: Motion) -> Callable[[int], np.ndarray | None]:
+    """How a session steps ``partner`` through frame ``i`` of A's ``motion``: the partner's
+    own ``stepper(motion)`` where it has one (:meth:`ModelPartner.stepper`: A seen once,
+    not frame by frame), else ``step`` of each one-frame Motion."""
+    own = getattr(partner, "stepper", None)
+    return own(motion) if own is not None else _one_frame_steps(partner, motion)
+
+
 PartnerFactory = Callable[[Motion], LivePartner]
 """Builds a fresh partner for a session from person A's motion (raising a
 :class:`MarkovMotionError` if it cannot answer that motion)."""
@@ -100,6 +113,18 @@ class ModelPartner:
 
     def step(self, frame_a: Motion) -> np.ndarray | None:
         return self._positions(self._partner.step(frame_a))
+
+    def stepper(self, motion_a: Motion) -> Callable[[int], np.ndarray | None]:
+        """Frame ``i`` of ``motion_a`` (at the partner's rate) in, B's pose out: through the
+        partner's ``see`` (A's whole motion seen at once; the dual HMM's
+        :meth:`~markovmotion.models.hmm.partner.Partner.see`) where it offers one, else
+        :meth:`step` of the one-frame motion."""
+        see = getattr(self._partner, "see", None)
+        seen = see(motion_a) if see is not None else None
+        if seen is None:
+            return _one_frame_steps(self, motion_a)
+        step_seen = self._partner.step_seen
+        return lambda i: self._positions(step_seen(seen, i))
 
     def skip(self) -> np.ndarray | None:
         """A frame of A missed (the camera page's frames come when they can)."""
@@ -191,18 +216,20 @@ def _motion_of(msg: dict, library: MotionLibrary) -> Motion:
 
 
 def _stream(msg: dict, library: MotionLibrary, factory: PartnerFactory):
-    """Person A (at the partner's rate), A's frames as JSON text, and the session's partner.
+    """Person A (at the partner's rate), A's frames as JSON text, the session's partner and
+    how to step it frame by frame (:func:`stepper`).
 
     A library file is read, resampled and encoded once for every session that streams
     it (:meth:`MotionLibrary.stream`); an upload for its own session."""
     if isinstance(msg.get("path"), str):
         partner = factory(library.motion(msg["path"]))
         motion, poses = library.stream(msg["path"], partner.fps)
-        return motion, poses, partner
-    motion = _motion_of(msg, library)
-    partner = factory(motion)
-    motion = motion.resample(partner.fps) if partner.fps else motion
-    return motion, encoded_frames(motion), partner
+    else:
+        motion = _motion_of(msg, library)
+        partner = factory(motion)
+        motion = motion.resample(partner.fps) if partner.fps else motion
+        poses = encoded_frames(motion)
+    return motion, poses, partner, stepper(partner, motion)
 
 
 async def _send(ws: WebSocket, msg: dict) -> None:
@@ -257,7 +284,7 @@ async def live_session(
         msg = _parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT))
         if factory is None:
             raise _Garbage("this server has no partner model: start it with --partner MODEL")
-        motion, poses_a, partner = await asyncio.to_thread(_stream, msg, library, factory)
+        motion, poses_a, partner, step = await asyncio.to_thread(_stream, msg, library, factory)
     except (_Garbage, MarkovMotionError, TimeoutError, RecursionError, MemoryError) as exc:
         if isinstance(exc, _Garbage | MarkovMotionError):
             message = library.public(str(exc))
@@ -312,7 +339,7 @@ async def live_session(
             # in the event loop's own thread: a step takes well under a millisecond, and
             # a hop to a worker thread per frame made the threads queue on the
             # interpreter lock (40 sessions: 54 ms median latency, real-time factor 0.32)
-            pose_b = partner.step(motion.trim(i, i + 1))
+            pose_b = step(i)
             latency = 1000.0 * (time.perf_counter() - t0)
             b = "null" if pose_b is None else positions_json(pose_b)
             await ws.send_text(
