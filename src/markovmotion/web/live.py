@@ -31,6 +31,7 @@ import asyncio
 import json
 import os
 import time
+import weakref
 from collections.abc import Callable
 from functools import partial
 from typing import Protocol
@@ -269,6 +270,197 @@ async def _listen(ws: WebSocket, stop: asyncio.Event, garbage: list[_Garbage]) -
         stop.set()
 
 
+TICK = 0.004
+"""A worker's live sessions are stepped by one task (:class:`_Ticker`) that wakes when the
+first of them is due and serves every session due within this many seconds (an eighth of a
+frame at 30 fps): a wake-up per tick, not per frame and session."""
+
+
+class _Stream:
+    """One live session's place in its stream: frame k of A is due at ``start + k / fps``."""
+
+    def __init__(
+        self,
+        ws: WebSocket,
+        motion: Motion,
+        poses_a: list[str],
+        partner: LivePartner,
+        step: Callable[[int], np.ndarray | None],
+        loop: bool,
+        drop_late: float,
+        stop: asyncio.Event,
+    ):
+        self.ws, self.motion, self.poses_a = ws, motion, poses_a
+        self.partner, self.step, self.loop, self.drop_late = partner, step, loop, drop_late
+        self.period = 1.0 / motion.fps
+        self.start = time.perf_counter()
+        self.frame = self.skipped = self.sent = 0  # frames stepped or dropped; dropped; sent
+        self.stop = stop
+        self.done: asyncio.Future = asyncio.get_running_loop().create_future()
+        self.sending: asyncio.Future | None = None  # a send that had to wait (slow page)
+
+    @property
+    def due(self) -> float:
+        """When the session is next served: its next frame's time, or while a send waits
+        for a slow page a frame from now."""
+        if self.sending is not None and not self.sending.done():
+            return time.perf_counter() + self.period
+        return self.start + self.frame * self.period
+
+    def over(self) -> bool:
+        return self.stop.is_set() or (not self.loop and self.frame >= self.motion.n_frames)
+
+    def serve(self) -> None:
+        """The present frame: stepped and sent; the frames it overtook dropped.
+
+        Frame k is due at start + k / fps; a session more than ``drop_late`` behind its
+        clock drops the frames already overtaken by their successors (the partner told by
+        drop(), which costs far less than a step, so catching up does not put the other
+        sessions behind) and jumps to the present one, never sends a backlog."""
+        motion = self.motion
+        now = time.perf_counter() - self.start
+        present = int(now * motion.fps)
+        if now - self.frame * self.period <= self.drop_late:
+            present = self.frame
+        elif not self.loop:
+            present = min(present, motion.n_frames - 1)
+        while self.frame < present:
+            self.partner.drop()
+            self.frame += 1
+            self.skipped += 1
+        i = self.frame % motion.n_frames
+        t0 = time.perf_counter()
+        # in the event loop's own thread: a step takes well under a millisecond, and a hop
+        # to a worker thread per frame made the threads queue on the interpreter lock
+        # (40 sessions: 54 ms median latency, real-time factor 0.32)
+        pose_b = self.step(i)
+        latency = 1000.0 * (time.perf_counter() - t0)
+        b = "null" if pose_b is None else positions_json(pose_b)
+        self.sending = _send_soon(
+            self.ws,
+            f'{{"type":"frame","i":{self.frame},"a":{self.poses_a[i]},"b":{b},'
+            f'"latency_ms":{round(latency, 3)},"skipped":{self.skipped}}}',
+        )
+        self.sent += 1
+        self.frame += 1
+        if self.sent == 1:  # the clock starts with the first frame out (loading, compiling)
+            self.start = time.perf_counter() - self.period
+
+
+class _Resume:
+    """Awaiting the rest of a coroutine already started by hand (:func:`_send_soon`) from
+    the future it is waiting on."""
+
+    def __init__(self, coro, waiting):
+        self.coro, self.waiting = coro, waiting
+
+    def __await__(self):
+        waiting = self.waiting
+        while True:
+            try:
+                value = yield waiting
+            except BaseException as exc:  # noqa: BLE001 - thrown into the coroutine
+                try:
+                    waiting = self.coro.throw(exc)
+                except StopIteration:
+                    return
+            else:
+                try:
+                    waiting = self.coro.send(value)
+                except StopIteration:
+                    return
+
+
+async def _finish(resume: _Resume) -> None:
+    await resume
+
+
+def _send_soon(ws: WebSocket, text: str) -> asyncio.Future | None:
+    """Send ``text`` now; None if it went without waiting (the transport took it, as it
+    does unless the page reads too slowly), else the task that finishes the send. So one
+    slow page never holds up the other sessions of the ticker; the ticker skips a session
+    while its send waits (its frames are then dropped as late)."""
+    coro = ws.send_text(text)
+    try:
+        waiting = coro.send(None)
+    except StopIteration:
+        return None
+    return asyncio.ensure_future(_finish(_Resume(coro, waiting)))
+
+
+class _Ticker:
+    """The live sessions of one event loop (one worker), stepped by one task: it sleeps
+    until the first session is due, then serves every session due within :data:`TICK`,
+    in turn. Fewer wake-ups and timers than a task per session sleeping per frame; a
+    session's failure ends that session only."""
+
+    _by_loop: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def __init__(self) -> None:
+        self.streams: list[_Stream] = []
+        self.task: asyncio.Task | None = None
+
+    @classmethod
+    def of_this_loop(cls) -> _Ticker:
+        loop = asyncio.get_running_loop()
+        ticker = cls._by_loop.get(loop)
+        if ticker is None:
+            ticker = cls._by_loop[loop] = cls()
+        return ticker
+
+    async def run(self, stream: _Stream) -> None:
+        """Serve ``stream`` until it is over or stopped (exceptions of its partner raised
+        here, for its session)."""
+        self.streams.append(stream)
+        if self.task is None or self.task.done():
+            self.task = asyncio.create_task(self._tick())
+        stop = asyncio.ensure_future(stream.stop.wait())
+        try:
+            await asyncio.wait([stream.done, stop], return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            stop.cancel()
+            if stream in self.streams:
+                self.streams.remove(stream)
+        if stream.done.done():
+            stream.done.result()
+
+    async def _tick(self) -> None:
+        while self.streams:
+            soon = time.perf_counter() + TICK
+            for stream in list(self.streams):
+                if stream.due <= soon:
+                    self._serve(stream)
+            if not self.streams:
+                break
+            delay = min(s.due for s in self.streams) - time.perf_counter()
+            # a plain sleep; behind, sleep(0) still lets the pages' messages in between
+            await asyncio.sleep(max(delay, 0.0))
+
+    def _serve(self, stream: _Stream) -> None:
+        sending = stream.sending
+        if sending is not None and not sending.done():
+            return  # the page reads slowly: its frames wait (and are dropped as late)
+        try:
+            if sending is not None and (sending.cancelled() or sending.exception()):
+                self._end(stream)  # the page went away while its frame waited
+                return
+            if stream.over():
+                self._end(stream)
+                return
+            stream.serve()
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            self._end(stream)  # the page went away
+        except BaseException as exc:  # noqa: BLE001 - raised in the session's own task
+            self.streams.remove(stream)
+            if not stream.done.done():
+                stream.done.set_exception(exc)
+
+    def _end(self, stream: _Stream) -> None:
+        self.streams.remove(stream)
+        if not stream.done.done():
+            stream.done.set_result(None)
+
+
 async def live_session(
     ws: WebSocket,
     library: MotionLibrary,
@@ -303,8 +495,6 @@ async def live_session(
     stop = asyncio.Event()
     garbage: list[_Garbage] = []
     listener = asyncio.create_task(_listen(ws, stop, garbage))
-    loop = bool(msg.get("loop"))
-    sent = 0
     try:
         await _send(
             ws,
@@ -317,45 +507,11 @@ async def live_session(
                 "lag": int(partner.lag),
             },
         )
-        start = time.perf_counter()
-        frame = skipped = 0  # frames of the stream stepped or skipped; of those, skipped
-        while not stop.is_set() and (loop or frame < motion.n_frames):
-            # frame k is due at start + k / fps; a session more than DROP_LATE behind its
-            # clock drops the frames already overtaken by their successors (the partner
-            # told by drop(), which costs far less than a step, so catching up does not put
-            # the other sessions behind) and jumps to the present one, never sends a backlog
-            now = time.perf_counter() - start
-            present = int(now * motion.fps)
-            if now - frame / motion.fps <= drop_late:
-                present = frame
-            elif not loop:
-                present = min(present, motion.n_frames - 1)
-            while frame < present:
-                partner.drop()
-                frame += 1
-                skipped += 1
-            i = frame % motion.n_frames
-            t0 = time.perf_counter()
-            # in the event loop's own thread: a step takes well under a millisecond, and
-            # a hop to a worker thread per frame made the threads queue on the
-            # interpreter lock (40 sessions: 54 ms median latency, real-time factor 0.32)
-            pose_b = step(i)
-            latency = 1000.0 * (time.perf_counter() - t0)
-            b = "null" if pose_b is None else positions_json(pose_b)
-            await ws.send_text(
-                f'{{"type":"frame","i":{frame},"a":{poses_a[i]},"b":{b},'
-                f'"latency_ms":{round(latency, 3)},"skipped":{skipped}}}'
-            )
-            sent += 1
-            frame += 1
-            if sent == 1:  # the clock starts with the first frame out (loading, compiling)
-                start = time.perf_counter() - 1.0 / motion.fps
-            delay = start + frame / motion.fps - time.perf_counter()
-            # a plain sleep (a stop is seen within a frame); behind, sleep(0) still lets
-            # the other sessions' frames go between two of this one's
-            await asyncio.sleep(max(delay, 0.0))
+        loop = bool(msg.get("loop"))
+        stream = _Stream(ws, motion, poses_a, partner, step, loop, drop_late, stop)
+        await _Ticker.of_this_loop().run(stream)
         if not stop.is_set():
-            await _send(ws, {"type": "end", "frames": sent, "skipped": skipped})
+            await _send(ws, {"type": "end", "frames": stream.sent, "skipped": stream.skipped})
     except (WebSocketDisconnect, RuntimeError, OSError):
         pass
     finally:
