@@ -28,13 +28,15 @@ Protocol (JSON text messages):
 from __future__ import annotations
 
 import asyncio
+import collections
 import json
 import os
+import threading
 import time
 import weakref
 from collections.abc import Callable
 from functools import partial
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
@@ -105,6 +107,7 @@ class ModelPartner:
         check = getattr(model, "check_input", None)
         if check is not None:
             check(motion_a)
+        self._model = model
         self._partner = model.partner()
         self.lag = int(self._partner.lag)
         self.fps = float(self._partner.fps)
@@ -121,7 +124,7 @@ class ModelPartner:
         :meth:`~markovmotion.models.hmm.partner.Partner.see`) where it offers one, else
         :meth:`step` of the one-frame motion."""
         see = getattr(self._partner, "see", None)
-        seen = see(motion_a) if see is not None else None
+        seen = self._seen(see, motion_a) if see is not None else None
         if seen is None:
             return _one_frame_steps(self, motion_a)
         step_seen = self._partner.step_seen
@@ -130,6 +133,25 @@ class ModelPartner:
     def skip(self) -> np.ndarray | None:
         """A frame of A missed (the camera page's frames come when they can)."""
         return self._positions(self._partner.skip())
+
+    _SEEN: ClassVar[collections.OrderedDict] = collections.OrderedDict()
+    _SEEN_LOCK = threading.Lock()
+
+    def _seen(self, see: Callable, motion_a: Motion):
+        """``see(motion_a)``, computed once for every session that streams the same motion
+        object (a library file: :meth:`MotionLibrary.stream` gives each the same) with the
+        same model; the last 8 kept."""
+        key = (id(self._model), id(motion_a))
+        with self._SEEN_LOCK:
+            hit = self._SEEN.get(key)
+            if hit is not None and hit[0] is self._model and hit[1] is motion_a:
+                self._SEEN.move_to_end(key)
+                return hit[2]
+            seen = see(motion_a)
+            self._SEEN[key] = (self._model, motion_a, seen)  # the objects kept: ids stay theirs
+            while len(self._SEEN) > 8:
+                self._SEEN.popitem(last=False)
+        return seen
 
     @staticmethod
     def _positions(out) -> np.ndarray | None:
@@ -320,8 +342,8 @@ class _Stream:
         motion = self.motion
         now = time.perf_counter() - self.start
         present = int(now * motion.fps)
-        if now - self.frame * self.period <= self.drop_late:
-            present = self.frame
+        if not self.sent or now - self.frame * self.period <= self.drop_late:
+            present = self.frame  # the clock has not started, or a jitter to catch up with
         elif not self.loop:
             present = min(present, motion.n_frames - 1)
         while self.frame < present:
@@ -344,7 +366,7 @@ class _Stream:
         self.sent += 1
         self.frame += 1
         if self.sent == 1:  # the clock starts with the first frame out (loading, compiling)
-            self.start = time.perf_counter() - self.period
+            self.start = time.perf_counter() - self.frame * self.period
 
 
 class _Resume:

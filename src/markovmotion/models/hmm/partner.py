@@ -285,8 +285,9 @@ class Partner:
         return x[-1]
 
     def see(self, motion: Motion | Markers) -> SeenA | None:
-        """Person A's whole ``motion`` (at the model's rate) seen at once, for a caller that
-        streams it frame by frame (the live page, looping): :meth:`step_seen` then costs the
+        """Person A's whole ``motion`` (at the model's rate) seen at once, for callers that
+        stream it frame by frame (the live page, looping; read-only, so the partners of
+        several sessions may share it): :meth:`step_seen` then costs the
         decoder, the trellis and B, not A's forward kinematics, features and densities
         (:meth:`DualHMM.features_a` over the motion, as :meth:`DualHMM.respond` computes
         them). None for a model whose A features depend on the stream before the motion
@@ -305,6 +306,8 @@ class Partner:
         xa, missing = self.model.features_a(motion)
         log_b = gaussian_log_density(xa, *self._emission)
         origin, yaw = self.model.place(motion)
+        for array in (xa, log_b, origin, yaw):  # shared by the sessions streaming the motion
+            array.flags.writeable = False
         seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
         return SeenA(log_b, seen, origin, yaw)
 
