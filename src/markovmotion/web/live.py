@@ -365,8 +365,9 @@ class _Stream:
         )
         self.sent += 1
         self.frame += 1
-        if self.sent == 1:  # the clock starts with the first frame out (loading, compiling)
-            self.start = time.perf_counter() - self.frame * self.period
+        if self.sent == 1:  # the clock starts with the first frame out (loading, compiling):
+            # that frame's time is now, whichever frame it was
+            self.start = time.perf_counter() - (self.frame - 1) * self.period
 
 
 class _Resume:
