@@ -38,9 +38,8 @@ from markovmotion.evaluate.store import open_results
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.bvh import bvh_text
 from markovmotion.models.hmm.dual import DualHMM
-from markovmotion.web import create_app
+from markovmotion.web import create_app, live
 from markovmotion.web.library import MotionLibrary, display_parents
-from markovmotion.web import live
 from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import MirrorPartner, simulate_evaluators, simulate_live
 from markovmotion.web.server import AppOptions, running, running_workers
