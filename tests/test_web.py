@@ -433,6 +433,28 @@ def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(si
     assert all(b - a >= 4 for a, b in zip(sent[1:-2], sent[2:-1], strict=True))
 
 
+def test_a_partner_model_is_compiled_before_its_first_session(dual):
+    """``serve --partner`` (each worker) steps a partner once at start-up, so the kernels a
+    live step calls are compiled before a session needs them: compiled in a first session,
+    they held every session of the worker (the event loop and numba's compile lock)."""
+    check = (
+        "import sys, numba\n"
+        "from markovmotion.web.live import model_partner\n"
+        "model_partner(sys.argv[1])\n"
+        "from markovmotion.models.hmm import dual, trellis\n"
+        "from markovmotion.algorithms import windowed_viterbi\n"
+        "kernels = [trellis.lowest_error_path, trellis.blend_quaternions,\n"
+        "           trellis.pair_distances, trellis.whitened_distances, dual._turn_root,\n"
+        "           windowed_viterbi.viterbi_kernel]\n"
+        "print([k.__name__ for k in kernels if not k.signatures])\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", check, str(dual)], capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
+    assert "warning" not in out.stderr
+
+
 class PageSocket:
     """A WebSocket's sending side, as a live session sees it: frames kept; with ``slow``, a
     send waits until the page reads (``read`` set)."""

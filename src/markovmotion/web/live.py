@@ -42,6 +42,7 @@ import numpy as np
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import MarkovMotionError, ModelFormatError
 from markovmotion.models.base import KINDS, Model
 from markovmotion.web.library import (
@@ -189,8 +190,36 @@ def load_partner_model(path: str | os.PathLike[str]) -> Model:
 
 
 def model_partner(path: str | os.PathLike[str]) -> PartnerFactory:
-    """Sessions answered by the model saved at ``path`` (:func:`load_partner_model`)."""
-    return partial(ModelPartner, load_partner_model(path))
+    """Sessions answered by the model saved at ``path`` (:func:`load_partner_model`), its
+    compiled kernels ready (:func:`warm_up`)."""
+    model = load_partner_model(path)
+    warm_up(model)
+    return partial(ModelPartner, model)
+
+
+def warm_up(model: Model) -> None:
+    """Step a partner of ``model`` through a person A standing still (the rest pose of the
+    model's A skeleton, if it has one), stepped and seen, so that numba's kernels are
+    compiled or loaded from their cache before a session needs them. A first session
+    compiling them held every session of its worker for seconds (the event loop and
+    numba's compile lock; on a fresh clone the 40 sessions of the load test all timed out)."""
+    skeleton = getattr(model, "skeleton_a_", None)
+    fps = getattr(model, "fps", None)
+    if not isinstance(skeleton, Skeleton) or not fps:
+        return
+    frames = 2 * int(getattr(model, "window", 10)) + 2
+    still = np.tile([0.0, 0.0, 0.0, 1.0], (frames, skeleton.n_joints, 1))
+    rest = Motion.from_rotations(skeleton, still, fps=float(fps), name="warm-up")
+    try:
+        partner = ModelPartner(model, rest)
+        step = stepper(partner, rest)
+        for i in range(frames):
+            step(i)
+        partner = ModelPartner(model, rest)
+        for i in range(frames):
+            partner.step(rest.trim(i, i + 1))
+    except MarkovMotionError:
+        return  # a model this cannot warm (its first session compiles)
 
 
 #: The factory's name from when only the dual HMM could answer on the live page.
