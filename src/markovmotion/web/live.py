@@ -478,10 +478,16 @@ class _Ticker:
 
     async def _tick(self) -> None:
         while self.streams:
-            soon = time.perf_counter() + TICK
+            began = time.perf_counter()
+            soon = began + TICK
             for stream in list(self.streams):
-                if stream.due <= soon:
+                if stream in self.streams and stream.due <= soon:
                     self._serve(stream)
+                    if time.perf_counter() - began > 2 * TICK:
+                        # many sessions due at once: the pages' messages and new
+                        # connections get in at least every 8 ms of stepping
+                        await asyncio.sleep(0)
+                        began = time.perf_counter()
             if not self.streams:
                 break
             delay = min(s.due for s in self.streams) - time.perf_counter()
