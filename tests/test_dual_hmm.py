@@ -231,6 +231,27 @@ def test_partner_sees_a_as_the_offline_features_do(model, capsys):
     assert capsys.readouterr().err.count("skipped") == 2
 
 
+def test_a_motion_seen_at_once_streams_what_stepping_it_gives(model, training, capsys):
+    """The live page's path (:meth:`Partner.see`, then :meth:`Partner.step_seen` frame by
+    frame: A's features, densities and places computed for the whole motion at once) gives
+    B frame for frame as :meth:`Partner.step` of each one-frame motion, missing frames too."""
+    a = turning(synthetic_pair(70, 12)[0])
+    a.rotations[30:32] = np.nan
+    stepped, streamed = model.partner(), model.partner()
+    seen = streamed.see(a)
+    assert not seen.log_b.flags.writeable  # shared by the sessions streaming the motion
+    for t in range(a.n_frames):
+        one, other = stepped.step(a.trim(t, t + 1)), streamed.step_seen(seen, t)
+        assert (one is None) == (other is None) == (t < model.window - 1)
+        if one is not None:
+            np.testing.assert_allclose(other.positions(), one.positions(), atol=1e-9)
+    assert [m.n_frames for m in streamed.finish()] == [m.n_frames for m in stepped.finish()]
+    assert capsys.readouterr().err.count("skipped") == 2  # step's warnings; see is quiet
+    # A's features relative to A's running mean depend on the stream before: stepped
+    person = DualHMM(n_states=N_POSES, n_iter=2, window=6, normalise="person", **TOY)
+    assert person.fit(training[:1]).partner().see(a) is None
+
+
 def test_into_and_out_of_a_ground_frame_turn_the_root_about_up():
     a = turning(synthetic_pair(40, 10)[0])
     rng = np.random.default_rng(0)

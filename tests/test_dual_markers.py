@@ -151,6 +151,19 @@ def test_the_online_partner_streams_what_windowed_respond_gives(model, marker_ta
     assert "missing" in capsys.readouterr().err
 
 
+def test_markers_seen_at_once_stream_what_stepping_them_gives(model, marker_takes, capsys):
+    a = model._rate(marker_takes[2][0])
+    a.positions[10:13, 4] = np.nan
+    stepped, streamed = model.partner(), model.partner()
+    seen = streamed.see(a)
+    for t in range(a.n_frames):
+        one, other = stepped.step(a.trim(t, t + 1)), streamed.step_seen(seen, t)
+        assert (one is None) == (other is None)
+        if one is not None:
+            np.testing.assert_allclose(other.positions, one.positions, atol=1e-9)
+    capsys.readouterr()
+
+
 def test_marker_model_files_are_checked(model, tmp_path):
     from markovmotion import persist
 

@@ -9,6 +9,7 @@ Screenshots of every page go to ``test-screenshots/``.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import os
@@ -37,7 +38,7 @@ from markovmotion.evaluate.store import open_results
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.bvh import bvh_text
 from markovmotion.models.hmm.dual import DualHMM
-from markovmotion.web import create_app
+from markovmotion.web import create_app, live
 from markovmotion.web.library import MotionLibrary, display_parents
 from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import MirrorPartner, simulate_evaluators, simulate_live
@@ -430,6 +431,81 @@ def test_a_session_behind_its_clock_drops_frames_instead_of_sending_a_backlog(si
     # each frame says how many were dropped before it; each jump is to the present frame
     assert [f["skipped"] for f in frames] == [i - k for k, i in enumerate(sent)]
     assert all(b - a >= 4 for a, b in zip(sent[1:-2], sent[2:-1], strict=True))
+
+
+def test_a_partner_model_is_compiled_before_its_first_session(dual):
+    """``serve --partner`` (each worker) steps a partner once at start-up, so the kernels a
+    live step calls are compiled before a session needs them: compiled in a first session,
+    they held every session of the worker (the event loop and numba's compile lock)."""
+    check = (
+        "import sys, numba\n"
+        "from markovmotion.web.live import model_partner\n"
+        "model_partner(sys.argv[1])\n"
+        "from markovmotion.models.hmm import dual, trellis\n"
+        "from markovmotion.algorithms import windowed_viterbi\n"
+        "kernels = [trellis.lowest_error_path, trellis.blend_quaternions,\n"
+        "           trellis.pair_distances, trellis.whitened_distances, dual._turn_root,\n"
+        "           windowed_viterbi.viterbi_kernel]\n"
+        "print([k.__name__ for k in kernels if not k.signatures])\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", check, str(dual)], capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
+    assert "warning" not in out.stderr
+
+
+class PageSocket:
+    """A WebSocket's sending side, as a live session sees it: frames kept; with ``slow``, a
+    send waits until the page reads (``read`` set)."""
+
+    def __init__(self, slow: bool = False):
+        self.frames: list[dict] = []
+        self.read = asyncio.Event()
+        self.slow = slow
+
+    async def send_text(self, text: str) -> None:
+        if self.slow:
+            await self.read.wait()
+        self.frames.append(json.loads(text))
+
+
+def test_a_stream_served_late_starts_its_clock_with_its_first_frame():
+    """A session's first frame served a second after the session began (a busy worker) is
+    frame 0, nothing dropped, and frame 1 is due a frame after it, not at once and not
+    after a second's shift."""
+
+    async def run() -> tuple[PageSocket, live._Stream, float]:
+        ws, motion = PageSocket(), make_motion(24, fps=30)
+        partner = MirrorPartner(motion)
+        step = live.stepper(partner, motion)
+        poses = [live.positions_json(p) for p in motion.positions()]
+        stream = live._Stream(ws, motion, poses, partner, step, False, 0.07, asyncio.Event())
+        stream.start -= 1.0
+        stream.serve()
+        await asyncio.sleep(0)
+        return ws, stream, time.perf_counter()
+
+    ws, stream, now = asyncio.run(run())
+    assert [(f["i"], f["skipped"]) for f in ws.frames] == [(0, 0)]
+    assert stream.frame == 1 and 0 < stream.due - now <= 1 / 30
+
+
+def test_a_slow_page_holds_up_only_its_own_send():
+    """A frame's send finishes at once when the transport takes it; for a page that reads
+    slowly it goes on in a task of its own while the worker's other sessions are served."""
+
+    async def run() -> None:
+        quick, slow = PageSocket(), PageSocket(slow=True)
+        assert live._send_soon(quick, '{"i":0}') is None and quick.frames == [{"i": 0}]
+        waiting = live._send_soon(slow, '{"i":1}')
+        await asyncio.sleep(0.01)
+        assert not waiting.done() and slow.frames == []
+        slow.read.set()
+        await asyncio.wait_for(waiting, 1)
+        assert slow.frames == [{"i": 1}]
+
+    asyncio.run(run())
 
 
 def test_live_session_from_an_uploaded_bvh(server):

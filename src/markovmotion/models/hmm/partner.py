@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,6 +47,26 @@ def finite_frames(motion: Motion | Markers) -> np.ndarray:
     return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
         axis=(1, 2)
     )
+
+
+@dataclass(frozen=True)
+class SeenA:
+    """Person A's whole motion as the partner sees it, computed at once for a stream that
+    plays it frame by frame (:meth:`Partner.see`): what :meth:`Partner.step` computes for
+    one frame, for all of them in a few vectorised calls, as :meth:`DualHMM.respond` does.
+
+    Attributes:
+        log_b: (F, N) log emission probabilities log b_j(x_t) of A's features under
+            lambda_A's states (eq. 1's b_j), frame by frame.
+        features: per frame A's features (Da,), or None for a missing frame (NaN).
+        origin: (F, 3) where A stands (mm), B is placed by it.
+        yaw: (F,) A's heading (radians).
+    """
+
+    log_b: np.ndarray
+    features: list[np.ndarray | None]
+    origin: np.ndarray
+    yaw: np.ndarray
 
 
 class Partner:
@@ -262,6 +283,42 @@ class Partner:
             else:
                 x = step.transform([x])[0]
         return x[-1]
+
+    def see(self, motion: Motion | Markers) -> SeenA | None:
+        """Person A's whole ``motion`` (at the model's rate) seen at once, for callers that
+        stream it frame by frame (the live page, looping; read-only, so the partners of
+        several sessions may share it): :meth:`step_seen` then costs the
+        decoder, the trellis and B, not A's forward kinematics, features and densities
+        (:meth:`DualHMM.features_a` over the motion, as :meth:`DualHMM.respond` computes
+        them). None for a model whose A features depend on the stream before the motion
+        (the running centre of ``normalise="person"``, kept across loops): step it frame by
+        frame.
+
+        Raises:
+            SkeletonMismatchError: a motion the model cannot answer (``check_input``).
+        """
+        steps = self.model.pipeline_a_.steps
+        if any(isinstance(step, RunningCentre) for step in steps):
+            return None
+        self.model.check_input(motion)
+        if self.model.uses_markers:
+            motion = self.model.input_markers(motion)
+        xa, missing = self.model.features_a(motion)
+        log_b = gaussian_log_density(xa, *self._emission)
+        origin, yaw = self.model.place(motion)
+        for array in (xa, log_b, origin, yaw):  # shared by the sessions streaming the motion
+            array.flags.writeable = False
+        seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
+        return SeenA(log_b, seen, origin, yaw)
+
+    def step_seen(self, seen: SeenA, t: int) -> Motion | Markers | None:
+        """:meth:`step` for frame ``t`` of A's motion seen by :meth:`see` (a missing frame,
+        NaN: :meth:`skip`, without a warning)."""
+        if seen.features[t] is None:
+            return self.skip()
+        self._place = (seen.origin[t], float(seen.yaw[t]))
+        self._add_place(self._place)
+        return self._motion(self.step_log_frameprob(seen.log_b[t], seen.features[t]))
 
     def skip(self) -> Motion | Markers | None:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
