@@ -259,8 +259,11 @@ def test_resample_refuses_absurd_sizes():
 
 # ------------------------------------------------------------- outputs
 
+# The child restores Ctrl-C's handler: a shell starts background jobs with SIGINT ignored,
+# which the child would inherit (then no KeyboardInterrupt, and the test would wait 30 s).
 WRITER = """
-import sys, time
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from markovmotion.io.files import atomic_write
 with atomic_write(sys.argv[1], "wb") as fh:
     fh.write(b"x" * 1000)
