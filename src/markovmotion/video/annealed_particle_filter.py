@@ -790,14 +790,13 @@ def track_video(
     clock starts (``guide_seconds`` of the result)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = guided = None
-    if sides:
+    if sides or guide:  # MediaPipe once over every camera, for both uses
         from markovmotion.video.sides import SideCheck
+        from markovmotion.video.triangulation import Guide, ViewLandmarks, triangulate_views
 
-        check = SideCheck.from_videos(mv.videos, mv.cameras, max_frames)
-    if guide:
-        from markovmotion.video.triangulation import guide_of_videos
-
-        guided = guide_of_videos(mv.videos, mv.cameras, max_frames)
+        views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
+        check = SideCheck.from_landmarks(views) if sides else None
+        guided = Guide.from_views(views, triangulate_views(views)) if guide else None
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,

@@ -22,8 +22,8 @@ import numpy as np
 
 from markovmotion.features.body_points import BODY_POINTS
 from markovmotion.video.cameras import CalibratedCamera
-from markovmotion.video.monocular import LANDMARKS, MIN_VISIBILITY, detect_landmarks
-from markovmotion.video.render import read_frames
+from markovmotion.video.monocular import LANDMARKS, MIN_VISIBILITY
+from markovmotion.video.triangulation import ViewLandmarks
 
 #: Left-right pairs compared: (body point, MediaPipe landmark) for each side.
 PAIRS: tuple[tuple[str, str], ...] = (("shoulder", "shoulder"), ("hip", "hip"))
@@ -40,14 +40,6 @@ class SideView:
     camera: CalibratedCamera
     pixels: np.ndarray
     visibility: np.ndarray
-
-    @classmethod
-    def from_video(
-        cls, video: str | os.PathLike[str], camera: CalibratedCamera, max_frames: int | None = None
-    ) -> SideView:
-        """MediaPipe Pose over one camera's video (``scripts/install-camera``)."""
-        lm = detect_landmarks(read_frames(video), max_frames)
-        return cls(camera, lm.pixels, np.where(lm.found[:, None], lm.visibility, 0.0))
 
     def distances(self, points: np.ndarray, frame: int) -> tuple[float, float, float]:
         """Pixel distances of the tracked left and right shoulders and hips (``points``, the
@@ -81,15 +73,25 @@ class SideCheck:
     views: list[SideView]
 
     @classmethod
+    def from_landmarks(cls, views: ViewLandmarks) -> SideCheck:
+        """The check of MediaPipe's landmarks already found in every camera (the detection
+        the guide of :mod:`~markovmotion.video.triangulation` uses too: run once)."""
+        return cls(
+            [
+                SideView(camera, views.pixels[k], views.visibility[k])
+                for k, camera in enumerate(views.cameras)
+            ]
+        )
+
+    @classmethod
     def from_videos(
         cls,
         videos: list[str | os.PathLike[str]],
         cameras: list[CalibratedCamera],
         max_frames: int | None = None,
     ) -> SideCheck:
-        return cls(
-            [SideView.from_video(v, c, max_frames) for v, c in zip(videos, cameras, strict=True)]
-        )
+        """MediaPipe Pose over each camera's video (``scripts/install-camera``)."""
+        return cls.from_landmarks(ViewLandmarks.from_videos(videos, cameras, max_frames))
 
     def evidence(self, points: np.ndarray, frame: int) -> float | None:
         """How much better the swapped sides fit than the tracked ones, summed over the views

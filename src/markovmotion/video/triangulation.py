@@ -338,17 +338,6 @@ def fit_state(
     return fit.x
 
 
-def guide_of_videos(
-    videos: Sequence[str | os.PathLike[str]],
-    cameras: Sequence[CalibratedCamera],
-    max_frames: int | None = None,
-) -> Guide:
-    """MediaPipe over every camera's video, triangulated to reject the views that disagree,
-    as a :class:`Guide`."""
-    views = ViewLandmarks.from_videos(videos, cameras, max_frames)
-    return Guide.from_views(views, triangulate_views(views))
-
-
 @dataclass
 class TriangulatedTrack:
     """Body points (F, 19, 3) mm (NaN where fewer than 2 views saw them), confidence (F,)
