@@ -290,9 +290,9 @@ def evaluate_pair(
         res.errors[k] = trial_errors(where[k], truth)
         res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)
         res.jumps[k] = jump_sizes(where[k])
-    res.errors["mean_pose"] = trial_errors(baselines.mean_world(origin, yaw), truth)
-    res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
     placed = baselines.mean_world(origin, yaw)
+    res.errors["mean_pose"] = trial_errors(placed, truth)
+    res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
     res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
     res.pose_errors["known_motion"] = trial_errors(
         known_motion(baselines.mean_pose, truth_pose), truth_pose
