@@ -116,10 +116,44 @@ def test_marker_chain_refuses_what_it_cannot_see(marker_partner, handshakes, sal
     _, _, _, a, _ = handshakes[0]
     with pytest.raises(SkeletonMismatchError, match="R_HAND"):
         marker_partner.respond(a.select([n for n in a.names if n != "R_HAND"]))
-    with pytest.raises(SkeletonMismatchError, match="trained on markers"):
-        marker_partner.respond(salsa_pair[0])
+    with pytest.raises(SkeletonMismatchError, match="trained on skeletons, not markers"):
+        VirtualPartner(**SMALL).fit([salsa_pair]).respond(a)
     with pytest.raises(TypeError, match="all Motions or all Markers"):
         VirtualPartner(**SMALL).fit([(a, a), salsa_pair])
+
+
+def test_marker_chain_answers_a_skeleton_by_its_body_points(marker_partner, salsa_pair, capsys):
+    import dataclasses
+
+    from markovmotion.core.motion import Motion
+    from markovmotion.features.markers import named_body_points
+
+    a = salsa_pair[0].trim(0, 120)
+    points = named_body_points(a, marker_partner.markers_)
+    out = marker_partner.respond(a, rng=0, n_hypotheses=10)
+    same = marker_partner.respond(points, rng=0, n_hypotheses=10)
+    assert out.names == tuple(marker_partner.markers_)
+    np.testing.assert_allclose(out.positions, same.positions)
+    # the partner stands at the skeleton's height (its centroid's, as the training pairs)
+    gap = np.mean(out.positions[..., 1]) - np.mean(points.positions[..., 1])
+    assert abs(gap) < 300.0, gap
+    # online, frame by frame, the same frames
+    a25 = a.resample(marker_partner.fps_)
+    partner = marker_partner.partner(rng=0, n_hypotheses=10, size=None)
+    frames = [f for t in range(a25.n_frames) if (f := partner.step(a25.trim(t, t + 1)))]
+    assert len(frames) + len(partner.finish()) == a25.n_frames
+    # a skeleton without a body point the markers name: one error naming it
+    names = tuple("noggin" if n.lower() == "head" else n for n in a.skeleton.names)
+    headless = Motion(
+        dataclasses.replace(a.skeleton, names=names),
+        a.rotations,
+        a.translations,
+        a.fps,
+        name="headless",
+    )
+    with pytest.raises(SkeletonMismatchError, match="headless.*head"):
+        marker_partner.respond(headless)
+    capsys.readouterr()
 
 
 @pytest.fixture(scope="module")

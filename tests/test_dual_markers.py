@@ -206,11 +206,103 @@ def test_bad_inputs_are_one_line(model, marker_takes, takes, tmp_path, capsys):
         + ["--out", str(tmp_path / "b.c3d")]
     )
     assert read_c3d(tmp_path / "b.c3d").names == virtual_marker_names(30)
-    # a model learnt from C3D markers has no virtual markers to place on a BVH
+    # a model learnt from C3D markers whose names are no body points cannot find them on a BVH
     c3d_model = DualHMM(n_states=4, n_iter=3).fit(marker_takes[:1])
     assert not c3d_model.markers and c3d_model.uses_markers
-    with pytest.raises(SkeletonMismatchError, match="give a .c3d"):
+    with pytest.raises(SkeletonMismatchError, match="HEAD_BACK.*name no body point"):
         c3d_model.respond(takes[0][0])
+
+
+#: An upper-body tracker's points (Bütepage's Kinect names) and the body points they name.
+SENSOR_POINTS = {
+    "TORSO": "spine",
+    "HEAD": "head",
+    "R_SHOULDER": "right_shoulder",
+    "L_SHOULDER": "left_shoulder",
+    "R_ELBOW": "right_elbow",
+    "L_ELBOW": "left_elbow",
+    "R_HAND": "right_wrist",
+    "L_HAND": "left_wrist",
+}
+SENSOR_HEIGHT = 1100.0  # mm: the sensor's origin above the floor
+
+
+def _sensor(motion, drop: float = SENSOR_HEIGHT) -> Markers:
+    """A skeleton's body points as a depth sensor gives them: named, origin at its height."""
+    from markovmotion.features.body_points import body_point_index
+
+    index = body_point_index(motion.skeleton, list(SENSOR_POINTS.values()))
+    pos = motion.positions()[:, index]
+    pos[..., 1] -= drop
+    return Markers(list(SENSOR_POINTS), pos, motion.fps, motion.name)
+
+
+@pytest.fixture(scope="module")
+def sensor_model(takes) -> DualHMM:
+    """A dual HMM of sensor markers (vertical origin the sensor's), both roles."""
+    pairs = [(_sensor(a), _sensor(b)) for a, b in takes[:2]]
+    return DualHMM(n_states=5, n_iter=8).fit(pairs + [(b, a) for a, b in pairs])
+
+
+def test_a_sensor_marker_model_answers_a_skeleton_at_its_height(sensor_model, takes, capsys):
+    a, b = takes[2]
+    assert sensor_model.lifts(a) and not sensor_model.lifts(_sensor(a))
+    answer = sensor_model.respond(a, "windowed")
+    assert answer.names == tuple(SENSOR_POINTS)
+    # B stands at the skeleton's height, not the sensor's: the training pairs' centroids
+    # are at the same height to within a few cm; the real B is at A's height here
+    real_b = _sensor(b, drop=0.0).resample(30)
+    gap = np.mean(answer.positions[..., 1]) - np.mean(real_b.positions[..., 1])
+    assert abs(gap) < 150.0, gap
+    # raising A raises B by as much, and nothing else changes
+    raised = a.copy()
+    raised.translations[:, 0, 1] += 500.0
+    up = sensor_model.respond(raised, "windowed")
+    np.testing.assert_allclose(up.positions[..., 1], answer.positions[..., 1] + 500.0, atol=1e-6)
+    np.testing.assert_allclose(up.positions[..., [0, 2]], answer.positions[..., [0, 2]], atol=1e-6)
+    # the online partner, frame by frame, gives the same B
+    a30 = a.resample(30)
+    partner = sensor_model.partner()
+    frames = [f for t in range(a30.n_frames) if (f := partner.step(a30.trim(t, t + 1)))]
+    frames += partner.finish()
+    np.testing.assert_allclose(
+        np.concatenate([f.positions for f in frames]), answer.positions, atol=1e-6
+    )
+    capsys.readouterr()
+
+
+def test_a_sensor_marker_model_names_the_body_points_a_skeleton_lacks(sensor_model, takes):
+    import dataclasses
+
+    from markovmotion.core.motion import Motion
+
+    a = takes[2][0]
+    names = ["noggin" if n.lower() == "head" else n for n in a.skeleton.names]
+    skeleton = dataclasses.replace(a.skeleton, names=tuple(names))
+    headless = Motion(skeleton, a.rotations, a.translations, a.fps, name="headless")
+    with pytest.raises(SkeletonMismatchError, match="headless.*head"):
+        sensor_model.check_input(headless)
+
+
+def test_lift_online_equals_whole_take():
+    from markovmotion.features.markers import Lift
+
+    rng = np.random.default_rng(0)
+    pos = rng.normal(0.0, 100.0, (40, 3, 3))
+    pos[..., 1] += 1200.0
+    pos[5] = np.nan  # a frame with nothing seen keeps the last lift
+    markers = Markers(["a", "b", "c"], pos, 30.0)
+    lifted, lift = Lift(-50.0)(markers)
+    centre = pos[..., 1].mean(axis=1)  # NaN in frame 5
+    seen = np.isfinite(centre)
+    expected = [-50.0 - np.mean(centre[: t + 1][seen[: t + 1]]) for t in range(40)]
+    np.testing.assert_allclose(lift, expected)
+    online = Lift(-50.0)
+    steps = [online.step(markers.trim(t, t + 1)) for t in range(40)]
+    np.testing.assert_allclose([s for _, s in steps], lift)
+    np.testing.assert_allclose(
+        np.concatenate([m.positions for m, _ in steps]), lifted.positions, equal_nan=True
+    )
 
 
 def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes, tmp_path, capsys):

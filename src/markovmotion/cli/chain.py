@@ -274,23 +274,24 @@ def _respond_markers(
     model, input: Path, out: Path, fps: float | None, person: int, realtime: bool, options: dict
 ) -> None:
     """``chain respond`` with a marker model: C3D in (a file of the collection at INDEX.csv's
-    rate unless ``fps`` says), the partner's markers to a C3D file."""
+    rate unless ``fps`` says), or a skeleton whose body points the markers name, the
+    partner's markers to a C3D file."""
     from markovmotion.data.index import listed_entry
     from markovmotion.io.c3d import check_c3d_output, read_c3d, write_c3d
 
     if realtime:
         raise typer.BadParameter("--realtime streams skeletons: a marker model answers whole takes")
-    if base_suffix(input) != ".c3d" or base_suffix(out) != ".c3d":
-        raise MarkovMotionError(
-            f"{input if base_suffix(input) != '.c3d' else out}: the model was trained on "
-            "markers: it reads and writes .c3d files"
-        )
+    if base_suffix(out) != ".c3d":
+        raise MarkovMotionError(f"{out}: the model was trained on markers: it writes .c3d files")
     check_c3d_output(out)
-    markers = read_c3d(input)
-    entry = listed_entry(input) if fps is None else None
-    rate = fps if fps is not None else entry.fps if entry is not None else None
-    if rate is not None:
-        markers.fps = float(rate)
+    if base_suffix(input) != ".c3d":  # a skeleton: its body points by the markers' names
+        markers = read_listed_motion(input, fps)
+    else:
+        markers = read_c3d(input)
+        entry = listed_entry(input) if fps is None else None
+        rate = fps if fps is not None else entry.fps if entry is not None else None
+        if rate is not None:
+            markers.fps = float(rate)
     model.check_input(markers)
     write_c3d(model.respond(markers, person, **options), out)
     err_console.print(f"wrote {out}", highlight=False)

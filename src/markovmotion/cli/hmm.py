@@ -438,8 +438,9 @@ def _respond_video(
 
 def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: bool) -> None:
     """One line (exit 2) for a model and files that do not go together: markers in or out
-    of a skeleton model, a skeleton's output from a marker model, a BVH given to a model
-    learnt from C3D markers (no virtual markers to place), or --realtime on markers."""
+    of a skeleton model, a skeleton's output from a marker model, or --realtime on markers
+    (a BVH given to a model learnt from C3D markers is checked by ``check_input``: the body
+    points its markers name)."""
     from markovmotion.errors import MotionFormatError, SkeletonMismatchError
     from markovmotion.io.files import base_suffix
 
@@ -451,11 +452,6 @@ def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: boo
         )
     if dual.uses_markers and not as_c3d:
         raise MotionFormatError(out, "the model was trained on markers: write B to a .c3d file")
-    if dual.uses_markers and not c3d_in and not dual.markers:
-        raise SkeletonMismatchError(
-            f"{input}: the model learnt markers from C3D files (no virtual markers to place "
-            "on a skeleton): give a .c3d file"
-        )
     if dual.uses_markers and realtime:
         raise SkeletonMismatchError(
             f"{input}: --realtime replays skeleton models only (this one is on markers)"

@@ -49,8 +49,8 @@ _SIDED: dict[str, tuple[str, ...]] = {
 #: Points on the body's midline and their names.
 _MIDDLE: dict[str, tuple[str, ...]] = {
     "pelvis": ("hips", "hip", "pelvis", "root"),
-    "spine": ("spine", "abdomen", "lowerback", "spine1"),
-    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2", "torso"),
+    "spine": ("spine", "abdomen", "lowerback", "spine1", "torso"),  # a Kinect's mid-trunk
+    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2"),
     "neck": ("neck", "lowerneck", "neck1"),
     "head": ("head",),
 }

@@ -50,9 +50,11 @@ import numpy as np
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.base import FeatureStep
 from markovmotion.features.body_motion import BodyMotion
-from markovmotion.features.body_points import body_point_index, normalise
+from markovmotion.features.body_points import body_point_index, find_points, normalise
+from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.state import StateError, check_index, check_shape, is_fitted, register, require
 
 #: Most virtual markers :func:`virtual_markers` places.
@@ -220,6 +222,81 @@ def virtual_markers(motion: Motion, n: int = 30) -> Markers:
     rot, pos = motion.global_transforms()
     points = pos[:, rigid] + np.einsum("fmij,mj->fmi", rot[:, rigid], vectors)
     return Markers(virtual_marker_names(n), points, motion.fps, motion.name, motion.source)
+
+
+def named_body_points(motion: Motion, names: Sequence[str]) -> Markers:
+    """``motion`` as the markers ``names`` of a C3D marker set that names body points
+    (``TORSO``, ``R_SHOULDER``, ``L_HAND``...,
+    :func:`~markovmotion.features.body_points.find_points`): each marker the skeleton's
+    joint of the body point its name stands for, in ``names`` order, at the motion's rate.
+    For a model learnt from such markers to answer a skeleton (a capture, a tracked video,
+    a webcam's points), with :class:`Lift` for the height.
+
+    Raises:
+        SkeletonMismatchError: a name that stands for no body point, or body points the
+            skeleton lacks (named).
+    """
+    found = find_points(names)
+    unknown = [n for i, n in enumerate(names) if i not in found.values()]
+    if unknown:
+        raise SkeletonMismatchError(
+            f"the model's markers {', '.join(unknown)} name no body point, so they cannot "
+            "be found on a skeleton (give markers)"
+        )
+    points = sorted(found, key=found.__getitem__)
+    index = body_point_index(motion.skeleton, points, motion.name or "the skeleton")
+    return Markers(list(names), motion.positions()[:, index], motion.fps, motion.name)
+
+
+class Lift:
+    """Markers moved up to a marker set's height: by ``height`` minus the causal running
+    mean of their centroid's height (frames 1..t).
+
+    A marker set from a depth sensor (Bütepage's Kinect points) has the sensor's height as
+    its vertical origin, not the floor, so a model learnt from it places people at heights
+    that mean nothing for a skeleton standing on a floor. Lifting the skeleton's points to
+    the training people's mean centroid height (``height``), and moving B's answer down by
+    the same lift, keeps B at A's height as the training pairs stood. The running mean is
+    :class:`~markovmotion.features.person.RunningCentre`'s without a prior, so
+    :meth:`__call__` on a whole take and :meth:`step` frame by frame give the same lifts; a
+    frame with no marker seen keeps the last lift.
+    """
+
+    def __init__(self, height: float):
+        self.height = float(height)
+        self._online: OnlineCentre | None = None
+        self._last = 0.0
+
+    def __call__(self, markers: Markers) -> tuple[Markers, np.ndarray]:
+        """``markers`` lifted, and the lift per frame (F,)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a frame with nothing seen
+            centre = np.nanmean(markers.positions[..., 1], axis=1)
+        seen = np.isfinite(centre)
+        lift = np.zeros(len(centre))
+        if seen.any():
+            x = centre[seen, None]
+            running = x - RunningCentre(prior=0.0).fit([x]).transform([x])[0]  # mean so far
+            k = np.cumsum(seen) - 1  # the last frame seen up to each frame, among the seen
+            lift = np.where(k >= 0, self.height - running[np.maximum(k, 0), 0], 0.0)
+        return _moved_up(markers, lift), lift
+
+    def step(self, markers: Markers) -> tuple[Markers, float]:
+        """One frame's markers lifted and its lift, the running mean taking the frame in."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            centre = float(np.nanmean(markers.positions[0, :, 1]))
+        if np.isfinite(centre):
+            self._online = self._online or OnlineCentre(np.zeros(1), 0.0)
+            x = np.array([centre])
+            self._last = self.height - float((x - self._online(x))[0])
+        return _moved_up(markers, np.array([self._last])), self._last
+
+
+def _moved_up(markers: Markers, lift: np.ndarray) -> Markers:
+    pos = markers.positions.copy()
+    pos[..., 1] += lift[:, None]
+    return Markers(markers.names, pos, markers.fps, markers.name, markers.source)
 
 
 # ------------------------------------------------------------------ a person's ground frame

@@ -39,7 +39,7 @@ from markovmotion.features.joint_shape import (
     person_from_take,
     shape_joints,
 )
-from markovmotion.features.markers import MarkerFeatures
+from markovmotion.features.markers import MarkerFeatures, named_body_points
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.chain.behaviour_chain import BehaviourChain
 from markovmotion.models.chain.condensation import (
@@ -288,6 +288,12 @@ class VirtualPartner(Model):
         """Raise :class:`SkeletonMismatchError` unless this 3-D model can observe ``motion``:
         a skeleton with as many shape joints, or markers with every name of ``markers_``."""
         where = motion.name or ("markers" if isinstance(motion, Markers) else "motion")
+        if self.uses_markers and isinstance(motion, Motion):
+            try:
+                self.as_markers(motion)
+            except SkeletonMismatchError as exc:
+                raise SkeletonMismatchError(f"{where}: {exc}") from None
+            return
         if self.uses_markers or isinstance(motion, Markers):
             if not (self.uses_markers and isinstance(motion, Markers)):
                 learnt = "markers" if self.uses_markers else "skeletons"
@@ -320,6 +326,16 @@ class VirtualPartner(Model):
             )
         return joints_skeleton(motion.skeleton, shape_joints(motion.skeleton))
 
+    def as_markers(self, motion: Motion | Markers) -> Markers:
+        """A model of markers' view of ``motion``: Markers as they are; a skeleton's joints of
+        the body points the markers name (``TORSO``, ``R_HAND``...,
+        :func:`~markovmotion.features.markers.named_body_points`). No lift is needed (unlike
+        the dual HMM's, :class:`~markovmotion.features.markers.Lift`): the partner is placed
+        about A's marker centroid, height included (:func:`person_from_markers`)."""
+        if isinstance(motion, Markers):
+            return motion
+        return named_body_points(motion, self.markers_)
+
     def person(self, take: Motion | Markers) -> Person:
         """One captured person as the model sees it (its shape joints or markers), at the
         take's own rate (:func:`~markovmotion.features.joint_shape.person_from_take`)."""
@@ -345,7 +361,7 @@ class VirtualPartner(Model):
         :meth:`propagator` (``n_hypotheses``, ``sigma``, ``response``, ``resync``).
         """
         self.check_input(motion)
-        motion = motion.resample(self.fps_)
+        motion = (self.as_markers(motion) if self.uses_markers else motion).resample(self.fps_)
         resp = self.respond_shapes(self.person(motion), person, rng=rng, **options)
         name = f"partner of {motion.name}" if motion.name else "virtual partner"
         if isinstance(motion, Markers):
@@ -477,6 +493,8 @@ class ChainPartner:
         if kind is not self._checked:
             self.model.check_input(frame)
             self._checked = kind
+        if self._markers is not None and isinstance(frame, Motion):
+            frame = self.model.as_markers(frame)  # a skeleton's body points by name
         if isinstance(frame, Markers):
             pos = frame.select(self._markers).positions
             if not np.isfinite(pos).all():

@@ -45,7 +45,10 @@ markers in A's ground frame (A's marker centroid on the floor, A's heading)
 + PCA; the trellis and windowed decoder are the same, and the output is
 real training frames of B's markers (``markers_b_``), B's centroid averaged
 over ``placement_window`` and B's shape about it over ``blend_window``,
-placed through A's ground frame: ``respond`` returns Markers. A frame of A
+placed through A's ground frame: ``respond`` returns Markers. A model learnt
+from C3D markers that name body points (``TORSO``, ``R_HAND``...) answers a skeleton too
+(:func:`~markovmotion.features.markers.named_body_points`), lifted to the training people's
+height (:class:`~markovmotion.features.markers.Lift`). A frame of A
 with a marker unseen (NaN) is a missing observation; gaps in training takes
 are filled by interpolation (:func:`~markovmotion.features.markers.fill_gaps`).
 """
@@ -53,6 +56,7 @@ are filled by interpolation (:func:`~markovmotion.features.markers.fill_gaps`).
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Sequence
 
 import numba
@@ -77,9 +81,11 @@ from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, Joi
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.features.body_points import BODY_POINTS, body_point_index, body_points
 from markovmotion.features.markers import (
+    Lift,
     MarkerFeatures,
     fill_gaps,
     into_marker_frame,
+    named_body_points,
     out_of_marker_frame,
     virtual_markers,
 )
@@ -567,11 +573,34 @@ class DualHMM(Model):
         if isinstance(x, Markers):
             return x
         if not self.markers:
-            raise SkeletonMismatchError(
-                f"{x.name or 'input'}: a skeleton's motion, but the model knows markers by "
-                "their names in C3D files (give a .c3d file)"
-            )
+            return named_body_points(x, self.pipeline_a_.steps[0].names_)
         return virtual_markers(x, int(self.markers))
+
+    def lifts(self, x: Motion | Markers) -> bool:
+        """Whether A's points are lifted to the training people's height (:meth:`lift`): a
+        skeleton given to a model learnt from C3D markers, whose vertical origin is the
+        sensor's, not the floor."""
+        return self.uses_markers and not self.markers and isinstance(x, Motion)
+
+    def lift(self) -> Lift:
+        """:class:`~markovmotion.features.markers.Lift` to the training people's mean
+        centroid height (B's training markers, A's too with ``roles="both"``)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return Lift(float(np.nanmean(np.nanmean(self.markers_b_[..., 1], axis=1))))
+
+    def a_in(self, x: Motion | Markers) -> tuple[Motion | Markers, np.ndarray | None]:
+        """A as the model sees it, at the model's rate: a Motion, or on markers A's Markers
+        (virtual or body points by name on a skeleton, :meth:`as_markers`), lifted when
+        :meth:`lifts`; and the lift per frame (None when not lifted), by which B's answer
+        goes down again."""
+        lifting = self.lifts(x)
+        if self.uses_markers:
+            x = self.input_markers(x)
+        x = self._rate(x)
+        if not lifting:
+            return x, None
+        return self.lift()(x)
 
     def check_state(self) -> None:
         """The learnt parts a model file must hold, and that they fit each other: both
@@ -742,7 +771,7 @@ class DualHMM(Model):
         :meth:`respond`.
         """
         self.check_input(motion_a)
-        xa, missing = self.features_a(self._rate(motion_a))
+        xa, missing = self.features_a(self.a_in(motion_a)[0])
         log_b = self.lambda_a_.log_frameprob(xa)
         log_b[missing] = 0.0
         hmm = self.lambda_a_
@@ -760,9 +789,7 @@ class DualHMM(Model):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         self.check_input(motion_a)
-        if self.uses_markers:
-            motion_a = self.input_markers(motion_a)
-        motion_a = self._rate(motion_a)
+        motion_a, lift = self.a_in(motion_a)
         xa, missing = self.features_a(motion_a)
         log_b = self.lambda_a_.log_frameprob(xa)
         log_b[missing] = 0.0
@@ -786,8 +813,10 @@ class DualHMM(Model):
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
-        where = self.placing(_fill_missing(motion_a, missing), method)
-        return self.frames_to_motion(idx, *where, root, rot)
+        origin, yaw = self.place(_fill_missing(motion_a, missing))
+        if lift is not None:
+            origin[:, 1] -= lift
+        return self.frames_to_motion(idx, *self.smoothed(origin, yaw, method), root, rot)
 
     def regression_positions(
         self, states: Sequence[int], xa: Sequence[np.ndarray | None]

@@ -27,7 +27,7 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
-from markovmotion.features.markers import MarkerFeatures
+from markovmotion.features.markers import Lift, MarkerFeatures
 from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
@@ -116,6 +116,8 @@ class Partner:
         self._frames_in = 0
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton, once checked against the model's
+        self._lift: Lift | None = None  # a skeleton's points lifted to the model's markers
+        self._lifted = 0.0  # the last frame's lift (mm)
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
         self._unseen = np.zeros(len(hmm.means_))  # log b_j of a missing frame: no evidence
@@ -236,7 +238,11 @@ class Partner:
             if kind != self._checked:
                 self.model.check_input(frame)
                 self._checked = kind
+            lifting = self.model.lifts(frame)
             frame = self.model.input_markers(frame)
+            if lifting:  # a skeleton's body points to a model of sensor markers: DualHMM.a_in
+                self._lift = self._lift or self.model.lift()
+                frame, self._lifted = self._lift.step(frame)
         if frame is None or not finite_frames(frame)[0]:
             err_console.print(
                 f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
@@ -246,6 +252,7 @@ class Partner:
         if isinstance(frame, Markers):
             pos = frame.positions
             origin, yaw = self.model.place(frame)
+            origin[:, 1] -= self._lifted
         else:
             if frame.skeleton is not self._checked:
                 self.model.check_input(frame)
@@ -301,11 +308,12 @@ class Partner:
         if any(isinstance(step, RunningCentre) for step in steps):
             return None
         self.model.check_input(motion)
-        if self.model.uses_markers:
-            motion = self.model.input_markers(motion)
+        motion, lift = self.model.a_in(motion)
         xa, missing = self.model.features_a(motion)
         log_b = gaussian_log_density(xa, *self._emission)
         origin, yaw = self.model.place(motion)
+        if lift is not None:
+            origin[:, 1] -= lift
         for array in (xa, log_b, origin, yaw):  # shared by the sessions streaming the motion
             array.flags.writeable = False
         seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
