@@ -256,13 +256,15 @@ def _respond_live(
 
 
 def _load_partner_model(model: str | os.PathLike[str]):
-    """The dual HMM of ``model``; one trained on markers cannot answer a tracked skeleton."""
+    """The dual HMM of ``model``; one trained on markers answers with markers, which have no
+    body to draw into the video."""
     from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
     if getattr(dual, "uses_markers", False):
         raise SkeletonMismatchError(
-            f"{model}: the model was trained on markers; a person tracked in video is a skeleton"
+            f"{model}: the model answers with markers, which have no body to draw into the video "
+            "(train the partner on skeleton takes, --kind skeleton)"
         )
     return dual
 
