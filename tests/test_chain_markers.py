@@ -422,3 +422,57 @@ def test_chain_train_takes_several_labels_as_dualhmm_does(tmp_path):
         for sha in (file_sha256(a.path), file_sha256(b.path))
     }
     assert {f["sha256"] for f in model.train_files_} == wanted
+
+
+def test_shape_centre_takes_out_a_persons_own_offset_and_runs_online():
+    from markovmotion.features.person import ShapeCentre
+
+    rng = np.random.default_rng(4)
+    k = 6  # one person's shape size
+    takes = [rng.normal(size=(40, 2 * k + 3)) for _ in range(3)]
+    step = ShapeCentre(k, prior=10.0).fit(takes)
+    out = step.transform(takes)[0]
+    # brute force: each half minus its running mean (started from the training mean with
+    # the weight of 10 frames) plus the training mean; separation and scale pass through
+    for sl in (slice(0, k), slice(k, 2 * k)):
+        x, mean = takes[0][:, sl], step.mean_[sl]
+        for t in (0, 7, 39):
+            running = (10.0 * mean + x[: t + 1].sum(axis=0)) / (10.0 + t + 1)
+            np.testing.assert_allclose(out[t, sl], x[t] - running + mean)
+    np.testing.assert_allclose(out[:, 2 * k :], takes[0][:, 2 * k :])
+    # a person whose shape is off by a constant is seen off by a share that decays with time
+    s = takes[1][:, :k]
+    offset = rng.normal(size=k)
+    gap = step.person(s + offset, 0) - step.person(s, 0)
+    t = np.arange(1, len(s) + 1)[:, None]
+    np.testing.assert_allclose(gap, offset * 10.0 / (10.0 + t))
+    # online, row by row, as a whole take; either half: the halves' average
+    online = step.online(1)
+    np.testing.assert_allclose([online(row) for row in s], step.person(s, 1))
+    np.testing.assert_allclose(step.target(None), (step.mean_[:k] + step.mean_[k:]) / 2)
+
+
+def test_a_person_normalised_marker_chain_streams_what_respond_gives(handshakes, tmp_path):
+    last = handshakes[-1][2]
+    train = [(a, b) for _, _, people, a, b in handshakes if people != last]
+    model = VirtualPartner(**SMALL, normalise="person").fit(train)
+    assert model.shape_centre is not None
+    _, _, _, a, _ = handshakes[-1]
+    a = a.trim(0, 90).resample(model.fps_)
+    whole = model.respond(a, n_hypotheses=10, rng=3)
+    size = marker_size(a.select(model.markers_).positions)
+    partner = model.partner(rng=3, size=size, n_hypotheses=10)
+    out = [f for t in range(a.n_frames) if (f := partner.step(a.trim(t, t + 1)))]
+    out += partner.finish()
+    np.testing.assert_allclose(
+        np.concatenate([f.positions for f in out]), whole.positions, atol=1e-6
+    )
+    # the option and the centre's mean go through the model file
+    path = tmp_path / "person.npz"
+    model.save(path)
+    back = VirtualPartner.load(path)
+    assert back.normalise == "person"
+    np.testing.assert_allclose(back.shape_centre.mean_, model.shape_centre.mean_)
+    np.testing.assert_allclose(back.respond(a, n_hypotheses=10, rng=3).positions, whole.positions)
+    with pytest.raises(ValueError, match="normalise"):
+        VirtualPartner(**SMALL, normalise="everyone").fit(train)

@@ -13,7 +13,14 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import choose_option, grid_of, kind_option, ranged, roles_option
+from markovmotion.cli.options import (
+    choice,
+    choose_option,
+    grid_of,
+    kind_option,
+    ranged,
+    roles_option,
+)
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -53,6 +60,12 @@ CHOOSE = choose_option(
     "world plus body-centred error of the multiple hypotheses",
     "n_state_prototypes+n_behaviour_prototypes=20,40,80;roles=one,both",
 )
+NORMALISE = typer.Option(
+    "none",
+    callback=choice(("none", "person")),
+    help="'person': each person's shape relative to their own running mean, on the training "
+    "people's mean shape, for people the model has never seen; 'none': the paper's.",
+)
 RESPONSE = typer.Option(
     DEFAULT_RESPONSE,
     help="The response of multiple hypotheses reported as multiple_hypotheses: ml (the "
@@ -60,7 +73,15 @@ RESPONSE = typer.Option(
 )
 
 
-def _new_model(prototypes: int, behaviours: int, gamma: float, lam: float, epochs: int, seed: int):
+def _new_model(
+    prototypes: int,
+    behaviours: int,
+    gamma: float,
+    lam: float,
+    epochs: int,
+    seed: int,
+    normalise: str = "none",
+):
     """An unfitted :class:`VirtualPartner` with the command line's settings."""
     from markovmotion.models.chain.partner import VirtualPartner
 
@@ -71,6 +92,7 @@ def _new_model(prototypes: int, behaviours: int, gamma: float, lam: float, epoch
         gamma=gamma,
         n_epochs=epochs,
         random_state=seed,
+        normalise=normalise,
     )
 
 
@@ -146,6 +168,7 @@ def train(
     seed: int = SEED,
     kind: str = kind_option(),
     roles: str = roles_option(),
+    normalise: str = NORMALISE,
     choose: str = CHOOSE,
     hypotheses: int = ranged(
         "hypotheses", 200, min=2, help="--choose: hypotheses N of the multiple-hypothesis runs."
@@ -161,7 +184,7 @@ def train(
     grid = grid_of("chain", choose)
     labels = [x.strip() for x in label.split(",") if x.strip()] or [label]
     takes = _training_takes(data, source, labels if len(labels) > 1 else labels[0], kind)
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
     extras: dict = {}
     with err_console.status("learning prototypes and chain"):
         if source == "mocap":
@@ -375,6 +398,7 @@ def crossval(
     sigma: float = SIGMA,
     resync: float = RESYNC,
     roles: str = roles_option(),
+    normalise: str = NORMALISE,
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),
@@ -396,7 +420,7 @@ def crossval(
     from markovmotion.evaluate.chain import crossval_index
 
     _check_response(response)
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed)
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
     parts = [choose] if choose else []  # and the old flags, as the grid they stand for
     if choose_prototypes:

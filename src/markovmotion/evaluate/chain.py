@@ -399,7 +399,7 @@ def nearest_partners(
         real = take.person(person)
         half = c[:, model.shape_step.person_slice(person)]
         nn = NearestNeighbors(n_neighbors=1).fit(half)
-        idx = nn.kneighbors(model.observe(real), return_distance=False)[:, 0]
+        idx = nn.kneighbors(model.observe(real, person), return_distance=False)[:, 0]
         out.append(model.place(c[idx], np.full(len(idx), person), real))
     return out[0], out[1]
 

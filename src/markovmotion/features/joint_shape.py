@@ -47,6 +47,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
 from markovmotion.features.markers import MarkerFeatures, fill_gaps
+from markovmotion.features.person import ShapeCentre
 from markovmotion.features.smoothing import TemporalSmoothing
 from markovmotion.state import StateError, check_count, is_fitted, register, require
 
@@ -431,13 +432,21 @@ class JointShapeScaling(AugmentedConfiguration):
 
 
 def joint_shape_pipeline(
-    takes: Sequence[TwoPeople], window: int = 5, lam: float = 10.0
+    takes: Sequence[TwoPeople], window: int = 5, lam: float = 10.0, normalise: str = "none"
 ) -> FeaturePipeline:
     """TwoPeople -> state vectors F = [C, lambda dC] in [0, 1] (§2; paper: w = 5, lambda = 10).
 
-    Unfitted but for the layout of C, which is read from ``takes``.
+    Unfitted but for the layout of C, which is read from ``takes``. ``normalise="person"``:
+    each person's shapes centred on the training people's mean
+    (:class:`~markovmotion.features.person.ShapeCentre`) before the smoothing.
     """
     shape = JointShape().fit(takes)
+    centre = [ShapeCentre(shape.shape_size)] if normalise == "person" else []
     return FeaturePipeline(
-        [shape, TemporalSmoothing(window), JointShapeScaling(lam, shared=2 * shape.shape_size)]
+        [
+            shape,
+            *centre,
+            TemporalSmoothing(window),
+            JointShapeScaling(lam, shared=2 * shape.shape_size),
+        ]
     )

@@ -19,7 +19,7 @@ each sequence's causal running mean.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -87,6 +87,79 @@ class OnlineCentre:
         self.total += x
         self.count += 1.0
         return x - self.total / self.count
+
+
+@register
+class ShapeCentre(FeatureStep):
+    """The behaviour chain's person normalisation (``VirtualPartner(normalise="person")``):
+    combined shape vectors C (:class:`~markovmotion.features.joint_shape.JointShape`, the
+    two people's shapes in its first ``2 * shape_size`` columns) with each person's shape
+    minus its causal running mean plus the training people's mean shape ``mean_``
+    (:class:`RunningCentre`'s running mean, with its ``prior``).
+
+    Each person's body and posture shift their shape vectors by an offset of their own; with
+    few training pairs the chain's prototypes learn who moves more than how, and the partner
+    shows a training person's posture. Centred, the chain learns how the training people
+    moved on the average body, and the real person is observed the same way, frame by frame
+    (:meth:`person`, :meth:`online`), as the dual HMM's ``normalise="person"``. The
+    separation and scale columns pass through.
+    """
+
+    def __init__(self, shape_size: int = 1, prior: float = 30.0):
+        self.shape_size = shape_size
+        self.prior = prior
+
+    def fit(self, sequences: Sequence[np.ndarray]) -> ShapeCentre:
+        k = 2 * int(self.shape_size)
+        if not self.prior >= 0 or k < 2:
+            raise ValueError(f"prior >= 0 and shape_size >= 1 needed, got {self.prior}, {k // 2}")
+        self.mean_ = np.vstack([np.asarray(s, dtype=float) for s in sequences])[:, :k].mean(axis=0)
+        return self
+
+    def check_state(self) -> None:
+        if not is_fitted(self):
+            return
+        require(self, "mean_")
+        check_shape("mean_", self.mean_, (2 * int(self.shape_size),))
+        if not np.isfinite(self.mean_).all():
+            raise StateError("mean_: not finite")
+
+    def _centred(self, x: np.ndarray, mean: np.ndarray) -> np.ndarray:
+        step = RunningCentre(self.prior)
+        step.mean_ = mean
+        return step.transform([x])[0] + mean
+
+    def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        k = len(self.mean_)
+        out = []
+        for s in sequences:
+            c = np.array(s, dtype=float)
+            half = k // 2
+            for sl in (slice(0, half), slice(half, k)):
+                c[:, sl] = self._centred(c[:, sl], self.mean_[sl])
+            out.append(c)
+        return out
+
+    def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
+        return [np.asarray(s) for s in sequences]
+
+    def target(self, person: int | None) -> np.ndarray:
+        """The mean shape a real person is centred on: their half's, or (``None``, either
+        half) the two halves' average."""
+        half = len(self.mean_) // 2
+        halves = self.mean_[:half], self.mean_[half:]
+        return (halves[0] + halves[1]) / 2 if person is None else halves[person]
+
+    def person(self, shapes: np.ndarray, person: int | None) -> np.ndarray:
+        """One real person's shape vectors S^H (F, KD) centred as :meth:`transform` centres
+        the training people's."""
+        return self._centred(np.asarray(shapes, dtype=float), self.target(person))
+
+    def online(self, person: int | None) -> Callable[[np.ndarray], np.ndarray]:
+        """:meth:`person` one row at a time."""
+        target = self.target(person)
+        centre = OnlineCentre(self.prior * target, float(self.prior))
+        return lambda row: centre(np.asarray(row, dtype=float)) + target
 
 
 def on_average_body(takes: Sequence[np.ndarray]) -> list[np.ndarray]:

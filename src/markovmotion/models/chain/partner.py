@@ -40,6 +40,8 @@ from markovmotion.features.joint_shape import (
     shape_joints,
 )
 from markovmotion.features.markers import MarkerFeatures, named_body_points
+from markovmotion.features.person import ShapeCentre
+from markovmotion.features.smoothing import TemporalSmoothing
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.chain.behaviour_chain import BehaviourChain
 from markovmotion.models.chain.condensation import (
@@ -82,6 +84,9 @@ class PartnerResponse:
 
 #: The kinds of take the behaviour chain learns from (:mod:`markovmotion.data.kinds`).
 KINDS = ("skeleton", "markers")
+#: ``VirtualPartner(normalise=...)``: the paper's shapes, or each person's centred on the
+#: training people's mean shape (:class:`~markovmotion.features.person.ShapeCentre`).
+NORMALISE = ("none", "person")
 
 
 class VirtualPartner(Model):
@@ -117,6 +122,7 @@ class VirtualPartner(Model):
         interval_noise: tuple[float, float] = (0.5, 0.25),
         random_state: int = 0,
         fps: float = DEFAULT_FPS,
+        normalise: str = "none",
     ):
         self.window = window
         self.lam = lam
@@ -127,6 +133,7 @@ class VirtualPartner(Model):
         self.interval_noise = interval_noise
         self.random_state = random_state
         self.fps = fps
+        self.normalise = normalise
 
     def fit(
         self,
@@ -145,6 +152,8 @@ class VirtualPartner(Model):
         takes = list(takes)
         if not takes:
             raise DataNotFoundError("no two-person takes to learn from")
+        if self.normalise not in NORMALISE:
+            raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
         self.skeletons_ = self.markers_ = None
         if all(isinstance(t, TwoPeople) for t in takes):
             people = takes
@@ -170,7 +179,7 @@ class VirtualPartner(Model):
             except ValueError as exc:  # a take without the first one's markers
                 raise SkeletonMismatchError(str(exc)) from None
             self.record_training(flatten(pairs))
-        self.pipeline_ = joint_shape_pipeline(people, self.window, self.lam)
+        self.pipeline_ = joint_shape_pipeline(people, self.window, self.lam, self.normalise)
         states = self.pipeline_.fit_transform(people)
         self.chain_ = BehaviourChain(
             n_state_prototypes=self.n_state_prototypes,
@@ -238,14 +247,24 @@ class VirtualPartner(Model):
         """Columns of C the real person may match: its own half, or either (eq. 18) if None."""
         return [self.shape_step.person_slice(p) for p in self.people(person)]
 
-    def observe(self, real: Person) -> np.ndarray:
-        """(T, KD) the real person's shape vectors S^H, smoothed and normalised like C."""
-        _, smoothing, _ = self.pipeline_.steps
-        return self.normalise(smoothing.transform([self.shape_step.shape_vectors(real)])[0])
+    def observe(self, real: Person, person: int | None = None) -> np.ndarray:
+        """(T, KD) the real person's shape vectors S^H, centred (``normalise="person"``, on
+        the mean shape of ``person``'s half: :meth:`ShapeCentre.person`), smoothed and
+        scaled like C."""
+        s = self.shape_step.shape_vectors(real)
+        if self.shape_centre is not None:
+            s = self.shape_centre.person(s, person)
+        smoothing = next(st for st in self.pipeline_.steps if isinstance(st, TemporalSmoothing))
+        return self.scaled(smoothing.transform([s])[0])
 
-    def normalise(self, s: np.ndarray) -> np.ndarray:
+    @property
+    def shape_centre(self) -> ShapeCentre | None:
+        """The pipeline's :class:`ShapeCentre` (``normalise="person"``), else None."""
+        return next((st for st in self.pipeline_.steps if isinstance(st, ShapeCentre)), None)
+
+    def scaled(self, s: np.ndarray) -> np.ndarray:
         """Smoothed shape vectors (..., KD) of one person mapped into C's [0, 1] range."""
-        _, _, scaling = self.pipeline_.steps
+        scaling = self.pipeline_.steps[-1]
         sl = self.shape_step.person_slice(0)
         return (s - scaling.min_[sl]) / scaling.scale_[sl]
 
@@ -280,7 +299,7 @@ class VirtualPartner(Model):
         ``person`` is the real person's half of the model (0 or 1); None lets
         eq. (18) choose it at every frame (silhouettes: left or right).
         """
-        shapes, matched, errors = self.propagator(person, **options).run(self.observe(real))
+        shapes, matched, errors = self.propagator(person, **options).run(self.observe(real, person))
         roles = np.asarray(self.people(person))[matched]
         return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
 
@@ -384,7 +403,7 @@ class VirtualPartner(Model):
 
     def place(self, shapes: np.ndarray, roles: np.ndarray, real: Person) -> Person:
         """Partners of ``real`` from normalised combined shapes (T, d), real person's roles (T,)."""
-        _, _, scaling = self.pipeline_.steps
+        scaling = self.pipeline_.steps[-1]
         d = shapes.shape[1]
         c = shapes * scaling.scale_[:d] + scaling.min_[:d]
         roles = np.asarray(roles)
@@ -470,6 +489,8 @@ class ChainPartner:
             )
         else:
             self._skeleton = model.partner_skeleton(None, person)
+        centre = model.shape_centre
+        self._centre = None if centre is None else centre.online(person)
         self._propagator = model.propagator(person, rng=rng, **options)
         self._propagator.reset()
         self._shapes: deque = deque(maxlen=w)  # A's last raw shape vectors
@@ -506,6 +527,8 @@ class ChainPartner:
             return self.skip()
         self._last = frame
         s = self.model.shape_step.shape_vectors(real)[0]
+        if self._centre is not None:  # normalise="person": as observe centres a whole take
+            s = self._centre(s)
         if self._first is None:
             self._first = s
         self._shapes.append(s)
@@ -555,7 +578,7 @@ class ChainPartner:
         for i in range(t - self._behind, t - self._behind + self._window):
             i = min(max(i, 0), newest)
             rows.append(self._first if i < oldest else shapes[i - oldest])
-        r = self._propagator.step(self.model.normalise(np.mean(rows, axis=0)))
+        r = self._propagator.step(self.model.scaled(np.mean(rows, axis=0)))
         real = self._people[t - (newest - len(self._people) + 1)]
         role = np.asarray(self.model.people(self.person))[[r.role]]
         placed = self.model.place(r.shape[None], role, real)
