@@ -259,8 +259,8 @@ def respond(
     model: Path = typer.Option(..., help="Dual-HMM model file (.npz)."),
     input: Path = typer.Option(
         None,
-        help="Person A's motion (BVH), or markers (C3D) for a model trained on markers; "
-        "or --video.",
+        help="Person A's motion (BVH, ASF/AMC), or markers (C3D) for a model trained on "
+        "markers (which also reads a skeleton by the body points its markers name); or --video.",
     ),
     out: Path = typer.Option(
         ...,
