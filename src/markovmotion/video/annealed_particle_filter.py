@@ -305,6 +305,33 @@ def _coverage(pix, rad, seg, width, height):  # pragma: no cover - compiled
     return out
 
 
+@numba.njit(cache=True)
+def _project(pts, rot, trans, intr, focal, seg, radii):  # pragma: no cover - compiled
+    """Pixels (M, V, Q, 2), depths (M, V, Q) and capsule radii in pixels (M, V, S, 2) of points
+    (M, Q, 3) in V cameras (rot (V, 3, 3), trans (V, 3), intr (V, 4) fx fy cx cy, focal (V,)):
+    :meth:`CalibratedCamera.project` of every camera at once."""
+    m_n, q_n = pts.shape[0], pts.shape[1]
+    v_n, s_n = rot.shape[0], seg.shape[0]
+    pix = np.empty((m_n, v_n, q_n, 2))
+    depth = np.empty((m_n, v_n, q_n))
+    rad = np.empty((m_n, v_n, s_n, 2))
+    for m in range(m_n):
+        for v in range(v_n):
+            for q in range(q_n):
+                x, y, z = pts[m, q, 0], pts[m, q, 1], pts[m, q, 2]
+                cx = x * rot[v, 0, 0] + y * rot[v, 0, 1] + z * rot[v, 0, 2] + trans[v, 0]
+                cy = x * rot[v, 1, 0] + y * rot[v, 1, 1] + z * rot[v, 1, 2] + trans[v, 1]
+                cz = x * rot[v, 2, 0] + y * rot[v, 2, 1] + z * rot[v, 2, 2] + trans[v, 2]
+                cz = max(cz, 1.0)
+                pix[m, v, q, 0] = intr[v, 0] * cx / cz + intr[v, 2]
+                pix[m, v, q, 1] = intr[v, 1] * cy / cz + intr[v, 3]
+                depth[m, v, q] = cz
+            for s in range(s_n):
+                rad[m, v, s, 0] = focal[v] * radii[s, 0] / depth[m, v, seg[s, 0]]
+                rad[m, v, s, 1] = focal[v] * radii[s, 1] / depth[m, v, seg[s, 1]]
+    return pix, rad, depth
+
+
 def project_model(
     joints: np.ndarray, cameras: Sequence[CalibratedCamera]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -314,16 +341,11 @@ def project_model(
     """
     seg, radii = BODY_SHAPE.segments()
     pts = BODY_SHAPE.points(joints)  # (M, Q, 3)
-    pix, depth = [], []
-    for c in cameras:
-        p, z = c.project(pts)
-        pix.append(p)
-        depth.append(z)
-    pix_a = np.stack(pix, axis=1)
-    depth_a = np.stack(depth, axis=1)
-    focal = np.array([c.focal for c in cameras])[None, :, None, None]
-    rad = focal * radii[None, None] / depth_a[:, :, seg]
-    return pix_a, rad, depth_a
+    rot = np.array([c.R for c in cameras], dtype=float)
+    trans = np.array([c.t for c in cameras], dtype=float)
+    intr = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in cameras])
+    focal = np.array([c.focal for c in cameras])
+    return _project(np.ascontiguousarray(pts), rot, trans, intr, focal, seg, radii)
 
 
 def model_coverage(joints: np.ndarray, camera: CalibratedCamera) -> np.ndarray:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -102,6 +103,36 @@ def _greedy_axes(
             break
         k[best] += 1
     return k
+
+
+def _turned(yaw: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
+    """Rotation vectors (M, 3) of the rotations ``rotvec`` (M, 3) followed by turns of ``yaw``
+    (M,) rad about Y: scipy's ``(from_euler("y", yaw) * from_rotvec(rotvec)).as_rotvec()``
+    (same quaternion product and conversions), without its per-call overhead (it is the
+    tracker's inner loop)."""
+    theta = np.sqrt(np.einsum("ma,ma->m", rotvec, rotvec))
+    small = theta <= 1e-3
+    t2 = theta * theta
+    half = np.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(0.5 * theta) / np.where(small, 1.0, theta))
+    bx, by, bz = (rotvec * half[:, None]).T
+    bw = np.cos(0.5 * theta)
+    s, c = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
+    # (0, s, 0, c) * (bx, by, bz, bw), Hamilton product
+    qx = c * bx + s * bz
+    qy = c * by + s * bw
+    qz = c * bz - s * bx
+    qw = c * bw - s * by
+    sign = np.where(qw < 0, -1.0, 1.0)
+    qx, qy, qz, qw = qx * sign, qy * sign, qz * sign, qw * sign
+    norm = np.sqrt(qx * qx + qy * qy + qz * qz)
+    angle = 2.0 * np.arctan2(norm, qw)
+    a2 = angle * angle
+    scale = np.where(
+        angle <= 1e-3,
+        2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0,
+        angle / np.sin(0.5 * np.where(angle <= 1e-3, 1.0, angle)),
+    )
+    return np.stack([qx * scale, qy * scale, qz * scale], axis=-1)
 
 
 def _yaw(rot: Rotation) -> np.ndarray:
@@ -222,6 +253,15 @@ class BodyModel:
                 mask[sl] = True
         return mask
 
+    @cached_property
+    def _expansion(self) -> np.ndarray:
+        """(D, J * 3): the state to the joints' rotation vectors less their mean (the bases in
+        one matrix; zero for the root's position and heading)."""
+        out = np.zeros((self.n_dof, *self.mean.shape))
+        for j, basis, sl in zip(self.joints, self.bases, self.slices, strict=True):
+            out[sl, j] = basis.T
+        return out.reshape(self.n_dof, -1)
+
     # ------------------------------------------------------------------ poses
     def standing(self, position: np.ndarray, yaw: float = 0.0) -> np.ndarray:
         """The state (D,) of the mean pose with the root at ``position`` (mm) facing ``yaw``."""
@@ -238,12 +278,9 @@ class BodyModel:
     def rotvecs(self, states: np.ndarray) -> np.ndarray:
         """Local rotation vectors (M, J, 3) of states (M, D); joint 0's is global."""
         states = np.atleast_2d(states)
-        m = len(states)
-        rv = np.broadcast_to(self.mean, (m, *self.mean.shape)).copy()
-        for j, basis, sl in zip(self.joints, self.bases, self.slices, strict=True):
-            rv[:, j] += states[:, sl] @ basis.T
-        root = Rotation.from_euler("y", states[:, 3:4]) * Rotation.from_rotvec(rv[:, 0])
-        rv[:, 0] = root.as_rotvec()
+        rv = (states @ self._expansion).reshape(len(states), *self.mean.shape)
+        rv += self.mean
+        rv[:, 0] = _turned(states[:, 3], rv[:, 0])
         return rv
 
     def joint_positions(self, states: np.ndarray) -> np.ndarray:
