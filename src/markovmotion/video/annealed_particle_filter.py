@@ -120,7 +120,8 @@ def _gradient(img: np.ndarray, sigma: float) -> np.ndarray:
 
 @dataclass
 class ViewFeatures:
-    """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame."""
+    """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame
+    (the first ``n_samples`` of each view, kept sorted by row for the coverage cost)."""
 
     fg: np.ndarray
     edge: np.ndarray
@@ -128,6 +129,12 @@ class ViewFeatures:
     n_samples: np.ndarray
     centroids: list[np.ndarray | None] = field(default_factory=list)
     heights: list[float] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.samples = np.array(self.samples, dtype=float)
+        for v, n in enumerate(self.n_samples):
+            rows = self.samples[v, :n]
+            self.samples[v, :n] = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
 
 
 def view_features(
@@ -184,12 +191,27 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
     return img[v, yi, xi]
 
 
+@numba.njit(cache=True)
+def _first_row(samples, v, n, y):  # pragma: no cover - compiled
+    """The first of the ``n`` samples of view ``v`` (sorted by row) with a row >= ``y``."""
+    lo = 0
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if samples[v, mid, 1] < y:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @numba.njit(cache=True, fastmath=True)
 def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
     pix (M, V, Q, 2) projected model points; rad (M, V, S, 2) capsule end radii in
-    pixels; seg (S, 2) point indices (a == b for a ball).
+    pixels; seg (S, 2) point indices (a == b for a ball); samples (V, K, 2) the first
+    n_samples of each view sorted by row (y), as :class:`ViewFeatures` keeps them.
     """
     m_n, v_n = pix.shape[0], pix.shape[1]
     s_n = seg.shape[0]
@@ -199,6 +221,7 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
         geo = np.empty((s_n, 9))  # per capsule: ax, ay, dx, dy, l2, ra, rb, x range
         ylo = np.empty(s_n)
         yhi = np.empty(s_n)
+        covered = np.empty(samples.shape[1], np.int64)
         total = 0.0
         for v in range(v_n):
             e_in = 0.0
@@ -251,32 +274,32 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                         e_ed += 1.0 - _lookup(edge, v, ax + ra * c, ay + ra * sn)
                         n_in += 1
                         n_ed += 1
-            miss = 0
-            for k in range(n_samples[v]):
-                px = samples[v, k, 0]
-                py = samples[v, k, 1]
-                covered = False
-                for s in range(s_n):
-                    if px < geo[s, 7] or px > geo[s, 8] or py < ylo[s] or py > yhi[s]:
-                        continue
-                    ax = geo[s, 0]
-                    ay = geo[s, 1]
-                    dx = geo[s, 2]
-                    dy = geo[s, 3]
-                    l2 = geo[s, 4]
-                    t = 0.0
-                    if l2 > 1e-12:
-                        t = ((px - ax) * dx + (py - ay) * dy) / l2
-                        t = min(max(t, 0.0), 1.0)
+            # coverage: the samples (sorted by row) in each capsule's box, found by bisection
+            k_n = n_samples[v]
+            for k in range(k_n):
+                covered[k] = 0
+            for s in range(s_n):
+                k0 = _first_row(samples, v, k_n, ylo[s])
+                k1 = _first_row(samples, v, k_n, math.nextafter(yhi[s], math.inf))
+                ax = geo[s, 0]
+                ay = geo[s, 1]
+                dx = geo[s, 2]
+                dy = geo[s, 3]
+                inv = 1.0 / geo[s, 4] if geo[s, 4] > 1e-12 else 0.0
+                ra = geo[s, 5]
+                dr = geo[s, 6] - ra
+                for k in range(k0, k1):
+                    px = samples[v, k, 0]
+                    py = samples[v, k, 1]
+                    t = min(max(((px - ax) * dx + (py - ay) * dy) * inv, 0.0), 1.0)
                     ex = ax + t * dx - px
                     ey = ay + t * dy - py
-                    r = geo[s, 5] + t * (geo[s, 6] - geo[s, 5])
-                    if ex * ex + ey * ey <= r * r:
-                        covered = True
-                        break
-                if not covered:
-                    miss += 1
-            e_cov = miss / n_samples[v] if n_samples[v] > 0 else 0.0
+                    r = ra + t * dr
+                    covered[k] |= ex * ex + ey * ey <= r * r
+            hit = 0
+            for k in range(k_n):
+                hit += covered[k]
+            e_cov = (k_n - hit) / k_n if k_n > 0 else 0.0
             total += e_in / max(n_in, 1) + e_cov + edge_weight * e_ed / max(n_ed, 1)
         out[m] = total / (v_n * (2.0 + edge_weight))
 
@@ -380,19 +403,30 @@ def survival_beta(cost: np.ndarray, survival: float) -> float:
     The survival rate is the effective sample size (sum w)^2 / sum w^2 over the
     number of particles (Deutscher et al. §4); it falls as beta grows.
     """
+    return float(_survival_beta(np.asarray(cost, dtype=float), float(survival)))
+
+
+@numba.njit(cache=True)
+def _survival_rate(e, b):  # pragma: no cover - compiled
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(e.shape[0]):
+        w = math.exp(-b * e[i])
+        s1 += w
+        s2 += w * w
+    return s1 * s1 / (e.shape[0] * s2)
+
+
+@numba.njit(cache=True)
+def _survival_beta(cost, survival):  # pragma: no cover - compiled
+    """:func:`survival_beta`: beta bracketed by quadrupling, then 30 bisections."""
     e = cost - cost.min()
     lo, hi = 0.0, 1.0
-    n = len(e)
-
-    def rate(b: float) -> float:
-        w = np.exp(-b * e)
-        return w.sum() ** 2 / (n * (w**2).sum())
-
-    while rate(hi) > survival and hi < 1e8:
+    while _survival_rate(e, hi) > survival and hi < 1e8:
         hi *= 4
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if rate(mid) > survival:
+        if _survival_rate(e, mid) > survival:
             lo = mid
         else:
             hi = mid
