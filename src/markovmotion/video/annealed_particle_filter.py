@@ -111,11 +111,37 @@ def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
-def _gradient(img: np.ndarray, sigma: float) -> np.ndarray:
-    g = cv2.GaussianBlur(img, (0, 0), sigma)
-    return np.hypot(
-        cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+def _sobel(smooth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y Sobel responses (float32) of a smoothed image."""
+    return (
+        cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3),
+        cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3),
     )
+
+
+@numba.njit(cache=True)
+def _hypot32(x, y):  # pragma: no cover - compiled
+    """``np.hypot`` of two float32 values, to the bit: in float64 (exact squares), rounded."""
+    a = np.float64(x)
+    b = np.float64(y)
+    return np.float32(math.sqrt(a * a + b * b))
+
+
+@numba.njit(cache=True)
+def _edge_map(ox, oy, outline_scale, ix, iy, inner_scale, smooth, near):  # pragma: no cover
+    """max(outline, inner) (H, W) float32: each the gradient magnitude (float32 ``np.hypot``
+    of the Sobel responses) over its scale, clipped to [0, 1]; the inner edges only where the
+    smoothed foreground exceeds ``near``."""
+    h, w = ox.shape
+    out = np.empty((h, w), np.float32)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    for y in range(h):
+        for x in range(w):
+            a = min(max(_hypot32(ox[y, x], oy[y, x]) / outline_scale, zero), one)
+            b = min(max(_hypot32(ix[y, x], iy[y, x]) / inner_scale, zero), one)
+            out[y, x] = max(a, b) if smooth[y, x] > near else a
+    return out
 
 
 @dataclass
@@ -151,17 +177,26 @@ def view_features(
     n_samples = np.zeros(v, np.intp)
     centroids, heights = [], []
     for k, (frame, bg) in enumerate(zip(frames, backgrounds, strict=True)):
-        diff = np.abs(frame.astype(np.int16) - bg.astype(np.int16)).max(axis=2).astype(np.float32)
-        diff = cv2.GaussianBlur(diff, (0, 0), 1.0)
+        channels = cv2.split(cv2.absdiff(frame, bg))  # the largest channel difference
+        diff = channels[0]
+        for c in channels[1:]:
+            diff = cv2.max(diff, c)
+        diff = cv2.GaussianBlur(diff.astype(np.float32), (0, 0), 1.0)
         f = np.clip((diff - FG_LOW) / (FG_HIGH - FG_LOW), 0, 1)
         f = cv2.morphologyEx(f, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-        outline = np.clip(_gradient(f, 2.0) / (8 * 0.15), 0, 1)  # Sobel gain 8; sigma-2 step 0.2
+        smooth = cv2.GaussianBlur(f, (0, 0), 2.0)
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY).astype(np.float32)
-        near = cv2.GaussianBlur(f, (0, 0), 2.0) > 0.05
-        inner = np.clip(_gradient(grey, 1.0) / EDGE_CONTRAST, 0, 1) * near
+        both = _edge_map(
+            *_sobel(smooth),
+            np.float32(8 * 0.15),  # the outline: Sobel gain 8; sigma-2 step 0.2
+            *_sobel(cv2.GaussianBlur(grey, (0, 0), 1.0)),
+            np.float32(EDGE_CONTRAST),  # inner edges near the foreground
+            smooth,
+            np.float32(0.05),
+        )
         fh, fw = f.shape
         fg[k, :fh, :fw] = f
-        edge[k, :fh, :fw] = cv2.GaussianBlur(np.maximum(outline, inner), (0, 0), 1.0)
+        edge[k, :fh, :fw] = cv2.GaussianBlur(both, (0, 0), 1.0)
         ys, xs = np.nonzero(f > 0.5)
         if len(xs):
             pick = rng.choice(len(xs), min(COVER_SAMPLES, len(xs)), replace=False)
