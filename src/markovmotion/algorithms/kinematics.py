@@ -8,6 +8,8 @@ poses affordable. Tests check that the two agree.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -80,6 +82,43 @@ def ancestors_closure(skeleton: Skeleton, joints: np.ndarray) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
+@dataclass(frozen=True)
+class KinematicChain:
+    """What :func:`rotvec_positions` needs of a skeleton, prepared once for many calls: parents,
+    rest offsets, the joints asked for with their ancestors, and the root joint."""
+
+    parents: np.ndarray
+    offsets: np.ndarray
+    closure: np.ndarray
+    wanted: np.ndarray
+    root_joint: int = 0
+
+    @classmethod
+    def of(
+        cls, skeleton: Skeleton, joints: np.ndarray | None = None, root_joint: int = 0
+    ) -> KinematicChain:
+        wanted = np.arange(skeleton.n_joints) if joints is None else np.asarray(joints)
+        return cls(
+            skeleton.parents.astype(np.intp),
+            np.ascontiguousarray(skeleton.offsets, dtype=float),
+            ancestors_closure(skeleton, wanted).astype(np.intp),
+            wanted.astype(np.intp),
+            int(root_joint),
+        )
+
+    def positions(self, rotvecs: np.ndarray, root_positions: np.ndarray) -> np.ndarray:
+        """Global positions (M, len(wanted), 3) in mm (see :func:`rotvec_positions`)."""
+        return _fk(
+            np.ascontiguousarray(rotvecs, dtype=float),
+            np.ascontiguousarray(root_positions, dtype=float),
+            self.root_joint,
+            self.parents,
+            self.offsets,
+            self.closure,
+            self.wanted,
+        )
+
+
 def rotvec_positions(
     skeleton: Skeleton,
     rotvecs: np.ndarray,
@@ -97,16 +136,7 @@ def rotvec_positions(
         joints: which joints to return (default: all).
         root_joint: the joint whose translation ``root_positions`` gives.
     """
-    wanted = np.arange(skeleton.n_joints) if joints is None else np.asarray(joints, dtype=np.intp)
-    return _fk(
-        np.ascontiguousarray(rotvecs, dtype=float),
-        np.ascontiguousarray(root_positions, dtype=float),
-        int(root_joint),
-        skeleton.parents.astype(np.intp),
-        np.ascontiguousarray(skeleton.offsets, dtype=float),
-        ancestors_closure(skeleton, wanted).astype(np.intp),
-        wanted.astype(np.intp),
-    )
+    return KinematicChain.of(skeleton, joints, root_joint).positions(rotvecs, root_positions)
 
 
 def fit_rotations(skeleton: Skeleton, positions: np.ndarray, fps: float = 30.0) -> Motion:

@@ -147,7 +147,9 @@ def _edge_map(ox, oy, outline_scale, ix, iy, inner_scale, smooth, near):  # prag
 @dataclass
 class ViewFeatures:
     """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame
-    (the first ``n_samples`` of each view, kept sorted by row for the coverage cost)."""
+    (the first ``n_samples`` of each view, whole pixels, kept sorted by row for the coverage
+    cost, also as ``sample_x`` and ``sample_y`` (V, K); ``rows`` (V, H + 1) counts each view's
+    samples above every row)."""
 
     fg: np.ndarray
     edge: np.ndarray
@@ -158,9 +160,15 @@ class ViewFeatures:
 
     def __post_init__(self) -> None:
         self.samples = np.array(self.samples, dtype=float)
+        if not np.array_equal(self.samples, np.round(self.samples)):
+            raise ValueError("foreground samples must be whole pixels")
+        self.rows = np.zeros((len(self.samples), self.fg.shape[1] + 1), np.intp)
         for v, n in enumerate(self.n_samples):
-            rows = self.samples[v, :n]
-            self.samples[v, :n] = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
+            pts = self.samples[v, :n]
+            self.samples[v, :n] = pts[np.lexsort((pts[:, 0], pts[:, 1]))]
+            self.rows[v] = np.searchsorted(self.samples[v, :n, 1], np.arange(self.fg.shape[1] + 1))
+        self.sample_x = np.ascontiguousarray(self.samples[..., 0])
+        self.sample_y = np.ascontiguousarray(self.samples[..., 1])
 
 
 def view_features(
@@ -211,6 +219,8 @@ def view_features(
 
 
 # ----------------------------------------------------------------------------- the weighting function
+#: The body's primitives: point indices (S, 2) and radii in mm (S, 2), made once.
+_SEGMENTS = BODY_SHAPE.segments()
 _T_CAPSULE = np.array([0.1, 0.3, 0.5, 0.7, 0.9])
 _ACROSS = np.array([-0.6, 0.0, 0.6])
 _BALL_COS = np.cos(np.pi / 4 + np.arange(4) * np.pi / 2)
@@ -226,27 +236,14 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
     return img[v, yi, xi]
 
 
-@numba.njit(cache=True)
-def _first_row(samples, v, n, y):  # pragma: no cover - compiled
-    """The first of the ``n`` samples of view ``v`` (sorted by row) with a row >= ``y``."""
-    lo = 0
-    hi = n
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if samples[v, mid, 1] < y:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 @numba.njit(cache=True, fastmath=True)
-def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
+def _costs(pix, rad, seg, fg, edge, sx, sy, n_samples, rows, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
     pix (M, V, Q, 2) projected model points; rad (M, V, S, 2) capsule end radii in
-    pixels; seg (S, 2) point indices (a == b for a ball); samples (V, K, 2) the first
-    n_samples of each view sorted by row (y), as :class:`ViewFeatures` keeps them.
+    pixels; seg (S, 2) point indices (a == b for a ball); sx, sy (V, K) columns and rows of the
+    first n_samples foreground samples of each view, sorted by row, whole pixels, and rows
+    (V, H + 1) the number of samples above each row, as :class:`ViewFeatures` keeps them.
     """
     m_n, v_n = pix.shape[0], pix.shape[1]
     s_n = seg.shape[0]
@@ -256,7 +253,8 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
         geo = np.empty((s_n, 9))  # per capsule: ax, ay, dx, dy, l2, ra, rb, x range
         ylo = np.empty(s_n)
         yhi = np.empty(s_n)
-        covered = np.empty(samples.shape[1], np.int64)
+        covered = np.empty(sx.shape[1], np.bool_)
+        n_rows = rows.shape[1] - 1
         total = 0.0
         for v in range(v_n):
             e_in = 0.0
@@ -309,13 +307,13 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                         e_ed += 1.0 - _lookup(edge, v, ax + ra * c, ay + ra * sn)
                         n_in += 1
                         n_ed += 1
-            # coverage: the samples (sorted by row) in each capsule's box, found by bisection
+            # coverage: the samples in each capsule's rows (they are sorted by row)
             k_n = n_samples[v]
             for k in range(k_n):
-                covered[k] = 0
+                covered[k] = False
             for s in range(s_n):
-                k0 = _first_row(samples, v, k_n, ylo[s])
-                k1 = _first_row(samples, v, k_n, math.nextafter(yhi[s], math.inf))
+                k0 = rows[v, int(math.ceil(min(max(ylo[s], 0.0), n_rows)))]
+                k1 = rows[v, int(math.floor(min(max(yhi[s] + 1.0, 0.0), n_rows)))]
                 ax = geo[s, 0]
                 ay = geo[s, 1]
                 dx = geo[s, 2]
@@ -323,14 +321,17 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                 inv = 1.0 / geo[s, 4] if geo[s, 4] > 1e-12 else 0.0
                 ra = geo[s, 5]
                 dr = geo[s, 6] - ra
-                for k in range(k0, k1):
-                    px = samples[v, k, 0]
-                    py = samples[v, k, 1]
+                bx = sx[v, k0:k1]
+                by = sy[v, k0:k1]
+                bc = covered[k0:k1]
+                for k in range(bx.shape[0]):  # on slices from 0: a loop LLVM vectorises
+                    px = bx[k]
+                    py = by[k]
                     t = min(max(((px - ax) * dx + (py - ay) * dy) * inv, 0.0), 1.0)
                     ex = ax + t * dx - px
                     ey = ay + t * dy - py
                     r = ra + t * dr
-                    covered[k] |= ex * ex + ey * ey <= r * r
+                    bc[k] |= ex * ex + ey * ey <= r * r
             hit = 0
             for k in range(k_n):
                 hit += covered[k]
@@ -397,7 +398,7 @@ def project_model(
 
     ``joints`` (M, 19, 3) are body points in mm; Q counts them and the balls' centres.
     """
-    seg, radii = BODY_SHAPE.segments()
+    seg, radii = _SEGMENTS
     pts = BODY_SHAPE.points(joints)  # (M, Q, 3)
     rot = np.array([c.R for c in cameras], dtype=float)
     trans = np.array([c.t for c in cameras], dtype=float)
@@ -424,10 +425,13 @@ def joint_costs(
     joints: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
 ) -> np.ndarray:
     """E (M,) in [0, 1] of body points (M, 19, 3) mm against one frame's features."""
-    seg, _ = BODY_SHAPE.segments()
+    seg, _ = _SEGMENTS
     pix, rad, _ = project_model(joints, cameras)
     out = np.empty(len(joints))
-    _costs(pix, rad, seg, feats.fg, feats.edge, feats.samples, feats.n_samples, EDGE_WEIGHT, out)
+    _costs(
+        pix, rad, seg, feats.fg, feats.edge, feats.sample_x, feats.sample_y, feats.n_samples,
+        feats.rows, EDGE_WEIGHT, out,
+    )  # fmt: skip
     return out
 
 

@@ -20,14 +20,16 @@ renderer draws them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
+import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from markovmotion.algorithms.kinematics import rotvec_positions
+from markovmotion.algorithms.kinematics import KinematicChain, rotvec_positions
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
@@ -105,34 +107,40 @@ def _greedy_axes(
     return k
 
 
-def _turned(yaw: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True)
+def _turned(yaw, rotvec):  # pragma: no cover - compiled
     """Rotation vectors (M, 3) of the rotations ``rotvec`` (M, 3) followed by turns of ``yaw``
     (M,) rad about Y: scipy's ``(from_euler("y", yaw) * from_rotvec(rotvec)).as_rotvec()``
-    (same quaternion product and conversions), without its per-call overhead (it is the
-    tracker's inner loop)."""
-    theta = np.sqrt(np.einsum("ma,ma->m", rotvec, rotvec))
-    small = theta <= 1e-3
-    t2 = theta * theta
-    half = np.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(0.5 * theta) / np.where(small, 1.0, theta))
-    bx, by, bz = (rotvec * half[:, None]).T
-    bw = np.cos(0.5 * theta)
-    s, c = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
-    # (0, s, 0, c) * (bx, by, bz, bw), Hamilton product
-    qx = c * bx + s * bz
-    qy = c * by + s * bw
-    qz = c * bz - s * bx
-    qw = c * bw - s * by
-    sign = np.where(qw < 0, -1.0, 1.0)
-    qx, qy, qz, qw = qx * sign, qy * sign, qz * sign, qw * sign
-    norm = np.sqrt(qx * qx + qy * qy + qz * qz)
-    angle = 2.0 * np.arctan2(norm, qw)
-    a2 = angle * angle
-    scale = np.where(
-        angle <= 1e-3,
-        2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0,
-        angle / np.sin(0.5 * np.where(angle <= 1e-3, 1.0, angle)),
-    )
-    return np.stack([qx * scale, qy * scale, qz * scale], axis=-1)
+    (the same quaternion product and conversions; tests compare them), compiled, as the
+    tracker calls it for every particle set."""
+    out = np.empty_like(rotvec)
+    for m in range(rotvec.shape[0]):
+        rx, ry, rz = rotvec[m, 0], rotvec[m, 1], rotvec[m, 2]
+        t2 = rx * rx + ry * ry + rz * rz
+        theta = math.sqrt(t2)
+        if theta <= 1e-3:
+            half = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+        else:
+            half = math.sin(0.5 * theta) / theta
+        bx, by, bz, bw = rx * half, ry * half, rz * half, math.cos(0.5 * theta)
+        s, c = math.sin(0.5 * yaw[m]), math.cos(0.5 * yaw[m])
+        # (0, s, 0, c) * (bx, by, bz, bw), Hamilton product
+        qx = c * bx + s * bz
+        qy = c * by + s * bw
+        qz = c * bz - s * bx
+        qw = c * bw - s * by
+        if qw < 0:
+            qx, qy, qz, qw = -qx, -qy, -qz, -qw
+        angle = 2.0 * math.atan2(math.sqrt(qx * qx + qy * qy + qz * qz), qw)
+        if angle <= 1e-3:
+            a2 = angle * angle
+            scale = 2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0
+        else:
+            scale = angle / math.sin(0.5 * angle)
+        out[m, 0] = qx * scale
+        out[m, 1] = qy * scale
+        out[m, 2] = qz * scale
+    return out
 
 
 def _yaw(rot: Rotation) -> np.ndarray:
@@ -280,13 +288,17 @@ class BodyModel:
         states = np.atleast_2d(states)
         rv = (states @ self._expansion).reshape(len(states), *self.mean.shape)
         rv += self.mean
-        rv[:, 0] = _turned(states[:, 3], rv[:, 0])
+        rv[:, 0] = _turned(np.ascontiguousarray(states[:, 3], dtype=float), rv[:, 0])
         return rv
 
     def joint_positions(self, states: np.ndarray) -> np.ndarray:
         """Body points (M, 19, 3) in mm of states (M, D)."""
         states = np.atleast_2d(states)
-        return rotvec_positions(self.skeleton, self.rotvecs(states), states[:, :3], self.points)
+        return self._chain.positions(self.rotvecs(states), states[:, :3])
+
+    @cached_property
+    def _chain(self) -> KinematicChain:
+        return KinematicChain.of(self.skeleton, self.points)
 
     def motion(self, states: np.ndarray, fps: float, name: str = "tracked") -> Motion:
         """The poses (F, D) as a motion of the template skeleton."""
