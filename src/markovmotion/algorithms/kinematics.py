@@ -19,7 +19,7 @@ from markovmotion.core.skeleton import Skeleton
 
 
 @numba.njit(cache=True)
-def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pragma: no cover
+def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted, turns):  # pragma: no cover
     m = rotvecs.shape[0]
     n_j = parents.shape[0]
     out = np.empty((m, wanted.shape[0], 3))
@@ -28,6 +28,19 @@ def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pra
     r = np.empty((3, 3))
     for f in range(m):
         for j in joints:
+            t0, t1, t2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            if j == root_joint:
+                t0, t1, t2 = root_pos[f, 0], root_pos[f, 1], root_pos[f, 2]
+            par = parents[j]
+            if par < 0:
+                p[j, 0], p[j, 1], p[j, 2] = t0, t1, t2
+            else:
+                for a_ in range(3):
+                    p[j, a_] = (
+                        p[par, a_] + g[par, a_, 0] * t0 + g[par, a_, 1] * t1 + g[par, a_, 2] * t2
+                    )
+            if not turns[j]:  # no joint of the chain hangs from it: its rotation moves nothing
+                continue
             x, y, z = rotvecs[f, j, 0], rotvecs[f, j, 1], rotvecs[f, j, 2]
             th2 = x * x + y * y + z * z
             if th2 < 1e-16:
@@ -46,20 +59,12 @@ def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pra
             r[2, 0] = b * x * z - a * y
             r[1, 2] = b * y * z - a * x
             r[2, 1] = b * y * z + a * x
-            t0, t1, t2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            if j == root_joint:
-                t0, t1, t2 = root_pos[f, 0], root_pos[f, 1], root_pos[f, 2]
-            par = parents[j]
             if par < 0:
                 for a_ in range(3):
-                    p[j, a_] = t0 if a_ == 0 else (t1 if a_ == 1 else t2)
                     for b_ in range(3):
                         g[j, a_, b_] = r[a_, b_]
             else:
                 for a_ in range(3):
-                    p[j, a_] = (
-                        p[par, a_] + g[par, a_, 0] * t0 + g[par, a_, 1] * t1 + g[par, a_, 2] * t2
-                    )
                     for b_ in range(3):
                         g[j, a_, b_] = (
                             g[par, a_, 0] * r[0, b_]
@@ -84,13 +89,16 @@ def ancestors_closure(skeleton: Skeleton, joints: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class KinematicChain:
-    """What :func:`rotvec_positions` needs of a skeleton, prepared once for many calls: parents,
-    rest offsets, the joints asked for with their ancestors, and the root joint."""
+    """What :func:`rotvec_positions` needs of a skeleton, prepared once for many calls
+    (:meth:`of`): parents, rest offsets, the joints asked for with their ancestors, which of
+    those carry a child, and the root joint."""
 
     parents: np.ndarray
     offsets: np.ndarray
     closure: np.ndarray
     wanted: np.ndarray
+    #: (J,) bool: joints of the closure that are a parent within it (whose rotation matters).
+    turns: np.ndarray
     root_joint: int = 0
 
     @classmethod
@@ -98,11 +106,16 @@ class KinematicChain:
         cls, skeleton: Skeleton, joints: np.ndarray | None = None, root_joint: int = 0
     ) -> KinematicChain:
         wanted = np.arange(skeleton.n_joints) if joints is None else np.asarray(joints)
+        closure = ancestors_closure(skeleton, wanted).astype(np.intp)
+        turns = np.zeros(skeleton.n_joints, bool)
+        parents = skeleton.parents[closure]
+        turns[parents[parents >= 0]] = True
         return cls(
             skeleton.parents.astype(np.intp),
             np.ascontiguousarray(skeleton.offsets, dtype=float),
-            ancestors_closure(skeleton, wanted).astype(np.intp),
+            closure,
             wanted.astype(np.intp),
+            turns,
             int(root_joint),
         )
 
@@ -116,6 +129,7 @@ class KinematicChain:
             self.offsets,
             self.closure,
             self.wanted,
+            self.turns,
         )
 
 

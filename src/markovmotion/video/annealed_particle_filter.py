@@ -205,10 +205,12 @@ def view_features(
         fh, fw = f.shape
         fg[k, :fh, :fw] = f
         edge[k, :fh, :fw] = cv2.GaussianBlur(both, (0, 0), 1.0)
-        ys, xs = np.nonzero(f > 0.5)
-        if len(xs):
+        found = cv2.findNonZero((f > 0.5).view(np.uint8))  # x, y in row order (np.nonzero's)
+        if found is not None:
+            found = found.reshape(-1, 2)
+            xs, ys = found[:, 0], found[:, 1]
             pick = rng.choice(len(xs), min(COVER_SAMPLES, len(xs)), replace=False)
-            samples[k, : len(pick)] = np.stack([xs[pick], ys[pick]], axis=1)
+            samples[k, : len(pick)] = found[pick]
             n_samples[k] = len(pick)
             centroids.append(np.array([xs.mean(), ys.mean()]))
             heights.append(float(ys.max() - ys.min() + 1))
