@@ -8,10 +8,12 @@ shared machine inflate them less than wall time):
 * ``features``: their foreground and edge maps and the sampled foreground pixels
   (:func:`~markovmotion.video.annealed_particle_filter.view_features`);
 * per weighting of ``--particles`` particles: ``kinematics`` (body points of the states),
-  ``projection`` (into every camera), ``costs`` (the compiled cost kernel alone), and
-  ``score`` (all of them, as a layer calls it); ``survival beta``;
+  ``projection`` (into every camera), ``projection + costs`` (the weighting function of
+  given body points), and ``score`` (all of them, as a layer calls it); ``survival beta``;
 * ``frame``: a whole tracked frame (features included, the limb search too), the mean over
   the take's frames after the first.
+
+Only public functions are called, so an older checkout runs it too (``PYTHONPATH=OLD/src``).
 
     python3 benchmarks/tracker_stages.py [--data DIR] [--particles 200] [--json]
 """
@@ -30,7 +32,6 @@ import numpy as np
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
-from markovmotion.video import annealed_particle_filter as apf_module
 from markovmotion.video.annealed_particle_filter import (
     AnnealedParticleFilter,
     joint_costs,
@@ -80,28 +81,10 @@ def main() -> None:
     rng = np.random.default_rng(0)
     x = body.clip(est + rng.normal(size=(args.particles, body.n_dof)) * apf.step_std)
     joints = body.joint_positions(x)
-    pix, rad, _ = project_model(joints, mv.cameras)
-    seg, _ = apf_module._SEGMENTS
     f = feats[mid]
-    out = np.empty(len(x))
     rows["kinematics"] = best_ms(lambda: body.joint_positions(x), args.repeat)
     rows["projection"] = best_ms(lambda: project_model(joints, mv.cameras), args.repeat)
-    rows["costs"] = best_ms(
-        lambda: apf_module._costs(
-            pix,
-            rad,
-            seg,
-            f.fg,
-            f.edge,
-            f.sample_x,
-            f.sample_y,
-            f.n_samples,
-            f.rows,
-            apf_module.EDGE_WEIGHT,
-            out,
-        ),
-        args.repeat,
-    )
+    rows["projection + costs"] = best_ms(lambda: joint_costs(joints, mv.cameras, f), args.repeat)
     rows["score"] = best_ms(
         lambda: joint_costs(body.joint_positions(x), mv.cameras, f), args.repeat
     )
@@ -120,7 +103,7 @@ def main() -> None:
         print(json.dumps({"ms": rows, "particles": args.particles, "load": load}))
         return
     for k, v in rows.items():
-        print(f"{k:14s} {v:8.3f} ms CPU")
+        print(f"{k:20s} {v:8.3f} ms CPU")
     print(f"load average {load[0]:.1f} on {os.cpu_count()} CPUs")
 
 
