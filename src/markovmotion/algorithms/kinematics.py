@@ -8,6 +8,8 @@ poses affordable. Tests check that the two agree.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -17,7 +19,7 @@ from markovmotion.core.skeleton import Skeleton
 
 
 @numba.njit(cache=True)
-def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pragma: no cover
+def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted, turns):  # pragma: no cover
     m = rotvecs.shape[0]
     n_j = parents.shape[0]
     out = np.empty((m, wanted.shape[0], 3))
@@ -26,6 +28,19 @@ def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pra
     r = np.empty((3, 3))
     for f in range(m):
         for j in joints:
+            t0, t1, t2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            if j == root_joint:
+                t0, t1, t2 = root_pos[f, 0], root_pos[f, 1], root_pos[f, 2]
+            par = parents[j]
+            if par < 0:
+                p[j, 0], p[j, 1], p[j, 2] = t0, t1, t2
+            else:
+                for a_ in range(3):
+                    p[j, a_] = (
+                        p[par, a_] + g[par, a_, 0] * t0 + g[par, a_, 1] * t1 + g[par, a_, 2] * t2
+                    )
+            if not turns[j]:  # no joint of the chain hangs from it: its rotation moves nothing
+                continue
             x, y, z = rotvecs[f, j, 0], rotvecs[f, j, 1], rotvecs[f, j, 2]
             th2 = x * x + y * y + z * z
             if th2 < 1e-16:
@@ -44,20 +59,12 @@ def _fk(rotvecs, root_pos, root_joint, parents, offsets, joints, wanted):  # pra
             r[2, 0] = b * x * z - a * y
             r[1, 2] = b * y * z - a * x
             r[2, 1] = b * y * z + a * x
-            t0, t1, t2 = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-            if j == root_joint:
-                t0, t1, t2 = root_pos[f, 0], root_pos[f, 1], root_pos[f, 2]
-            par = parents[j]
             if par < 0:
                 for a_ in range(3):
-                    p[j, a_] = t0 if a_ == 0 else (t1 if a_ == 1 else t2)
                     for b_ in range(3):
                         g[j, a_, b_] = r[a_, b_]
             else:
                 for a_ in range(3):
-                    p[j, a_] = (
-                        p[par, a_] + g[par, a_, 0] * t0 + g[par, a_, 1] * t1 + g[par, a_, 2] * t2
-                    )
                     for b_ in range(3):
                         g[j, a_, b_] = (
                             g[par, a_, 0] * r[0, b_]
@@ -80,6 +87,52 @@ def ancestors_closure(skeleton: Skeleton, joints: np.ndarray) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
+@dataclass(frozen=True)
+class KinematicChain:
+    """What :func:`rotvec_positions` needs of a skeleton, prepared once for many calls
+    (:meth:`of`): parents, rest offsets, the joints asked for with their ancestors, which of
+    those carry a child, and the root joint."""
+
+    parents: np.ndarray
+    offsets: np.ndarray
+    closure: np.ndarray
+    wanted: np.ndarray
+    #: (J,) bool: joints of the closure that are a parent within it (whose rotation matters).
+    turns: np.ndarray
+    root_joint: int = 0
+
+    @classmethod
+    def of(
+        cls, skeleton: Skeleton, joints: np.ndarray | None = None, root_joint: int = 0
+    ) -> KinematicChain:
+        wanted = np.arange(skeleton.n_joints) if joints is None else np.asarray(joints)
+        closure = ancestors_closure(skeleton, wanted).astype(np.intp)
+        turns = np.zeros(skeleton.n_joints, bool)
+        parents = skeleton.parents[closure]
+        turns[parents[parents >= 0]] = True
+        return cls(
+            skeleton.parents.astype(np.intp),
+            np.ascontiguousarray(skeleton.offsets, dtype=float),
+            closure,
+            wanted.astype(np.intp),
+            turns,
+            int(root_joint),
+        )
+
+    def positions(self, rotvecs: np.ndarray, root_positions: np.ndarray) -> np.ndarray:
+        """Global positions (M, len(wanted), 3) in mm (see :func:`rotvec_positions`)."""
+        return _fk(
+            np.ascontiguousarray(rotvecs, dtype=float),
+            np.ascontiguousarray(root_positions, dtype=float),
+            self.root_joint,
+            self.parents,
+            self.offsets,
+            self.closure,
+            self.wanted,
+            self.turns,
+        )
+
+
 def rotvec_positions(
     skeleton: Skeleton,
     rotvecs: np.ndarray,
@@ -97,16 +150,7 @@ def rotvec_positions(
         joints: which joints to return (default: all).
         root_joint: the joint whose translation ``root_positions`` gives.
     """
-    wanted = np.arange(skeleton.n_joints) if joints is None else np.asarray(joints, dtype=np.intp)
-    return _fk(
-        np.ascontiguousarray(rotvecs, dtype=float),
-        np.ascontiguousarray(root_positions, dtype=float),
-        int(root_joint),
-        skeleton.parents.astype(np.intp),
-        np.ascontiguousarray(skeleton.offsets, dtype=float),
-        ancestors_closure(skeleton, wanted).astype(np.intp),
-        wanted.astype(np.intp),
-    )
+    return KinematicChain.of(skeleton, joints, root_joint).positions(rotvecs, root_positions)
 
 
 def fit_rotations(skeleton: Skeleton, positions: np.ndarray, fps: float = 30.0) -> Motion:

@@ -111,16 +111,45 @@ def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
-def _gradient(img: np.ndarray, sigma: float) -> np.ndarray:
-    g = cv2.GaussianBlur(img, (0, 0), sigma)
-    return np.hypot(
-        cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+def _sobel(smooth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y Sobel responses (float32) of a smoothed image."""
+    return (
+        cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3),
+        cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3),
     )
+
+
+@numba.njit(cache=True)
+def _hypot32(x, y):  # pragma: no cover - compiled
+    """``np.hypot`` of two float32 values, to the bit: in float64 (exact squares), rounded."""
+    a = np.float64(x)
+    b = np.float64(y)
+    return np.float32(math.sqrt(a * a + b * b))
+
+
+@numba.njit(cache=True)
+def _edge_map(ox, oy, outline_scale, ix, iy, inner_scale, smooth, near):  # pragma: no cover
+    """max(outline, inner) (H, W) float32: each the gradient magnitude (float32 ``np.hypot``
+    of the Sobel responses) over its scale, clipped to [0, 1]; the inner edges only where the
+    smoothed foreground exceeds ``near``."""
+    h, w = ox.shape
+    out = np.empty((h, w), np.float32)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    for y in range(h):
+        for x in range(w):
+            a = min(max(_hypot32(ox[y, x], oy[y, x]) / outline_scale, zero), one)
+            b = min(max(_hypot32(ix[y, x], iy[y, x]) / inner_scale, zero), one)
+            out[y, x] = max(a, b) if smooth[y, x] > near else a
+    return out
 
 
 @dataclass
 class ViewFeatures:
-    """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame."""
+    """Foreground (V, H, W), edges (V, H, W) and sampled foreground pixels (V, K, 2) of one frame
+    (the first ``n_samples`` of each view, whole pixels, kept sorted by row for the coverage
+    cost, also as ``sample_x`` and ``sample_y`` (V, K); ``rows`` (V, H + 1) counts each view's
+    samples above every row)."""
 
     fg: np.ndarray
     edge: np.ndarray
@@ -128,6 +157,18 @@ class ViewFeatures:
     n_samples: np.ndarray
     centroids: list[np.ndarray | None] = field(default_factory=list)
     heights: list[float] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.samples = np.array(self.samples, dtype=float)
+        if not np.array_equal(self.samples, np.round(self.samples)):
+            raise ValueError("foreground samples must be whole pixels")
+        self.rows = np.zeros((len(self.samples), self.fg.shape[1] + 1), np.intp)
+        for v, n in enumerate(self.n_samples):
+            pts = self.samples[v, :n]
+            self.samples[v, :n] = pts[np.lexsort((pts[:, 0], pts[:, 1]))]
+            self.rows[v] = np.searchsorted(self.samples[v, :n, 1], np.arange(self.fg.shape[1] + 1))
+        self.sample_x = np.ascontiguousarray(self.samples[..., 0])
+        self.sample_y = np.ascontiguousarray(self.samples[..., 1])
 
 
 def view_features(
@@ -144,21 +185,32 @@ def view_features(
     n_samples = np.zeros(v, np.intp)
     centroids, heights = [], []
     for k, (frame, bg) in enumerate(zip(frames, backgrounds, strict=True)):
-        diff = np.abs(frame.astype(np.int16) - bg.astype(np.int16)).max(axis=2).astype(np.float32)
-        diff = cv2.GaussianBlur(diff, (0, 0), 1.0)
+        channels = cv2.split(cv2.absdiff(frame, bg))  # the largest channel difference
+        diff = channels[0]
+        for c in channels[1:]:
+            diff = cv2.max(diff, c)
+        diff = cv2.GaussianBlur(diff.astype(np.float32), (0, 0), 1.0)
         f = np.clip((diff - FG_LOW) / (FG_HIGH - FG_LOW), 0, 1)
         f = cv2.morphologyEx(f, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-        outline = np.clip(_gradient(f, 2.0) / (8 * 0.15), 0, 1)  # Sobel gain 8; sigma-2 step 0.2
+        smooth = cv2.GaussianBlur(f, (0, 0), 2.0)
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY).astype(np.float32)
-        near = cv2.GaussianBlur(f, (0, 0), 2.0) > 0.05
-        inner = np.clip(_gradient(grey, 1.0) / EDGE_CONTRAST, 0, 1) * near
+        both = _edge_map(
+            *_sobel(smooth),
+            np.float32(8 * 0.15),  # the outline: Sobel gain 8; sigma-2 step 0.2
+            *_sobel(cv2.GaussianBlur(grey, (0, 0), 1.0)),
+            np.float32(EDGE_CONTRAST),  # inner edges near the foreground
+            smooth,
+            np.float32(0.05),
+        )
         fh, fw = f.shape
         fg[k, :fh, :fw] = f
-        edge[k, :fh, :fw] = cv2.GaussianBlur(np.maximum(outline, inner), (0, 0), 1.0)
-        ys, xs = np.nonzero(f > 0.5)
-        if len(xs):
+        edge[k, :fh, :fw] = cv2.GaussianBlur(both, (0, 0), 1.0)
+        found = cv2.findNonZero((f > 0.5).view(np.uint8))  # x, y in row order (np.nonzero's)
+        if found is not None:
+            found = found.reshape(-1, 2)
+            xs, ys = found[:, 0], found[:, 1]
             pick = rng.choice(len(xs), min(COVER_SAMPLES, len(xs)), replace=False)
-            samples[k, : len(pick)] = np.stack([xs[pick], ys[pick]], axis=1)
+            samples[k, : len(pick)] = found[pick]
             n_samples[k] = len(pick)
             centroids.append(np.array([xs.mean(), ys.mean()]))
             heights.append(float(ys.max() - ys.min() + 1))
@@ -169,6 +221,8 @@ def view_features(
 
 
 # ----------------------------------------------------------------------------- the weighting function
+#: The body's primitives: point indices (S, 2) and radii in mm (S, 2), made once.
+_SEGMENTS = BODY_SHAPE.segments()
 _T_CAPSULE = np.array([0.1, 0.3, 0.5, 0.7, 0.9])
 _ACROSS = np.array([-0.6, 0.0, 0.6])
 _BALL_COS = np.cos(np.pi / 4 + np.arange(4) * np.pi / 2)
@@ -185,11 +239,13 @@ def _lookup(img, v, x, y):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=True)
-def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pragma: no cover
+def _costs(pix, rad, seg, fg, edge, sx, sy, n_samples, rows, edge_weight, out):  # pragma: no cover
     """Cost (M,) of every particle: mean over views of silhouette + coverage + edge terms.
 
     pix (M, V, Q, 2) projected model points; rad (M, V, S, 2) capsule end radii in
-    pixels; seg (S, 2) point indices (a == b for a ball).
+    pixels; seg (S, 2) point indices (a == b for a ball); sx, sy (V, K) columns and rows of the
+    first n_samples foreground samples of each view, sorted by row, whole pixels, and rows
+    (V, H + 1) the number of samples above each row, as :class:`ViewFeatures` keeps them.
     """
     m_n, v_n = pix.shape[0], pix.shape[1]
     s_n = seg.shape[0]
@@ -199,6 +255,8 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
         geo = np.empty((s_n, 9))  # per capsule: ax, ay, dx, dy, l2, ra, rb, x range
         ylo = np.empty(s_n)
         yhi = np.empty(s_n)
+        covered = np.empty(sx.shape[1], np.bool_)
+        n_rows = rows.shape[1] - 1
         total = 0.0
         for v in range(v_n):
             e_in = 0.0
@@ -251,32 +309,35 @@ def _costs(pix, rad, seg, fg, edge, samples, n_samples, edge_weight, out):  # pr
                         e_ed += 1.0 - _lookup(edge, v, ax + ra * c, ay + ra * sn)
                         n_in += 1
                         n_ed += 1
-            miss = 0
-            for k in range(n_samples[v]):
-                px = samples[v, k, 0]
-                py = samples[v, k, 1]
-                covered = False
-                for s in range(s_n):
-                    if px < geo[s, 7] or px > geo[s, 8] or py < ylo[s] or py > yhi[s]:
-                        continue
-                    ax = geo[s, 0]
-                    ay = geo[s, 1]
-                    dx = geo[s, 2]
-                    dy = geo[s, 3]
-                    l2 = geo[s, 4]
-                    t = 0.0
-                    if l2 > 1e-12:
-                        t = ((px - ax) * dx + (py - ay) * dy) / l2
-                        t = min(max(t, 0.0), 1.0)
+            # coverage: the samples in each capsule's rows (they are sorted by row)
+            k_n = n_samples[v]
+            for k in range(k_n):
+                covered[k] = False
+            for s in range(s_n):
+                k0 = rows[v, int(math.ceil(min(max(ylo[s], 0.0), n_rows)))]
+                k1 = rows[v, int(math.floor(min(max(yhi[s] + 1.0, 0.0), n_rows)))]
+                ax = geo[s, 0]
+                ay = geo[s, 1]
+                dx = geo[s, 2]
+                dy = geo[s, 3]
+                inv = 1.0 / geo[s, 4] if geo[s, 4] > 1e-12 else 0.0
+                ra = geo[s, 5]
+                dr = geo[s, 6] - ra
+                bx = sx[v, k0:k1]
+                by = sy[v, k0:k1]
+                bc = covered[k0:k1]
+                for k in range(bx.shape[0]):  # on slices from 0: a loop LLVM vectorises
+                    px = bx[k]
+                    py = by[k]
+                    t = min(max(((px - ax) * dx + (py - ay) * dy) * inv, 0.0), 1.0)
                     ex = ax + t * dx - px
                     ey = ay + t * dy - py
-                    r = geo[s, 5] + t * (geo[s, 6] - geo[s, 5])
-                    if ex * ex + ey * ey <= r * r:
-                        covered = True
-                        break
-                if not covered:
-                    miss += 1
-            e_cov = miss / n_samples[v] if n_samples[v] > 0 else 0.0
+                    r = ra + t * dr
+                    bc[k] |= ex * ex + ey * ey <= r * r
+            hit = 0
+            for k in range(k_n):
+                hit += covered[k]
+            e_cov = (k_n - hit) / k_n if k_n > 0 else 0.0
             total += e_in / max(n_in, 1) + e_cov + edge_weight * e_ed / max(n_ed, 1)
         out[m] = total / (v_n * (2.0 + edge_weight))
 
@@ -305,6 +366,33 @@ def _coverage(pix, rad, seg, width, height):  # pragma: no cover - compiled
     return out
 
 
+@numba.njit(cache=True)
+def _project(pts, rot, trans, intr, focal, seg, radii):  # pragma: no cover - compiled
+    """Pixels (M, V, Q, 2), depths (M, V, Q) and capsule radii in pixels (M, V, S, 2) of points
+    (M, Q, 3) in V cameras (rot (V, 3, 3), trans (V, 3), intr (V, 4) fx fy cx cy, focal (V,)):
+    :meth:`CalibratedCamera.project` of every camera at once."""
+    m_n, q_n = pts.shape[0], pts.shape[1]
+    v_n, s_n = rot.shape[0], seg.shape[0]
+    pix = np.empty((m_n, v_n, q_n, 2))
+    depth = np.empty((m_n, v_n, q_n))
+    rad = np.empty((m_n, v_n, s_n, 2))
+    for m in range(m_n):
+        for v in range(v_n):
+            for q in range(q_n):
+                x, y, z = pts[m, q, 0], pts[m, q, 1], pts[m, q, 2]
+                cx = x * rot[v, 0, 0] + y * rot[v, 0, 1] + z * rot[v, 0, 2] + trans[v, 0]
+                cy = x * rot[v, 1, 0] + y * rot[v, 1, 1] + z * rot[v, 1, 2] + trans[v, 1]
+                cz = x * rot[v, 2, 0] + y * rot[v, 2, 1] + z * rot[v, 2, 2] + trans[v, 2]
+                cz = max(cz, 1.0)
+                pix[m, v, q, 0] = intr[v, 0] * cx / cz + intr[v, 2]
+                pix[m, v, q, 1] = intr[v, 1] * cy / cz + intr[v, 3]
+                depth[m, v, q] = cz
+            for s in range(s_n):
+                rad[m, v, s, 0] = focal[v] * radii[s, 0] / depth[m, v, seg[s, 0]]
+                rad[m, v, s, 1] = focal[v] * radii[s, 1] / depth[m, v, seg[s, 1]]
+    return pix, rad, depth
+
+
 def project_model(
     joints: np.ndarray, cameras: Sequence[CalibratedCamera]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -312,18 +400,13 @@ def project_model(
 
     ``joints`` (M, 19, 3) are body points in mm; Q counts them and the balls' centres.
     """
-    seg, radii = BODY_SHAPE.segments()
+    seg, radii = _SEGMENTS
     pts = BODY_SHAPE.points(joints)  # (M, Q, 3)
-    pix, depth = [], []
-    for c in cameras:
-        p, z = c.project(pts)
-        pix.append(p)
-        depth.append(z)
-    pix_a = np.stack(pix, axis=1)
-    depth_a = np.stack(depth, axis=1)
-    focal = np.array([c.focal for c in cameras])[None, :, None, None]
-    rad = focal * radii[None, None] / depth_a[:, :, seg]
-    return pix_a, rad, depth_a
+    rot = np.array([c.R for c in cameras], dtype=float)
+    trans = np.array([c.t for c in cameras], dtype=float)
+    intr = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in cameras])
+    focal = np.array([c.focal for c in cameras])
+    return _project(np.ascontiguousarray(pts), rot, trans, intr, focal, seg, radii)
 
 
 def model_coverage(joints: np.ndarray, camera: CalibratedCamera) -> np.ndarray:
@@ -344,10 +427,13 @@ def joint_costs(
     joints: np.ndarray, cameras: Sequence[CalibratedCamera], feats: ViewFeatures
 ) -> np.ndarray:
     """E (M,) in [0, 1] of body points (M, 19, 3) mm against one frame's features."""
-    seg, _ = BODY_SHAPE.segments()
+    seg, _ = _SEGMENTS
     pix, rad, _ = project_model(joints, cameras)
     out = np.empty(len(joints))
-    _costs(pix, rad, seg, feats.fg, feats.edge, feats.samples, feats.n_samples, EDGE_WEIGHT, out)
+    _costs(
+        pix, rad, seg, feats.fg, feats.edge, feats.sample_x, feats.sample_y, feats.n_samples,
+        feats.rows, EDGE_WEIGHT, out,
+    )  # fmt: skip
     return out
 
 
@@ -358,19 +444,30 @@ def survival_beta(cost: np.ndarray, survival: float) -> float:
     The survival rate is the effective sample size (sum w)^2 / sum w^2 over the
     number of particles (Deutscher et al. §4); it falls as beta grows.
     """
+    return float(_survival_beta(np.asarray(cost, dtype=float), float(survival)))
+
+
+@numba.njit(cache=True)
+def _survival_rate(e, b):  # pragma: no cover - compiled
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(e.shape[0]):
+        w = math.exp(-b * e[i])
+        s1 += w
+        s2 += w * w
+    return s1 * s1 / (e.shape[0] * s2)
+
+
+@numba.njit(cache=True)
+def _survival_beta(cost, survival):  # pragma: no cover - compiled
+    """:func:`survival_beta`: beta bracketed by quadrupling, then 30 bisections."""
     e = cost - cost.min()
     lo, hi = 0.0, 1.0
-    n = len(e)
-
-    def rate(b: float) -> float:
-        w = np.exp(-b * e)
-        return w.sum() ** 2 / (n * (w**2).sum())
-
-    while rate(hi) > survival and hi < 1e8:
+    while _survival_rate(e, hi) > survival and hi < 1e8:
         hi *= 4
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if rate(mid) > survival:
+        if _survival_rate(e, mid) > survival:
             lo = mid
         else:
             hi = mid

@@ -20,13 +20,16 @@ renderer draws them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
+import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from markovmotion.algorithms.kinematics import rotvec_positions
+from markovmotion.algorithms.kinematics import KinematicChain, rotvec_positions
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
@@ -102,6 +105,42 @@ def _greedy_axes(
             break
         k[best] += 1
     return k
+
+
+@numba.njit(cache=True)
+def _turned(yaw, rotvec):  # pragma: no cover - compiled
+    """Rotation vectors (M, 3) of the rotations ``rotvec`` (M, 3) followed by turns of ``yaw``
+    (M,) rad about Y: scipy's ``(from_euler("y", yaw) * from_rotvec(rotvec)).as_rotvec()``
+    (the same quaternion product and conversions; tests compare them), compiled, as the
+    tracker calls it for every particle set."""
+    out = np.empty_like(rotvec)
+    for m in range(rotvec.shape[0]):
+        rx, ry, rz = rotvec[m, 0], rotvec[m, 1], rotvec[m, 2]
+        t2 = rx * rx + ry * ry + rz * rz
+        theta = math.sqrt(t2)
+        if theta <= 1e-3:
+            half = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+        else:
+            half = math.sin(0.5 * theta) / theta
+        bx, by, bz, bw = rx * half, ry * half, rz * half, math.cos(0.5 * theta)
+        s, c = math.sin(0.5 * yaw[m]), math.cos(0.5 * yaw[m])
+        # (0, s, 0, c) * (bx, by, bz, bw), Hamilton product
+        qx = c * bx + s * bz
+        qy = c * by + s * bw
+        qz = c * bz - s * bx
+        qw = c * bw - s * by
+        if qw < 0:
+            qx, qy, qz, qw = -qx, -qy, -qz, -qw
+        angle = 2.0 * math.atan2(math.sqrt(qx * qx + qy * qy + qz * qz), qw)
+        if angle <= 1e-3:
+            a2 = angle * angle
+            scale = 2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0
+        else:
+            scale = angle / math.sin(0.5 * angle)
+        out[m, 0] = qx * scale
+        out[m, 1] = qy * scale
+        out[m, 2] = qz * scale
+    return out
 
 
 def _yaw(rot: Rotation) -> np.ndarray:
@@ -222,6 +261,15 @@ class BodyModel:
                 mask[sl] = True
         return mask
 
+    @cached_property
+    def _expansion(self) -> np.ndarray:
+        """(D, J * 3): the state to the joints' rotation vectors less their mean (the bases in
+        one matrix; zero for the root's position and heading)."""
+        out = np.zeros((self.n_dof, *self.mean.shape))
+        for j, basis, sl in zip(self.joints, self.bases, self.slices, strict=True):
+            out[sl, j] = basis.T
+        return out.reshape(self.n_dof, -1)
+
     # ------------------------------------------------------------------ poses
     def standing(self, position: np.ndarray, yaw: float = 0.0) -> np.ndarray:
         """The state (D,) of the mean pose with the root at ``position`` (mm) facing ``yaw``."""
@@ -238,18 +286,19 @@ class BodyModel:
     def rotvecs(self, states: np.ndarray) -> np.ndarray:
         """Local rotation vectors (M, J, 3) of states (M, D); joint 0's is global."""
         states = np.atleast_2d(states)
-        m = len(states)
-        rv = np.broadcast_to(self.mean, (m, *self.mean.shape)).copy()
-        for j, basis, sl in zip(self.joints, self.bases, self.slices, strict=True):
-            rv[:, j] += states[:, sl] @ basis.T
-        root = Rotation.from_euler("y", states[:, 3:4]) * Rotation.from_rotvec(rv[:, 0])
-        rv[:, 0] = root.as_rotvec()
+        rv = (states @ self._expansion).reshape(len(states), *self.mean.shape)
+        rv += self.mean
+        rv[:, 0] = _turned(np.ascontiguousarray(states[:, 3], dtype=float), rv[:, 0])
         return rv
 
     def joint_positions(self, states: np.ndarray) -> np.ndarray:
         """Body points (M, 19, 3) in mm of states (M, D)."""
         states = np.atleast_2d(states)
-        return rotvec_positions(self.skeleton, self.rotvecs(states), states[:, :3], self.points)
+        return self._chain.positions(self.rotvecs(states), states[:, :3])
+
+    @cached_property
+    def _chain(self) -> KinematicChain:
+        return KinematicChain.of(self.skeleton, self.points)
 
     def motion(self, states: np.ndarray, fps: float, name: str = "tracked") -> Motion:
         """The poses (F, D) as a motion of the template skeleton."""

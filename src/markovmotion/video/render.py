@@ -181,12 +181,11 @@ class BodyShape:
     def points(self, joints: np.ndarray) -> np.ndarray:
         """(..., P + balls, 3): the joints (..., P, 3) and the centres of the balls."""
         joints = np.asarray(joints, dtype=float)
-        centres = []
-        for k, frm, offset, r in self.balls:
-            d = joints[..., k, :] - joints[..., frm, :]
-            d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-6)
-            centres.append(joints[..., k, :] + offset * r * d)
-        return np.concatenate([joints, np.stack(centres, axis=-2)], axis=-2)
+        at = [b[0] for b in self.balls]
+        d = joints[..., at, :] - joints[..., [b[1] for b in self.balls], :]
+        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-6)
+        shift = np.array([offset * r for _, _, offset, r in self.balls])[:, None]
+        return np.concatenate([joints, joints[..., at, :] + shift * d], axis=-2)
 
     def segments(self) -> tuple[np.ndarray, np.ndarray]:
         """(S, 2) indices into :meth:`points` and (S, 2) radii in mm of every primitive."""
