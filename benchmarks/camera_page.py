@@ -3,9 +3,13 @@ of the real video (``../shared/data/video/pose2sim_balancing``) at 30 fps: frame
 second and latency from grabbing a frame to drawing its answer, as the page reports them, and
 the CPU time per frame answered of the server (this process: the server and Playwright's
 client) and of the browser (every process under this one: Chromium and Playwright's driver),
-so that a run on a loaded machine can be read.
+so that a run on a loaded machine can be read. ``--client socket`` replaces the browser by a
+WebSocket client in this process that sends the video's frames as JPEG (quality 80, as the
+page) at 30 frames/s with the same rule (a frame is dropped while ``--inflight`` await an
+answer): the server's own rate without the browser's share of the two cores.
 
     python3 benchmarks/camera_page.py [--seconds 20] [--inflight 2 3] [--graphs 1 2]
+        [--client page|socket]
 
 Needs MediaPipe (``scripts/install-camera``) and Chromium (``scripts/install-test-browser``).
 The partner is a dual HMM on two salsa takes (body points), trained here (about 20 s).
@@ -39,6 +43,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=20.0, help="measured time per run")
     ap.add_argument("--inflight", type=int, nargs="+", default=[2, 3], help="frames in flight")
     ap.add_argument("--graphs", type=int, nargs="+", default=[1, 2], help="MediaPipe graphs")
+    ap.add_argument("--client", choices=["page", "socket"], default="page")
     args = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -60,11 +65,77 @@ def main() -> None:
         for graphs in args.graphs:
             camera = functools.partial(WebcamTracker, graphs=graphs)
             app = create_app(tmp / "lib", partner=partner, camera=camera)
+            if args.client == "socket":
+                frames = [jpeg(f) for f in read_frames(root / cam["video"])]
+                with running(app) as url:
+                    for inflight in args.inflight:
+                        measure_socket(url, frames, fov, graphs, inflight, args.seconds)
+                continue
             with running(app) as url, sync_playwright() as p:
                 browser = p.chromium.launch(executable_path=CHROMIUM, args=flags)
                 for inflight in args.inflight:
                     measure(browser, url, fov, graphs, inflight, args.seconds)
                 browser.close()
+
+
+def jpeg(rgb) -> bytes:
+    import cv2
+
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    return cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 80])[1].tobytes()
+
+
+def measure_socket(
+    url: str, frames: list[bytes], fov: float, graphs: int, inflight: int, seconds: float
+) -> None:
+    """The server alone: frames sent at 30 frames/s, at most ``inflight`` awaiting an answer
+    (others dropped, as the page does); 10 answers of warm-up, then ``seconds`` measured."""
+    import threading
+    from collections import deque
+
+    import numpy as np
+    from websockets.sync.client import connect
+
+    sent: deque[float] = deque()
+    latency: list[float] = []
+    answered = [0, 0]  # all, warm-up
+    with connect(url.replace("http://", "ws://") + "/ws/camera") as ws:
+        ws.send(json.dumps({"fov": fov}))
+        assert json.loads(ws.recv(120))["type"] == "start"
+
+        def read() -> None:
+            for text in ws:
+                msg = json.loads(text)
+                if msg["type"] != "frame":
+                    raise SystemExit(f"the server said {msg}")
+                latency.append(1000 * (time.perf_counter() - sent.popleft()))
+                answered[0] += 1
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        k, t0, cpu0, start = 0, time.perf_counter(), None, None
+        while True:
+            now = time.perf_counter()
+            if start is None and answered[0] >= 10:
+                start, cpu0, answered[1], warm = now, _cpu(), answered[0], len(latency)
+            if start is not None and now - start >= seconds:
+                break
+            if len(sent) < inflight:
+                sent.append(now)
+                ws.send(frames[k % len(frames)])
+            k += 1
+            time.sleep(max(0.0, t0 + k / 30.0 - time.perf_counter()))
+        cpu1, wall, n = _cpu(), time.perf_counter() - start, answered[0] - answered[1]
+        ws.send(json.dumps({"type": "stop"}))
+        reader.join(30)
+    lat = np.array(latency[warm:])
+    print(
+        f"graphs {graphs}, in flight {inflight}, no browser: {n / wall:.1f} frames/s answered "
+        f"over {wall:.0f} s, latency mean {lat.mean():.0f} ms p99 "
+        f"{np.percentile(lat, 99):.0f}; server CPU {1000 * (cpu1[0] - cpu0[0]) / n:.0f} ms "
+        f"per frame answered; load average {os.getloadavg()[0]:.1f}",
+        flush=True,
+    )
 
 
 def _cpu() -> tuple[float, float]:

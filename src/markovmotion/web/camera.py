@@ -23,6 +23,16 @@ is stepped once per tick of its rate that has passed, with A's body points inter
 between the last frame and this one (:class:`TickResampler`); a gap of more than
 :data:`MAX_GAP` seconds is told to the partner as frames missed (``skip``).
 
+Frames are pipelined: the tracker has ``graphs`` MediaPipe graphs (two on two cores,
+:data:`markovmotion.video.webcam.DEFAULT_GRAPHS`) and frame ``n`` is decoded and its
+landmarks found on graph ``n % graphs`` in a worker thread (MediaPipe lets go of the GIL, so
+the graphs run on both cores while the event loop goes on), each graph taking its frames
+one at a time and in order; the landmarks are then placed, the partner stepped and the
+answer sent in frame order, one frame after another. At most :data:`MAX_PENDING` frames
+are received and not yet answered; every frame received is answered, also after
+``{"type": "stop"}``. A tracker that raises ends the session with ``{"type": "error",
+"message": "frame N: the tracker failed (...)"}`` and the close code 1011.
+
 The tracker is given to the app (``create_app(camera=...)``, a :data:`TrackerFactory`):
 ``serve`` gives :class:`markovmotion.video.webcam.WebcamTracker` (the web layer does not
 import the video layer).
