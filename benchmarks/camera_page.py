@@ -98,6 +98,7 @@ def measure_socket(
 
     sent: deque[float] = deque()
     latency: list[float] = []
+    work: list[tuple[float, float]] = []  # the server's track_ms, partner_ms
     answered = [0, 0]  # all, warm-up
     with connect(url.replace("http://", "ws://") + "/ws/camera") as ws:
         ws.send(json.dumps({"fov": fov}))
@@ -109,6 +110,7 @@ def measure_socket(
                 if msg["type"] != "frame":
                     raise SystemExit(f"the server said {msg}")
                 latency.append(1000 * (time.perf_counter() - sent.popleft()))
+                work.append((msg["track_ms"], msg["partner_ms"]))
                 answered[0] += 1
 
         reader = threading.Thread(target=read, daemon=True)
@@ -128,11 +130,11 @@ def measure_socket(
         cpu1, wall, n = _cpu(), time.perf_counter() - start, answered[0] - answered[1]
         ws.send(json.dumps({"type": "stop"}))
         reader.join(30)
-    lat = np.array(latency[warm:])
+    lat, ms = np.array(latency[warm:]), np.array(work[warm:]).mean(axis=0)
     print(
         f"graphs {graphs}, in flight {inflight}, no browser: {n / wall:.1f} frames/s answered "
         f"over {wall:.0f} s, latency mean {lat.mean():.0f} ms p99 "
-        f"{np.percentile(lat, 99):.0f}; server CPU {1000 * (cpu1[0] - cpu0[0]) / n:.0f} ms "
+        f"{np.percentile(lat, 99):.0f}; track {ms[0]:.1f} ms, partner {ms[1]:.1f} ms; server CPU {1000 * (cpu1[0] - cpu0[0]) / n:.0f} ms "
         f"per frame answered; load average {os.getloadavg()[0]:.1f}",
         flush=True,
     )
