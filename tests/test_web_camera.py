@@ -405,7 +405,7 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         page.fill("#fov", f"{fov:.2f}")
         page.click("#start")
         page.wait_for_function(
-            "() => Number(document.body.dataset.framesB || 0) > 30", timeout=60000
+            "() => Number(document.body.dataset.framesB || 0) > 30", timeout=120000
         )
         data = page.evaluate("() => ({...document.body.dataset})")
         drawn = colours_drawn(page, "#stage")

@@ -41,6 +41,7 @@ import the video layer).
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import math
 import time
@@ -316,11 +317,11 @@ def _answer(
 
 
 async def _receive_frames(
-    ws: WebSocket, tracker: FrameTracker, pending: asyncio.Queue, running: list
+    ws: WebSocket, tracker: FrameTracker, pending: asyncio.Queue, running: set
 ) -> None:
     """The session's reader: each binary frame starts its :func:`_detect` on graph
     ``number % graphs`` (after that graph's previous frame) and joins ``pending`` in order
-    (``(task, number, arrival time)``; None at the end); ``running``: every task started."""
+    (``(task, number, arrival time)``; None at the end); ``running``: the tasks not done."""
     graphs = max(1, int(tracker.graphs))
     last: list[asyncio.Future | None] = [None] * graphs
     number = 0
@@ -337,10 +338,19 @@ async def _receive_frames(
         graph = number % graphs
         task = asyncio.ensure_future(_detect_after(last[graph], tracker, data, number, graph))
         last[graph] = task
-        running.append(task)
+        running.add(task)  # until done: the session's end waits for it
+        task.add_done_callback(functools.partial(_done, running))
         await pending.put((task, number, arrived))
         number += 1
     await pending.put(None)
+
+
+def _done(running: set, task: asyncio.Future) -> None:
+    """A frame's task is done: out of ``running``; its error (if any) is the writer's to
+    report, or nobody's once the session has ended (not logged as never retrieved)."""
+    running.discard(task)
+    if not task.cancelled():
+        task.exception()
 
 
 async def _answer_frames(
@@ -386,7 +396,7 @@ async def camera_session(
         _leave(sessions, ws)
         return
     resampler = TickResampler(partner, partner.fps or 30.0)
-    running: list[asyncio.Future] = []
+    running: set[asyncio.Future] = set()
     error: tuple[str, int] | None = None
     try:
         await _send(
