@@ -364,6 +364,19 @@ def test_a_tracker_failing_ends_the_session_with_one_line(pipeline_server):
     assert trackers[0].closed
 
 
+def test_a_page_gone_mid_stream_frees_the_graphs(pipeline_server):
+    url, trackers = pipeline_server.url, pipeline_server.trackers
+    with connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        assert json.loads(ws.recv(30))["type"] == "start"
+        for k in range(8):
+            ws.send(grey(k))
+    deadline = time.monotonic() + 10  # closed once the frames it was given are done
+    while not trackers[0].closed and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert trackers[0].closed and not trackers[0].overlapped
+
+
 def test_track_is_landmarks_then_place(video):
     """WebcamTracker.track (one frame start to end) gives what landmarks then place give."""
     _needs_mediapipe()
