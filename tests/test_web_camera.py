@@ -253,8 +253,9 @@ def grey(k: int) -> bytes:
 class _TwoGraphs:
     """A tracker of two graphs that checks the session's pipeline: the first frames of the
     two graphs meet at a barrier (it breaks unless both graphs work at once); each graph
-    records its frames and whether it was ever given two at once; the "landmarks" of a
-    frame are its number. ``fail``: the frame on which it raises."""
+    records its frames and whether it was ever given two at once (or any once closed:
+    ``overlapped``); the "landmarks" of a frame are its number. ``fail``: the frame on which
+    it raises."""
 
     graphs = 2
 
@@ -268,6 +269,9 @@ class _TwoGraphs:
         self.closed = False
 
     def landmarks(self, rgb, graph):
+        if self.closed:
+            self.overlapped = True
+            raise AssertionError("a graph used after the tracker was closed")
         if not self.busy[graph].acquire(blocking=False):
             self.overlapped = True
             raise AssertionError("one graph given two frames at once")
