@@ -71,7 +71,7 @@ MAX_FRAME_BYTES = 300_000
 #: it is decoded (a small file may declare an enormous image).
 MAX_SIDE = 1280
 MIN_SIDE = 32
-#: Camera sessions one server process runs at once (each runs MediaPipe on a core).
+#: Camera sessions one server process runs at once (each runs its MediaPipe graphs).
 MAX_SESSIONS = 2
 #: Frames of a session received and not yet answered: the tracker's graphs work on as many
 #: as they have, the others wait; further frames wait in the socket (the page sends a frame
