@@ -78,11 +78,11 @@ class WebcamFrame:
     seconds: float
 
 
-#: MediaPipe graphs a tracker runs, each on every ``graphs``-th frame: two on two cores (one
-#: graph's frame takes about 30 ms of one core; MediaPipe lets go of the GIL while it runs, so
-#: two graphs in two threads of the server answer about 50 frames/s on this 2-core machine
-#: against 29 for one; each graph tracks every other frame, and the landmarks on the real
-#: video's camera 0 stay as close to the reference, see docs/web.md).
+#: MediaPipe graphs a tracker runs, each on every ``graphs``-th frame: two on two cores. One
+#: graph's frame takes about 30 ms of one core and MediaPipe lets go of the GIL while it runs:
+#: on the real video's camera 0, two graphs in two threads answered 35-50 frames/s against
+#: 22-32 for one (2 cores shared with other jobs, load average 2.1-2.9), and tracking every
+#: other frame left the landmarks as close to the reference (docs/web.md, the camera partner).
 DEFAULT_GRAPHS = min(2, os.cpu_count() or 1)
 
 
