@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -35,6 +37,7 @@ from markovmotion.web import create_app
 from markovmotion.web.camera import (
     MAX_FRAME_BYTES,
     MAX_GAP,
+    MAX_PENDING,
     MAX_SIDE,
     TickResampler,
     decode_frame,
@@ -173,10 +176,9 @@ def test_camera_session_tracks_the_person_and_the_partner_answers(camera_server,
         start = json.loads(ws.recv(60))
         assert start["type"] == "start" and start["fps"] == 30.0 and start["lag"] == 9
         assert start["parents_a"][0] == -1 and len(start["parents_a"]) == 19
-        answers = []
-        for f in frames[:30]:
+        for f in frames[:30]:  # at once: the tracker's graphs work on several frames
             ws.send(jpeg(f))
-            answers.append(json.loads(ws.recv(30)))
+        answers = [json.loads(ws.recv(60)) for _ in range(30)]
         ws.send(json.dumps({"type": "stop"}))
         with pytest.raises(ConnectionClosed):
             ws.recv(10)
@@ -242,6 +244,156 @@ def test_a_field_of_view_out_of_range_is_refused(camera_server):
         assert error["type"] == "error" and error["message"].startswith("fov: a field of view")
 
 
+# ---------------------------------------------------------------- the pipeline
+def grey(k: int) -> bytes:
+    """Frame ``k``: a grey JPEG whose level tells its number (10 k)."""
+    return jpeg(np.full((64, 48, 3), 10 * k, np.uint8))
+
+
+class _TwoGraphs:
+    """A tracker of two graphs that checks the session's pipeline: the first frames of the
+    two graphs meet at a barrier (it breaks unless both graphs work at once); each graph
+    records its frames and whether it was ever given two at once (or any once closed:
+    ``overlapped``); the "landmarks" of a frame are its number. ``fail``: the frame on which
+    it raises."""
+
+    graphs = 2
+
+    def __init__(self, fail: int | None = None):
+        self.fail = fail
+        self.barrier = threading.Barrier(2, timeout=10)
+        self.busy = [threading.Lock(), threading.Lock()]
+        self.frames: list[list[int]] = [[], []]
+        self.overlapped = False
+        self.placed: list[int] = []
+        self.closed = False
+
+    def landmarks(self, rgb, graph):
+        if self.closed:
+            self.overlapped = True
+            raise AssertionError("a graph used after the tracker was closed")
+        if not self.busy[graph].acquire(blocking=False):
+            self.overlapped = True
+            raise AssertionError("one graph given two frames at once")
+        try:
+            k = int(round(rgb.mean() / 10))
+            self.frames[graph].append(k)
+            if k == self.fail:
+                raise RuntimeError("the graph crashed\nwith a second line")
+            if k < 6:  # frames 2j and 2j + 1 wait for each other
+                self.barrier.wait()
+            return k
+        finally:
+            self.busy[graph].release()
+
+    def place(self, found):
+        self.placed.append(found)
+        return SimpleNamespace(points=np.full((19, 3), float(found)), pixels=np.zeros((33, 2)))
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.fixture()
+def pipeline_server(tmp_path):
+    from markovmotion.web.loadtest import MirrorPartner
+
+    made = SimpleNamespace(trackers=[], fail=None)
+
+    def camera(fov: float | None = None) -> _TwoGraphs:
+        made.trackers.append(_TwoGraphs(made.fail))
+        return made.trackers[-1]
+
+    with running(create_app(tmp_path, partner=MirrorPartner, camera=camera)) as url:
+        made.url = url
+        yield made
+
+
+def test_frames_go_to_the_graphs_in_turn_and_are_answered_in_order(pipeline_server):
+    url, trackers = pipeline_server.url, pipeline_server.trackers
+    n = 3 * MAX_PENDING
+    with connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        assert json.loads(ws.recv(30))["type"] == "start"
+        for k in range(n):  # all sent at once: the server works on MAX_PENDING at a time
+            ws.send(grey(k))
+        answers = [json.loads(ws.recv(30)) for _ in range(n)]
+        ws.send(json.dumps({"type": "stop"}))
+        with pytest.raises(ConnectionClosed):
+            ws.recv(10)
+    (tracker,) = trackers
+    assert [a["i"] for a in answers] == list(range(n))  # in order, none lost
+    assert [a["a"][0] for a in answers] == list(range(n))  # each answer is its own frame's
+    assert tracker.frames == [list(range(0, n, 2)), list(range(1, n, 2))]
+    assert tracker.placed == list(range(n)) and not tracker.overlapped
+    assert tracker.closed
+
+
+def test_frames_sent_before_stop_are_all_answered(pipeline_server):
+    url = pipeline_server.url
+    with connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        assert json.loads(ws.recv(30))["type"] == "start"
+        for k in range(MAX_PENDING + 3):
+            ws.send(grey(k))
+        ws.send(json.dumps({"type": "stop"}))
+        answers = []
+        with pytest.raises(ConnectionClosed) as closed:
+            while True:
+                answers.append(json.loads(ws.recv(30)))
+    assert closed.value.rcvd.code == 1000
+    assert [a["i"] for a in answers] == list(range(MAX_PENDING + 3))
+
+
+def test_a_tracker_failing_ends_the_session_with_one_line(pipeline_server):
+    url, trackers = pipeline_server.url, pipeline_server.trackers
+    pipeline_server.fail = 7
+    with connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        assert json.loads(ws.recv(30))["type"] == "start"
+        for k in range(10):
+            ws.send(grey(k))
+        got = [json.loads(ws.recv(30)) for _ in range(8)]
+        with pytest.raises(ConnectionClosed) as closed:
+            ws.recv(10)
+    assert [a["i"] for a in got[:7]] == list(range(7))  # the frames before it are answered
+    assert got[7] == {
+        "type": "error",
+        "message": "frame 7: the tracker failed (the graph crashed with a second line)",
+    }
+    assert closed.value.rcvd.code == 1011
+    deadline = time.monotonic() + 10  # the graphs are closed once their frames are done
+    while not trackers[0].closed and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert trackers[0].closed
+
+
+def test_a_page_gone_mid_stream_frees_the_graphs(pipeline_server):
+    url, trackers = pipeline_server.url, pipeline_server.trackers
+    with connect(ws_url(url)) as ws:
+        ws.send(json.dumps({}))
+        assert json.loads(ws.recv(30))["type"] == "start"
+        for k in range(8):
+            ws.send(grey(k))
+    deadline = time.monotonic() + 10  # closed once the frames it was given are done
+    while not trackers[0].closed and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert trackers[0].closed and not trackers[0].overlapped
+
+
+def test_track_is_landmarks_then_place(video):
+    """WebcamTracker.track (one frame start to end) gives what landmarks then place give."""
+    _needs_mediapipe()
+    frames = video[0][:4]
+    with WebcamTracker(40.0, graphs=1) as one, WebcamTracker(40.0, graphs=1) as split:
+        for f in frames:
+            a = one.track(f)
+            b = split.place(split.landmarks(f, 0))
+            assert np.allclose(a.points, b.points) and np.allclose(a.pixels, b.pixels)
+    with pytest.raises(ValueError, match="graphs: at least 1"):
+        WebcamTracker(graphs=0)
+
+
 # ---------------------------------------------------------------- the page, fake camera
 def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
     camera_server, video, browser, tmp_path
@@ -270,7 +422,7 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         page.fill("#fov", f"{fov:.2f}")
         page.click("#start")
         page.wait_for_function(
-            "() => Number(document.body.dataset.framesB || 0) > 30", timeout=60000
+            "() => Number(document.body.dataset.framesB || 0) > 30", timeout=120000
         )
         data = page.evaluate("() => ({...document.body.dataset})")
         drawn = colours_drawn(page, "#stage")

@@ -28,6 +28,7 @@ A webcam has no calibration, so:
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 
@@ -77,32 +78,79 @@ class WebcamFrame:
     seconds: float
 
 
+#: MediaPipe graphs a tracker runs, each on every ``graphs``-th frame: two on two cores. One
+#: graph's frame takes about 30 ms of one core and MediaPipe lets go of the GIL while it runs:
+#: on the real video's camera 0, two graphs in two threads answered 35-50 frames/s against
+#: 22-32 for one (2 cores shared with other jobs, load average 2.1-2.9), and tracking every
+#: other frame left the landmarks as close to the reference (docs/web.md, the camera partner).
+DEFAULT_GRAPHS = min(2, os.cpu_count() or 1)
+
+
+@dataclass
+class FoundLandmarks:
+    """MediaPipe's answer for one frame (:meth:`WebcamTracker.landmarks`): the 33 landmarks'
+    pixels (x, y), world points (mm, hip-centred) and visibility, the image's (width, height)
+    and when the frame's tracking started (``time.perf_counter``)."""
+
+    pixels: np.ndarray
+    world: np.ndarray
+    visibility: np.ndarray
+    size: tuple[int, int]
+    started: float
+
+
 class WebcamTracker:
     """The person in a webcam's frames, one RGB frame at a time (module docstring).
 
     MediaPipe runs in video mode (each frame's landmarks start from the last frame's), so
     one tracker follows one camera. ``fov``: the camera's horizontal field of view
-    (degrees). Close it (or use it in a ``with``) to free MediaPipe's graph.
+    (degrees). ``graphs``: MediaPipe graphs, frame ``n`` going to graph ``n % graphs``
+    (:data:`DEFAULT_GRAPHS`). :meth:`track` runs a frame from start to end; a pipeline
+    (:mod:`markovmotion.web.camera`) runs :meth:`landmarks` of several frames at once, each
+    graph's frames in order, and :meth:`place` of every frame in order. Close it (or use it
+    in a ``with``) to free MediaPipe's graphs.
 
     Raises:
         MotionFormatError: MediaPipe is not installed (``scripts/install-camera``).
     """
 
-    def __init__(self, fov: float = DEFAULT_FOV):
+    def __init__(self, fov: float = DEFAULT_FOV, graphs: int = DEFAULT_GRAPHS):
+        if graphs < 1:
+            raise ValueError(f"graphs: at least 1, not {graphs}")
         self.fov = float(fov)
-        self._estimator = pose_estimator()
+        self._estimators = []
+        try:
+            for _ in range(graphs):
+                self._estimators.append(pose_estimator())
+        except BaseException:
+            self.close()
+            raise
         self._pose: tuple[np.ndarray, np.ndarray] | None = None
         self._lift: float | None = None  # added to Y so that the floor is at 0
+        self._frames = 0
 
-    def track(self, rgb: np.ndarray) -> WebcamFrame | None:
-        """The person in one RGB frame (H, W, 3) uint8, or None when no one is found or the
-        landmarks cannot be placed."""
+    @property
+    def graphs(self) -> int:
+        """MediaPipe graphs: frames whose :meth:`landmarks` may run at once."""
+        return len(self._estimators)
+
+    def landmarks(self, rgb: np.ndarray, graph: int = 0) -> FoundLandmarks | None:
+        """MediaPipe's landmarks of one RGB frame (H, W, 3) uint8 on graph ``graph``, or None
+        when no one is found. Graphs run in parallel (MediaPipe lets go of the GIL); one
+        graph must be given its frames one at a time and in order."""
         t0 = time.perf_counter()
-        got = frame_landmarks(self._estimator, rgb)
+        got = frame_landmarks(self._estimators[graph], rgb)
         if got is None:
             return None
-        pixels, world, visibility = got
-        k = webcam_intrinsics(rgb.shape[1], rgb.shape[0], self.fov)
+        return FoundLandmarks(*got, (rgb.shape[1], rgb.shape[0]), t0)
+
+    def place(self, found: FoundLandmarks | None) -> WebcamFrame | None:
+        """A frame's landmarks placed in the upright world (module docstring), or None when
+        none were found or they cannot be placed; frames must come in order."""
+        if found is None:
+            return None
+        pixels, world, visibility = found.pixels, found.world, found.visibility
+        k = webcam_intrinsics(*found.size, self.fov)
         placed = place_frame(world, pixels, visibility, k, self._pose)
         if placed is None:
             self._pose = None
@@ -116,8 +164,16 @@ class WebcamTracker:
                 lift if self._lift is None else self._lift + FLOOR_RATE * (lift - self._lift)
             )
         elif self._lift is None:
-            return self._finish(pts, pixels, visibility, t0, PELVIS_HEIGHT - pts[_HIPS, 1].mean())
-        return self._finish(pts, pixels, visibility, t0, self._lift)
+            lift = PELVIS_HEIGHT - pts[_HIPS, 1].mean()
+            return self._finish(pts, pixels, visibility, found.started, lift)
+        return self._finish(pts, pixels, visibility, found.started, self._lift)
+
+    def track(self, rgb: np.ndarray) -> WebcamFrame | None:
+        """The person in one RGB frame (H, W, 3) uint8 (the graphs taking the frames in
+        turn), or None when no one is found or the landmarks cannot be placed."""
+        graph = self._frames % self.graphs
+        self._frames += 1
+        return self.place(self.landmarks(rgb, graph))
 
     def _finish(
         self, pts: np.ndarray, pixels: np.ndarray, vis: np.ndarray, t0: float, lift: float
@@ -127,7 +183,9 @@ class WebcamTracker:
         return WebcamFrame(body, pixels, vis, float(vis.mean()), time.perf_counter() - t0)
 
     def close(self) -> None:
-        self._estimator.close()
+        for est in self._estimators:
+            est.close()
+        self._estimators = []
 
     def __enter__(self) -> WebcamTracker:
         return self

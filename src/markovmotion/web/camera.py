@@ -23,6 +23,16 @@ is stepped once per tick of its rate that has passed, with A's body points inter
 between the last frame and this one (:class:`TickResampler`); a gap of more than
 :data:`MAX_GAP` seconds is told to the partner as frames missed (``skip``).
 
+Frames are pipelined: the tracker has ``graphs`` MediaPipe graphs (two on two cores,
+:data:`markovmotion.video.webcam.DEFAULT_GRAPHS`) and frame ``n`` is decoded and its
+landmarks found on graph ``n % graphs`` in a worker thread (MediaPipe lets go of the GIL, so
+the graphs run on both cores while the event loop goes on), each graph taking its frames
+one at a time and in order; the landmarks are then placed, the partner stepped and the
+answer sent in frame order, one frame after another. At most :data:`MAX_PENDING` frames
+are received and not yet answered; every frame received is answered, also after
+``{"type": "stop"}``. A tracker that raises ends the session with ``{"type": "error",
+"message": "frame N: the tracker failed (...)"}`` and the close code 1011.
+
 The tracker is given to the app (``create_app(camera=...)``, a :data:`TrackerFactory`):
 ``serve`` gives :class:`markovmotion.video.webcam.WebcamTracker` (the web layer does not
 import the video layer).
@@ -31,6 +41,7 @@ import the video layer).
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import math
 import time
@@ -60,8 +71,12 @@ MAX_FRAME_BYTES = 300_000
 #: it is decoded (a small file may declare an enormous image).
 MAX_SIDE = 1280
 MIN_SIDE = 32
-#: Camera sessions one server process runs at once (each runs MediaPipe on a core).
+#: Camera sessions one server process runs at once (each runs its MediaPipe graphs).
 MAX_SESSIONS = 2
+#: Frames of a session received and not yet answered: the tracker's graphs work on as many
+#: as they have, the others wait; further frames wait in the socket (the page sends a frame
+#: only while fewer than its frames in flight await an answer, so none queue up).
+MAX_PENDING = 4
 #: Longest gap between frames (s) over which A is interpolated; longer is frames missed.
 MAX_GAP = 0.5
 #: Fields of view a page may give (degrees).
@@ -76,9 +91,16 @@ class TrackedFrame(Protocol):
 
 
 class FrameTracker(Protocol):
-    """One camera's person, frame by frame (:class:`markovmotion.video.webcam.WebcamTracker`)."""
+    """One camera's person, frame by frame (:class:`markovmotion.video.webcam.WebcamTracker`):
+    ``landmarks(rgb, graph)`` (the slow part: ``graphs`` of them may run at once, in worker
+    threads, each graph's frames in order) then ``place(found)`` of every frame in order."""
 
-    def track(self, rgb: np.ndarray) -> TrackedFrame | None: ...
+    @property
+    def graphs(self) -> int: ...
+
+    def landmarks(self, rgb: np.ndarray, graph: int) -> object: ...
+
+    def place(self, found: object) -> TrackedFrame | None: ...
 
     def close(self) -> None: ...
 
@@ -100,6 +122,10 @@ class _TooBig(_Garbage):
     """A frame over the size limits (closed with 1009, message too big)."""
 
     code = 1009
+
+
+class TrackerFailed(RuntimeError):
+    """The tracker raised on a frame (closed with 1011, internal error, with one line)."""
 
 
 def jpeg_size(data: bytes) -> tuple[int, int] | None:
@@ -227,11 +253,49 @@ def _start(msg: dict, factory: PartnerFactory, camera: TrackerFactory):
     return (camera() if fov is None else camera(float(fov))), partner
 
 
-def _answer(tracker, resampler: TickResampler, data: bytes, number: int, arrived: float) -> str:
-    """One frame's answer (JSON text): decode, track, step the partner (a worker thread)."""
+def _failed(number: int, exc: Exception) -> TrackerFailed:
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    return TrackerFailed(f"frame {number}: the tracker failed ({message})")
+
+
+def _detect(tracker: FrameTracker, data: bytes, number: int, graph: int):
+    """A frame's first stage (a worker thread, beside the other graphs'): decode, landmarks.
+    Returns the image's (width, height), the tracker's landmarks and the seconds they took.
+
+    Raises:
+        _BadFrame, _TooBig: from :func:`decode_frame`.
+        TrackerFailed: the tracker raised (one line naming the frame).
+    """
     rgb = decode_frame(data, number)
     t0 = time.perf_counter()
-    frame = tracker.track(rgb)
+    try:
+        found = tracker.landmarks(rgb, graph)
+    except Exception as exc:
+        raise _failed(number, exc) from exc
+    return rgb.shape[1], rgb.shape[0], found, time.perf_counter() - t0
+
+
+async def _detect_after(
+    before: asyncio.Future | None, tracker: FrameTracker, data: bytes, number: int, graph: int
+):
+    """:func:`_detect` once the graph's previous frame (``before``) is done, so that each
+    graph takes its frames one at a time and in order (MediaPipe's video mode)."""
+    if before is not None:
+        await asyncio.wait([before])
+    return await asyncio.to_thread(_detect, tracker, data, number, graph)
+
+
+def _answer(
+    tracker: FrameTracker, resampler: TickResampler, detected, number: int, arrived: float
+) -> str:
+    """One frame's answer (JSON text), in frame order (a worker thread): place the landmarks
+    of :func:`_detect`, step the partner."""
+    width, height, found, seconds = detected
+    t0 = time.perf_counter()
+    try:
+        frame = tracker.place(found)
+    except Exception as exc:
+        raise _failed(number, exc) from exc
     t1 = time.perf_counter()
     b = resampler.feed(arrived, None if frame is None else frame.points)
     t2 = time.perf_counter()
@@ -243,13 +307,61 @@ def _answer(tracker, resampler: TickResampler, data: bytes, number: int, arrived
             "a": None if frame is None else flat_positions(frame.points),
             "b": None if b is None else flat_positions(b),
             "pixels": None if frame is None else flat_positions(frame.pixels),
-            "width": rgb.shape[1],
-            "height": rgb.shape[0],
-            "track_ms": round(1000 * (t1 - t0), 2),
+            "width": width,
+            "height": height,
+            "track_ms": round(1000 * (seconds + t1 - t0), 2),
             "partner_ms": round(1000 * (t2 - t1), 2),
         },
         separators=(",", ":"),
     )
+
+
+async def _receive_frames(
+    ws: WebSocket, tracker: FrameTracker, pending: asyncio.Queue, running: set
+) -> None:
+    """The session's reader: each binary frame starts its :func:`_detect` on graph
+    ``number % graphs`` (after that graph's previous frame) and joins ``pending`` in order
+    (``(task, number, arrival time)``; None at the end); ``running``: the tasks not done."""
+    graphs = max(1, int(tracker.graphs))
+    last: list[asyncio.Future | None] = [None] * graphs
+    number = 0
+    while True:
+        message = await ws.receive()
+        if message["type"] == "websocket.disconnect":
+            break
+        data = message.get("bytes")
+        if data is None:
+            if _parse(message.get("text") or "").get("type") == "stop":
+                break
+            raise _Garbage("unexpected text message: send frames as binary JPEG messages")
+        arrived = time.perf_counter()
+        graph = number % graphs
+        task = asyncio.ensure_future(_detect_after(last[graph], tracker, data, number, graph))
+        last[graph] = task
+        running.add(task)  # until done: the session's end waits for it
+        task.add_done_callback(functools.partial(_done, running))
+        await pending.put((task, number, arrived))
+        number += 1
+    await pending.put(None)
+
+
+def _done(running: set, task: asyncio.Future) -> None:
+    """A frame's task is done: out of ``running``; its error (if any) is the writer's to
+    report, or nobody's once the session has ended (not logged as never retrieved)."""
+    running.discard(task)
+    if not task.cancelled():
+        task.exception()
+
+
+async def _answer_frames(
+    ws: WebSocket, tracker: FrameTracker, resampler: TickResampler, pending: asyncio.Queue
+) -> None:
+    """The session's writer: each frame of ``pending``, in order, placed, answered, sent."""
+    while (item := await pending.get()) is not None:
+        task, number, arrived = item
+        detected = await asyncio.shield(task)  # a cancelled session lets it finish
+        answer = await asyncio.to_thread(_answer, tracker, resampler, detected, number, arrived)
+        await ws.send_text(answer)
 
 
 async def camera_session(
@@ -284,7 +396,8 @@ async def camera_session(
         _leave(sessions, ws)
         return
     resampler = TickResampler(partner, partner.fps or 30.0)
-    number = 0
+    running: set[asyncio.Future] = set()
+    error: tuple[str, int] | None = None
     try:
         await _send(
             ws,
@@ -298,28 +411,24 @@ async def camera_session(
                 "max_side": MAX_SIDE,
             },
         )
-        while True:
-            message = await ws.receive()
-            if message["type"] == "websocket.disconnect":
-                break
-            data = message.get("bytes")
-            if data is None:
-                if _parse(message.get("text") or "").get("type") == "stop":
-                    break
-                raise _Garbage("unexpected text message: send frames as binary JPEG messages")
-            arrived = time.perf_counter()
-            answer = await asyncio.to_thread(_answer, tracker, resampler, data, number, arrived)
-            number += 1
-            await ws.send_text(answer)
+        pending: asyncio.Queue = asyncio.Queue(MAX_PENDING)
+        async with asyncio.TaskGroup() as group:
+            group.create_task(_receive_frames(ws, tracker, pending, running))
+            group.create_task(_answer_frames(ws, tracker, resampler, pending))
         await _close(ws)
-    except _Garbage as exc:
-        await _fail(ws, str(exc), exc.code)
-    except MarkovMotionError as exc:  # the partner cannot take A (one line, internal error)
-        await _fail(ws, str(exc), 1011)
-    except (WebSocketDisconnect, RuntimeError, OSError):
+    except* _Garbage as exc:
+        first = exc.exceptions[0]
+        error = (str(first), first.code)
+    except* (TrackerFailed, MarkovMotionError) as exc:  # one line, internal error
+        error = (str(exc.exceptions[0]), 1011)
+    except* (WebSocketDisconnect, RuntimeError, OSError):
         pass
     finally:
         _leave(sessions, ws)
+        if error is not None:
+            await _fail(ws, *error)
+        # a graph's thread cannot be stopped: let every frame finish before closing them
+        await asyncio.gather(*running, return_exceptions=True)
         await asyncio.to_thread(tracker.close)
 
 

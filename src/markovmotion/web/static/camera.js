@@ -8,15 +8,21 @@ const stage = new Stage($("stage"));
 const overlay = $("overlay");
 const video = $("video");
 const grab = document.createElement("canvas");
-// frames sent and not yet answered (the next one waits at the server); ?inflight=1 for the
-// lowest latency, 2 (default) so that the server never waits for the network
-const IN_FLIGHT = Math.max(1, Math.min(4, Number(new URLSearchParams(location.search).get("inflight")) || 2));
+// frames sent and not yet answered: ?inflight=1 for the lowest latency; 3 (default) keeps the
+// server's two MediaPipe graphs busy with one more frame waiting (docs/web.md's table)
+const IN_FLIGHT = Math.max(1, Math.min(4, Number(new URLSearchParams(location.search).get("inflight")) || 3));
 const MAX_SIDE = 640; // frames are scaled down to at most this many pixels a side
 // MediaPipe's landmark pairs drawn over the frame: arms, trunk, legs, feet, face to ears
 const LINKS = [[11, 13], [13, 15], [12, 14], [14, 16], [11, 12], [11, 23], [12, 24], [23, 24],
   [23, 25], [25, 27], [24, 26], [26, 28], [27, 29], [29, 31], [27, 31], [28, 30], [30, 32],
   [28, 32], [0, 7], [0, 8]];
 let ws = null, stream = null, session = null;
+
+// the last 120 values of a running statistic
+function keep(values, x) {
+  values.push(x);
+  if (values.length > 240) values.splice(0, values.length - 120);
+}
 
 function stopped(message) {
   setRunning(false);
@@ -29,16 +35,18 @@ function stopped(message) {
 
 function send() {
   if (!session || !session.running || session.pending.length >= IN_FLIGHT || !video.videoWidth) return;
+  const t = performance.now();
   const scale = Math.min(1, MAX_SIDE / Math.max(video.videoWidth, video.videoHeight));
   grab.width = Math.round(video.videoWidth * scale);
   grab.height = Math.round(video.videoHeight * scale);
   grab.getContext("2d").drawImage(video, 0, 0, grab.width, grab.height);
-  const t = performance.now();
   session.pending.push(t);
   session.sent += 1;
   grab.toBlob(async (blob) => {
     if (!ws || ws.readyState !== WebSocket.OPEN) return;
-    ws.send(await blob.arrayBuffer());
+    const data = await blob.arrayBuffer();
+    if (session) keep(session.encode, performance.now() - t); // grab + JPEG, ms
+    ws.send(data);
   }, "image/jpeg", 0.8);
 }
 
@@ -73,7 +81,9 @@ function report() {
   const span = s.answers.length > 1 ? (s.answers[s.answers.length - 1] - s.answers[0]) / 1000 : 0;
   const fps = span > 0 ? (s.answers.length - 1) / span : 0;
   const recent = s.latency.slice(-120);
-  const mean = recent.reduce((a, b) => a + b, 0) / Math.max(1, recent.length);
+  const encode = s.encode.slice(-120), track = s.tracks.slice(-120);
+  const avg = (xs) => xs.reduce((a, b) => a + b, 0) / Math.max(1, xs.length);
+  const mean = avg(recent);
   $("fps").textContent = fps.toFixed(1);
   $("dropped").textContent = `camera frames ${s.seen} · sent ${s.sent}`;
   $("latency").textContent = mean.toFixed(0);
@@ -84,6 +94,7 @@ function report() {
     framesA: String(s.found), framesB: String(s.b), frames: String(s.frames),
     fps: fps.toFixed(2), latency: mean.toFixed(1), latencyP99: quantile(recent, 0.99).toFixed(1),
     cameraFrames: String(s.seen), sent: String(s.sent),
+    encodeMs: avg(encode).toFixed(1), trackMs: avg(track).toFixed(1),
   });
 }
 
@@ -91,7 +102,7 @@ function onMessage(event) {
   const msg = received(event);
   if (!msg) return;
   if (msg.type === "start") {
-    session = { ...msg, running: true, pending: [], answers: [], latency: [], seen: 0, sent: 0,
+    session = { ...msg, running: true, pending: [], answers: [], latency: [], encode: [], tracks: [], seen: 0, sent: 0,
       frames: 0, found: 0, b: 0, track: 0, partner: 0, fitted: false, fittedB: false };
     $("lag").textContent = String(msg.lag);
     $("status").textContent = `Tracking; the partner answers at ${msg.fps.toFixed(0)} fps, ${msg.lag} frames behind you.`;
@@ -100,10 +111,11 @@ function onMessage(event) {
   }
   if (msg.type !== "frame" || !session) return;
   const s = session, now = performance.now();
-  s.latency.push(now - s.pending.shift());
+  keep(s.latency, now - s.pending.shift());
   s.answers.push(now);
   s.frames += 1;
   s.track = msg.track_ms;
+  keep(s.tracks, msg.track_ms);
   s.partner = msg.partner_ms;
   if (msg.a) s.found += 1;
   if (msg.b) s.b += 1;
