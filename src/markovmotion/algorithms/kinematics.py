@@ -160,6 +160,9 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ IK on a few points
+_UP = np.array([0.0, 1.0, 0.0])
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     """(..., 3, 3) cross-product matrices of vectors (..., 3)."""
     s = np.zeros((*v.shape[:-1], 3, 3))
@@ -210,6 +213,7 @@ def points_ik(
     prior_mean: np.ndarray,
     prior_precision: np.ndarray,
     iterations: int = 30,
+    upright: tuple[np.ndarray, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse kinematics on a few points, all frames at once (batch Levenberg-Marquardt).
 
@@ -240,6 +244,9 @@ def points_ik(
         rotvecs: (F, J, 3) starting local rotation vectors (joint 0's is global).
         root: (F, 3) starting root position (mm).
         prior_mean, prior_precision: (J, 3) and (J, 3, 3); joint 0 has no prior.
+        upright: ``(a, w)``: the root's tilt prior, a term ``w^2 |G_0 a - up|^2`` (``a`` the
+            root's axis that is vertical on average, ``w`` in mm per rad of tilt): without it
+            the root tilts freely where the points cannot tell it from a bent lower back.
 
     Returns:
         The fitted rotation vectors (F, J, 3), root positions (F, 3), and per frame the mean
@@ -268,6 +275,8 @@ def points_ik(
         e = x[:, points] - targets
         d = rv_[:, free[1:]] - mean
         c = (e**2).sum(axis=(1, 2)) + (d[..., None, :] @ prec @ d[..., None]).sum(axis=(1, 2, 3))
+        if upright is not None:
+            c = c + upright[1] ** 2 * ((g[:, 0] @ upright[0] - _UP) ** 2).sum(axis=1)
         return c, g, x
 
     lam = np.full(f, 1e-3)
@@ -293,6 +302,11 @@ def points_ik(
             s = slice(3 + 3 * k, 6 + 3 * k)
             a[:, s, s] += hp[:, k - 1]
             b[:, s] += gp[:, k - 1]
+        if upright is not None:
+            ju = -upright[1] * g[:, 0] @ _skew(upright[0])  # (F, 3, 3)
+            ru = upright[1] * (g[:, 0] @ upright[0] - _UP)
+            a[:, 3:6, 3:6] += np.swapaxes(ju, 1, 2) @ ju
+            b[:, 3:6] += (np.swapaxes(ju, 1, 2) @ ru[..., None])[..., 0]
         diag = np.einsum("fii->fi", a)
         a[:, np.arange(n), np.arange(n)] += lam[:, None] * (diag + 1e-6)
         step = -np.linalg.solve(a, b[..., None])[..., 0]
@@ -303,7 +317,13 @@ def points_ik(
         new_rv[:, free] = (now * turn).as_rotvec().reshape(f, n_free, 3)
         c_new, g_new, x_new = cost(new_rv, new_root)
         ok = c_new < c
-        rv[ok], root[ok], c[ok], g[ok], x[ok] = new_rv[ok], new_root[ok], c_new[ok], g_new[ok], x_new[ok]
+        rv[ok], root[ok], c[ok], g[ok], x[ok] = (
+            new_rv[ok],
+            new_root[ok],
+            c_new[ok],
+            g_new[ok],
+            x_new[ok],
+        )
         lam = np.where(ok, lam / 3, lam * 4)
     err = np.linalg.norm(x[:, points] - targets, axis=-1).mean(axis=1)
     return rv, root, err
