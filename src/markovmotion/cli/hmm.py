@@ -381,7 +381,7 @@ def _respond_video(
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.composite import respond_in_video, respond_monocular
-    from markovmotion.video.multiview import training_body_model
+    from markovmotion.video.multiview import default_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
@@ -413,7 +413,7 @@ def _respond_video(
         return
     if realtime:
         live = respond_in_video(
-            model, video, out, training_body_model(data), cameras, view, particles, layers,
+            model, video, out, default_body_model(data), cameras, view, particles, layers,
             max_frames, live=True,
         )  # fmt: skip
         err_console.print(
@@ -425,7 +425,7 @@ def _respond_video(
         )
         return
     summary = respond_in_video(
-        model, video, out, training_body_model(data), cameras, view, particles, layers,
+        model, video, out, default_body_model(data), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed", guide=guide,
     )  # fmt: skip
     err_console.print(

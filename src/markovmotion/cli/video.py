@@ -99,6 +99,13 @@ def track(
         "lowered.",
     ),
     guide: str = guide_option(),
+    body_model: str = typer.Option(
+        "collection",
+        callback=choice(("collection", "interaction")),
+        help="collection: joint axes and ranges learnt from every skeleton take of --data, "
+        "retargeted onto the template (built once, then cached); interaction: from the "
+        "training handshake and pull takes alone (the template's own skeleton).",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -114,7 +121,7 @@ def track(
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-    from markovmotion.video.multiview import track_take, training_body_model
+    from markovmotion.video.multiview import default_body_model, track_take
 
     if out is not None:
         check_motion_output(out)
@@ -125,7 +132,7 @@ def track(
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     size = _body_size(body_size)
-    body = training_body_model(data)
+    body = default_body_model(data, body_model)
     if size == "video":
         from markovmotion.video.body_size import body_size_from_points
         from markovmotion.video.monocular import track_monocular_video

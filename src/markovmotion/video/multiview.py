@@ -35,6 +35,7 @@ from markovmotion.video.annealed_particle_filter import TrackResult, track_video
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel, local_rotvecs
 from markovmotion.video.cameras import ring_of_cameras, save_cameras
 from markovmotion.video.render import background, write_video
+from markovmotion.video.retarget import Template
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
 
 #: Labels of the two-person takes the interaction body model learns from; person A of the
@@ -167,19 +168,40 @@ def collection_body_model(
     """The body model learnt from every skeleton take of the collection (BVH and ASF/AMC, any
     skeleton whose body points are found), retargeted onto the template
     (:mod:`~markovmotion.video.retarget`): its principal axes and joint ranges cover what the
-    collection's people do, not only the handshakes and pulls.
+    collection's people do, not only the handshakes and pulls. The takes:
+    :func:`collection_takes`; the axes chosen backward, the limits without the
+    :data:`LIMIT_TAIL` at each end, the speeds from the takes at the retargeting's full rate
+    (:meth:`BodyModel.fit_rotvecs`), the standing height the template's own.
+
+    Raises:
+        DataNotFoundError: no skeleton take is left.
+    """
+    from markovmotion.video.retarget import RETARGET_FPS
+
+    template, takes = collection_takes(data, leave_out, label_frames)
+    body = BodyModel.fit_rotvecs(
+        template.skeleton, takes, max_dof=max_dof, tail=LIMIT_TAIL, speed_fps=0.99 * RETARGET_FPS
+    )
+    return dataclasses.replace(body, height=template.height)
+
+
+def collection_takes(
+    data: str | os.PathLike[str] | None = None,
+    leave_out: Sequence[str] = (),
+    label_frames: int = LABEL_FRAMES,
+) -> tuple[Template, list[tuple[np.ndarray, np.ndarray, float]]]:
+    """The template and every skeleton take of the collection as its poses: per take (or run
+    of frames) local rotation vectors (F, J, 3), root positions (F, 3) and frame rate.
 
     The template is person A of the first training take of :data:`BODY_LABELS` (else the
     first take left); its own takes of those labels give the IK's pose prior and enter with
     their own rotations. Left out: the held-out two-person takes of every label
     (:func:`~markovmotion.data.splits.held_out_pairs`, the split the tracker's benchmarks
-    render), the labels in ``leave_out``, and takes whose body points are not all found (a
-    note names them). Each label gives at most ``label_frames`` frames, every
-    ``round(fps / RETARGET_FPS) * k``-th frame of its takes with ``k`` as small as allows.
-    Retargeted takes are cached (:func:`~markovmotion.video.retarget.retarget_file`).
-
-    Raises:
-        DataNotFoundError: no skeleton take is left.
+    render), the labels in ``leave_out``, takes whose body points are not all found (a
+    note names them), and retargeted frames with a joint beyond :data:`HALF_TURN`. Each
+    label gives at most ``label_frames`` frames, every ``round(fps / RETARGET_FPS) * k``-th
+    frame of its takes with ``k`` as small as allows. Retargeted takes are cached
+    (:func:`~markovmotion.video.retarget.retarget_file`).
     """
     from markovmotion.errors import SkeletonMismatchError
     from markovmotion.progress import note, track
@@ -225,12 +247,7 @@ def collection_body_model(
     if skipped:
         note(f"body model: {len(skipped)} takes without every body point left out: "
              f"{', '.join(skipped[:6])}")  # fmt: skip
-    body = BodyModel.fit_rotvecs(
-        sk, takes, max_dof=max_dof, tail=LIMIT_TAIL, speed_fps=0.99 * RETARGET_FPS
-    )
-    # the template's standing height is its own (retargeted pelvises stand by leg lengths)
-    height = float(np.concatenate([m.translations[:, 0, 1] for m in template_motions]).mean())
-    return dataclasses.replace(body, height=height)
+    return template, takes
 
 
 #: The collection's joint limits leave out this share of frames at each end of every

@@ -152,6 +152,7 @@ class Template:
             (:func:`trunk_directions`).
         upright: the root's axis that is vertical on average (3,), and the weight of its
             prior (mm per rad: :data:`PRIOR_WEIGHT` over the tilt's standard deviation).
+        height: mean height (mm) of the root above the floor in the template's takes.
     """
 
     skeleton: Skeleton
@@ -162,6 +163,7 @@ class Template:
     lengths: np.ndarray
     trunk: np.ndarray
     upright: tuple[np.ndarray, float]
+    height: float
 
     @classmethod
     def fit(cls, motions: Sequence[Motion]) -> Template:
@@ -192,7 +194,7 @@ class Template:
         sd = max(float(np.sqrt(np.mean(tilt**2))), PRIOR_FLOOR)
         return cls(
             skeleton, points, np.flatnonzero(moves), mean, precision, _segment_lengths(at),
-            trunk_directions(at), (axis, PRIOR_WEIGHT / sd),
+            trunk_directions(at), (axis, PRIOR_WEIGHT / sd), float(root[:, 1].mean()),
         )  # fmt: skip
 
     def key(self) -> str:
