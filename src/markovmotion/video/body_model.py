@@ -118,6 +118,17 @@ def local_rotvecs(motion: Motion) -> np.ndarray:
     return rot.as_rotvec().reshape(motion.n_frames, -1, 3)
 
 
+def moving_joints(skeleton: Skeleton, points: np.ndarray) -> np.ndarray:
+    """Joints (sorted) that move a body point: those with one of ``points`` strictly below."""
+    moves = np.zeros(skeleton.n_joints, bool)
+    for p in points:
+        j = skeleton.parents[p]
+        while j >= 0:
+            moves[j] = True
+            j = skeleton.parents[j]
+    return np.flatnonzero(moves)
+
+
 def split_heading(root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Root rotation vectors (F, 3) as their tilt (rotation vectors, heading removed) and
     heading (F,) in rad: ``root = yaw(heading) * tilt``."""
@@ -223,13 +234,7 @@ class BodyModel:
             rates.append(float(fps))
         allrv = np.concatenate(rv)
         mean = allrv.mean(axis=0)
-        moves = np.zeros(skeleton.n_joints, bool)  # joints with a body point strictly below
-        for p in points:
-            j = skeleton.parents[p]
-            while j >= 0:
-                moves[j] = True
-                j = skeleton.parents[j]
-        cand = [j for j in range(skeleton.n_joints) if moves[j]]
+        cand = [int(j) for j in moving_joints(skeleton, points)]
         axes = {j: np.linalg.svd(allrv[:, j] - mean[j], full_matrices=False)[2] for j in cand}
         k = _greedy_axes(skeleton, points, allrv, mean, axes, max_dof - ROOT_DOF, backward=backward)
 

@@ -52,7 +52,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features.body_points import BODY_POINTS, PARENT, body_point_index, body_points
 from markovmotion.persist import load_npz, save_npz
-from markovmotion.video.body_model import local_rotvecs
+from markovmotion.video.body_model import local_rotvecs, moving_joints
 
 #: Frames per second of the takes retargeted (every ``round(fps / RETARGET_FPS)``-th frame).
 RETARGET_FPS = 7.5
@@ -181,19 +181,13 @@ class Template:
         d = rv - mean
         cov = np.einsum("fja,fjb->jab", d, d) / len(rv) + PRIOR_FLOOR**2 * np.eye(3)
         precision = PRIOR_WEIGHT**2 * np.linalg.inv(cov)
-        moves = np.zeros(skeleton.n_joints, bool)
-        for p in points:
-            j = skeleton.parents[p]
-            while j >= 0:
-                moves[j] = True
-                j = skeleton.parents[j]
         at = rotvec_positions(skeleton, rv, root, points)
         up = Rotation.from_rotvec(rv[:, 0]).inv().apply([0.0, 1.0, 0.0])  # world up, root's axes
         axis = up.mean(axis=0) / np.linalg.norm(up.mean(axis=0))
         tilt = np.arccos(np.clip(up @ axis, -1.0, 1.0))
         sd = max(float(np.sqrt(np.mean(tilt**2))), PRIOR_FLOOR)
         return cls(
-            skeleton, points, np.flatnonzero(moves), mean, precision, _segment_lengths(at),
+            skeleton, points, moving_joints(skeleton, points), mean, precision, _segment_lengths(at),
             trunk_directions(at), (axis, PRIOR_WEIGHT / sd), float(root[:, 1].mean()),
         )  # fmt: skip
 
