@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from markovmotion.cli.options import choice, guide_option, ranged
+from markovmotion.cli.options import body_model_option, choice, guide_option, ranged
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -99,13 +99,7 @@ def track(
         "lowered.",
     ),
     guide: str = guide_option(),
-    body_model: str = typer.Option(
-        "collection",
-        callback=choice(("collection", "interaction")),
-        help="collection: joint axes and ranges learnt from every skeleton take of --data, "
-        "retargeted onto the template (built once, then cached); interaction: from the "
-        "training handshake and pull takes alone (the template's own skeleton).",
-    ),
+    body_model: str = body_model_option(),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
