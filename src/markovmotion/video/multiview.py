@@ -7,9 +7,11 @@ capture volume (Deutscher et al. used three), over a static textured
 background with sensor noise; person A alone (B masked) or both. It writes
 one video per camera and ``cameras.json``.
 
-:func:`training_body_model` learns the body model from the collection's
-two-person takes (training split); :func:`track_take` tracks a multi-view
-video and, given the true motion, measures the error over the body points.
+:func:`collection_body_model` learns the body model from every skeleton take of the
+collection, retargeted onto the template (the default, :func:`default_body_model`);
+:func:`training_body_model` from the training handshake and pull takes alone;
+:func:`track_take` tracks a multi-view video and, given the true motion, measures the
+error over the body points.
 """
 
 from __future__ import annotations
