@@ -112,9 +112,7 @@ def main() -> None:
         start = min(args.start, max(0.0, take.frames / take.fps - 0.1 - args.seconds))
         folder = args.cache / f"{take.name}-{start:g}-{args.seconds:g}s"
         if not (folder / "cameras.json").is_file():
-            render_multiview(
-                take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start
-            )
+            render_multiview(take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start)
         truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
         for name, body in (("interaction (old)", old), ("collection without it", new)):
             errs, limbs, fps = [], [], []
