@@ -1,19 +1,22 @@
 """The articulated body model a tracker fits to video: a skeleton, its degrees of freedom, its flesh.
 
 Built from motion capture of any skeleton whose body points
-(:mod:`markovmotion.features.body_points`) can be found. The state of a pose
+(:mod:`markovmotion.features.body_points`) can be found (:meth:`BodyModel.fit`), or from
+poses of it given as rotation vectors, such as takes of other skeletons retargeted onto it
+(:meth:`BodyModel.fit_rotvecs`, :mod:`~markovmotion.video.retarget`). The state of a pose
 is a vector of ~30 numbers (Deutscher et al.'s model has 29):
 
 * the root position (3, mm) and heading (yaw about the vertical, 1);
 * the root's remaining tilt and every joint that moves a body point, each as
   a few coefficients of its local rotation vector on the principal axes of
   the training data (``k`` axes per joint: 1 for an elbow or knee that only
-  bends, up to 3 for a shoulder, chosen by the variance they explain);
-* joints that barely move (collar bones, the hip sockets) and joints that
-  move no body point (fingers) stay at their mean rotation.
+  bends, up to 3 for a shoulder, chosen greedily by how well they rebuild the
+  training poses' body points);
+* joints left without an axis (on the interaction takes: collar bones, the hip
+  sockets) and joints that move no body point (fingers) stay at their mean rotation.
 
 Joint limits are the range of each coefficient over the training data (with
-a margin). The flesh is :data:`BODY_SHAPE`: tapered capsules on the
+a margin; optionally without the extreme quantiles). The flesh is :data:`BODY_SHAPE`: tapered capsules on the
 segments between body points, a ball for the head and one per hand, as the
 renderer draws them.
 """
