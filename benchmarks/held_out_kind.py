@@ -19,7 +19,7 @@ Kinds: ``--kinds salsa,bend`` or, by default, chosen from INDEX.csv at run time:
 category of skeleton takes, the label with the most takes (ties: the first listed).
 
     python3 benchmarks/held_out_kind.py [--data DIR] [--kinds A,B] [--seconds 3] [--start 1]
-        [--seeds 1] [--first-seed 0] [--json]
+        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--json]
 """
 
 from __future__ import annotations
@@ -92,6 +92,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="seconds of each take")
     parser.add_argument("--start", type=float, default=1.0, help="seconds into the take")
     parser.add_argument("--seeds", type=int, default=1, help="runs per body model")
+    parser.add_argument("--models", default="interaction,collection",
+                        help="body models to run, comma-separated")  # fmt: skip
     parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -115,6 +117,8 @@ def main() -> None:
             render_multiview(take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start)
         truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
         for name, body in (("interaction (old)", old), ("collection without it", new)):
+            if name.split()[0] not in args.models.split(","):
+                continue
             errs, limbs, fps = [], [], []
             low = floor(body, body_points(truth)[: int(round(args.seconds * FPS)) : 3])
             for seed in range(args.first_seed, args.first_seed + args.seeds):

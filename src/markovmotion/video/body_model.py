@@ -237,7 +237,8 @@ class BodyModel:
             rates.append(float(fps))
         allrv = np.concatenate(rv)
         mean = allrv.mean(axis=0)
-        cand = [int(j) for j in moving_joints(skeleton, points)]
+        still = allrv.std(axis=0).max(axis=1) < 1e-9  # never moves in these takes: no axis
+        cand = [int(j) for j in moving_joints(skeleton, points) if not still[j] or j == 0]
         axes = {j: np.linalg.svd(allrv[:, j] - mean[j], full_matrices=False)[2] for j in cand}
         k = _greedy_axes(skeleton, points, allrv, mean, axes, max_dof - ROOT_DOF, backward=backward)
 

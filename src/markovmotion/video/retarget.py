@@ -20,7 +20,9 @@ retargeted by what every skeleton shares, the 19 body points
    0.38 rad (median) on every other skeleton's take. (A take whose trunk keeps one
    posture throughout has that posture taken for its skeleton's.)
 2. **inverse kinematics**: the template's root position and the local rotations of every
-   joint that moves a body point (:func:`~markovmotion.algorithms.kinematics.points_ik`),
+   joint that moves a body point and moves at all in the template's own takes (cgspeed's hip
+   sockets and collar bones never do: left free, they absorbed where other skeletons put
+   their points, took principal axes, and the tracker lost a jump it had followed) (:func:`~markovmotion.algorithms.kinematics.points_ik`),
    with a Gaussian prior per joint from the template's own takes (mean and covariance of
    the local rotation vector, a floor of :data:`PRIOR_FLOOR` rad on every axis, weight
    :data:`PRIOR_WEIGHT` mm per standard deviation), and one on the root's tilt from the
@@ -60,8 +62,11 @@ RETARGET_FPS = 7.5
 PRIOR_WEIGHT = 10.0
 #: Smallest standard deviation (rad) of the prior on any axis of any joint.
 PRIOR_FLOOR = 0.1
+#: A joint whose local rotation varies less than this (rad) over the template's takes stays
+#: fixed in the retargeting.
+STILL = 1e-3
 #: Version of the retargeting, part of the cache key.
-VERSION = 1
+VERSION = 2
 KIND = "retargeted-take"
 
 _PARENTS = np.array([BODY_POINTS.index(PARENT[p]) if p in PARENT else -1 for p in BODY_POINTS])
@@ -144,7 +149,8 @@ class Template:
     Attributes:
         skeleton: the template skeleton.
         points: (19,) its joints that are the body points.
-        free: joints fitted by the IK (every joint with a body point below it; 0 first).
+        free: joints fitted by the IK (every joint with a body point below it that the
+            template's takes move; 0 first).
         mean: (J, 3) mean local rotation vector over the template's takes.
         precision: (J, 3, 3) the prior's precision (mm^2 per rad^2, module docstring).
         lengths: (19,) median segment lengths (mm) of the body points.
@@ -181,19 +187,25 @@ class Template:
         d = rv - mean
         cov = np.einsum("fja,fjb->jab", d, d) / len(rv) + PRIOR_FLOOR**2 * np.eye(3)
         precision = PRIOR_WEIGHT**2 * np.linalg.inv(cov)
+        # joints the template's own takes never move (cgspeed's hip sockets and collar
+        # bones) stay fixed: moving them only absorbs where other skeletons put their points
+        moves = rv.std(axis=0).max(axis=1) > STILL
+        free = np.array([j for j in moving_joints(skeleton, points) if j == 0 or moves[j]])
         at = rotvec_positions(skeleton, rv, root, points)
         up = Rotation.from_rotvec(rv[:, 0]).inv().apply([0.0, 1.0, 0.0])  # world up, root's axes
         axis = up.mean(axis=0) / np.linalg.norm(up.mean(axis=0))
         tilt = np.arccos(np.clip(up @ axis, -1.0, 1.0))
         sd = max(float(np.sqrt(np.mean(tilt**2))), PRIOR_FLOOR)
         return cls(
-            skeleton, points, moving_joints(skeleton, points), mean, precision, _segment_lengths(at),
+            skeleton, points, free, mean, precision, _segment_lengths(at),
             trunk_directions(at), (axis, PRIOR_WEIGHT / sd), float(root[:, 1].mean()),
         )  # fmt: skip
 
     def key(self) -> str:
         """A digest of everything the retargeting depends on (for the cache)."""
-        h = hashlib.sha256(json.dumps([VERSION, self.skeleton.to_dict()]).encode())
+        h = hashlib.sha256(
+            json.dumps([VERSION, self.skeleton.to_dict(), self.free.tolist()]).encode()
+        )
         for a in (self.mean, self.precision, self.lengths, self.trunk, self.upright[0]):
             h.update(np.ascontiguousarray(a, dtype=np.float64).round(6).tobytes())
         return h.hexdigest()[:16]
