@@ -80,7 +80,8 @@ def _greedy_axes(
     Forward: from none, add the axis that most lowers the error. ``backward``: from every
     axis, take away the one whose loss raises it least; where joints move together (a
     pelvis tilt the hips take back, a knee bent with its hip) an axis helps only beside the
-    others, which forward selection does not see: on the whole collection it chose no knee.
+    others, which forward selection does not see: on a first form of the retargeted collection
+    it chose no knee.
     """
     rng = np.random.default_rng(0)
     rv = rv[rng.choice(len(rv), min(sample, len(rv)), replace=False)]
