@@ -2,6 +2,7 @@
 guide, with the plates and with the learnt background, two seeds; and MediaPipe triangulated.
 
     python3 benchmarks/real_video_guide.py [--video DIR] [--seeds 0 1] [--json]
+        [--body-model collection|interaction] [--backgrounds plates learnt] [--no-triangulate]
 
 Prints one JSON line per run (``--json``) or a Markdown table: mean error over the 12 joints
 against the triangulated reference, the same outside the frames its README calls wrong (45-70),
@@ -22,7 +23,7 @@ import numpy as np
 from markovmotion.data.index import data_root
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.monocular import REFERENCE_JOINTS, read_reference, reference_errors
-from markovmotion.video.multiview import track_take, training_body_model
+from markovmotion.video.multiview import BODY_MODELS, default_body_model, track_take
 from markovmotion.video.triangulation import track_triangulated_video
 
 #: Frames the reference's README says are wrong for one leg.
@@ -56,20 +57,27 @@ def main() -> None:
     )
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--body-model", choices=BODY_MODELS, default="collection")
+    ap.add_argument("--backgrounds", nargs="+", choices=("plates", "learnt"),
+                    default=["plates", "learnt"])  # fmt: skip
+    ap.add_argument("--no-triangulate", action="store_true", help="skip MediaPipe triangulated")
     args = ap.parse_args()
     reference = args.video / "reference_mediapipe_triangulated_mm.csv"
     rows = []
-    tr, s = track_triangulated_video(args.video, reference=reference)
-    rows.append({"method": "triangulate", "background": "-", "seed": "-",
-                 "mean_mm": s["mean_mm"], "outside_45_70_mm": outside_wrong(tr.points, reference),
-                 "per_joint_mm": s["per_joint_mm"], "fps": s["fps"], "fps_with_guide": s["fps"]})  # fmt: skip
-    if args.json:
-        print(json.dumps(rows[-1]), flush=True)
-    body = training_body_model()
+    if not args.no_triangulate:
+        tr, s = track_triangulated_video(args.video, reference=reference)
+        rows.append({"method": "triangulate", "background": "-", "seed": "-",
+                     "mean_mm": s["mean_mm"], "outside_45_70_mm": outside_wrong(tr.points, reference),
+                     "per_joint_mm": s["per_joint_mm"], "fps": s["fps"], "fps_with_guide": s["fps"]})  # fmt: skip
+        if args.json:
+            print(json.dumps(rows[-1]), flush=True)
+    body = default_body_model(None, args.body_model)
     tmp = Path(tempfile.mkdtemp(prefix="nobg"))
     try:
         plain = without_plates(args.video, tmp)
         for background, cams in (("plates", None), ("learnt", plain)):
+            if background not in args.backgrounds:
+                continue
             for seed in args.seeds:
                 for guide in (False, True):
                     motion, _, s = track_take(
@@ -84,7 +92,7 @@ def main() -> None:
                         "outside_45_70_mm": outside_wrong(pts, reference),
                         "per_joint_mm": err["per_joint_mm"], "fps": s["fps"],
                         "fps_with_guide": s.get("fps_with_guide", s["fps"]),
-                        "recoveries": s["recoveries"],
+                        "recoveries": s["recoveries"], "body_model": args.body_model,
                     })  # fmt: skip
                     if args.json:
                         print(json.dumps(rows[-1]), flush=True)

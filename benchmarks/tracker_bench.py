@@ -17,7 +17,7 @@ included) and per second of CPU time (the tracker is single-threaded, so this
 is its rate on one unshared core). Videos are cached in ``--cache``.
 
     python3 benchmarks/tracker_bench.py [--data DIR] [--seconds 3] [--seeds 2] [--sweep] [--json]
-        [--take cmu/bvh/FILE.bvh.gz ...]
+        [--take cmu/bvh/FILE.bvh.gz ...] [--body-model interaction|collection] [--only apf]
 """
 
 from __future__ import annotations
@@ -42,9 +42,10 @@ from markovmotion.video.annealed_particle_filter import (
 )
 from markovmotion.video.multiview import (
     BODY_LABELS,
+    BODY_MODELS,
+    default_body_model,
     render_multiview,
     tracking_errors,
-    training_body_model,
 )
 
 FPS = 30.0
@@ -76,12 +77,15 @@ def main() -> None:
     parser.add_argument("--take", action="append", help="track these files of the index instead")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-tracker")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument("--only", help="run only the configuration of this name (e.g. apf)")
+    parser.add_argument("--body-model", choices=BODY_MODELS, default="interaction",
+                        help="interaction: the model the tables in docs/video.md were made with")  # fmt: skip
     args = parser.parse_args()
 
     index = MocapIndex.load(args.data)
     _, test = held_out_pairs(index.pairs(label=list(BODY_LABELS), kind="skeleton"))
     chosen = [index.find(f) for f in args.take] if args.take else [a for a, _ in test]
-    body = training_body_model(args.data)
+    body = default_body_model(args.data, args.body_model)
     takes = []
     for a in chosen:
         folder = args.cache / f"{Path(a.file).name.split('.')[0]}-{args.seconds:g}s"
@@ -92,6 +96,8 @@ def main() -> None:
 
     rows = []
     for cfg in configs(args.sweep):
+        if args.only and cfg["name"] != args.only:
+            continue
         errs, fps, fps_cpu = [], [], []
         for _file, folder, truth in takes:
             for seed in range(args.seeds):

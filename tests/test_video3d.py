@@ -226,8 +226,9 @@ def test_video_render_writes_videos_and_cameras(rendered):
 def test_track_command_reports_error_against_truth(rendered, take, tmp_path, capsys):
     _, path = take
     capsys.readouterr()
-    main(["track", "--video", str(rendered), "--truth", str(path), "--json", "--particles", "20",
-          "--layers", "2", "--out", str(tmp_path / "a.bvh")])  # fmt: skip
+    main(["track", "--video", str(rendered), "--truth", str(path), "--json",
+          "--body-model", "interaction", "--particles", "20", "--layers", "2",
+          "--out", str(tmp_path / "a.bvh")])  # fmt: skip
     summary = json.loads(capsys.readouterr().out)
     assert summary["views"] == 2 and summary["frames"] == 3
     assert {"mpjpe_mm", "per_joint_mm", "fps", "confidence"} <= summary.keys()
@@ -242,8 +243,9 @@ def test_seed_changes_the_draw_and_the_same_seed_repeats_it(rendered, tmp_path):
     tracks = {}
     for name, seed in (("a", 0), ("b", 0), ("c", 1)):
         out = tmp_path / f"{name}.bvh"
-        main(["track", "--video", str(rendered), "--particles", "20", "--layers", "2",
-              "--seed", str(seed), "--out", str(out)])  # fmt: skip
+        main(["track", "--video", str(rendered), "--body-model", "interaction",
+              "--particles", "20", "--layers", "2", "--seed", str(seed),
+              "--out", str(out)])  # fmt: skip
         tracks[name] = body_points(read_motion(out))
     assert np.array_equal(tracks["a"], tracks["b"])
     assert np.abs(tracks["a"] - tracks["c"]).max() > 1.0
@@ -267,7 +269,8 @@ def dual_model(mocap, tmp_path_factory):
 def test_respond_draws_the_partner_into_the_video(rendered, dual_model, tmp_path, capsys, live):
     out = tmp_path / "composite.mp4"
     args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
-            "--out", str(out), "--particles", "20", "--layers", "2", "--view", "1"]  # fmt: skip
+            "--out", str(out), "--body-model", "interaction", "--particles", "20",
+            "--layers", "2", "--view", "1"]  # fmt: skip
     main(args + (["--realtime"] if live else []))
     frames = list(read_frames(out))
     original = list(read_frames(rendered / "cam1.mp4"))
@@ -297,7 +300,7 @@ def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path,
 
     monkeypatch.setattr(composite, "track_take", spy)
     args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
-            "--out", str(tmp_path / "c.mp4")]  # fmt: skip
+            "--out", str(tmp_path / "c.mp4"), "--body-model", "interaction"]  # fmt: skip
     for extra in ([], ["--guide", "mediapipe"]):
         with pytest.raises(Tracked):
             main(args + extra)
@@ -345,8 +348,8 @@ def test_missing_or_bad_camera_file_exits_2(tmp_path, capsys):
 def test_lone_video_uses_its_camera(rendered, tmp_path, capsys):
     """One camera's video is tracked with the camera naming it; without a camera file: exit 2."""
     capsys.readouterr()
-    main(["track", "--video", str(rendered / "cam1.mp4"), "--json", "--particles", "10",
-          "--layers", "1", "--max-frames", "1"])  # fmt: skip
+    main(["track", "--video", str(rendered / "cam1.mp4"), "--json", "--body-model", "interaction",
+          "--particles", "10", "--layers", "1", "--max-frames", "1"])  # fmt: skip
     assert json.loads(capsys.readouterr().out)["views"] == 1
     lone = tmp_path / "lone.mp4"
     lone.write_bytes((rendered / "cam1.mp4").read_bytes())

@@ -201,3 +201,173 @@ def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     angle = np.arctan2(sin, np.sum(a * b, axis=1, keepdims=True))
     rotvec = np.divide(axis, sin, out=np.zeros_like(axis), where=sin > 1e-12) * angle
     return Rotation.from_rotvec(rotvec).as_matrix()
+
+
+# ------------------------------------------------------------------ IK on a few points
+_UP = np.array([0.0, 1.0, 0.0])
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) cross-product matrices of vectors (..., 3)."""
+    s = np.zeros((*v.shape[:-1], 3, 3))
+    s[..., 0, 1], s[..., 0, 2] = -v[..., 2], v[..., 1]
+    s[..., 1, 0], s[..., 1, 2] = v[..., 2], -v[..., 0]
+    s[..., 2, 0], s[..., 2, 1] = -v[..., 1], v[..., 0]
+    return s
+
+
+def _right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) inverse right Jacobians of SO(3) at rotation vectors (..., 3): how
+    ``log(exp(phi) exp(delta))`` changes with a small ``delta``."""
+    th = np.linalg.norm(phi, axis=-1)[..., None, None]
+    k = _skew(phi)
+    safe = np.where(th < 1e-6, 1.0, th)
+    c = np.where(
+        th < 1e-6, 1.0 / 12.0, 1.0 / safe**2 - (1 + np.cos(safe)) / (2 * safe * np.sin(safe))
+    )
+    return np.eye(3) + 0.5 * k + c * (k @ k)
+
+
+def _frames(
+    skeleton: Skeleton, rotvecs: np.ndarray, root: np.ndarray, joints: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations (F, J, 3, 3) and positions (F, J, 3) of ``joints`` (parents first)."""
+    f = len(rotvecs)
+    g = np.zeros((f, skeleton.n_joints, 3, 3))
+    x = np.zeros((f, skeleton.n_joints, 3))
+    r = Rotation.from_rotvec(rotvecs[:, joints].reshape(-1, 3)).as_matrix()
+    r = r.reshape(f, len(joints), 3, 3)
+    for k, j in enumerate(joints):
+        p = skeleton.parents[j]
+        if p < 0:
+            g[:, j], x[:, j] = r[:, k], root
+        else:
+            g[:, j] = g[:, p] @ r[:, k]
+            x[:, j] = x[:, p] + g[:, p] @ skeleton.offsets[j]
+    return g, x
+
+
+def points_ik(
+    skeleton: Skeleton,
+    targets: np.ndarray,
+    points: np.ndarray,
+    free: np.ndarray,
+    rotvecs: np.ndarray,
+    root: np.ndarray,
+    prior_mean: np.ndarray,
+    prior_precision: np.ndarray,
+    iterations: int = 30,
+    upright: tuple[np.ndarray, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse kinematics on a few points, all frames at once (batch Levenberg-Marquardt).
+
+    Finds per frame the root position and the local rotations of the ``free`` joints
+    (joint 0, the root, among them) minimising
+
+        sum_p |x_p(theta) - target_p|^2 + sum_{j in free, j > 0} (r_j - m_j)^T P_j (r_j - m_j)
+
+    where ``x_p`` are the positions (mm) of the joints ``points`` by forward kinematics,
+    ``r_j`` joint j's local rotation vector, and the second term a Gaussian prior (mean
+    ``m_j``, precision ``P_j`` in mm^2/rad^2) that settles what the points do not show
+    (the twist about a straight limb, how a bend shares out over several spine joints).
+    Rotations are updated on the group (``R_j <- R_j exp(delta_j)``), so the Jacobian of a
+    point below joint j is ``-[x_p - x_j]_x G_j`` (G_j the joint's global rotation); the
+    prior's uses the inverse right Jacobian of SO(3). Each frame keeps its own damping
+    (divided by 3 after a step that lowers its cost, multiplied by 4 and the step refused
+    otherwise). Frames are independent: the caller warm-starts them (``rotvecs``, ``root``).
+
+    Written here because no maintained Python library fits: robotics IK (ikpy, pinocchio's
+    examples) solves one chain or one frame at a time for URDF models without a pose
+    prior; this solves thousands of frames of a BVH/ASF skeleton in a few batched NumPy
+    solves.
+
+    Args:
+        skeleton: parents and rest offsets (mm); parents must come before children.
+        targets: (F, P, 3) target positions (mm) of the joints ``points`` (P,).
+        free: joints whose rotations are fitted (must include 0); others keep ``rotvecs``.
+        rotvecs: (F, J, 3) starting local rotation vectors (joint 0's is global).
+        root: (F, 3) starting root position (mm).
+        prior_mean, prior_precision: (J, 3) and (J, 3, 3); joint 0 has no prior.
+        upright: ``(a, w)``: the root's tilt prior, a term ``w^2 |G_0 a - up|^2`` (``a`` the
+            root's axis that is vertical on average, ``w`` in mm per rad of tilt): without it
+            the root tilts freely where the points cannot tell it from a bent lower back.
+
+    Returns:
+        The fitted rotation vectors (F, J, 3), root positions (F, 3), and per frame the mean
+        distance (mm) of the points from their targets.
+    """
+    points, free = np.asarray(points, np.intp), np.asarray(free, np.intp)
+    if free[0] != 0 or np.any(skeleton.parents[1:] >= np.arange(1, skeleton.n_joints)):
+        raise ValueError("free joints must start with the root; parents before children")
+    rv, root = np.array(rotvecs, dtype=float), np.array(root, dtype=float)
+    targets = np.asarray(targets, dtype=float)
+    f, n_free = len(rv), len(free)
+    n = 3 + 3 * n_free
+    joints = ancestors_closure(skeleton, np.concatenate([points, free]))
+    below = np.zeros((n_free, len(points)), dtype=bool)  # free joint k moves point p
+    for i, p in enumerate(points):
+        j = int(p)
+        while j >= 0:
+            below[np.flatnonzero(free == j), i] = True
+            j = skeleton.parents[j]
+    below &= free[:, None] != points[None, :]
+    below[0] = True  # the root's rotation moves every point but turns the root point about itself
+    mean, prec = prior_mean[free[1:]], prior_precision[free[1:]]
+
+    def cost(rv_: np.ndarray, root_: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        g, x = _frames(skeleton, rv_, root_, joints)
+        e = x[:, points] - targets
+        d = rv_[:, free[1:]] - mean
+        c = (e**2).sum(axis=(1, 2)) + (d[..., None, :] @ prec @ d[..., None]).sum(axis=(1, 2, 3))
+        if upright is not None:
+            c = c + upright[1] ** 2 * ((g[:, 0] @ upright[0] - _UP) ** 2).sum(axis=1)
+        return c, g, x
+
+    lam = np.full(f, 1e-3)
+    c, g, x = cost(rv, root)
+    for _ in range(iterations):
+        e = x[:, points] - targets  # (F, P, 3)
+        jac = np.zeros((f, len(points), 3, n))
+        jac[:, :, :, :3] = np.eye(3)
+        for k, j in enumerate(free):
+            idx = np.flatnonzero(below[k])
+            d = x[:, points[idx]] - x[:, j, None]  # (F, p, 3)
+            jac[:, idx, :, 3 + 3 * k : 6 + 3 * k] = -_skew(d) @ g[:, j, None]
+        jac = jac.reshape(f, -1, n)
+        jt = np.swapaxes(jac, 1, 2)
+        a = jt @ jac
+        b = (jt @ e.reshape(f, -1, 1))[..., 0]
+        jr = _right_jacobian_inverse(rv[:, free[1:]])  # (F, K-1, 3, 3)
+        dp = rv[:, free[1:]] - mean
+        jrt_p = np.swapaxes(jr, 2, 3) @ prec
+        hp = jrt_p @ jr
+        gp = (jrt_p @ dp[..., None])[..., 0]
+        for k in range(1, n_free):
+            s = slice(3 + 3 * k, 6 + 3 * k)
+            a[:, s, s] += hp[:, k - 1]
+            b[:, s] += gp[:, k - 1]
+        if upright is not None:
+            ju = -upright[1] * g[:, 0] @ _skew(upright[0])  # (F, 3, 3)
+            ru = upright[1] * (g[:, 0] @ upright[0] - _UP)
+            a[:, 3:6, 3:6] += np.swapaxes(ju, 1, 2) @ ju
+            b[:, 3:6] += (np.swapaxes(ju, 1, 2) @ ru[..., None])[..., 0]
+        diag = np.einsum("fii->fi", a)
+        a[:, np.arange(n), np.arange(n)] += lam[:, None] * (diag + 1e-6)
+        step = -np.linalg.solve(a, b[..., None])[..., 0]
+        new_root = root + step[:, :3]
+        new_rv = rv.copy()
+        turn = Rotation.from_rotvec(step[:, 3:].reshape(-1, 3))
+        now = Rotation.from_rotvec(rv[:, free].reshape(-1, 3))
+        new_rv[:, free] = (now * turn).as_rotvec().reshape(f, n_free, 3)
+        c_new, g_new, x_new = cost(new_rv, new_root)
+        ok = c_new < c
+        rv[ok], root[ok], c[ok], g[ok], x[ok] = (
+            new_rv[ok],
+            new_root[ok],
+            c_new[ok],
+            g_new[ok],
+            x_new[ok],
+        )
+        lam = np.where(ok, lam / 3, lam * 4)
+    err = np.linalg.norm(x[:, points] - targets, axis=-1).mean(axis=1)
+    return rv, root, err

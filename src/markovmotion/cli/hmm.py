@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from markovmotion.cli.options import (
+    body_model_option,
     choice,
     choose_option,
     grid_of,
@@ -303,6 +304,7 @@ def respond(
         "monocular (MediaPipe Pose in the --view camera alone, needs the [camera] extra).",
     ),
     guide: str = guide_option(),
+    body_model: str = body_model_option(),
 ) -> None:
     """Generate person B's response to person A's motion (or markers, for a marker model:
     a C3D file, or a BVH with the model's virtual markers placed on it; B comes out as C3D)."""
@@ -326,7 +328,7 @@ def respond(
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime, method, guide == "mediapipe",
+            realtime, method, guide == "mediapipe", body_model,
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -374,14 +376,14 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method, guide=False,
+    method, guide=False, body_model="collection",
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.composite import respond_in_video, respond_monocular
-    from markovmotion.video.multiview import training_body_model
+    from markovmotion.video.multiview import default_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
@@ -413,7 +415,7 @@ def _respond_video(
         return
     if realtime:
         live = respond_in_video(
-            model, video, out, training_body_model(data), cameras, view, particles, layers,
+            model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
             max_frames, live=True,
         )  # fmt: skip
         err_console.print(
@@ -425,7 +427,7 @@ def _respond_video(
         )
         return
     summary = respond_in_video(
-        model, video, out, training_body_model(data), cameras, view, particles, layers,
+        model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed", guide=guide,
     )  # fmt: skip
     err_console.print(

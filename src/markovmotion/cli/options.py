@@ -196,6 +196,18 @@ def roles_option() -> Any:
     )
 
 
+def body_model_option() -> Any:
+    """``--body-model``: what the tracker's body model learns its joints' axes and ranges from
+    (``track`` and ``dualhmm respond --video``)."""
+    return typer.Option(
+        "collection",
+        callback=choice(("collection", "interaction")),
+        help="collection: every skeleton take of --data, retargeted onto the template "
+        "(built once, then cached); interaction: the training handshake and pull takes "
+        "alone (the template's own skeleton; the model before issue 24).",
+    )
+
+
 def guide_option() -> Any:
     """``--guide``: what guides the annealed particle filter besides the images (``track``
     and ``dualhmm respond --video``)."""

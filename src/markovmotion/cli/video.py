@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from markovmotion.cli.options import choice, guide_option, ranged
+from markovmotion.cli.options import body_model_option, choice, guide_option, ranged
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -99,6 +99,7 @@ def track(
         "lowered.",
     ),
     guide: str = guide_option(),
+    body_model: str = body_model_option(),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -114,7 +115,7 @@ def track(
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-    from markovmotion.video.multiview import track_take, training_body_model
+    from markovmotion.video.multiview import default_body_model, track_take
 
     if out is not None:
         check_motion_output(out)
@@ -125,7 +126,7 @@ def track(
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     size = _body_size(body_size)
-    body = training_body_model(data)
+    body = default_body_model(data, body_model)
     if size == "video":
         from markovmotion.video.body_size import body_size_from_points
         from markovmotion.video.monocular import track_monocular_video

@@ -1,19 +1,22 @@
 """The articulated body model a tracker fits to video: a skeleton, its degrees of freedom, its flesh.
 
 Built from motion capture of any skeleton whose body points
-(:mod:`markovmotion.features.body_points`) can be found. The state of a pose
+(:mod:`markovmotion.features.body_points`) can be found (:meth:`BodyModel.fit`), or from
+poses of it given as rotation vectors, such as takes of other skeletons retargeted onto it
+(:meth:`BodyModel.fit_rotvecs`, :mod:`~markovmotion.video.retarget`). The state of a pose
 is a vector of ~30 numbers (Deutscher et al.'s model has 29):
 
 * the root position (3, mm) and heading (yaw about the vertical, 1);
 * the root's remaining tilt and every joint that moves a body point, each as
   a few coefficients of its local rotation vector on the principal axes of
   the training data (``k`` axes per joint: 1 for an elbow or knee that only
-  bends, up to 3 for a shoulder, chosen by the variance they explain);
-* joints that barely move (collar bones, the hip sockets) and joints that
-  move no body point (fingers) stay at their mean rotation.
+  bends, up to 3 for a shoulder, chosen greedily by how well they rebuild the
+  training poses' body points);
+* joints left without an axis (on the interaction takes: collar bones, the hip
+  sockets) and joints that move no body point (fingers) stay at their mean rotation.
 
 Joint limits are the range of each coefficient over the training data (with
-a margin). The flesh is :data:`BODY_SHAPE`: tapered capsules on the
+a margin; optionally without the extreme quantiles). The flesh is :data:`BODY_SHAPE`: tapered capsules on the
 segments between body points, a ball for the head and one per hand, as the
 renderer draws them.
 """
@@ -73,37 +76,40 @@ def _greedy_axes(
     axes: dict[int, np.ndarray],
     budget: int,
     sample: int = 400,
+    backward: bool = False,
 ) -> dict[int, int]:
-    """Axes per joint (leading principal axes first) that best rebuild the body points."""
+    """Axes per joint (leading principal axes first) that best rebuild the body points.
+
+    Forward: from none, add the axis that most lowers the error. ``backward``: from every
+    axis, take away the one whose loss raises it least; where joints move together (a
+    pelvis tilt the hips take back, a knee bent with its hip) an axis helps only beside the
+    others, which forward selection does not see: on a first form of the retargeted collection
+    it chose no knee.
+    """
     rng = np.random.default_rng(0)
     rv = rv[rng.choice(len(rv), min(sample, len(rv)), replace=False)]
     rv = rv.copy()
     rv[:, 0] = Rotation.from_rotvec(rv[:, 0]).as_rotvec()  # root tilt (heading removed)
     zero = np.zeros((len(rv), 3))
     truth = rotvec_positions(skeleton, rv, zero, points)
-    k = dict.fromkeys(axes, 0)
 
-    def rebuilt(kk: dict[int, int]) -> np.ndarray:
+    def error(kk: dict[int, int]) -> float:
         out = np.broadcast_to(mean, rv.shape).copy()
         for j, n in kk.items():
             if n:
                 b = axes[j][:n].T
                 out[:, j] += (rv[:, j] - mean[j]) @ b @ b.T
-        return out
+        p = rotvec_positions(skeleton, out, zero, points)
+        return float(np.linalg.norm(p - truth, axis=-1).mean())
 
-    for _ in range(budget):
-        best, best_err = None, np.inf
-        for j in axes:
-            if k[j] >= 3:
-                continue
-            trial = {**k, j: k[j] + 1}
-            p = rotvec_positions(skeleton, rebuilt(trial), zero, points)
-            err = np.linalg.norm(p - truth, axis=-1).mean()
-            if err < best_err:
-                best, best_err = j, err
-        if best is None:
+    k = dict.fromkeys(axes, 3 if backward else 0)
+    step = -1 if backward else 1
+    while (sum(k.values()) > budget) if backward else (sum(k.values()) < budget):
+        moves = [j for j in axes if 0 <= k[j] + step <= 3]
+        if not moves:
             break
-        k[best] += 1
+        best = min(moves, key=lambda j: error({**k, j: k[j] + step}))
+        k[best] += step
     return k
 
 
@@ -149,6 +155,31 @@ def _yaw(rot: Rotation) -> np.ndarray:
     return np.arctan2(z[..., 0], z[..., 2])
 
 
+def local_rotvecs(motion: Motion) -> np.ndarray:
+    """(F, J, 3) local rotation vectors of a motion (joint 0's global)."""
+    rot = Rotation.from_quat(motion.rotations.reshape(-1, 4))
+    return rot.as_rotvec().reshape(motion.n_frames, -1, 3)
+
+
+def moving_joints(skeleton: Skeleton, points: np.ndarray) -> np.ndarray:
+    """Joints (sorted) that move a body point: those with one of ``points`` strictly below."""
+    moves = np.zeros(skeleton.n_joints, bool)
+    for p in points:
+        j = skeleton.parents[p]
+        while j >= 0:
+            moves[j] = True
+            j = skeleton.parents[j]
+    return np.flatnonzero(moves)
+
+
+def split_heading(root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Root rotation vectors (F, 3) as their tilt (rotation vectors, heading removed) and
+    heading (F,) in rad: ``root = yaw(heading) * tilt``."""
+    rot = Rotation.from_rotvec(root)
+    yaw = _yaw(rot)
+    return (Rotation.from_euler("y", yaw[:, None]).inv() * rot).as_rotvec(), yaw
+
+
 @dataclass
 class BodyModel:
     """Skeleton, degrees of freedom and limits of the tracked body (see the module docstring).
@@ -189,59 +220,94 @@ class BodyModel:
 
     @classmethod
     def fit(cls, motions: Sequence[Motion], max_dof: int = 28, margin: float = 0.15) -> BodyModel:
-        """Learn degrees of freedom and joint limits from motions of one skeleton (the first's).
-
-        The ``max_dof - 4`` rotation axes (besides root position and heading) are
-        chosen greedily among the joints' principal axes, each time the one
-        that most lowers the error of the training poses rebuilt from the state.
+        """Learn degrees of freedom and joint limits from motions of one skeleton (the first's);
+        motions of other skeletons are left out (:meth:`fit_rotvecs` takes them retargeted).
 
         Raises:
             SkeletonMismatchError: the body points are not found on the skeleton.
         """
         skeleton = motions[0].skeleton
-        points = body_point_index(skeleton, BODY_POINTS, motions[0].name or "template")
-        motions = [m for m in motions if m.skeleton.same_topology(skeleton)]
-        rv, pos, yaw = [], [], []
-        for m in motions:
-            rot = Rotation.from_quat(m.rotations.reshape(-1, 4))
-            r = rot.as_rotvec().reshape(m.n_frames, -1, 3)
-            root = Rotation.from_quat(m.rotations[:, 0])
-            y = _yaw(root)
-            r[:, 0] = (Rotation.from_euler("y", y[:, None]).inv() * root).as_rotvec()
+        body_point_index(skeleton, BODY_POINTS, motions[0].name or "template")
+        takes = [
+            (local_rotvecs(m), m.translations[:, 0], m.fps)
+            for m in motions
+            if m.skeleton.same_topology(skeleton)
+        ]
+        return cls.fit_rotvecs(skeleton, takes, max_dof, margin, backward=False)
+
+    @classmethod
+    def fit_rotvecs(
+        cls,
+        skeleton: Skeleton,
+        takes: Sequence[tuple[np.ndarray, np.ndarray, float]],
+        max_dof: int = 28,
+        margin: float = 0.15,
+        backward: bool = True,
+        tail: float = 0.0,
+        speed_fps: float = 0.0,
+    ) -> BodyModel:
+        """Learn degrees of freedom and joint limits from poses of ``skeleton`` given as local
+        rotation vectors: per take ``(rotvecs (F, J, 3), root positions (F, 3) mm, fps)``,
+        joint 0's rotation global (e.g. takes of other skeletons retargeted by
+        :func:`~markovmotion.video.retarget.retarget`).
+
+        The ``max_dof - 4`` rotation axes (besides root position and heading) are
+        chosen greedily among the joints' principal axes by the error of the training
+        poses rebuilt from the state: ``backward`` (the default) from all of them, each
+        time leaving out the one whose loss raises it least, else forward (:meth:`fit`, the
+        interaction takes' model as it was), each time adding the one that lowers it most.
+        Limits: each coefficient's range over the takes, widened by ``margin`` of it on
+        both sides; with ``tail``, the range between its ``tail`` and ``1 - tail``
+        quantiles (retargeted takes: a few frames where the IK fell into a wrong basin, an
+        elbow bent backwards, would otherwise set the limits). Speeds (the diffusion's
+        scale): from the takes at ``speed_fps`` or more (changes over longer steps are
+        not a frame's), all if none is.
+
+        Raises:
+            SkeletonMismatchError: the body points are not found on the skeleton.
+        """
+        points = body_point_index(skeleton, BODY_POINTS, "template")
+        rv, pos, yaw, rates = [], [], [], []
+        for r, root, fps in takes:
+            r = np.array(r, dtype=float)
+            r[:, 0], y = split_heading(r[:, 0])
             rv.append(r)
-            pos.append(m.translations[:, 0])
+            pos.append(np.asarray(root, dtype=float))
             yaw.append(np.unwrap(y))
-        fps = motions[0].fps
+            rates.append(float(fps))
         allrv = np.concatenate(rv)
         mean = allrv.mean(axis=0)
-        moves = np.zeros(skeleton.n_joints, bool)  # joints with a body point strictly below
-        for p in points:
-            j = skeleton.parents[p]
-            while j >= 0:
-                moves[j] = True
-                j = skeleton.parents[j]
-        cand = [j for j in range(skeleton.n_joints) if moves[j]]
+        still = allrv.std(axis=0).max(axis=1) < 1e-9  # never moves in these takes: no axis
+        cand = [int(j) for j in moving_joints(skeleton, points) if not still[j] or j == 0]
         axes = {j: np.linalg.svd(allrv[:, j] - mean[j], full_matrices=False)[2] for j in cand}
-        k = _greedy_axes(skeleton, points, allrv, mean, axes, max_dof - ROOT_DOF)
+        k = _greedy_axes(skeleton, points, allrv, mean, axes, max_dof - ROOT_DOF, backward=backward)
+
+        fast = [f >= speed_fps for f in rates]
+        fast = fast if any(fast) else [True] * len(rates)
+
+        def per_second(values: list[np.ndarray]) -> np.ndarray:
+            """Standard deviation of the change per second (each take at its own rate)."""
+            return np.concatenate(
+                [np.diff(v, axis=0) * f for v, f, ok in zip(values, rates, fast, strict=True) if ok]
+            ).std(axis=0)
+
         joints, bases, lo, hi, coef_speed = [], [], [], [], []
         for j in cand:
             if k[j] == 0:
                 continue
             basis = axes[j][: k[j]].T  # (3, k)
             c = (allrv[:, j] - mean[j]) @ basis
-            span = c.max(axis=0) - c.min(axis=0)
+            cmin, cmax = np.quantile(c, [tail, 1.0 - tail], axis=0)
+            span = cmax - cmin
             joints.append(j)
             bases.append(basis)
-            lo.append(c.min(axis=0) - margin * span)
-            hi.append(c.max(axis=0) + margin * span)
-            d = np.concatenate([np.diff(r[:, j] @ basis, axis=0) for r in rv])
-            coef_speed.append(d.std(axis=0) * fps)
-        dpos = np.concatenate([np.diff(p, axis=0) for p in pos]).std(axis=0) * fps
-        dyaw = np.concatenate([np.diff(y) for y in yaw]).std() * fps
+            lo.append(cmin - margin * span)
+            hi.append(cmax + margin * span)
+            coef_speed.append(per_second([r[:, j] @ basis for r in rv]))
         inf = np.inf
         lower = np.concatenate([[-inf, -inf, -inf, -inf], *lo])
         upper = np.concatenate([[inf, inf, inf, inf], *hi])
-        speed = np.concatenate([dpos, [dyaw], *coef_speed])
+        speed = np.concatenate([per_second(pos), [per_second(yaw)], *coef_speed])
         height = float(np.concatenate(pos)[:, 1].mean())
         return cls(skeleton, points, mean, joints, bases, lower, upper, speed, height)
 
@@ -311,11 +377,8 @@ class BodyModel:
         """The states (F, D) nearest to a motion of the template skeleton (for tests, truth)."""
         if not motion.skeleton.same_topology(self.skeleton):
             raise SkeletonMismatchError(f"{motion.name or 'motion'}: not the body model's skeleton")
-        rot = Rotation.from_quat(motion.rotations.reshape(-1, 4))
-        r = rot.as_rotvec().reshape(motion.n_frames, -1, 3)
-        root = Rotation.from_quat(motion.rotations[:, 0])
-        yaw = _yaw(root)
-        r[:, 0] = (Rotation.from_euler("y", yaw[:, None]).inv() * root).as_rotvec()
+        r = local_rotvecs(motion)
+        r[:, 0], yaw = split_heading(r[:, 0])
         x = np.zeros((motion.n_frames, self.n_dof))
         x[:, :3] = motion.translations[:, 0]
         x[:, 3] = np.unwrap(yaw)

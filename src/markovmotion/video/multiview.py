@@ -7,16 +7,19 @@ capture volume (Deutscher et al. used three), over a static textured
 background with sensor noise; person A alone (B masked) or both. It writes
 one video per camera and ``cameras.json``.
 
-:func:`training_body_model` learns the body model from the collection's
-two-person takes (training split); :func:`track_take` tracks a multi-view
-video and, given the true motion, measures the error over the body points.
+:func:`collection_body_model` learns the body model from every skeleton take of the
+collection, retargeted onto the template (the default, :func:`default_body_model`);
+:func:`training_body_model` from the training handshake and pull takes alone;
+:func:`track_take` tracks a multi-view video and, given the true motion, measures the
+error over the body points.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import cv2
@@ -31,13 +34,21 @@ from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.io.files import atomic_path
 from markovmotion.limits import MAX_FRAMES
 from markovmotion.video.annealed_particle_filter import TrackResult, track_video
-from markovmotion.video.body_model import BODY_SHAPE, BodyModel
+from markovmotion.video.body_model import BODY_SHAPE, BodyModel, local_rotvecs
 from markovmotion.video.cameras import ring_of_cameras, save_cameras
 from markovmotion.video.render import background, write_video
+from markovmotion.video.retarget import Template
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
 
-#: Labels of the two-person takes the default body model learns from.
+#: Labels of the two-person takes the interaction body model learns from; person A of the
+#: first training take of them is the template of every body model.
 BODY_LABELS = ("handshake", "pull")
+#: The body models ``track --body-model`` builds: from every skeleton take of the collection
+#: (retargeted), or from the training takes of :data:`BODY_LABELS` alone (the template's own).
+BODY_MODELS = ("collection", "interaction")
+#: At most this many frames of each label (at :data:`~markovmotion.video.retarget.RETARGET_FPS`)
+#: go into the collection's body model, so that hours of walks do not outweigh a dance.
+LABEL_FRAMES = 1000
 
 
 def shaded_frames(
@@ -148,6 +159,119 @@ def training_body_model(
         ma, mb = index.load_pair(a, b)
         motions += [ma.resample(30.0), mb.resample(30.0)]
     return BodyModel.fit(motions, max_dof=max_dof)
+
+
+def collection_body_model(
+    data: str | os.PathLike[str] | None = None,
+    leave_out: Sequence[str] = (),
+    max_dof: int = 28,
+    label_frames: int = LABEL_FRAMES,
+) -> BodyModel:
+    """The body model learnt from every skeleton take of the collection (BVH and ASF/AMC, any
+    skeleton whose body points are found), retargeted onto the template
+    (:mod:`~markovmotion.video.retarget`): its principal axes and joint ranges cover what the
+    collection's people do, not only the handshakes and pulls. The takes:
+    :func:`collection_takes`; the axes chosen backward, the limits without the
+    :data:`LIMIT_TAIL` at each end, the speeds from the takes at the retargeting's full rate
+    (:meth:`BodyModel.fit_rotvecs`), the standing height the template's own.
+
+    Raises:
+        DataNotFoundError: no skeleton take is left.
+    """
+    from markovmotion.video.retarget import RETARGET_FPS
+
+    template, takes = collection_takes(data, leave_out, label_frames)
+    body = BodyModel.fit_rotvecs(
+        template.skeleton, takes, max_dof=max_dof, tail=LIMIT_TAIL, speed_fps=0.99 * RETARGET_FPS
+    )
+    return dataclasses.replace(body, height=template.height)
+
+
+def collection_takes(
+    data: str | os.PathLike[str] | None = None,
+    leave_out: Sequence[str] = (),
+    label_frames: int = LABEL_FRAMES,
+) -> tuple[Template, list[tuple[np.ndarray, np.ndarray, float]]]:
+    """The template and every skeleton take of the collection as its poses: per take (or run
+    of frames) local rotation vectors (F, J, 3), root positions (F, 3) and frame rate.
+
+    The template is person A of the first training take of :data:`BODY_LABELS` (else the
+    first take left); its own takes of those labels give the IK's pose prior and enter with
+    their own rotations. Left out: the held-out two-person takes of every label
+    (:func:`~markovmotion.data.splits.held_out_pairs`, the split the tracker's benchmarks
+    render), the labels in ``leave_out``, takes whose body points are not all found (a
+    note names them), and retargeted frames with a joint beyond :data:`HALF_TURN`. Each
+    label gives at most ``label_frames`` frames, every ``round(fps / RETARGET_FPS) * k``-th
+    frame of its takes with ``k`` as small as allows. Retargeted takes are cached
+    (:func:`~markovmotion.video.retarget.retarget_file`).
+    """
+    from markovmotion.errors import SkeletonMismatchError
+    from markovmotion.progress import note, track
+    from markovmotion.video.retarget import RETARGET_FPS, Template, retarget_file
+
+    index = MocapIndex.load(data)
+    _, test = held_out_pairs(index.pairs(kind="skeleton"))
+    unseen = {e.file for pair in test for e in pair}
+    entries = [
+        e for e in index.query(kind="skeleton") if e.label not in leave_out and e.file not in unseen
+    ]
+    if not entries:
+        raise DataNotFoundError(f"no skeleton takes in {index.root} for the body model")
+    own = [e for a, b in index.pairs(label=list(BODY_LABELS), kind="skeleton") for e in (a, b)]
+    own = [e for e in own if e in entries] or entries[:1]
+    stride = {e.file: max(1, round(e.fps / RETARGET_FPS)) for e in entries}
+    per_label: dict[str, float] = {}
+    for e in entries:
+        per_label[e.label] = per_label.get(e.label, 0.0) + e.frames / stride[e.file]
+    for e in entries:
+        stride[e.file] *= max(1, math.ceil(per_label[e.label] / label_frames))
+    template_motions = [index.load_motion(e) for e in own]
+    template = Template.fit(template_motions)
+    sk = template.skeleton
+    takes, done, skipped = [], set(), []
+    for e, m in zip(own, template_motions, strict=True):
+        if m.skeleton.same_topology(sk):
+            s = stride[e.file]
+            takes.append((local_rotvecs(m)[::s], m.translations[::s, 0], m.fps / s))
+            done.add(e.file)
+    rest = [e for e in entries if e.file not in done]
+    for e in track(rest, "retargeting takes to the body model", total=len(rest)):
+        try:
+            rv, root, _ = retarget_file(template, e.path, e.read, stride[e.file])
+        except SkeletonMismatchError:
+            skipped.append(e.file)
+            continue
+        # a joint near a half turn: a wrong basin of the IK (no elbow or knee bends 160
+        # degrees), where rotation vectors also wrap; such frames are left out
+        sane = (np.linalg.norm(rv[:, template.free[1:]], axis=-1) < HALF_TURN).all(axis=1)
+        for run in _runs(sane):
+            takes.append((rv[run], root[run], e.fps / stride[e.file]))
+    if skipped:
+        note(f"body model: {len(skipped)} takes without every body point left out: "
+             f"{', '.join(skipped[:6])}")  # fmt: skip
+    return template, takes
+
+
+#: The collection's joint limits leave out this share of frames at each end of every
+#: coefficient's range (:meth:`BodyModel.fit_rotvecs`).
+LIMIT_TAIL = 0.005
+#: Retargeted frames with a joint's rotation (rad) beyond this are left out (160 degrees).
+HALF_TURN = np.radians(160.0)
+
+
+def _runs(mask: np.ndarray) -> list[slice]:
+    """Slices of the runs of True in ``mask`` (two frames or more)."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [slice(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+
+
+def default_body_model(
+    data: str | os.PathLike[str] | None = None, which: str = "collection"
+) -> BodyModel:
+    """The body model ``track`` and ``respond --video`` use (:data:`BODY_MODELS`)."""
+    if which == "interaction":
+        return training_body_model(data)
+    return collection_body_model(data)
 
 
 def tracking_errors(tracked: Motion, truth: Motion) -> dict:

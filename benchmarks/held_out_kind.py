@@ -1,0 +1,168 @@
+"""The held-out-kind tracking check: a take of a kind of motion the body model never saw.
+
+For each kind (an INDEX.csv label of skeleton takes), the body model is learnt from every
+skeleton take of the collection but that label's (``collection_body_model(leave_out=...)``,
+the takes of other skeletons retargeted onto the template), and from the interaction
+takes alone as before (``training_body_model``: it never saw any kind but handshakes and
+pulls). The first take of the kind (INDEX.csv order) is rendered (``video render``: 3
+cameras at 320x240, person A alone, ``--seconds`` from ``--start`` at 30 fps) and tracked
+(annealed particle filter, 200 particles x 10 layers) with each body model; MPJPE (mm,
+19 body points, and the 12 limb joints: shoulders ... ankles) against the capture, frames
+tracked per second of wall time. ``floor``: the body model fitted to the true body points
+of every 3rd frame (``triangulation.fit_state``, within its limits, no images); a take shorter than
+``--start`` plus ``--seconds`` starts earlier: what the
+model can reach at best. Takes of other skeletons place their trunk points (pelvis, spine,
+chest, neck) elsewhere than the template does, which puts the 19-point floor far above the
+limbs'.
+
+Kinds: ``--kinds salsa,bend`` or, by default, chosen from INDEX.csv at run time: per
+category of skeleton takes, the label with the most takes (ties: the first listed).
+
+    python3 benchmarks/held_out_kind.py [--data DIR] [--kinds A,B] [--seconds 3] [--start 1]
+        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from markovmotion.data import MocapIndex
+from markovmotion.data.index import read_listed_motion
+from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.video.annealed_particle_filter import (
+    AnnealedParticleFilter,
+    open_video,
+    track_features,
+)
+from markovmotion.video.multiview import (
+    collection_body_model,
+    render_multiview,
+    tracking_errors,
+    training_body_model,
+)
+from markovmotion.video.triangulation import GUIDE_POINTS, fit_state
+
+FPS = 30.0
+
+
+def default_kinds(index: MocapIndex) -> list[str]:
+    """Per category of skeleton takes, its label with the most takes."""
+    entries = index.query(kind="skeleton")
+    counts = Counter(e.label for e in entries)
+    best: dict[str, str] = {}
+    for e in entries:
+        if e.category not in best or counts[e.label] > counts[best[e.category]]:
+            best[e.category] = e.label
+    return list(best.values())
+
+
+LIMBS = [BODY_POINTS.index(p) for p in GUIDE_POINTS]
+
+
+def floor(body, truth: np.ndarray) -> np.ndarray:
+    """(F, 19) distances (mm) of the body model fitted to true body points (F, 19, 3), each
+    frame from the last one's state (the first: the best of 8 headings)."""
+    x, out = body.standing(truth[0, 0]), []
+    for t in truth:
+        tries = []
+        for yaw in np.linspace(-np.pi, np.pi, 8, endpoint=False) if not out else [x[3]]:
+            x0 = x.copy()
+            x0[:3], x0[3] = t[0], yaw
+            f = fit_state(body, t, x0)
+            tries.append((np.linalg.norm(body.joint_positions(f)[0] - t, axis=-1), f))
+        err, x = min(tries, key=lambda e: e[0].mean())
+        out.append(err)
+    return np.array(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=None, help="folder with INDEX.csv")
+    parser.add_argument("--kinds", default=None, help="labels, comma-separated")
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds of each take")
+    parser.add_argument("--start", type=float, default=1.0, help="seconds into the take")
+    parser.add_argument("--seeds", type=int, default=1, help="runs per body model")
+    parser.add_argument("--models", default="interaction,collection",
+                        help="body models to run, comma-separated")  # fmt: skip
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
+    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    args = parser.parse_args()
+
+    index = MocapIndex.load(args.data)
+    kinds = args.kinds.split(",") if args.kinds else default_kinds(index)
+    old = training_body_model(args.data)
+    rows = []
+    for kind in kinds:
+        takes = index.query(label=kind, kind="skeleton")
+        if not takes:
+            raise SystemExit(f"no skeleton take labelled {kind!r} in {index.root}")
+        take = takes[0]
+        t0 = time.perf_counter()
+        new = collection_body_model(args.data, leave_out=(kind,))
+        build = time.perf_counter() - t0
+        start = min(args.start, max(0.0, take.frames / take.fps - 0.1 - args.seconds))
+        folder = args.cache / f"{take.name}-{start:g}-{args.seconds:g}s"
+        if not (folder / "cameras.json").is_file():
+            render_multiview(take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start)
+        truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
+        for name, body in (("interaction (old)", old), ("collection without it", new)):
+            if name.split()[0] not in args.models.split(","):
+                continue
+            errs, limbs, fps = [], [], []
+            low = floor(body, body_points(truth)[: int(round(args.seconds * FPS)) : 3])
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
+                mv = open_video(folder)
+                apf = AnnealedParticleFilter(body, mv.cameras, 200, 10, fps=mv.fps, seed=seed)
+                result = track_features(mv.features(seed), apf)
+                motion = body.motion(result.states, result.fps)
+                e = tracking_errors(motion, truth)
+                errs.append(e["mpjpe_mm"])
+                limbs.append(np.mean([e["per_joint_mm"][p] for p in GUIDE_POINTS]))
+                fps.append(len(result.states) / result.seconds)
+            rows.append(
+                {
+                    "kind": kind,
+                    "take": take.file,
+                    "body_model": name,
+                    "mpjpe_mm": round(float(np.mean(errs)), 1),
+                    "mpjpe_runs": errs,
+                    "limbs_mm": round(float(np.mean(limbs)), 1),
+                    "floor_mm": round(float(low.mean()), 1),
+                    "floor_limbs_mm": round(float(low[:, LIMBS].mean()), 1),
+                    "fps": round(float(np.mean(fps)), 2),
+                    "build_seconds": round(build, 1) if name != "interaction (old)" else None,
+                    "load": round(os.getloadavg()[0], 1),
+                }
+            )
+            if not args.json:
+                Console().print(rows[-1])
+    if args.json:
+        print(json.dumps({"rows": rows, "cpus": os.cpu_count(), "seconds": args.seconds}))
+        return
+    table = Table(title=f"Held-out kinds ({args.seconds:g} s from {args.start:g} s, 3 views)")
+    cols = ("kind", "take", "body model", "MPJPE mm", "runs", "limbs mm", "floor", "floor limbs",
+            "frames/s", "load")  # fmt: skip
+    for col in cols:
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            r["kind"], Path(r["take"]).name, r["body_model"], f"{r['mpjpe_mm']:.1f}",
+            " ".join(f"{e:.0f}" for e in r["mpjpe_runs"]), f"{r['limbs_mm']:.1f}",
+            f"{r['floor_mm']:.1f}", f"{r['floor_limbs_mm']:.1f}", f"{r['fps']:.2f}", str(r["load"]),
+        )  # fmt: skip
+    Console().print(table)
+
+
+if __name__ == "__main__":
+    main()
