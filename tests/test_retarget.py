@@ -157,7 +157,7 @@ def test_collection_limits_hold_the_retargeted_states(
     assert new_in.mean() > 0.9 and new_in.mean() > old_in.mean() + 0.2
 
 
-def test_track_builds_the_collection_model_from_data_by_default(
+def test_track_builds_the_collection_model_from_data_when_asked(
     small_collection, take, tmp_path, monkeypatch, capsys
 ):
     from markovmotion.cli import main
@@ -171,10 +171,10 @@ def test_track_builds_the_collection_model_from_data_by_default(
         cache = tmp_path / which
         monkeypatch.setenv("MARKOVMOTION_CACHE", str(cache))
         capsys.readouterr()
-        extra = [] if which == "collection" else ["--body-model", which]
+        extra = [] if which == "interaction" else ["--body-model", which]
         main(["track", "--video", str(video), "--data", str(small_collection), "--json",
               "--particles", "20", "--layers", "2", "--out", str(tmp_path / f"{which}.bvh"),
               *extra])  # fmt: skip
         runs[which] = (json.loads(capsys.readouterr().out), list(cache.glob("retarget/*.npz")))
     assert runs["collection"][0]["frames"] == runs["interaction"][0]["frames"] == 3
-    assert runs["collection"][1] and not runs["interaction"][1]  # only the default retargets
+    assert runs["collection"][1] and not runs["interaction"][1]  # only `collection` retargets

@@ -376,7 +376,7 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method, guide=False, body_model="collection",
+    method, guide=False, body_model="interaction",
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""

@@ -200,11 +200,12 @@ def body_model_option() -> Any:
     """``--body-model``: what the tracker's body model learns its joints' axes and ranges from
     (``track`` and ``dualhmm respond --video``)."""
     return typer.Option(
-        "collection",
+        "interaction",
         callback=choice(("collection", "interaction")),
-        help="collection: every skeleton take of --data, retargeted onto the template "
-        "(built once, then cached); interaction: the training handshake and pull takes "
-        "alone (the template's own skeleton; the model before issue 24).",
+        help="interaction: the training handshake and pull takes alone (the template's own "
+        "skeleton); collection: every skeleton take of --data, retargeted onto the template "
+        "(built once, then cached; better on some motions the handshakes lack, worse on "
+        "others: docs/video.md).",
     )
 
 

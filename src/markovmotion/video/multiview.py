@@ -266,7 +266,7 @@ def _runs(mask: np.ndarray) -> list[slice]:
 
 
 def default_body_model(
-    data: str | os.PathLike[str] | None = None, which: str = "collection"
+    data: str | os.PathLike[str] | None = None, which: str = "interaction"
 ) -> BodyModel:
     """The body model ``track`` and ``respond --video`` use (:data:`BODY_MODELS`)."""
     if which == "interaction":
