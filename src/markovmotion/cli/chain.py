@@ -14,10 +14,10 @@ import typer
 from rich.table import Table
 
 from markovmotion.cli.options import (
-    choice,
     choose_option,
     grid_of,
     kind_option,
+    normalise_option,
     ranged,
     roles_option,
 )
@@ -60,11 +60,8 @@ CHOOSE = choose_option(
     "world plus body-centred error of the multiple hypotheses",
     "n_state_prototypes+n_behaviour_prototypes=20,40,80;roles=one,both",
 )
-NORMALISE = typer.Option(
-    "none",
-    callback=choice(("none", "person")),
-    help="'person': each person's shape relative to their own running mean, on the training "
-    "people's mean shape, for people the model has never seen; 'none': the paper's.",
+NORMALISE = normalise_option(
+    "each person's shape relative to their own running mean, on the training people's mean shape"
 )
 RESPONSE = typer.Option(
     DEFAULT_RESPONSE,

@@ -16,6 +16,7 @@ from markovmotion.cli.options import (
     grid_of,
     guide_option,
     kind_option,
+    normalise_option,
     ranged,
     roles_option,
 )
@@ -87,11 +88,9 @@ MARKERS = typer.Option(
     help="Learn on N virtual markers placed on each person's skeleton (13-200; the paper's "
     "suit has 30); 0: skeletons (takes listed as .c3d files are markers anyway).",
 )
-NORMALISE = typer.Option(
-    "none",
-    callback=choice(("none", "person")),
-    help="'person': A's features relative to A's own running mean and (markers) B's frames "
-    "on the average training body, for people the model has never seen; 'none': the paper's.",
+NORMALISE = normalise_option(
+    "A's features relative to A's own running mean and (markers) B's frames on the "
+    "average training body"
 )
 OUTPUT = typer.Option(
     "frames",

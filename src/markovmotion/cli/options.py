@@ -259,3 +259,13 @@ def grid_of(family: str, choose: str | None) -> list[dict] | None:
         return parse(choose)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--choose") from None
+
+
+def normalise_option(what: str) -> Any:
+    """``--normalise``: the paper's features, or each person's relative to themselves
+    (``dualhmm`` and ``chain``, ``what`` says what is made relative)."""
+    return typer.Option(
+        "none",
+        callback=choice(("none", "person")),
+        help=f"'person': {what}, for people the model has never seen; 'none': the paper's.",
+    )

@@ -54,7 +54,6 @@ from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.base import FeatureStep
 from markovmotion.features.body_motion import BodyMotion
 from markovmotion.features.body_points import body_point_index, find_points, normalise
-from markovmotion.features.person import OnlineCentre, RunningCentre
 from markovmotion.state import StateError, check_index, check_shape, is_fitted, register, require
 
 #: Most virtual markers :func:`virtual_markers` places.
@@ -236,16 +235,26 @@ def named_body_points(motion: Motion, names: Sequence[str]) -> Markers:
         SkeletonMismatchError: a name that stands for no body point, or body points the
             skeleton lacks (named).
     """
-    found = find_points(names)
-    unknown = [n for i, n in enumerate(names) if i not in found.values()]
-    if unknown:
-        raise SkeletonMismatchError(
-            f"the model's markers {', '.join(unknown)} name no body point, so they cannot "
-            "be found on a skeleton (give markers)"
-        )
-    points = sorted(found, key=found.__getitem__)
-    index = body_point_index(motion.skeleton, points, motion.name or "the skeleton")
+    known = _NAMED.setdefault(motion.skeleton, {})  # a stream's frames share one skeleton
+    index = known.get(tuple(names))
+    if index is None:
+        found = find_points(names)
+        unknown = [n for i, n in enumerate(names) if i not in found.values()]
+        if unknown:
+            raise SkeletonMismatchError(
+                f"the model's markers {', '.join(unknown)} name no body point, so they cannot "
+                "be found on a skeleton (give markers)"
+            )
+        points = sorted(found, key=found.__getitem__)
+        index = body_point_index(motion.skeleton, points, motion.name or "the skeleton")
+        known[tuple(names)] = index
     return Markers(list(names), motion.positions()[:, index], motion.fps, motion.name)
+
+
+#: Per skeleton, the joints of each marker set's names (:func:`named_body_points`).
+_NAMED: weakref.WeakKeyDictionary[Skeleton, dict[tuple[str, ...], np.ndarray]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 class Lift:
@@ -256,41 +265,40 @@ class Lift:
     its vertical origin, not the floor, so a model learnt from it places people at heights
     that mean nothing for a skeleton standing on a floor. Lifting the skeleton's points to
     the training people's mean centroid height (``height``), and moving B's answer down by
-    the same lift, keeps B at A's height as the training pairs stood. The running mean is
-    :class:`~markovmotion.features.person.RunningCentre`'s without a prior, so
-    :meth:`__call__` on a whole take and :meth:`step` frame by frame give the same lifts; a
-    frame with no marker seen keeps the last lift.
+    the same lift, keeps B at A's height as the training pairs stood. :meth:`__call__` on a
+    whole take and :meth:`step` frame by frame give the same lifts (a running sum and
+    count); a frame with no marker seen keeps the last lift.
     """
 
     def __init__(self, height: float):
         self.height = float(height)
-        self._online: OnlineCentre | None = None
-        self._last = 0.0
+        self._total, self._count, self._last = 0.0, 0, 0.0
 
     def __call__(self, markers: Markers) -> tuple[Markers, np.ndarray]:
         """``markers`` lifted, and the lift per frame (F,)."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a frame with nothing seen
-            centre = np.nanmean(markers.positions[..., 1], axis=1)
+        centre = _centre_heights(markers)
         seen = np.isfinite(centre)
-        lift = np.zeros(len(centre))
-        if seen.any():
-            x = centre[seen, None]
-            running = x - RunningCentre(prior=0.0).fit([x]).transform([x])[0]  # mean so far
-            k = np.cumsum(seen) - 1  # the last frame seen up to each frame, among the seen
-            lift = np.where(k >= 0, self.height - running[np.maximum(k, 0), 0], 0.0)
+        count = np.cumsum(seen)  # frames seen so far
+        total = np.cumsum(np.where(seen, centre, 0.0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lift = np.where(count > 0, self.height - total / count, 0.0)
         return _moved_up(markers, lift), lift
 
     def step(self, markers: Markers) -> tuple[Markers, float]:
         """One frame's markers lifted and its lift, the running mean taking the frame in."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            centre = float(np.nanmean(markers.positions[0, :, 1]))
+        centre = float(_centre_heights(markers)[0])
         if np.isfinite(centre):
-            self._online = self._online or OnlineCentre(np.zeros(1), 0.0)
-            x = np.array([centre])
-            self._last = self.height - float((x - self._online(x))[0])
+            self._total += centre
+            self._count += 1
+            self._last = self.height - self._total / self._count
         return _moved_up(markers, np.array([self._last])), self._last
+
+
+def _centre_heights(markers: Markers) -> np.ndarray:
+    """(F,) the height of each frame's centroid of the markers seen (NaN: none seen)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with nothing seen
+        return np.nanmean(markers.positions[..., 1], axis=1)
 
 
 def _moved_up(markers: Markers, lift: np.ndarray) -> Markers:
