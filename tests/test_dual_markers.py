@@ -336,6 +336,29 @@ def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes,
     # body-centred (per point, the mean distance to the frames >= the distance to their mean)
     body = report["overall"]["body_centred"]
     assert 0 < body["known_motion_mm"] <= body["mean_pose_mm"] + 0.05
+    # the world error split into B's place and the rest: moved onto the real B's centroid,
+    # each partner is no further from it than its world error allows (triangle inequality)
+    place = report["overall"]["place"]
+    for key in ("windowed", "mean_pose"):
+        world = report["overall"][f"{key}_mm"]
+        assert place[f"{key}_at_true_place_mm"] <= world + place[f"{key}_centroid_mm"] + 0.1
+        assert place[f"{key}_centroid_mm"] <= world + 0.1
+
+
+def test_place_split_separates_where_b_stands_from_its_pose():
+    from markovmotion.evaluate.hmm import place_split, trial_errors
+
+    rng = np.random.default_rng(5)
+    truth = rng.normal(size=(30, 6, 3)) * 100
+    pose_error = rng.normal(size=(30, 6, 3)) * 20
+    pose_error -= pose_error.mean(axis=1, keepdims=True)  # leaves every centroid in place
+    offset = rng.normal(size=(30, 1, 3)) * 300
+    split = place_split(truth + pose_error + offset, truth)
+    np.testing.assert_allclose(split["centroid"], np.linalg.norm(offset[:, 0], axis=-1))
+    np.testing.assert_allclose(split["at_true_place"], trial_errors(truth + pose_error, truth))
+    # B in the right place with the right pose: nothing left to split
+    exact = place_split(truth, truth)
+    assert np.abs(exact["centroid"]).max() < 1e-9 and np.abs(exact["at_true_place"]).max() < 1e-9
 
 
 def test_known_motion_is_the_real_motion_about_the_mean_pose():

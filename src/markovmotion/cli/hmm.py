@@ -560,6 +560,7 @@ def _print_table(report: dict) -> None:
     from rich.table import Table
 
     from markovmotion.cli.tables import print_table
+    from markovmotion.evaluate.hmm import PLACED
 
     table = Table(
         title="dual HMM: mean per-frame error of B (mm) and jumps (p90 of frame steps, mm)"
@@ -569,7 +570,7 @@ def _print_table(report: dict) -> None:
         cols = (*cols, "gmr_mm")
     jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
     heads = ("group", *cols, "body-centred std/win/mean", "known motion world/body")
-    heads = (*heads, "paper trellis std/win", *jumps)
+    heads = (*heads, "at true place win/mean", "paper trellis std/win", *jumps)
     for c in (*heads, "hand gap real/win", "latency median/p99 (µs)"):
         table.add_column(c)
     rows = {
@@ -580,12 +581,13 @@ def _print_table(report: dict) -> None:
     }
     for name, r in rows.items():
         lat, paper, body = r["latency_us"], r["trellis"].get("paper"), r["body_centred"]
-        gap = r.get("hand_gap_in_contact_median_mm")
+        gap, place = r.get("hand_gap_in_contact_median_mm"), r.get("place")
         table.add_row(
             name,
             *(f"{r[c]:.1f}" for c in cols),
             "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
             f"{r['known_motion_mm']:.1f}/{body['known_motion_mm']:.1f}",
+            "/".join(f"{place[f'{k}_at_true_place_mm']:.1f}" for k in PLACED) if place else "-",
             f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}" if paper else "-",
             *(f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",

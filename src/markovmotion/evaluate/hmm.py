@@ -85,6 +85,7 @@ class PairResult:
     chosen: dict = field(default_factory=dict)  # settings picked on inner folds, if any
     hand_gaps: dict[str, np.ndarray] = field(default_factory=dict)  # mm, in contact frames
     windows: dict[str, np.ndarray] = field(default_factory=dict)  # A and B, for the observer
+    places: dict[str, np.ndarray] = field(default_factory=dict)  # per frame (mm), see place_split
 
 
 class Baselines:
@@ -252,6 +253,23 @@ def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return truth - truth.mean(axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
 
 
+#: The partners whose world error is split into place and the rest (:func:`place_split`).
+PLACED = ("windowed", "mean_pose")
+
+
+def place_split(generated: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarray]:
+    """Where a generated B's world error comes from, per frame (mm): ``centroid``, the
+    distance of its points' centroid from the real B's; ``at_true_place``, its world error
+    once moved so that its centroid is the real B's (the error of its pose and heading
+    alone). On new people most of the world error is the place: a pair stands where it
+    chooses, which the other person's motion tells little of (docs/hmm.md, "New people")."""
+    shift = truth.mean(axis=1, keepdims=True) - generated.mean(axis=1, keepdims=True)
+    return {
+        "centroid": np.linalg.norm(shift[:, 0], axis=-1),
+        "at_true_place": trial_errors(generated + shift, truth),
+    }
+
+
 def evaluate_pair(
     model: DualHMM,
     a: Motion,
@@ -292,6 +310,9 @@ def evaluate_pair(
         res.jumps[k] = jump_sizes(where[k])
     placed = baselines.mean_world(origin, yaw)
     res.errors["mean_pose"] = trial_errors(placed, truth)
+    for key, points in zip(PLACED, (where["windowed"], placed), strict=True):
+        for part, err in place_split(points, truth).items():
+            res.places[f"{key}_{part}"] = err
     res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
     res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
     res.pose_errors["known_motion"] = trial_errors(
@@ -342,6 +363,8 @@ def _summary(results: Sequence[PairResult]) -> dict:
         if all(f"{kind}/standard" in r.errors for r in results)
     }
     out["body_centred"] = {f"{k}_mm": mean(k, "pose_errors") for k in methods}
+    if all(r.places for r in results):
+        out["place"] = {f"{k}_mm": mean(k, "places") for k in results[0].places}
     touching = [r for r in results if r.hand_gaps]
     if touching:
         keys = [k for k in touching[0].hand_gaps if all(k in r.hand_gaps for r in touching)]
