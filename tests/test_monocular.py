@@ -186,6 +186,47 @@ def test_respond_monocular_draws_the_partner_into_the_real_video(
     assert ("--frame heading" in err) == (frame == "world")
 
 
+def test_a_marker_partner_is_drawn_into_the_real_video_at_the_persons_height(
+    mocap, real_video, tmp_path, capsys
+):
+    """A partner learnt from a depth sensor's 8 upper-body markers (the collection's
+    handshakes) answers the man tracked in camera 0 and is drawn as the body parts its
+    markers name: its drawn pixels reach up to the man's head height and not to the floor."""
+    from markovmotion.models.hmm.dual import DualHMM
+
+    pairs = [mocap.load_pair(a, b) for a, b in mocap.pairs("handshake", kind="markers")[:4]]
+    model = tmp_path / "sensor.npz"
+    DualHMM(n_states=4, n_iter=3, window=4, frame="heading").fit(pairs).save(model)
+    out = tmp_path / "composite.mp4"
+    main(["dualhmm", "respond", "--model", str(model), "--video", str(real_video),
+          "--method", "monocular", "--max-frames", "12", "--out", str(out)])  # fmt: skip
+    assert "12 frames in camera 0 alone" in capsys.readouterr().err
+    frames = list(read_frames(out))
+    original = list(read_frames(real_video / "cam0.mp4"))[:12]
+    changed = np.array(
+        [np.abs(f.astype(int) - o).max(axis=2) > 60 for f, o in zip(frames, original, strict=True)]
+    )
+    rows = np.flatnonzero(changed.any(axis=(0, 2)))
+    assert changed.sum() > 500  # B drawn
+    height = original[0].shape[0]
+    assert rows.min() < 0.4 * height and rows.max() < 0.8 * height  # upper body, no legs
+
+
+def test_marker_shape_joins_the_named_body_points_and_refuses_unnamed_markers():
+    from markovmotion.errors import SkeletonMismatchError
+    from markovmotion.video.body_model import marker_shape
+
+    names = ["TORSO", "HEAD", "R_SHOULDER", "L_SHOULDER", "R_ELBOW", "L_ELBOW", "R_HAND", "L_HAND"]
+    shape, points = marker_shape(names)
+    assert points[0] == "spine" and points[6] == "right_wrist"
+    joined = {tuple(sorted((names[a], names[b]))) for a, b in shape.capsules}
+    assert ("R_ELBOW", "R_HAND") in joined and ("HEAD", "TORSO") in joined
+    assert len(joined) == 7  # every marker hangs from its parent on the body's tree
+    assert {names[b[0]] for b in shape.balls} == {"HEAD", "R_HAND", "L_HAND"}
+    with pytest.raises(SkeletonMismatchError, match="nothing to draw"):
+        marker_shape(["M1", "M2", "M3"])
+
+
 def test_respond_monocular_is_not_live(real_video, partner_models, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",

@@ -27,6 +27,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 
@@ -77,10 +78,14 @@ class Replay:
         )
 
 
-def concatenate(frames: list[Motion], fps: float, name: str = "virtual partner") -> Motion:
-    """One Motion from a partner's one-frame Motions."""
+def concatenate(
+    frames: list[Motion] | list[Markers], fps: float, name: str = "virtual partner"
+) -> Motion | Markers:
+    """One Motion (or Markers) from a partner's one-frame Motions (or Markers)."""
     if not frames:
         raise ValueError("the partner produced no frames")
+    if isinstance(frames[0], Markers):
+        return Markers(frames[0].names, np.concatenate([f.positions for f in frames]), fps, name)
     return Motion(
         frames[0].skeleton,
         np.concatenate([f.rotations for f in frames]),

@@ -36,7 +36,12 @@ from markovmotion.algorithms.kinematics import KinematicChain, rotvec_positions
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
-from markovmotion.features.body_points import BODY_POINTS, body_point_index
+from markovmotion.features.body_points import (
+    BODY_POINTS,
+    body_point_index,
+    find_points,
+    point_bones,
+)
 from markovmotion.video.render import BodyShape
 
 #: Tapered capsules (mm) on the segments between :data:`BODY_POINTS`, a head and two hands.
@@ -64,6 +69,47 @@ BODY_SHAPE = BodyShape.build(
     [("head", "neck", 1.0, 105.0)]
     + [(f"{s}_wrist", f"{s}_elbow", 0.6, 45.0) for s in ("left", "right")],
 )
+
+
+def marker_shape(names: Sequence[str]) -> tuple[BodyShape, list[str]]:
+    """The flesh of a marker set (a partner that answers with markers, such as a depth
+    sensor's 8 upper-body points), for drawing it as a body: a capsule on each bone of
+    :func:`~markovmotion.features.body_points.point_bones` (the markers that name body
+    points, joined along the body's tree), tapered from :data:`BODY_SHAPE`'s radius where
+    a capsule leaves the parent's body point to its radius where one reaches the child's;
+    a ball on the head marker (a marker lies on the head, not below it) and past each wrist.
+    Returns the shape (over the markers, in their order) and each marker's body point
+    (``""`` for a marker that names none), for :func:`capsule_colours`.
+
+    Raises:
+        SkeletonMismatchError: fewer than two markers name body points (nothing to join).
+    """
+    found = find_points(names)
+    bones = point_bones(names)
+    if not len(bones):
+        raise SkeletonMismatchError(
+            f"markers {', '.join(names)}: fewer than two name body points, nothing to draw"
+        )
+    point_of = {i: p for p, i in found.items()}
+    seg, radii = BODY_SHAPE.segments()
+    starts = {BODY_POINTS[a]: r[0] for (a, b), r in zip(seg, radii, strict=False) if a != b}
+    ends = {BODY_POINTS[b]: r[1] for (a, b), r in zip(seg, radii, strict=False) if a != b}
+    capsules, rad = [], []
+    for child, parent in bones:
+        pc, pp = point_of[child], point_of[parent]
+        capsules.append((int(parent), int(child)))
+        rad.append((float(starts.get(pp, ends.get(pp, 50.0))), float(ends.get(pc, 50.0))))
+    balls = []
+    up = next((p for c, p in bones if c == found.get("head")), None)
+    if up is not None:
+        balls.append((found["head"], int(up), 0.0, 105.0))
+    for side in ("left", "right"):
+        wrist, elbow = found.get(f"{side}_wrist"), found.get(f"{side}_elbow")
+        if wrist is not None and elbow is not None:
+            balls.append((wrist, elbow, 0.6, 45.0))
+    shape = BodyShape(tuple(capsules), tuple(rad), tuple(balls), len(names))
+    return shape, [point_of.get(i, "") for i in range(len(names))]
+
 
 ROOT_DOF = 4  # x, y, z, yaw
 

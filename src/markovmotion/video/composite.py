@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError, SkeletonMismatchError
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
-from markovmotion.video.body_model import BODY_SHAPE, BodyModel
+from markovmotion.video.body_model import BODY_SHAPE, BodyModel, marker_shape
 from markovmotion.video.cameras import (
     CalibratedCamera,
     camera_file,
@@ -32,21 +33,34 @@ from markovmotion.video.cameras import (
     load_cameras,
 )
 from markovmotion.video.multiview import track_take
-from markovmotion.video.render import read_frames, write_video
+from markovmotion.video.render import BodyShape, read_frames, write_video
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
+
+
+def partner_body(b: Motion | Markers | np.ndarray) -> tuple[np.ndarray, BodyShape, np.ndarray]:
+    """What of B is drawn: its points (F, P, 3), their flesh and each primitive's colour. A
+    Motion by its 19 body points on :data:`BODY_SHAPE` (an array: those points); Markers (a partner learnt from a
+    depth sensor's markers) by :func:`marker_shape`, only the parts its markers show (a
+    sensor's 8 upper-body points: trunk, head and arms; no legs are invented)."""
+    if isinstance(b, Markers):
+        shape, names = marker_shape(b.names)
+        return b.positions, shape, capsule_colours(shape, names, CLOTHES["b"])
+    points = body_points(b) if isinstance(b, Motion) else np.asarray(b, dtype=float)
+    return points, BODY_SHAPE, capsule_colours(BODY_SHAPE, BODY_POINTS, CLOTHES["b"])
 
 
 def composite_frames(
     frames: Iterator[np.ndarray],
     camera: CalibratedCamera,
     a_points: np.ndarray,
-    b_points: np.ndarray,
+    b: Motion | Markers | np.ndarray,
 ) -> Iterator[np.ndarray]:
-    """``frames`` with B (body points (F, 19, 3)) drawn shaded where it is in front of A's model.
+    """``frames`` with B (a Motion, Markers or body points, :func:`partner_body`) drawn shaded where it is
+    in front of A's model (A's body points (F, 19, 3) on :data:`BODY_SHAPE`).
 
     Stops with A's tracked frames; frames beyond B's motion pass through unchanged.
     """
-    colours = capsule_colours(BODY_SHAPE, BODY_POINTS, CLOTHES["b"])
+    b_points, shape, colours = partner_body(b)
     hidden = np.zeros((len(BODY_SHAPE.segments()[0]), 3))
     for t, frame in enumerate(frames):
         if t >= len(a_points):
@@ -57,7 +71,7 @@ def composite_frames(
         canvas = DepthCanvas(camera.width, camera.height)
         if np.isfinite(a_points[t]).all():  # A not found in this frame: B hides nothing of A
             canvas.body(a_points[t], camera, BODY_SHAPE, hidden, 0)
-        canvas.body(b_points[t], camera, BODY_SHAPE, colours, 1)
+        canvas.body(b_points[t], camera, shape, colours, 1)
         yield canvas.over(frame, only=1)
 
 
@@ -100,9 +114,7 @@ def respond_in_video(
     b = _respond(dual, a, method)
     video_path = Path(video) if single else camera_videos(where, cams)[view]
     frames = read_frames(video_path)
-    written = write_video(
-        composite_frames(frames, cams[view], body_points(a), body_points(b)), out, result.fps
-    )
+    written = write_video(composite_frames(frames, cams[view], body_points(a), b), out, result.fps)
     summary.update(
         {
             "tracking_seconds": round(tracked, 2),
@@ -150,7 +162,7 @@ def respond_monocular(
     a = points_motion(tr.points, tr.fps, path.name)
     b = _respond(dual, a, method)
     written = write_video(
-        composite_frames(read_frames(path), cams[view], tr.points, body_points(b)), out, tr.fps
+        composite_frames(read_frames(path), cams[view], tr.points, b), out, tr.fps
     )
     n = len(tr.points)
     return {
@@ -238,7 +250,7 @@ def _respond_live(
     b = concatenate(b_frames, partner.fps)
     frames = read_frames(mv.videos[view])  # decoded again: no frame is kept in memory
     written = write_video(
-        composite_frames(frames, mv.cameras[view], body_points(a), body_points(b)), out, mv.fps
+        composite_frames(frames, mv.cameras[view], body_points(a), b), out, mv.fps
     )
     ms = np.array(times or [0.0]) * 1e3
     return {
@@ -256,16 +268,16 @@ def _respond_live(
 
 
 def _load_partner_model(model: str | os.PathLike[str]):
-    """The dual HMM of ``model``; one trained on markers answers with markers, which have no
-    body to draw into the video."""
+    """The dual HMM of ``model``; one trained on markers answers with markers, drawn by the
+    body parts they name (:func:`partner_body`), so they must name at least two."""
     from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
     if getattr(dual, "uses_markers", False):
-        raise SkeletonMismatchError(
-            f"{model}: the model answers with markers, which have no body to draw into the video "
-            "(train the partner on skeleton takes, --kind skeleton)"
-        )
+        try:
+            marker_shape(dual.marker_names_b_)
+        except SkeletonMismatchError as err:
+            raise SkeletonMismatchError(f"{model}: {err}") from None
     return dual
 
 
@@ -279,7 +291,7 @@ def _fill_forward(states: list[np.ndarray | None]) -> np.ndarray:
     return np.array(out)
 
 
-def _respond(dual, a: Motion, method: str) -> Motion:
+def _respond(dual, a: Motion, method: str) -> Motion | Markers:
     """B's response at the video's rate (the model works at its own)."""
     b = dual.respond(a, method)
     return b.resample(a.fps) if not np.isclose(b.fps, a.fps) else b
