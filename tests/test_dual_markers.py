@@ -271,6 +271,22 @@ def test_a_sensor_marker_model_answers_a_skeleton_at_its_height(sensor_model, ta
     capsys.readouterr()
 
 
+def test_realtime_replays_a_marker_model_as_windowed_respond_answers(
+    sensor_model, takes, tmp_path, capsys
+):
+    """``respond --realtime`` with a marker model: A streamed at its rate, B's markers as
+    the windowed decoder answers the whole take (C3D's float32 aside)."""
+    a = _sensor(takes[2][0]).resample(30)
+    model, given, out = tmp_path / "m.npz", tmp_path / "a.c3d", tmp_path / "b.c3d"
+    sensor_model.save(model)
+    write_c3d(a, given)
+    main(["dualhmm", "respond", "--model", str(model), "--input", str(given), "--realtime"]
+         + ["--out", str(out)])  # fmt: skip
+    assert "dropped frames" in capsys.readouterr().err
+    whole = sensor_model.respond(read_c3d(given), "windowed")
+    np.testing.assert_allclose(read_c3d(out).positions, whole.positions, atol=0.05)
+
+
 def test_a_sensor_marker_model_names_the_body_points_a_skeleton_lacks(sensor_model, takes):
     import dataclasses
 

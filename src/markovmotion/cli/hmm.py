@@ -335,7 +335,7 @@ def respond(
     if animation is not None:
         check_output(animation)
     dual = DualHMM.load(model)
-    _check_combination(dual, input, out, as_c3d, realtime)
+    _check_combination(dual, input, out, as_c3d)
     dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
@@ -437,10 +437,9 @@ def _respond_video(
     )
 
 
-def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: bool) -> None:
+def _check_combination(dual, input: Path, out: Path, as_c3d: bool) -> None:
     """One line (exit 2) for a model and files that do not go together: markers in or out
-    of a skeleton model, a skeleton's output from a marker model, or --realtime on markers
-    (a BVH given to a model learnt from C3D markers is checked by ``check_input``: the body
+    of a skeleton model, or a skeleton's output from a marker model (a BVH given to a model learnt from C3D markers is checked by ``check_input``: the body
     points its markers name)."""
     from markovmotion.errors import MotionFormatError, SkeletonMismatchError
     from markovmotion.io.files import base_suffix
@@ -453,10 +452,6 @@ def _check_combination(dual, input: Path, out: Path, as_c3d: bool, realtime: boo
         )
     if dual.uses_markers and not as_c3d:
         raise MotionFormatError(out, "the model was trained on markers: write B to a .c3d file")
-    if dual.uses_markers and realtime:
-        raise SkeletonMismatchError(
-            f"{input}: --realtime replays skeleton models only (this one is on markers)"
-        )
 
 
 def _resample_stream(motion, broken: np.ndarray, fps: float):
