@@ -5,6 +5,7 @@ out once, never trained on."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
+from markovmotion.data.splits import PAIR_TEST_EVERY
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.evaluate.chain import PARTNERS, cross_validate_people
 from markovmotion.features.joint_shape import (
@@ -277,6 +279,27 @@ def test_train_chooses_settings_by_leaving_people_out_and_records_the_pick(tmp_p
     assert model.roles_ == pick["roles"]
     assert model.n_state_prototypes == model.n_behaviour_prototypes == pick["n_state_prototypes"]
     assert len(model.chain_.state_prototypes_) == pick["n_state_prototypes"]
+
+
+def test_train_holds_out_the_test_trials_or_none(mocap, tmp_path, capsys):
+    """``chain train --test-trials``: the collection's split by default (the last take of
+    each label), the trials given, or with ``none`` every take; a trial no take has is
+    refused in one line before anything is learnt."""
+    pairs = mocap.pairs("handshake", kind="markers")
+    argv = ["chain", "train", "--label", "handshake", "--kind", "markers", "--epochs", "1"]
+    argv += ["--prototypes", "4", "--behaviours", "4", "--out", str(tmp_path / "m.npz")]
+
+    def learnt(*extra: str) -> int:
+        main([*argv, *extra])
+        return int(capsys.readouterr().err.split("wrote ")[-1].split(": ")[1].split(" takes")[0])
+
+    assert learnt("--test-trials", "none") == len(pairs)
+    assert learnt() == len(pairs) - math.ceil(len(pairs) / PAIR_TEST_EVERY)
+    first = pairs[0][0].trial
+    assert learnt("--test-trials", first) == sum(a.trial != first for a, _ in pairs)
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--test-trials", "no-such-trial"])
+    assert exc.value.code == 2 and "no-such-trial" in capsys.readouterr().err
 
 
 def test_the_old_choice_flags_are_the_grid_they_stand_for(monkeypatch, capsys):

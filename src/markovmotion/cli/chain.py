@@ -24,7 +24,7 @@ from markovmotion.cli.options import (
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
-from markovmotion.data.splits import held_out_pairs
+from markovmotion.data.splits import held_out_pairs, select_pairs
 from markovmotion.defaults import (
     DEFAULT_PROTOTYPES,
     DEFAULT_RESPONSE,
@@ -111,22 +111,29 @@ def _check_response(response: str) -> None:
 
 
 def _training_takes(
-    data: Path | None, source: str, label: str | list[str], kind: str | None = None
+    data: Path | None,
+    source: str,
+    label: str | list[str],
+    kind: str | None = None,
+    test_trials: str | None = None,
 ):
     """Motion-capture takes ``(name, label, people, A, B)`` (names by
     :func:`~markovmotion.evaluate.takes.take_names`; skeletons:
     :func:`~markovmotion.data.kinds.choose_kind` says what it leaves out), or tracked
-    silhouette takes."""
+    silhouette takes. ``test_trials``: the trials held out (``"none"``: every take is
+    learnt); by default the collection's split (:func:`held_out_pairs`)."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
         from markovmotion.evaluate.takes import take_names
         from markovmotion.models.chain.partner import KINDS
 
         index = MocapIndex.load(data)
-        pairs, _ = choose_kind(
-            index.pairs(label=label), kind, "two-person takes", lambda p: p[0], KINDS
-        )
-        train, _ = held_out_pairs(pairs)
+        labels = [label] if isinstance(label, str) else label
+        held = [t.strip() for t in (test_trials or "").split(",") if t.strip() not in ("", "none")]
+        # select_pairs refuses a mistyped trial, which would otherwise leak into training
+        listed = select_pairs(index, labels, held or None, held_out=False)
+        pairs, _ = choose_kind(listed, kind, "two-person takes", lambda p: p[0], KINDS)
+        train = held_out_pairs(pairs)[0] if test_trials is None else pairs
         if not train:
             raise DataNotFoundError(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
@@ -170,17 +177,27 @@ def train(
     hypotheses: int = ranged(
         "hypotheses", 200, min=2, help="--choose: hypotheses N of the multiple-hypothesis runs."
     ),
+    test_trials: str = typer.Option(
+        None,
+        help="mocap: comma-separated trials held out for testing (not learnt); 'none' learns "
+        "every take (for a model evaluated on other people's INDEX.csv with evaluate --test). "
+        "Default: the last take of each label, as the paper's salsa split.",
+    ),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded): 3-D
     skeletons or markers (C3D, picked by name), or tracked silhouettes."""
     _check_source(source)
+    if source != "mocap" and test_trials is not None:
+        raise typer.BadParameter("--test-trials picks motion capture's takes: --source mocap")
     if source != "mocap" and (choose or roles != "one"):
         raise typer.BadParameter(
             "--choose and --roles both learn from motion capture's pairs of people: --source mocap"
         )
     grid = grid_of("chain", choose)
     labels = [x.strip() for x in label.split(",") if x.strip()] or [label]
-    takes = _training_takes(data, source, labels if len(labels) > 1 else labels[0], kind)
+    takes = _training_takes(
+        data, source, labels if len(labels) > 1 else labels[0], kind, test_trials
+    )
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
     extras: dict = {}
     with err_console.status("learning prototypes and chain"):
