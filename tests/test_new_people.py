@@ -274,9 +274,20 @@ def test_parse_grid_gives_every_combination_with_the_parameters_types():
         ("n_states=a", "int"),
         ("energy=", "no values"),
         ("", "no settings"),
+        # values of the right type out of the model's choices or ranges: refused before any
+        # fit (DualHMM.check_params), as fit itself would refuse them
+        ("output=frames,regresion", "output must be one of"),
+        ("place_memory=0,-5", "place_memory must be"),
+        ("n_states=0,4", "n_states must be"),
+        ("energy=0.5,2", "energy must be"),
+        ("covariance_type=full,dig", "covariance_type must be"),
     ):
         with pytest.raises(ValueError, match=what):
             evaluation.parse_grid(bad)
+    from markovmotion.evaluate import chain
+
+    with pytest.raises(ValueError, match="normalise must be one of"):
+        chain.parse_grid("normalise=none,persn")
 
 
 def test_nested_selection_never_sees_the_pair_of_people_it_is_reported_on(people, fits):
@@ -386,6 +397,8 @@ def test_train_learns_both_roles_and_chooses_settings_by_leaving_people_out(tmp_
         (["dualhmm", "train", "--out", "x.npz"], "n_states=a", "n_states takes int"),
         (["chain", "crossval"], "prototypes=3", "prototypes=3"),
         (["chain", "train", "--out", "x.npz"], "lam=0.5,x", "lam takes float"),
+        (["dualhmm", "crossval"], "output=frames,regresion", "output must be one of"),
+        (["chain", "crossval"], "normalise=none,persn", "normalise must be one of"),
         (["chain", "crossval"], "roles=two", "roles are one, both"),
     ],
 )

@@ -574,7 +574,10 @@ def parse_grid(text: str) -> list[dict]:
     """Settings of a behaviour chain to choose among, ``"param=v1,v2;param=v1,v2"``
     (:func:`markovmotion.evaluate.choose.parse_grid` over VirtualPartner's parameters and
     ``roles``; ``n_state_prototypes+n_behaviour_prototypes=20,40`` ties the two counts)."""
-    return choose.parse_grid(text, choose.grid_defaults(VirtualPartner()))
+    grid = choose.parse_grid(text, choose.grid_defaults(VirtualPartner()))
+    for setting in grid:  # a value out of its choices is refused before anything is learnt
+        VirtualPartner(**choose.model_params(setting)).check_params()
+    return grid
 
 
 def choose_settings(

@@ -446,7 +446,10 @@ GENERATION_ONLY = frozenset({"placement_window", "blend_window"})
 def parse_grid(text: str) -> list[dict]:
     """Settings of a DualHMM to choose among, ``"param=v1,v2;param=v1,v2"``
     (:func:`markovmotion.evaluate.choose.parse_grid` over DualHMM's parameters and ``roles``)."""
-    return choose.parse_grid(text, choose.grid_defaults(DualHMM()))
+    grid = choose.parse_grid(text, choose.grid_defaults(DualHMM()))
+    for setting in grid:  # a value out of its choices is refused before anything is learnt
+        DualHMM(**choose.model_params(setting)).check_params()
+    return grid
 
 
 def choose_settings(

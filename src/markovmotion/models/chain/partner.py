@@ -135,6 +135,13 @@ class VirtualPartner(Model):
         self.fps = fps
         self.normalise = normalise
 
+    def check_params(self) -> None:
+        """Raise ValueError (one line, naming the parameter) for a hyper-parameter out of its
+        choices: :meth:`fit` checks first, and ``--choose`` every setting before anything
+        is learnt."""
+        if self.normalise not in NORMALISE:
+            raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
+
     def fit(
         self,
         takes: Sequence[tuple[Motion, Motion]]
@@ -152,8 +159,7 @@ class VirtualPartner(Model):
         takes = list(takes)
         if not takes:
             raise DataNotFoundError("no two-person takes to learn from")
-        if self.normalise not in NORMALISE:
-            raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
+        self.check_params()
         self.skeletons_ = self.markers_ = None
         if all(isinstance(t, TwoPeople) for t in takes):
             people = takes

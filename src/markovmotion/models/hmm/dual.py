@@ -348,21 +348,10 @@ class DualHMM(Model):
         self.n_jobs = n_jobs
 
     # ---------------------------------------------------------------- fitting
-    def fit(
-        self,
-        pairs: Sequence[tuple[Motion, Motion]] | Sequence[tuple[Markers, Markers]],
-        labels: Sequence[str] | None = None,
-        groups: Sequence[str] | None = None,
-    ) -> DualHMM:
-        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A): Motions,
-        or Markers (or Motions with ``markers=N``: virtual markers) for a marker model.
-
-        ``labels``: the takes' interaction labels (INDEX.csv's ``label``), kept
-        in ``labels_`` (sorted, distinct) so that evaluation on another index
-        picks takes of the same interactions; empty if not given. ``groups``: the takes'
-        pairs of people (INDEX.csv's ``subject``), which ``frame="auto"`` leaves out one at a
-        time (:func:`choose_frame`); one take at a time if not given.
-        """
+    def check_params(self) -> None:
+        """Raise ValueError (one line, naming the parameter) for a hyper-parameter out of its
+        choices or range: :meth:`fit` checks first, and ``--choose`` every setting before
+        anything is learnt."""
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
         if self.observation not in OBSERVATIONS:
@@ -383,6 +372,37 @@ class DualHMM(Model):
             raise ValueError(f"place_memory must be 0 to 100000 frames, got {self.place_memory!r}")
         if self.output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {self.output!r}")
+        counts = ("n_states", "window", "candidates", "placement_window", "blend_window", "n_iter")
+        for name in counts:
+            value = getattr(self, name)
+            if not (isinstance(value, int | np.integer) and not isinstance(value, bool)) or (
+                value < 1
+            ):
+                raise ValueError(f"{name} must be a whole number of at least 1, got {value!r}")
+        if not 0.0 < float(self.energy) <= 1.0:
+            raise ValueError(f"energy must be above 0 and at most 1, got {self.energy!r}")
+        if not (float(self.fps) > 0.0 and np.isfinite(float(self.fps))):
+            raise ValueError(f"fps must be above 0, got {self.fps!r}")
+        if not float(self.var_floor) >= 0.0:
+            raise ValueError(f"var_floor must be 0 or more, got {self.var_floor!r}")
+        check_covariance_type(self.covariance_type)
+
+    def fit(
+        self,
+        pairs: Sequence[tuple[Motion, Motion]] | Sequence[tuple[Markers, Markers]],
+        labels: Sequence[str] | None = None,
+        groups: Sequence[str] | None = None,
+    ) -> DualHMM:
+        """Learn from two-person takes ``(A, B)`` (same frames; B responds to A): Motions,
+        or Markers (or Motions with ``markers=N``: virtual markers) for a marker model.
+
+        ``labels``: the takes' interaction labels (INDEX.csv's ``label``), kept
+        in ``labels_`` (sorted, distinct) so that evaluation on another index
+        picks takes of the same interactions; empty if not given. ``groups``: the takes'
+        pairs of people (INDEX.csv's ``subject``), which ``frame="auto"`` leaves out one at a
+        time (:func:`choose_frame`); one take at a time if not given.
+        """
+        self.check_params()
         markers_in = self.markers or (pairs and isinstance(pairs[0][0], Markers))
         if self.output == "regression" and not markers_in:
             raise SkeletonMismatchError(
