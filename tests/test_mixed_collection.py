@@ -88,6 +88,20 @@ def test_choose_kind_refuses_a_kind_absent_or_not_learnt(mocap):
         choose_kind(_entries(mocap, "s"), "points")
 
 
+@pytest.mark.parametrize("family", ["dualhmm", "chain"])
+@pytest.mark.parametrize("command", ["train", "crossval"])
+def test_a_misspelt_label_in_a_list_is_one_line_not_left_out(family, command, tmp_path, capsys):
+    """``--labels handshake,wav``: the label no take has is named (with the index's labels)
+    before anything is learnt, instead of learning the handshakes alone."""
+    argv = [family, command, "--labels", "handshake,wav", "--kind", "markers"]
+    argv += ["--out", str(tmp_path / "m.npz")] if command == "train" else []
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "'wav'" in err and "wave" in err and "Traceback" not in err
+    assert not (tmp_path / "m.npz").exists()
+
+
 def test_largest_group_keeps_one_skeleton_or_marker_set(capsys):
     a, b = make_motion(10), make_motion(10, seed=1)
     other = a.copy()

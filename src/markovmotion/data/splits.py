@@ -101,8 +101,24 @@ def select_pairs(
     trials: Sequence[str] | None,
     held_out: bool,
 ) -> list[Pair]:
-    """Two-person takes of ``labels``: those of ``trials`` (``held_out``) or all the others."""
+    """Two-person takes of ``labels``: those of ``trials`` (``held_out``) or all the others.
+
+    Raises:
+        DataNotFoundError: one line naming a label of ``labels`` that no two-person take has
+            (checked for training, ``held_out=False``: a misspelt label in a list would
+            otherwise be left out silently), a trial no take has, or no take at all.
+    """
     pairs = index.pairs(label=labels)
+    if labels is not None and not held_out:
+        have = {a.label for a, _ in pairs}
+        wanted = [labels] if isinstance(labels, str) else labels
+        missing = [lab for lab in dict.fromkeys(wanted) if lab not in have]
+        if missing and pairs:  # none at all: the message below
+            known = sorted({a.label for a, _ in index.pairs()})
+            raise DataNotFoundError(
+                f"no two-person take is labelled {', '.join(map(repr, missing))} in "
+                f"{index.root / 'INDEX.csv'} (its labels: {', '.join(known)})"
+            )
     if trials is not None:
         wanted = {t.lstrip("0") for t in trials}
         unknown = wanted - {p[0].trial.lstrip("0") for p in pairs}
