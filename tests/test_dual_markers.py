@@ -271,6 +271,26 @@ def test_a_sensor_marker_model_answers_a_skeleton_at_its_height(sensor_model, ta
     capsys.readouterr()
 
 
+def test_a_sensor_model_scored_on_skeletons_places_its_baselines_as_its_partner(
+    sensor_model, takes
+):
+    """Evaluated on a skeleton pair (floor at 0), a sensor-marker model's baselines see A
+    lifted as the partner does: raising both people by 500 mm changes no error, and the
+    mean pose is within reach of the partner (not a metre off, the sensor's height)."""
+    a, b = takes[2]
+    res = evaluate_pair(sensor_model, a, b, "t", "handshake")
+    up_a, up_b = a.copy(), b.copy()
+    for m in (up_a, up_b):
+        m.translations[:, 0, 1] += 500.0
+    raised = evaluate_pair(sensor_model, up_a, up_b, "t", "handshake")
+    for key in ("windowed", "mean_pose", "known_motion", "nearest_neighbour"):
+        assert raised.errors[key].mean() == pytest.approx(res.errors[key].mean(), abs=0.5)
+        assert raised.pose_errors[key].mean() == pytest.approx(res.pose_errors[key].mean(), abs=0.5)
+    assert res.pose_errors["mean_pose"].mean() < 2 * res.pose_errors["windowed"].mean()
+    # while B stands still (the take's first frames) the mean pose is as near as the partner
+    assert res.errors["mean_pose"][:10].mean() < 1.5 * res.errors["windowed"][:10].mean()
+
+
 def test_realtime_replays_a_marker_model_as_windowed_respond_answers(
     sensor_model, takes, tmp_path, capsys
 ):

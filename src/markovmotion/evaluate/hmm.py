@@ -284,8 +284,13 @@ def evaluate_pair(
     own only, as it passes no trellis)."""
     baselines = baselines or Baselines(model)
     a, b = model._rate(a), model._rate(b)
-    origin, yaw = model.placing(a)  # the baselines are placed as the windowed partner is
-    xa, _ = model.features_a(a)
+    # the baselines see A as the partner does (a skeleton lifted to a sensor model's height,
+    # DualHMM.a_in) and are placed as the windowed partner is, brought down by the same lift
+    seen, lift = model.a_in(a)
+    origin, yaw = model.placing(seen)
+    if lift is not None:
+        origin[:, 1] -= lift
+    xa, _ = model.features_a(seen)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     if baselines.gmr is not None:
         generated["gmr"] = baselines.regression(xa, origin, yaw)
@@ -313,11 +318,12 @@ def evaluate_pair(
     for key, points in zip(PLACED, (where["windowed"], placed), strict=True):
         for part, err in place_split(points, truth).items():
             res.places[f"{key}_{part}"] = err
-    res.pose_errors["mean_pose"] = trial_errors(baselines.mean_pose[None], truth_pose)
+    mean_pose = np.broadcast_to(baselines.mean_pose, truth_pose.shape)
+    if lift is not None:  # the training people's heights are the sensor's: down by the lift
+        mean_pose = mean_pose - np.outer(lift, UP)[:, None]
+    res.pose_errors["mean_pose"] = trial_errors(mean_pose, truth_pose)
     res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
-    res.pose_errors["known_motion"] = trial_errors(
-        known_motion(baselines.mean_pose, truth_pose), truth_pose
-    )
+    res.pose_errors["known_motion"] = trial_errors(known_motion(mean_pose, truth_pose), truth_pose)
     where_a = model.body_positions(a)
     for key, points in (("real", truth), ("windowed", where["windowed"])):
         res.windows[key] = observer_windows(where_a, points, origin, yaw)
