@@ -154,3 +154,15 @@ def test_errors_show_paths_as_the_user_gives_them(tmp_path, monkeypatch, capsys)
     library = MotionLibrary(tmp_path / "data")
     shown = library.public(str(MotionFormatError(take, "bad", 3)))
     assert shown == "c/x.c3d:3: bad" and str(tmp_path) not in library.public(f"{tmp_path}/data")
+
+
+@pytest.mark.parametrize("method", ["apf", "monocular"])
+def test_a_missing_video_is_named_not_its_camera_file(tmp_path, capsys, method):
+    """``track --video`` of a file that does not exist, beside a real cameras.json: the
+    video is what is missing, not the camera file."""
+    (tmp_path / "cameras.json").write_text("{}")
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(tmp_path / "cam9.mp4"), "--method", method])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "cam9.mp4: no such video file" in err
+    assert "cameras.json" not in err and len(err.strip().splitlines()) == 1

@@ -160,6 +160,12 @@ def track(
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
+    if summary["views"] == 1:
+        err_console.print(
+            "note: one view leaves the particle filter depth and mirror ambiguous (hundreds of mm "
+            "off, docs/video.md); for one camera, --method monocular",
+            highlight=False,
+        )
     if reference is not None:
         from markovmotion.features.body_points import body_points
         from markovmotion.video.monocular import reference_errors

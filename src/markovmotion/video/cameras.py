@@ -161,10 +161,16 @@ def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray
 
 def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
     """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
-    ``video`` or beside the video file ``video``."""
+    ``video`` or beside the video file ``video``.
+
+    Raises:
+        MotionFormatError: ``video`` does not exist (named, rather than its camera file).
+    """
+    video = Path(video)
+    if not video.exists():
+        raise MotionFormatError(video, "no such video file or folder")
     if cameras is not None:
         return Path(cameras)
-    video = Path(video)
     if video.is_file() and video.suffix.lower() != ".json":
         return video.parent / CAMERAS_FILE
     return video

@@ -206,7 +206,8 @@ def _respond_live(
     if not np.isclose(mv.fps, partner.fps):
         raise MotionFormatError(
             mv.source,
-            f"live tracking needs the video at the model's {partner.fps:g} fps, not {mv.fps:g}",
+            f"live tracking needs the video at the model's {partner.fps:g} fps, not {mv.fps:g}: "
+            f"train the partner with --fps {mv.fps:g}, or leave out --realtime",
         )
     apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps)
     period = 1.0 / mv.fps

@@ -152,7 +152,8 @@ def training_body_model(
             f"no skeleton two-person takes labelled {', '.join(labels)} in {index.root} "
             "for the body model"
         )
-    pairs, _ = choose_kind(pairs, None, "two-person takes", lambda p: p[0], ("skeleton",))
+    what = "two-person takes for the tracker's body model"
+    pairs, _ = choose_kind(pairs, None, what, lambda p: p[0], ("skeleton",))
     train, test = held_out_pairs(pairs)
     motions = []
     for a, b in train + (test if include_held_out else []):
