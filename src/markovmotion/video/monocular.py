@@ -152,7 +152,7 @@ def pose_estimator(static: bool = False):
     except ImportError:
         raise MotionFormatError(
             "MediaPipe Pose (--method monocular or triangulate, --guide, --sides)",
-            f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py attrs flatbuffers 'protobuf<5')",
+            f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py attrs flatbuffers 'protobuf>=4.25.3,<5')",
         ) from None
     return pose.Pose(
         static_image_mode=static,
