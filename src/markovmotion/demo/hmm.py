@@ -131,7 +131,7 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
         f"dual HMM on the markers handshakes of {', '.join(p for p in people if p != held)} "
         f"in both roles ({len(takes)} takes); {caption} (B's real motion on the mean pose: "
         f"{float(res.pose_errors['known_motion'].mean()):.0f} mm body-centred; one pair: "
-        "every pair left out in turn is dualhmm crossval, docs/hmm.md \"New people\")",
+        'every pair left out in turn is dualhmm crossval, docs/hmm.md "New people")',
         highlight=False,
     )
     a.name, b.name, virtual.name = "A (real)", "B (real)", "B (virtual partner)"
