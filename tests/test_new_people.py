@@ -4,6 +4,8 @@ the collection's real markers-only handshakes (Bütepage: several pairs of peopl
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -431,3 +433,28 @@ def test_takes_of_two_actions_with_the_same_file_stems_keep_their_own_names(moca
     assert len(set(names.values())) == len(pairs)  # none hides another in per_pair
     one = mocap.pairs(label=["handshake"], kind="markers")
     assert all(n == f"{a.name}+{b.name}" for (a, b), n in take_names(one).items())
+
+
+def test_train_holds_out_pairs_of_people_and_evaluate_answers_them(mocap, tmp_path, capsys):
+    """``dualhmm train --test-people P``: P's takes are not learnt and are what ``evaluate``
+    (without ``--test``) answers, reported per pair of people; an unknown pair is one line."""
+    from markovmotion.cli import main
+
+    pairs = mocap.pairs("handshake", kind="markers")
+    held = sorted({a.subject for a, _ in pairs})[-1]
+    model = tmp_path / "m.npz"
+    argv = ["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "4"]
+    main([*argv, "--n-iter", "3", "--test-people", held, "--out", str(model)])
+    dual = DualHMM.load(model)
+    assert sorted(dual.held_out_files_) == sorted(
+        e.file for a, b in pairs if a.subject == held for e in (a, b)
+    )
+    capsys.readouterr()
+    main(["dualhmm", "evaluate", "--model", str(model), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert list(report["per_people"]) == [held]
+    assert report["overall"]["pairs"] == sum(a.subject == held for a, _ in pairs)
+    assert not report["left_out_training_files"]
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--test-people", "nobody", "--out", str(tmp_path / "x.npz")])
+    assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err

@@ -169,6 +169,11 @@ def train(
     test_trials: str = typer.Option(
         None, help="Comma-separated trials held out for testing (not trained on)."
     ),
+    test_people: str = typer.Option(
+        None,
+        help="Comma-separated pairs of people (INDEX.csv's subject) held out for testing: "
+        "their takes are not trained on, and evaluate without --test answers them.",
+    ),
     states: int = STATES,
     mode: str = MODE,
     observation: str = OBSERVATION,
@@ -206,8 +211,9 @@ def train(
     grid = grid_of("hmm", choose)
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(
-            model, data, _split(labels), _split(test_trials), kind, roles, grid
-        )
+            model, data, _split(labels), _split(test_trials), kind, roles, grid,
+            _split(test_people),
+        )  # fmt: skip
     model.save(out, **extras)
     if "chosen" in extras:
         inner = extras["chosen"]["inner_mm"]

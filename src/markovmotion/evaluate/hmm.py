@@ -575,9 +575,11 @@ def fit_on_index(
     kind: str | None = None,
     roles: str = "one",
     grid: Sequence[dict] | None = None,
+    test_people: Sequence[str] | None = None,
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
-    ``test_trials``, of one kind and set (:func:`load_pairs`), in both roles with
+    ``test_trials`` and those of the pairs of people ``test_people`` (INDEX.csv's
+    ``subject``: a partner evaluated on people it has never seen), of one kind and set (:func:`load_pairs`), in both roles with
     ``roles="both"`` (:func:`~markovmotion.evaluate.choose.both_roles`). With ``grid``, the
     settings are first chosen among it by leave-one-pair-of-people-out on these takes
     (:func:`choose_settings`).
@@ -586,7 +588,8 @@ def fit_on_index(
     evaluates on; ``roles``; ``chosen``, with ``grid``) and the training pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
-    pairs, motions = load_pairs(index, pairs, kind)
+    away = _people_out(index, pairs, test_people)
+    pairs, motions = load_pairs(index, [p for p in pairs if p not in away], kind)
     names = take_names(pairs)
     takes = [(names[p], p[0].label, *ab) for p, ab in zip(pairs, motions, strict=True)]
     people = [a.subject for a, _ in pairs]
@@ -604,8 +607,30 @@ def fit_on_index(
         for a, b in select_pairs(index, labels, test_trials, held_out=True):
             if a.kind == pairs[0][0].kind:
                 held += [a.file, b.file]
+    held += [e.file for a, b in away if a.kind == pairs[0][0].kind for e in (a, b)]
     extras = {"data_index": index_record(index), "held_out_files": held, "roles": roles}
     return model, extras | ({"chosen": chosen} if chosen else {}), pairs
+
+
+def _people_out(index: MocapIndex, pairs: Sequence[Pair], people: Sequence[str] | None) -> list:
+    """The takes of ``pairs`` whose pair of people is one of ``people``, held out of training.
+
+    Raises:
+        DataNotFoundError: a pair of people no take has, or no take left to learn from.
+    """
+    if not people:
+        return []
+    have = {a.subject for a, _ in pairs}
+    unknown = [p for p in dict.fromkeys(people) if p not in have]
+    if unknown:
+        raise DataNotFoundError(
+            f"--test-people: no two-person take of {', '.join(map(repr, unknown))} in "
+            f"{index.root / INDEX_NAME} (its pairs of people: {', '.join(sorted(have - {''}))})"
+        )
+    away = [p for p in pairs if p[0].subject in set(people)]
+    if len(away) == len(pairs):
+        raise DataNotFoundError("--test-people leaves no two-person take to learn from")
+    return away
 
 
 def evaluation_pairs(
