@@ -458,3 +458,16 @@ def test_train_holds_out_pairs_of_people_and_evaluate_answers_them(mocap, tmp_pa
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--test-people", "nobody", "--out", str(tmp_path / "x.npz")])
     assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err
+
+
+def test_nested_crossval_reports_each_folds_pick(tmp_path, capsys):
+    """``dualhmm crossval --choose``: ``chosen_per_fold`` names each held-out pair of
+    people's pick (``model`` gives the settings before any choice)."""
+    from markovmotion.cli import main
+
+    main(["dualhmm", "crossval", "--labels", "handshake", "--kind", "markers", "--states", "3",
+          "--n-iter", "2", "--choose", "blend_window=1,9", "--json"])  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    picks = report["chosen_per_fold"]
+    assert set(picks) == set(report["per_people"])
+    assert all(p in ({"blend_window": 1}, {"blend_window": 9}) for p in picks.values())

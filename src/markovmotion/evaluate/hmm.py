@@ -737,6 +737,8 @@ def crossval_index(
     results, written = cross_validate(takes, model, plot_dir, grid, people, roles)
     report = summarise(results, model)
     report["left_out"] = "pairs of people" if len(set(people)) > 1 else "takes"
+    if grid:  # ``model`` gives the settings before the choice; each fold's pick is here
+        report["chosen_per_fold"] = {r.people or r.name: r.chosen["settings"] for r in results}
     report["roles"] = roles
     report.update(TestTakes(list(pairs)).report())
     return report, written
