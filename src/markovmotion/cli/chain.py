@@ -495,8 +495,9 @@ def _print_errors(result: dict, title: str, response: str) -> None:
     ms = result.get("per_frame_ms")
     for col in (
         "partner",
-        "error",
-        "placement (mm)" if placement else "",
+        # mocap: each person in its own frame (crossval's body_centred_mm), and in the world
+        "body-centred" if placement else "error",
+        "world (mm)" if placement else "",
         "ms / frame" if ms else "",
     ):
         if col:
