@@ -300,6 +300,13 @@ def test_train_holds_out_the_test_trials_or_none(mocap, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--test-trials", "no-such-trial"])
     assert exc.value.code == 2 and "no-such-trial" in capsys.readouterr().err
+    # --test-people: a pair of people's takes are not learnt
+    last = sorted({a.subject for a, _ in pairs})[-1]
+    kept = sum(a.subject != last for a, _ in pairs)
+    assert learnt("--test-trials", "none", "--test-people", last) == kept
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--test-people", "nobody"])
+    assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err
 
 
 def test_the_old_choice_flags_are_the_grid_they_stand_for(monkeypatch, capsys):

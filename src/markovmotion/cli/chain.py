@@ -24,7 +24,7 @@ from markovmotion.cli.options import (
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
-from markovmotion.data.splits import held_out_pairs, select_pairs
+from markovmotion.data.splits import held_out_pairs, people_out, select_pairs
 from markovmotion.defaults import (
     DEFAULT_PROTOTYPES,
     DEFAULT_RESPONSE,
@@ -116,12 +116,14 @@ def _training_takes(
     label: str | list[str],
     kind: str | None = None,
     test_trials: str | None = None,
+    test_people: str | None = None,
 ):
     """Motion-capture takes ``(name, label, people, A, B)`` (names by
     :func:`~markovmotion.evaluate.takes.take_names`; skeletons:
     :func:`~markovmotion.data.kinds.choose_kind` says what it leaves out), or tracked
     silhouette takes. ``test_trials``: the trials held out (``"none"``: every take is
-    learnt); by default the collection's split (:func:`held_out_pairs`)."""
+    learnt); by default the collection's split (:func:`held_out_pairs`). ``test_people``:
+    pairs of people (INDEX.csv's ``subject``) whose takes are held out too."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
         from markovmotion.evaluate.takes import take_names
@@ -134,6 +136,9 @@ def _training_takes(
         listed = select_pairs(index, labels, held or None, held_out=False)
         pairs, _ = choose_kind(listed, kind, "two-person takes", lambda p: p[0], KINDS)
         train = held_out_pairs(pairs)[0] if test_trials is None else pairs
+        people = [p.strip() for p in (test_people or "").split(",") if p.strip()]
+        away = people_out(index, train, people)
+        train = [p for p in train if p not in away]
         if not train:
             raise DataNotFoundError(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
@@ -183,12 +188,19 @@ def train(
         "every take (for a model evaluated on other people's INDEX.csv with evaluate --test). "
         "Default: the last take of each label, as the paper's salsa split.",
     ),
+    test_people: str = typer.Option(
+        None,
+        help="mocap: comma-separated pairs of people (INDEX.csv's subject) held out for "
+        "testing (not learnt), for evaluate --test on their takes.",
+    ),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded): 3-D
     skeletons or markers (C3D, picked by name), or tracked silhouettes."""
     _check_source(source)
-    if source != "mocap" and test_trials is not None:
-        raise typer.BadParameter("--test-trials picks motion capture's takes: --source mocap")
+    if source != "mocap" and (test_trials is not None or test_people is not None):
+        raise typer.BadParameter(
+            "--test-trials and --test-people pick motion capture's takes: --source mocap"
+        )
     if source != "mocap" and (choose or roles != "one"):
         raise typer.BadParameter(
             "--choose and --roles both learn from motion capture's pairs of people: --source mocap"
@@ -196,7 +208,7 @@ def train(
     grid = grid_of("chain", choose)
     labels = [x.strip() for x in label.split(",") if x.strip()] or [label]
     takes = _training_takes(
-        data, source, labels if len(labels) > 1 else labels[0], kind, test_trials
+        data, source, labels if len(labels) > 1 else labels[0], kind, test_trials, test_people
     )
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
     extras: dict = {}

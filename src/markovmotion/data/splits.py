@@ -134,3 +134,26 @@ def select_pairs(
             f"labels={labels or 'any'} trials={trials or 'any'}"
         )
     return pairs
+
+
+def people_out(
+    index: MocapIndex, pairs: Sequence[Pair], people: Sequence[str] | None
+) -> list[Pair]:
+    """The takes of ``pairs`` whose pair of people is one of ``people``, held out of training.
+
+    Raises:
+        DataNotFoundError: a pair of people no take has, or no take left to learn from.
+    """
+    if not people:
+        return []
+    have = {a.subject for a, _ in pairs}
+    unknown = [p for p in dict.fromkeys(people) if p not in have]
+    if unknown:
+        raise DataNotFoundError(
+            f"--test-people: no two-person take of {', '.join(map(repr, unknown))} in "
+            f"{index.root / 'INDEX.csv'} (its pairs of people: {', '.join(sorted(have - {''}))})"
+        )
+    away = [p for p in pairs if p[0].subject in set(people)]
+    if len(away) == len(pairs):
+        raise DataNotFoundError("--test-people leaves no two-person take to learn from")
+    return away

@@ -48,7 +48,7 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import UP, Motion
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.data.kinds import choose_kind, largest_group
-from markovmotion.data.splits import select_pairs
+from markovmotion.data.splits import people_out, select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate import choose
 from markovmotion.evaluate.choose import ROLES
@@ -588,7 +588,7 @@ def fit_on_index(
     evaluates on; ``roles``; ``chosen``, with ``grid``) and the training pairs."""
     index = MocapIndex.load(data)
     pairs = select_pairs(index, labels, test_trials, held_out=False)
-    away = _people_out(index, pairs, test_people)
+    away = people_out(index, pairs, test_people)
     pairs, motions = load_pairs(index, [p for p in pairs if p not in away], kind)
     names = take_names(pairs)
     takes = [(names[p], p[0].label, *ab) for p, ab in zip(pairs, motions, strict=True)]
@@ -610,27 +610,6 @@ def fit_on_index(
     held += [e.file for a, b in away if a.kind == pairs[0][0].kind for e in (a, b)]
     extras = {"data_index": index_record(index), "held_out_files": held, "roles": roles}
     return model, extras | ({"chosen": chosen} if chosen else {}), pairs
-
-
-def _people_out(index: MocapIndex, pairs: Sequence[Pair], people: Sequence[str] | None) -> list:
-    """The takes of ``pairs`` whose pair of people is one of ``people``, held out of training.
-
-    Raises:
-        DataNotFoundError: a pair of people no take has, or no take left to learn from.
-    """
-    if not people:
-        return []
-    have = {a.subject for a, _ in pairs}
-    unknown = [p for p in dict.fromkeys(people) if p not in have]
-    if unknown:
-        raise DataNotFoundError(
-            f"--test-people: no two-person take of {', '.join(map(repr, unknown))} in "
-            f"{index.root / INDEX_NAME} (its pairs of people: {', '.join(sorted(have - {''}))})"
-        )
-    away = [p for p in pairs if p[0].subject in set(people)]
-    if len(away) == len(pairs):
-        raise DataNotFoundError("--test-people leaves no two-person take to learn from")
-    return away
 
 
 def evaluation_pairs(
