@@ -227,6 +227,26 @@ def test_marker_shape_joins_the_named_body_points_and_refuses_unnamed_markers():
         marker_shape(["M1", "M2", "M3"])
 
 
+def test_live_respond_answers_a_video_at_twice_the_models_rate(
+    real_video, partner_models, tmp_path, capsys
+):
+    """``respond --video --realtime`` on the real 60 fps video with a 30 fps partner: the
+    partner sees every other frame and B, resampled to 60 fps, is drawn into the footage."""
+    out = tmp_path / "live.mp4"
+    main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+          str(real_video), "--realtime", "--max-frames", "12", "--particles", "20",
+          "--layers", "2", "--out", str(out)])  # fmt: skip
+    assert "live: 12 frames" in capsys.readouterr().err
+    frames = list(read_frames(out))
+    original = list(read_frames(real_video / "cam0.mp4"))[:12]
+    assert len(frames) == 12
+    changed = [
+        (np.abs(f.astype(int) - o).max(axis=2) > 60).sum()
+        for f, o in zip(frames, original, strict=True)
+    ]
+    assert sum(changed) > 500  # B drawn over the frames it answers (after the lag)
+
+
 def test_respond_monocular_is_not_live(real_video, partner_models, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",

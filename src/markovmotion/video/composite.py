@@ -192,7 +192,9 @@ def _respond_live(
     ``lag`` frames late, as the windowed Viterbi decides them; the composite is
     written at the end, B drawn over the frames it answers. The first frame's
     search for the person (and the partner's first step) happen before the
-    clock starts.
+    clock starts. A video at a whole multiple k of the model's rate (60 fps for a
+    30 fps partner): the partner sees every k-th frame, and B is resampled to the
+    video's rate to be drawn.
     """
     from markovmotion.models.online import concatenate
 
@@ -203,11 +205,13 @@ def _respond_live(
     if not 0 <= view < len(mv.cameras):
         raise MotionFormatError(mv.source, f"no camera {view}: the video has {len(mv.cameras)}")
     partner = dual.partner()
-    if not np.isclose(mv.fps, partner.fps):
+    every = int(round(mv.fps / partner.fps))  # the partner sees every k-th video frame
+    if every < 1 or not np.isclose(mv.fps, every * partner.fps):
         raise MotionFormatError(
             mv.source,
-            f"live tracking needs the video at the model's {partner.fps:g} fps, not {mv.fps:g}: "
-            f"train the partner with --fps {mv.fps:g}, or leave out --realtime",
+            f"live tracking needs the video at the model's {partner.fps:g} fps or a whole "
+            f"multiple of it, not {mv.fps:g}: train the partner with --fps {mv.fps:g}, or leave "
+            "out --realtime",
         )
     apf = AnnealedParticleFilter(body, mv.cameras, particles, layers, fps=mv.fps)
     period = 1.0 / mv.fps
@@ -219,9 +223,9 @@ def _respond_live(
         raise MotionFormatError(mv.source, "no frames in this video")
     # before the clock starts: the tracker's initial search and the partner's first step
     x, _ = apf.step(mv.features_of(first, 0))
-    dual.partner().step(body.motion(x[None], mv.fps))  # loads compiled kernels
+    dual.partner().step(body.motion(x[None], partner.fps))  # loads compiled kernels
     states.append(x)
-    if (b := partner.step(body.motion(x[None], mv.fps))) is not None:
+    if (b := partner.step(body.motion(x[None], partner.fps))) is not None:
         b_frames.append(b)
     start = time.perf_counter() - period
     for i, frames in enumerate(mv.frames, start=1):
@@ -230,16 +234,17 @@ def _respond_live(
         if now < due:
             time.sleep(due - now)
         tick = time.perf_counter()
+        seen = i % every == 0  # a frame at the partner's rate
         if tick > due + period:  # the next frame is already here: drop this one
             skipped += 1
             gap += 1
             states.append(None)
-            b = partner.skip()
+            b = partner.skip() if seen else None
         else:
             x, _ = apf.step(mv.features_of(frames, i), gap)
             gap = 1
             states.append(x)
-            b = partner.step(body.motion(x[None], mv.fps))
+            b = partner.step(body.motion(x[None], partner.fps)) if seen else None
             times.append(time.perf_counter() - tick)
         if b is not None:
             b_frames.append(b)
@@ -249,6 +254,8 @@ def _respond_live(
     filled = _fill_forward(states)
     a = body.motion(filled, mv.fps)
     b = concatenate(b_frames, partner.fps)
+    if every > 1:  # B at the video's rate, to be drawn over every frame
+        b = b.resample(mv.fps)
     frames = read_frames(mv.videos[view])  # decoded again: no frame is kept in memory
     written = write_video(
         composite_frames(frames, mv.cameras[view], body_points(a), b), out, mv.fps
