@@ -108,3 +108,108 @@ class SideCheck:
         """Whether the tracked body points (19, 3) are turned front to back in ``frame``."""
         e = self.evidence(points, frame)
         return e is not None and e > MARGIN
+
+
+# -- one camera's own left and right, made consistent over the video ---------------------------
+
+#: Left-right landmark groups relabelled together (MediaPipe's partial swaps: one limb
+#: segment at a time), each decoded on its own.
+SIDE_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("eye_inner", "eye", "eye_outer", "ear", "mouth", "shoulder"),
+    ("elbow",),
+    ("wrist", "pinky", "index", "thumb"),
+    ("hip",),
+    ("knee",),
+    ("ankle", "heel", "foot_index"),
+)
+#: Cost of a change of labelling between two frames, in torso lengths of 2-D motion: a pair
+#: of landmarks must jump across at least a quarter torso (each of the two moving it) before
+#: relabelling it is worth a switch; closer pairs hardly matter to the body's placement.
+SWITCH_COST = 0.5
+#: Cost per frame of the swapped labelling (torso lengths): the tie-break that keeps
+#: MediaPipe's own labels wherever continuity does not decide, and, of the two labellings
+#: that continuity cannot tell apart (all flipped), the one that swaps fewer frames.
+SWAPPED_COST = 0.01
+
+
+def _pairs(stem: str) -> tuple[int, int]:
+    names = ("mouth_left", "mouth_right") if stem == "mouth" else (f"left_{stem}", f"right_{stem}")
+    return LANDMARKS.index(names[0]), LANDMARKS.index(names[1])
+
+
+def continuity_costs(
+    pixels: np.ndarray, visibility: np.ndarray, pairs: list[tuple[int, int]]
+) -> np.ndarray:
+    """(F, 2) cost of frame t's labelling relative to frame t-1's: column 0 the same
+    labelling, column 1 the other one; the landmarks' 2-D motion (pixels, weighted by both
+    frames' visibility) in torso lengths (median shoulder-to-hip distance). Row 0 and rows
+    next to a frame without a person are 0 (no continuity across a gap)."""
+    li, ri = (np.array(x) for x in zip(*pairs, strict=True))
+    sh = [LANDMARKS.index(f"{s}_shoulder") for s in ("left", "right")]
+    hp = [LANDMARKS.index(f"{s}_hip") for s in ("left", "right")]
+    torso = np.linalg.norm(pixels[:, sh].mean(1) - pixels[:, hp].mean(1), axis=1)
+    scale = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
+    out = np.zeros((len(pixels), 2))
+    for t in range(1, len(pixels)):
+        a, b = pixels[t - 1], pixels[t]
+        w = np.minimum(visibility[t - 1], visibility[t])
+        same = w[li] * np.linalg.norm(b[li] - a[li], axis=1) + w[ri] * np.linalg.norm(
+            b[ri] - a[ri], axis=1
+        )
+        swap = w[li] * np.linalg.norm(b[li] - a[ri], axis=1) + w[ri] * np.linalg.norm(
+            b[ri] - a[li], axis=1
+        )
+        if np.isfinite(same).all() and np.isfinite(swap).all():
+            out[t] = same.sum() / max(scale, 1e-9), swap.sum() / max(scale, 1e-9)
+    return out
+
+
+def labelling_cost(labels: np.ndarray, continuity: np.ndarray) -> float:
+    """Total cost of a labelling (F,) (0 kept, 1 swapped) given :func:`continuity_costs`."""
+    labels = np.asarray(labels, dtype=int)
+    change = labels[1:] != labels[:-1]
+    return float(
+        continuity[1:][np.arange(len(change)), change.astype(int)].sum()
+        + SWITCH_COST * change.sum()
+        + SWAPPED_COST * labels.sum()
+    )
+
+
+def decode_labels(continuity: np.ndarray) -> np.ndarray:
+    """The labelling (F,) of least :func:`labelling_cost`, by Viterbi over the pairs of
+    consecutive labels: the state at t is (label t-1, label t), so the cost that depends on
+    both is a per-state cost and the transitions ((a, b) to (b, c)) are fixed (Rabiner
+    eqs. 32-35 in log space, :func:`~markovmotion.algorithms.hmm_recursions.viterbi`)."""
+    from markovmotion.algorithms.hmm_recursions import viterbi
+
+    n = len(continuity)
+    prev, cur = np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1])
+    change = (prev != cur).astype(int)
+    cost = continuity[:, change] + SWITCH_COST * change + SWAPPED_COST * cur
+    cost[0] = SWAPPED_COST * cur
+    start = np.where(change == 0, 0.0, -np.inf)
+    trans = np.where(cur[:, None] == prev[None, :], 0.0, -np.inf)
+    path, _ = viterbi(start, trans, -cost)
+    return cur[path][:n]
+
+
+def consistent_sides(
+    pixels: np.ndarray, world: np.ndarray, visibility: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's MediaPipe landmarks (F, 33, 2) pixels, (F, 33, 3) world points and
+    (F, 33) visibility with left and right made consistent over the whole video, each of
+    :data:`SIDE_GROUPS` relabelled by :func:`decode_labels` (offline: it needs every frame),
+    and (F, len(SIDE_GROUPS)) which groups were swapped back. A second person behind the
+    one tracked makes MediaPipe swap his sides for tens of frames, sometimes only some limbs
+    (issue 24, camera 1 of the real video): each swap is a jump in 2-D that continuity sees."""
+    pixels, world, visibility = pixels.copy(), world.copy(), visibility.copy()
+    swapped = np.zeros((len(pixels), len(SIDE_GROUPS)), dtype=bool)
+    for g, stems in enumerate(SIDE_GROUPS):
+        pairs = [_pairs(s) for s in stems]
+        labels = decode_labels(continuity_costs(pixels, visibility, pairs)).astype(bool)
+        swapped[:, g] = labels
+        li, ri = (list(x) for x in zip(*pairs, strict=True))
+        rows = np.nonzero(labels)[0]
+        for arr in (pixels, world, visibility):
+            arr[np.ix_(rows, li + ri)] = arr[np.ix_(rows, ri + li)]
+    return pixels, world, visibility, swapped
