@@ -130,6 +130,12 @@ SWITCH_COST = 0.5
 #: MediaPipe's own labels wherever continuity does not decide, and, of the two labellings
 #: that continuity cannot tell apart (all flipped), the one that swaps fewer frames.
 SWAPPED_COST = 0.01
+#: Each group's parent (an index into :data:`SIDE_GROUPS`, decoded first), whose same side
+#: a group's landmarks should lie nearer to in MediaPipe's 3-D world points.
+PARENTS: tuple[int | None, ...] = (None, 0, 1, 0, 3, 4)
+#: Cost per frame (torso lengths) of a labelling whose landmarks lie nearer the parent's
+#: other side, at full evidence (the distances' difference at least the parent's width).
+ATTACH_COST = 0.1
 
 
 def _pairs(stem: str) -> tuple[int, int]:
@@ -175,7 +181,24 @@ def labelling_cost(labels: np.ndarray, continuity: np.ndarray) -> float:
     )
 
 
-def decode_labels(continuity: np.ndarray) -> np.ndarray:
+def attachment_costs(world: np.ndarray, pairs, parent) -> np.ndarray:
+    """(F, 2) cost of keeping or swapping a group's pairs (3-D world points (F, 33, 3))
+    given its parent's pairs as labelled: :data:`ATTACH_COST` times how much nearer each
+    landmark lies to the parent's other side than to its own, over the parent's width,
+    clipped to [0, 1]."""
+    (li, ri), (pl, pr) = pairs[0], parent[0]
+    own = np.linalg.norm(world[:, li] - world[:, pl], axis=1) + np.linalg.norm(
+        world[:, ri] - world[:, pr], axis=1
+    )
+    other = np.linalg.norm(world[:, li] - world[:, pr], axis=1) + np.linalg.norm(
+        world[:, ri] - world[:, pl], axis=1
+    )
+    width = np.linalg.norm(world[:, pl] - world[:, pr], axis=1)
+    e = np.nan_to_num(np.clip((other - own) / np.maximum(width, 1e-9), -1.0, 1.0))
+    return ATTACH_COST * np.c_[np.maximum(-e, 0.0), np.maximum(e, 0.0)]
+
+
+def decode_labels(continuity: np.ndarray, unary: np.ndarray | None = None) -> np.ndarray:
     """The labelling (F,) of least :func:`labelling_cost`, by Viterbi over the pairs of
     consecutive labels: the state at t is (label t-1, label t), so the cost that depends on
     both is a per-state cost and the transitions ((a, b) to (b, c)) are fixed (Rabiner
@@ -187,6 +210,8 @@ def decode_labels(continuity: np.ndarray) -> np.ndarray:
     change = (prev != cur).astype(int)
     cost = continuity[:, change] + SWITCH_COST * change + SWAPPED_COST * cur
     cost[0] = SWAPPED_COST * cur
+    if unary is not None:
+        cost += unary[:, cur]
     start = np.where(change == 0, 0.0, -np.inf)
     trans = np.where(cur[:, None] == prev[None, :], 0.0, -np.inf)
     path, _ = viterbi(start, trans, -cost)
@@ -206,7 +231,13 @@ def consistent_sides(
     swapped = np.zeros((len(pixels), len(SIDE_GROUPS)), dtype=bool)
     for g, stems in enumerate(SIDE_GROUPS):
         pairs = [_pairs(s) for s in stems]
-        labels = decode_labels(continuity_costs(pixels, visibility, pairs)).astype(bool)
+        up = PARENTS[g]
+        unary = (
+            None
+            if up is None
+            else attachment_costs(world, pairs, [_pairs(x) for x in SIDE_GROUPS[up]])
+        )
+        labels = decode_labels(continuity_costs(pixels, visibility, pairs), unary).astype(bool)
         swapped[:, g] = labels
         li, ri = (list(x) for x in zip(*pairs, strict=True))
         rows = np.nonzero(labels)[0]
