@@ -4,14 +4,14 @@ import itertools
 
 import numpy as np
 
-from markovmotion.video.monocular import LANDMARKS
-from markovmotion.video.sides import (
+from markovmotion.video.left_right import (
     SIDE_GROUPS,
     consistent_sides,
     continuity_costs,
     decode_labels,
     labelling_cost,
 )
+from markovmotion.video.monocular import LANDMARKS
 
 
 def _walk(n=60, seed=0):
