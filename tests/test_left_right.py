@@ -59,14 +59,14 @@ def test_full_and_partial_swaps_are_restored_exactly():
 def test_viterbi_equals_brute_force():
     rng = np.random.default_rng(3)
     for _ in range(5):
-        cont = rng.uniform(0, 1.5, (9, 2))
-        cont[0] = 0
+        cont, skip, unary = (rng.uniform(0, 1.5, (9, 2)) for _ in range(3))
+        cont[0] = skip[:2] = 0
         best = min(
-            itertools.product((0, 1), repeat=len(cont)),
-            key=lambda lab: labelling_cost(np.array(lab), cont),
+            labelling_cost(np.array(lab), cont, unary, skip)
+            for lab in itertools.product((0, 1), repeat=len(cont))
         )
-        got = decode_labels(cont)
-        assert np.isclose(labelling_cost(got, cont), labelling_cost(np.array(best), cont))
+        got = decode_labels(cont, unary, skip)
+        assert np.isclose(labelling_cost(got, cont, unary, skip), best)
 
 
 def test_continuity_cost_sees_a_jump():

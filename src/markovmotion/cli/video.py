@@ -101,11 +101,11 @@ def track(
     guide: str = guide_option(),
     body_model: str = body_model_option(),
     left_right: str = typer.Option(
-        "mediapipe",
+        "continuity",
         callback=choice(("mediapipe", "continuity", "facing")),
-        help="Monocular: MediaPipe's own left and right; continuity: relabelled where they "
-        "jump between frames (offline, whole video); facing: that, and the person faces "
-        "the camera (a webcam's user).",
+        help="Monocular: continuity: MediaPipe's left and right relabelled where they jump "
+        "between frames (offline, whole video); facing: that, and the person faces the "
+        "camera (a webcam's user); mediapipe: its own labels.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -114,7 +114,7 @@ def track(
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
         )
-    if method != "monocular" and left_right != "mediapipe":
+    if method != "monocular" and left_right != "continuity":
         raise typer.BadParameter("is for --method monocular", param_hint="--left-right")
     if method in ("monocular", "triangulate"):
         _track_landmarks(
@@ -216,7 +216,7 @@ def _track_landmarks(
     views: int | None,
     reference: Path | None,
     json_out: bool,
-    left_right: str = "mediapipe",
+    left_right: str = "continuity",
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
     body points, written as the 13 markers."""

@@ -54,7 +54,7 @@ def _pairs(stem: str) -> tuple[int, int]:
 
 
 def continuity_costs(
-    pixels: np.ndarray, visibility: np.ndarray, pairs: list[tuple[int, int]]
+    pixels: np.ndarray, visibility: np.ndarray, pairs: list[tuple[int, int]], lag: int = 1
 ) -> np.ndarray:
     """(F, 2) cost of frame t's labelling relative to frame t-1's: column 0 the same
     labelling, column 1 the other one; the landmarks' motion (``pixels`` (F, 33, D): the
@@ -67,9 +67,9 @@ def continuity_costs(
     torso = np.linalg.norm(pixels[:, sh].mean(1) - pixels[:, hp].mean(1), axis=1)
     scale = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
     out = np.zeros((len(pixels), 2))
-    for t in range(1, len(pixels)):
-        a, b = pixels[t - 1], pixels[t]
-        w = np.minimum(visibility[t - 1], visibility[t])
+    for t in range(lag, len(pixels)):
+        a, b = pixels[t - lag], pixels[t]
+        w = np.minimum(visibility[t - lag], visibility[t])
         same = w[li] * np.linalg.norm(b[li] - a[li], axis=1) + w[ri] * np.linalg.norm(
             b[ri] - a[ri], axis=1
         )
@@ -82,20 +82,27 @@ def continuity_costs(
 
 
 def labelling_cost(
-    labels: np.ndarray, continuity: np.ndarray, unary: np.ndarray | None = None
+    labels: np.ndarray,
+    continuity: np.ndarray,
+    unary: np.ndarray | None = None,
+    skip: np.ndarray | None = None,
 ) -> float:
-    """Total cost of a labelling (F,) (0 kept, 1 swapped) given :func:`continuity_costs` and
-    per-frame costs ``unary`` (F, 2): the labelling before the video counts as kept, so a
-    swapped first frame costs a switch."""
+    """Total cost of a labelling (F,) (0 kept, 1 swapped) given :func:`continuity_costs`
+    from the previous frame and ``skip`` from the one before it, and per-frame costs
+    ``unary`` (F, 2): the labelling before the video counts as kept, so a swapped first
+    frame costs a switch."""
     labels = np.asarray(labels, dtype=int)
+    f = np.arange(len(labels))
     change = np.diff(labels, prepend=0) != 0
     total = (
-        continuity[1:][np.arange(len(labels) - 1), change[1:].astype(int)].sum()
+        continuity[f[1:], change[1:].astype(int)].sum()
         + SWITCH_COST * change.sum()
         + SWAPPED_COST * labels.sum()
     )
+    if skip is not None and len(labels) > 2:
+        total += skip[f[2:], (labels[2:] != labels[:-2]).astype(int)].sum()
     if unary is not None:
-        total += unary[np.arange(len(labels)), labels].sum()
+        total += unary[f, labels].sum()
     return float(total)
 
 
@@ -135,24 +142,30 @@ def facing_costs(pixels: np.ndarray) -> np.ndarray:
     return FACING_COST * np.c_[np.maximum(e, 0.0), np.maximum(-e, 0.0)]
 
 
-def decode_labels(continuity: np.ndarray, unary: np.ndarray | None = None) -> np.ndarray:
-    """The labelling (F,) of least :func:`labelling_cost`, by Viterbi over the pairs of
-    consecutive labels: the state at t is (label t-1, label t), so the cost that depends on
-    both is a per-state cost and the transitions ((a, b) to (b, c)) are fixed (Rabiner
+def decode_labels(
+    continuity: np.ndarray, unary: np.ndarray | None = None, skip: np.ndarray | None = None
+) -> np.ndarray:
+    """The labelling (F,) of least :func:`labelling_cost`, by Viterbi over the triples of
+    consecutive labels: the state at t is (label t-2, label t-1, label t), so the costs that
+    depend on two labels (``continuity`` from t-1, ``skip`` from t-2, (F, 2) each) are
+    per-state costs and the transitions ((a, b, c) to (b, c, d)) are fixed (Rabiner
     eqs. 32-35 in log space, :func:`~markovmotion.algorithms.hmm_recursions.viterbi`)."""
     from markovmotion.algorithms.hmm_recursions import viterbi
 
     n = len(continuity)
-    prev, cur = np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1])
-    change = (prev != cur).astype(int)
-    cost = continuity[:, change] + SWITCH_COST * change + SWAPPED_COST * cur
-    cost[0] = (SWAPPED_COST + SWITCH_COST) * cur  # the labelling before the video: kept
+    states = np.arange(8)
+    s2, s1, s0 = states >> 2 & 1, states >> 1 & 1, states & 1
+    change = (s1 != s0).astype(int)
+    cost = continuity[:, change] + SWITCH_COST * change + SWAPPED_COST * s0
+    if skip is not None:
+        cost += skip[:, (s2 != s0).astype(int)]
+    cost[0] = (SWAPPED_COST + SWITCH_COST) * s0  # the labelling before the video: kept
     if unary is not None:
-        cost += unary[:, cur]
-    start = np.where(change == 0, 0.0, -np.inf)
-    trans = np.where(cur[:, None] == prev[None, :], 0.0, -np.inf)
+        cost += unary[:, s0]
+    start = np.where((s2 == s1) & (s1 == s0), 0.0, -np.inf)
+    trans = np.where((states[:, None] & 3) == (states[None, :] >> 1), 0.0, -np.inf)
     path, _ = viterbi(start, trans, -cost)
-    return cur[path][:n]
+    return s0[path][:n]
 
 
 def consistent_sides(
@@ -172,6 +185,7 @@ def consistent_sides(
     body = decode_labels(
         _continuity(pixels, world, visibility, everything),
         facing_costs(pixels) if faces_camera else None,
+        _continuity(pixels, world, visibility, everything, 2),
     ).astype(bool)
     _relabel((pixels, world, visibility), body, everything)
     swapped[body] = True
@@ -183,16 +197,22 @@ def consistent_sides(
             if up is None
             else attachment_costs(world, pairs, [_pairs(x) for x in SIDE_GROUPS[up]])
         )
-        labels = decode_labels(_continuity(pixels, world, visibility, pairs), unary).astype(bool)
+        labels = decode_labels(
+            _continuity(pixels, world, visibility, pairs),
+            unary,
+            _continuity(pixels, world, visibility, pairs, 2),
+        ).astype(bool)
         swapped[:, g] ^= labels
         _relabel((pixels, world, visibility), labels, pairs)
     return pixels, world, visibility, swapped
 
 
-def _continuity(pixels, world, visibility, pairs) -> np.ndarray:
+def _continuity(pixels, world, visibility, pairs, lag: int = 1) -> np.ndarray:
     """Continuity in the image and in MediaPipe's world points (which also see a swap of a
     body seen edge on, whose left and right landmarks lie close in the image)."""
-    return continuity_costs(pixels, visibility, pairs) + continuity_costs(world, visibility, pairs)
+    return continuity_costs(pixels, visibility, pairs, lag) + continuity_costs(
+        world, visibility, pairs, lag
+    )
 
 
 def _relabel(arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs) -> None:

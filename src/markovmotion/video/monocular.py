@@ -298,7 +298,7 @@ def track_monocular(
     stature: float | None = None,
     floor: float | None = 0.0,
     snap: bool = True,
-    left_right: str = "mediapipe",
+    left_right: str = "continuity",
 ) -> MonocularTrack:
     """Track the person of one camera's video in 3-D (module docstring): body points in the
     world's mm, scaled so the feet rest on ``floor`` (None: MediaPipe's size), or so the
@@ -321,6 +321,8 @@ def track_monocular(
         yield from frames
 
     lm = detect_landmarks(all_frames(), max_frames)
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     if left_right != "mediapipe":
         pixels, world_lm, vis, _ = consistent_sides(
             lm.pixels, lm.world, lm.visibility, faces_camera=left_right == "facing"
@@ -443,7 +445,7 @@ def track_monocular_video(
     max_frames: int | None = None,
     stature: float | None = None,
     reference: str | os.PathLike[str] | None = None,
-    left_right: str = "mediapipe",
+    left_right: str = "continuity",
 ) -> tuple[MonocularTrack, dict]:
     """Track one camera's video (a folder with ``cameras.json``: its first camera; a video
     file: the camera naming it, see :func:`~markovmotion.video.cameras.camera_of_video`);
