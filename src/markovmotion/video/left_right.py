@@ -5,12 +5,13 @@ whole body or only some limbs: in camera 1 of the real video (issue 24) a second
 stands behind the man. Each swap is a jump of the landmarks from one frame to the next (in
 the image and in MediaPipe's world points), which a relabelling undoes. :func:`consistent_sides`
 chooses, over the whole video (offline), a kept / swapped label per frame, first for the whole
-body and then for each group of :data:`SIDE_GROUPS`, as the two-state Viterbi path (Rabiner
-eqs. 32-35) whose cost adds the landmarks' motion under the labelling, a fixed cost per change
-of labelling and a small cost per swapped frame. Continuity alone cannot tell a video from
-the same one with every frame's sides swapped (the person turned round): the labelling before
-the video counts as kept (MediaPipe's own), and ``faces_camera`` adds the webcam's prior that
-the person faces the camera.
+body and then for each group of :data:`SIDE_GROUPS`, as the Viterbi path (Rabiner eqs. 32-35,
+over triples of consecutive labels) whose cost adds the landmarks' motion under the labelling
+from the previous frame and from the one before it (a swap spread over frames, as a partial
+swap is), a fixed cost per change of labelling and a small cost per swapped frame. Continuity
+alone cannot tell a video from the same one with every frame's sides swapped (the person
+turned round): the labelling before the video counts as kept (MediaPipe's own), and
+``faces_camera`` adds the webcam's prior that the person faces the camera.
 """
 
 from __future__ import annotations
