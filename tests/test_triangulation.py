@@ -161,6 +161,9 @@ def real_video():
         (["--guide", "openpose"], "--guide"),
         (["--method", "triangulate", "--stature", "1700"], "--method monocular"),
         (["--method", "triangulate", "--out", "x.bvh"], "use a .c3d name"),
+        (["--method", "triangulate", "--left-right", "facing"], "--method monocular"),
+        (["--left-right", "mediapipe"], "--method monocular"),
+        (["--method", "monocular", "--left-right", "both"], "must be one of"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(

@@ -100,6 +100,13 @@ def track(
     ),
     guide: str = guide_option(),
     body_model: str = body_model_option(),
+    left_right: str = typer.Option(
+        "continuity",
+        callback=choice(("mediapipe", "continuity", "facing")),
+        help="Monocular: continuity: MediaPipe's left and right relabelled where they jump "
+        "between frames (offline, whole video); facing: that, and the person faces the "
+        "camera (a webcam's user); mediapipe: its own labels.",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -107,9 +114,20 @@ def track(
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
         )
+    if method != "monocular" and left_right != "continuity":
+        raise typer.BadParameter("is for --method monocular", param_hint="--left-right")
     if method in ("monocular", "triangulate"):
         _track_landmarks(
-            method, video, cameras, out, max_frames, stature, views, reference, json_out
+            method,
+            video,
+            cameras,
+            out,
+            max_frames,
+            stature,
+            views,
+            reference,
+            json_out,
+            left_right,
         )
         return
     from markovmotion.errors import MotionFormatError
@@ -204,6 +222,7 @@ def _track_landmarks(
     views: int | None,
     reference: Path | None,
     json_out: bool,
+    left_right: str = "continuity",
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
     body points, written as the 13 markers."""
@@ -223,7 +242,9 @@ def _track_landmarks(
         tr, summary = track_triangulated_video(video, cameras, max_frames, reference, views)
         where = f"{summary['views']} views"
     else:
-        tr, summary = track_monocular_video(video, cameras, max_frames, stature, reference)
+        tr, summary = track_monocular_video(
+            video, cameras, max_frames, stature, reference, left_right
+        )
         where = f"{summary['camera']}, scale {summary['scale']:.3f}"
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)

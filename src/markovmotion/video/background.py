@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from markovmotion.video.monocular import LANDMARKS, MIN_VISIBILITY
+from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 
 #: Limbs drawn as thick lines for a person's mask: pairs of landmark names.
 _LIMBS = tuple(

@@ -58,48 +58,14 @@ from markovmotion.core.markers import Markers
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, MARKER_POINTS
 from markovmotion.video.cameras import CalibratedCamera
+from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
+from markovmotion.video.left_right import consistent_sides
 from markovmotion.video.render import read_frames
 
 #: The release whose bundled pose models load offline (the 1.x releases ship none).
 MEDIAPIPE_VERSION = "0.10.21"
-#: MediaPipe Pose's 33 landmark names, in its order.
-LANDMARKS: tuple[str, ...] = (
-    "nose",
-    "left_eye_inner",
-    "left_eye",
-    "left_eye_outer",
-    "right_eye_inner",
-    "right_eye",
-    "right_eye_outer",
-    "left_ear",
-    "right_ear",
-    "mouth_left",
-    "mouth_right",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_pinky",
-    "right_pinky",
-    "left_index",
-    "right_index",
-    "left_thumb",
-    "right_thumb",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "left_heel",
-    "right_heel",
-    "left_foot_index",
-    "right_foot_index",
-)
-#: Landmarks seen less surely than this do not place the body.
-MIN_VISIBILITY = 0.5
+#: How left and right are labelled (:func:`track_monocular`).
+LEFT_RIGHT: tuple[str, ...] = ("mediapipe", "continuity", "facing")
 #: Fewest landmarks that place a body (solvePnP needs at least 4; fewer is a guess).
 MIN_LANDMARKS = 6
 #: The foot landmarks whose lowest rests on the floor.
@@ -332,10 +298,14 @@ def track_monocular(
     stature: float | None = None,
     floor: float | None = 0.0,
     snap: bool = True,
+    left_right: str = "continuity",
 ) -> MonocularTrack:
     """Track the person of one camera's video in 3-D (module docstring): body points in the
     world's mm, scaled so the feet rest on ``floor`` (None: MediaPipe's size), or so the
-    person is ``stature`` mm tall if given."""
+    person is ``stature`` mm tall if given. ``left_right`` (:data:`LEFT_RIGHT`): MediaPipe's
+    own left and right, or made consistent over the video
+    (:func:`~markovmotion.video.left_right.consistent_sides`), with the prior that the person
+    faces the camera for ``"facing"``."""
     t0 = time.perf_counter()
     frames = read_frames(video)
     first = next(frames)
@@ -351,6 +321,13 @@ def track_monocular(
         yield from frames
 
     lm = detect_landmarks(all_frames(), max_frames)
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
+    if left_right != "mediapipe":
+        pixels, world_lm, vis, _ = consistent_sides(
+            lm.pixels, lm.world, lm.visibility, faces_camera=left_right == "facing"
+        )
+        lm = Landmarks(pixels, world_lm, vis, lm.found, lm.seconds)
     cam_pts, placed = place_body(lm, camera, snap)
     world = to_world(cam_pts, camera)
     if stature is not None:
@@ -468,6 +445,7 @@ def track_monocular_video(
     max_frames: int | None = None,
     stature: float | None = None,
     reference: str | os.PathLike[str] | None = None,
+    left_right: str = "continuity",
 ) -> tuple[MonocularTrack, dict]:
     """Track one camera's video (a folder with ``cameras.json``: its first camera; a video
     file: the camera naming it, see :func:`~markovmotion.video.cameras.camera_of_video`);
@@ -485,7 +463,7 @@ def track_monocular_video(
         cam, path = cams[camera_of_video(cams, video)], Path(video)
     else:
         cam, path = cams[0], camera_videos(where, cams[:1])[0]
-    tr = track_monocular(path, cam, float(doc["fps"]), max_frames, stature)
+    tr = track_monocular(path, cam, float(doc["fps"]), max_frames, stature, left_right=left_right)
     n = len(tr.points)
     summary = {
         "method": "monocular",
@@ -495,6 +473,7 @@ def track_monocular_video(
         "fps": round(n / max(tr.seconds, 1e-9), 2),
         "video_fps": tr.fps,
         "scale": round(tr.scale, 4),
+        "left_right": left_right,
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:

@@ -22,7 +22,7 @@ import numpy as np
 
 from markovmotion.features.body_points import BODY_POINTS
 from markovmotion.video.cameras import CalibratedCamera
-from markovmotion.video.monocular import LANDMARKS, MIN_VISIBILITY
+from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 from markovmotion.video.triangulation import ViewLandmarks
 
 #: Left-right pairs compared: (body point, MediaPipe landmark) for each side.
