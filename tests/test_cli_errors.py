@@ -54,7 +54,7 @@ def test_console_script_on_bad_file(tmp_path, command):
     path = _make(tmp_path, "truncated.bvh")
     args = [str(path)] + ([str(tmp_path / "out.bvh")] if command == "convert" else [])
     run = subprocess.run(
-        [sys.executable, "-c", "from markovmotion.cli import main; main()", command, *args],
+        [sys.executable, "-m", "markovmotion", command, *args],  # as python3 -m markovmotion
         capture_output=True,
         text=True,
         timeout=120,
