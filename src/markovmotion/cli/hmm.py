@@ -445,8 +445,9 @@ def _respond_video(
 
 def _check_combination(dual, input: Path, out: Path, as_c3d: bool) -> None:
     """One line (exit 2) for a model and files that do not go together: markers in or out
-    of a skeleton model, or a skeleton's output from a marker model (a BVH given to a model learnt from C3D markers is checked by ``check_input``: the body
-    points its markers name)."""
+    of a skeleton model, or a skeleton's output from a marker model (a BVH given to a model
+    learnt from C3D markers is checked by ``check_input``: the body points its markers
+    name)."""
     from markovmotion.errors import MotionFormatError, SkeletonMismatchError
     from markovmotion.io.files import base_suffix
 

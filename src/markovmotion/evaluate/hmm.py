@@ -287,9 +287,7 @@ def evaluate_pair(
     # the baselines see A as the partner does (a skeleton lifted to a sensor model's height,
     # DualHMM.a_in) and are placed as the windowed partner is, brought down by the same lift
     seen, lift = model.a_in(a)
-    origin, yaw = model.placing(seen)
-    if lift is not None:
-        origin[:, 1] -= lift
+    origin, yaw = model.placing(seen, lift=lift)
     xa, _ = model.features_a(seen)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     if baselines.gmr is not None:
@@ -579,8 +577,9 @@ def fit_on_index(
 ) -> tuple[DualHMM, dict, list[Pair]]:
     """Fit ``model`` on the two-person takes of ``labels`` in the index at ``data``, all but
     ``test_trials`` and those of the pairs of people ``test_people`` (INDEX.csv's
-    ``subject``: a partner evaluated on people it has never seen), of one kind and set (:func:`load_pairs`), in both roles with
-    ``roles="both"`` (:func:`~markovmotion.evaluate.choose.both_roles`). With ``grid``, the
+    ``subject``: a partner evaluated on people it has never seen), of one kind and set
+    (:func:`load_pairs`), in both roles with ``roles="both"``
+    (:func:`~markovmotion.evaluate.choose.both_roles`). With ``grid``, the
     settings are first chosen among it by leave-one-pair-of-people-out on these takes
     (:func:`choose_settings`).
     Returns the model, the extras to save with it (``data_index``: the index,

@@ -39,9 +39,9 @@ from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
 
 def partner_body(b: Motion | Markers | np.ndarray) -> tuple[np.ndarray, BodyShape, np.ndarray]:
     """What of B is drawn: its points (F, P, 3), their flesh and each primitive's colour. A
-    Motion by its 19 body points on :data:`BODY_SHAPE` (an array: those points); Markers (a partner learnt from a
-    depth sensor's markers) by :func:`marker_shape`, only the parts its markers show (a
-    sensor's 8 upper-body points: trunk, head and arms; no legs are invented)."""
+    Motion by its 19 body points on :data:`BODY_SHAPE` (an array: those points); Markers (a
+    partner learnt from a depth sensor's markers) by :func:`marker_shape`, only the parts its
+    markers show (a sensor's 8 upper-body points: trunk, head and arms; no legs are invented)."""
     if isinstance(b, Markers):
         shape, names = marker_shape(b.names)
         return b.positions, shape, capsule_colours(shape, names, CLOTHES["b"])
@@ -55,8 +55,8 @@ def composite_frames(
     a_points: np.ndarray,
     b: Motion | Markers | np.ndarray,
 ) -> Iterator[np.ndarray]:
-    """``frames`` with B (a Motion, Markers or body points, :func:`partner_body`) drawn shaded where it is
-    in front of A's model (A's body points (F, 19, 3) on :data:`BODY_SHAPE`).
+    """``frames`` with B (a Motion, Markers or body points, :func:`partner_body`) drawn shaded
+    where it is in front of A's model (A's body points (F, 19, 3) on :data:`BODY_SHAPE`).
 
     Stops with A's tracked frames; frames beyond B's motion pass through unchanged.
     """

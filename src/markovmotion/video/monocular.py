@@ -306,6 +306,8 @@ def track_monocular(
     own left and right, or made consistent over the video
     (:func:`~markovmotion.video.left_right.consistent_sides`), with the prior that the person
     faces the camera for ``"facing"``."""
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     t0 = time.perf_counter()
     frames = read_frames(video)
     first = next(frames)
@@ -321,8 +323,6 @@ def track_monocular(
         yield from frames
 
     lm = detect_landmarks(all_frames(), max_frames)
-    if left_right not in LEFT_RIGHT:
-        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     if left_right != "mediapipe":
         pixels, world_lm, vis, _ = consistent_sides(
             lm.pixels, lm.world, lm.visibility, faces_camera=left_right == "facing"

@@ -731,11 +731,15 @@ class DualHMM(Model):
         return self.ground(x)
 
     def placing(
-        self, x: Motion | Markers, method: str = "windowed"
+        self, x: Motion | Markers, method: str = "windowed", lift: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """A's ground frame as B is placed through it by :meth:`respond` (``method``): per
-        frame :meth:`place`, averaged by :meth:`smoothed`."""
-        return self.smoothed(*self.place(x), method)
+        frame :meth:`place`, brought down by ``lift`` (A lifted by :meth:`a_in`: B goes down
+        as much), averaged by :meth:`smoothed`."""
+        origin, yaw = self.place(x)
+        if lift is not None:
+            origin[:, 1] -= lift
+        return self.smoothed(origin, yaw, method)
 
     def smoothed(
         self, origin: np.ndarray, yaw: np.ndarray, method: str = "windowed"
@@ -833,10 +837,8 @@ class DualHMM(Model):
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
-        origin, yaw = self.place(_fill_missing(motion_a, missing))
-        if lift is not None:
-            origin[:, 1] -= lift
-        return self.frames_to_motion(idx, *self.smoothed(origin, yaw, method), root, rot)
+        placed = self.placing(_fill_missing(motion_a, missing), method, lift)
+        return self.frames_to_motion(idx, *placed, root, rot)
 
     def regression_positions(
         self, states: Sequence[int], xa: Sequence[np.ndarray | None]
