@@ -116,3 +116,12 @@ def page(browser):
     yield pg
     context.close()
     assert not errors, errors
+
+
+@pytest.fixture
+def needs_mediapipe() -> None:
+    """Fails (never skips) a camera test when MediaPipe is missing."""
+    try:
+        import mediapipe  # noqa: F401
+    except ImportError:
+        pytest.fail("the camera tests need MediaPipe: run scripts/install-camera", pytrace=False)

@@ -4,8 +4,10 @@ import itertools
 
 import numpy as np
 
+from markovmotion.video import left_right
 from markovmotion.video.left_right import (
     SIDE_GROUPS,
+    OnlineSides,
     consistent_sides,
     continuity_costs,
     decode_labels,
@@ -75,3 +77,47 @@ def test_continuity_cost_sees_a_jump():
     pair = [(LANDMARKS.index("left_shoulder"), LANDMARKS.index("right_shoulder"))]
     c = continuity_costs(bad, v, pair)
     assert c[5, 1] < c[5, 0] and (c[6:, 0] < c[6:, 1]).all()
+
+
+def _online(p, w, v, **kw):
+    sides = OnlineSides(**kw)
+    out = [sides.step(p[t], w[t], v[t]) for t in range(len(p))]
+    return tuple(np.stack(x) for x in zip(*out, strict=True))
+
+
+def test_online_restores_swaps_on_the_frame_they_appear():
+    p, w, v = _walk()
+    q, x, _, swapped = _online(p, w, v)
+    np.testing.assert_array_equal(q, p)
+    assert not swapped.any()
+    every = [s for g in SIDE_GROUPS for s in g]
+    bad_p, bad_w = _swap(p, w, np.arange(20, 35), every)
+    bad_p, bad_w = _swap(bad_p, bad_w, np.arange(40, 50), ["wrist", "pinky", "index", "thumb"])
+    q, x, _, swapped = _online(bad_p, bad_w, v)
+    np.testing.assert_array_equal(q, p)
+    np.testing.assert_array_equal(x, w)
+    assert swapped[20:35].all() and swapped[40:50, 2].all() and not swapped[40:50, 0].any()
+
+
+def test_online_decision_is_the_least_cost_next_label():
+    """Each whole-body label is the one that adds least to :func:`labelling_cost` given the
+    labels already given (the torso is the same in every frame, so the running scale is the
+    offline one)."""
+    p, w, v = _walk(40, seed=5)
+    rng = np.random.default_rng(1)
+    every = [s for g in SIDE_GROUPS for s in g]
+    for _ in range(6):  # swaps at random frames, some only half way (a jump of half a swap)
+        at = rng.choice(40, size=rng.integers(1, 8), replace=False)
+        p, w = _swap(p, w, at, every[: rng.integers(1, len(every) + 1)])
+    pairs = [left_right._pairs(s) for s in every]
+    cont = left_right._continuity(p, w, v, pairs)
+    skip = left_right._continuity(p, w, v, pairs, 2)
+    sides = OnlineSides()
+    labels: list[int] = []
+    for t in range(len(p)):
+        best = min(
+            (0, 1), key=lambda c: labelling_cost(labels + [c], cont[: t + 1], None, skip[: t + 1])
+        )
+        sides.step(p[t], w[t], v[t])
+        labels.append(int(sides._labels[0, 0]))
+        assert labels[-1] == best

@@ -273,3 +273,25 @@ def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_fou
     ]
     assert drawn[0] < drawn[1] / 3  # A in front hides most of B
     assert drawn[1] == drawn[2] > 0  # A behind B, or not found: all of B
+
+
+def test_the_webcam_trackers_causal_left_right_is_the_offline_one_on_real_camera_1(
+    real_video, needs_mediapipe
+):
+    """MediaPipe swaps the man's sides in camera 1 (a second person behind him): the webcam
+    tracker's causal relabelling, frame by frame as the camera page runs it, undoes the
+    swaps as the offline decoder does over the whole video."""
+    from markovmotion.video.left_right import consistent_sides
+    from markovmotion.video.monocular import detect_landmarks
+    from markovmotion.video.webcam import FoundLandmarks, WebcamTracker
+
+    lm = detect_landmarks(read_frames(real_video / "cam1.mp4"))
+    offline, _, _, swapped = consistent_sides(lm.pixels, lm.world, lm.visibility)
+    assert swapped.any(axis=1).sum() >= 10  # MediaPipe's labels do jump here
+    with WebcamTracker(graphs=1) as live, WebcamTracker(graphs=1, left_right="mediapipe") as raw:
+        for t in np.nonzero(lm.found)[0]:
+            found = FoundLandmarks(lm.pixels[t], lm.world[t], lm.visibility[t], (272, 480), 0.0)
+            got, kept = live.place(found), raw.place(found)
+            if got is not None:
+                np.testing.assert_allclose(got.pixels, offline[t])
+                assert np.allclose(kept.pixels, lm.pixels[t])

@@ -102,10 +102,11 @@ def track(
     body_model: str = body_model_option(),
     left_right: str = typer.Option(
         "continuity",
-        callback=choice(("mediapipe", "continuity", "facing")),
+        callback=choice(("mediapipe", "continuity", "facing", "online")),
         help="Monocular: continuity: MediaPipe's left and right relabelled where they jump "
-        "between frames (offline, whole video); facing: that, and the person faces the "
-        "camera (a webcam's user); mediapipe: its own labels.",
+        "between frames (offline, whole video); online: the same frame by frame, causally "
+        "(as the camera page does); facing: continuity, and the person faces the camera (a "
+        "webcam's user); mediapipe: its own labels.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or

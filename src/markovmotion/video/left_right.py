@@ -16,6 +16,8 @@ turned round): the labelling before the video counts as kept (MediaPipe's own), 
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from markovmotion.video.landmarks import LANDMARKS
@@ -54,19 +56,29 @@ def _pairs(stem: str) -> tuple[int, int]:
     return LANDMARKS.index(names[0]), LANDMARKS.index(names[1])
 
 
-def continuity_costs(
-    pixels: np.ndarray, visibility: np.ndarray, pairs: list[tuple[int, int]], lag: int = 1
-) -> np.ndarray:
-    """(F, 2) cost of frame t's labelling relative to frame t-1's: column 0 the same
-    labelling, column 1 the other one; the landmarks' motion (``pixels`` (F, 33, D): the
-    2-D landmarks, or the world points, weighted by both frames' visibility) in torso
-    lengths (median shoulder-to-hip distance). Row 0 and rows
-    next to a frame without a person are 0 (no continuity across a gap)."""
-    li, ri = (np.array(x) for x in zip(*pairs, strict=True))
+def torso_lengths(points: np.ndarray) -> np.ndarray:
+    """(F,) shoulder-middle to hip-middle distance of landmarks (F, 33, D)."""
     sh = [LANDMARKS.index(f"{s}_shoulder") for s in ("left", "right")]
     hp = [LANDMARKS.index(f"{s}_hip") for s in ("left", "right")]
-    torso = np.linalg.norm(pixels[:, sh].mean(1) - pixels[:, hp].mean(1), axis=1)
-    scale = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
+    return np.linalg.norm(points[:, sh].mean(1) - points[:, hp].mean(1), axis=1)
+
+
+def continuity_costs(
+    pixels: np.ndarray,
+    visibility: np.ndarray,
+    pairs: list[tuple[int, int]],
+    lag: int = 1,
+    scale: float | None = None,
+) -> np.ndarray:
+    """(F, 2) cost of frame t's labelling relative to frame t-``lag``'s: column 0 the same
+    labelling, column 1 the other one; the landmarks' motion (``pixels`` (F, 33, D): the
+    2-D landmarks, or the world points, weighted by both frames' visibility) in torso
+    lengths (``scale``; default the median shoulder-to-hip distance). Rows before ``lag``
+    and rows next to a frame without a person are 0 (no continuity across a gap)."""
+    li, ri = (np.array(x) for x in zip(*pairs, strict=True))
+    if scale is None:
+        torso = torso_lengths(pixels)
+        scale = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
     out = np.zeros((len(pixels), 2))
     for t in range(lag, len(pixels)):
         a, b = pixels[t - lag], pixels[t]
@@ -208,12 +220,107 @@ def consistent_sides(
     return pixels, world, visibility, swapped
 
 
-def _continuity(pixels, world, visibility, pairs, lag: int = 1) -> np.ndarray:
+def _continuity(pixels, world, visibility, pairs, lag: int = 1, scales=(None, None)):
     """Continuity in the image and in MediaPipe's world points (which also see a swap of a
     body seen edge on, whose left and right landmarks lie close in the image)."""
-    return continuity_costs(pixels, visibility, pairs, lag) + continuity_costs(
-        world, visibility, pairs, lag
+    return continuity_costs(pixels, visibility, pairs, lag, scales[0]) + continuity_costs(
+        world, visibility, pairs, lag, scales[1]
     )
+
+
+class OnlineSides:
+    """:func:`consistent_sides` frame by frame, for a live camera (the camera page): each
+    frame's labels are decided when it arrives, from the frames before it alone.
+
+    Each stage (the whole body, then each of :data:`SIDE_GROUPS`, as offline) keeps the
+    labels it gave the two frames before and gives the new frame the label of least cost in
+    :func:`decode_labels`'s triple state (continuity from the frame before and the one
+    before that, :data:`SWITCH_COST`, :data:`SWAPPED_COST`, the parent's attachment and, with
+    ``faces_camera``, the facing prior): the Viterbi's forward step with every decision
+    final (greedy), since a live partner cannot wait for later frames to revise one. A jump
+    is seen, and a swap undone, on the frame it happens; what is lost against the offline
+    decoder is a later frame showing that an earlier decision was wrong. Torso lengths (the
+    costs' unit) are the median over the last ``memory`` frames. :meth:`gap` marks a frame
+    without a person (no continuity across it; the labels carry on)."""
+
+    def __init__(self, faces_camera: bool = False, memory: int = 900):
+        self.faces_camera = faces_camera
+        self._stages = [[_pairs(s) for stems in SIDE_GROUPS for s in stems]] + [
+            [_pairs(s) for s in stems] for stems in SIDE_GROUPS
+        ]
+        n = len(LANDMARKS)
+        # each stage's left and right rows in the stacked [pixels (x, y, 0); world] (66, 3)
+        self._rows = [
+            tuple(np.r_[idx, np.array(idx) + n] for idx in zip(*pairs, strict=True))
+            for pairs in self._stages
+        ]
+        self._swaps = [(np.r_[left, right], np.r_[right, left]) for left, right in self._rows]
+        self._parents = [None] + [
+            None if up is None else [_pairs(x) for x in SIDE_GROUPS[up]] for up in PARENTS
+        ]
+        self._labels = np.zeros((len(self._stages), 2), dtype=int)  # at t-1, t-2
+        self._before: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in self._stages]
+        self._torso = (deque(maxlen=memory), deque(maxlen=memory))
+
+    def gap(self) -> None:
+        """The frame before the next had no person: no continuity across it."""
+        self._before = [[] for _ in self._stages]
+
+    def step(
+        self, pixels: np.ndarray, world: np.ndarray, visibility: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One frame's landmarks (33, 2) pixels, (33, 3) world points and (33,) visibility,
+        relabelled, and which of :data:`SIDE_GROUPS` (len(SIDE_GROUPS),) were swapped."""
+        n = len(LANDMARKS)
+        points = np.zeros((2 * n, 3))
+        points[:n, :2], points[n:] = pixels, world
+        vis = np.r_[visibility, visibility]
+        inverse = np.empty(2 * n)  # 1 / torso length, per row (pixels, then world)
+        for k, (hist, pts) in enumerate(zip(self._torso, (pixels, world), strict=True)):
+            hist.append(float(torso_lengths(pts[None])[0]))
+            torso = np.array(hist)
+            scale = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
+            inverse[k * n : (k + 1) * n] = 1.0 / max(scale, 1e-9)
+        swapped = np.zeros(len(SIDE_GROUPS), dtype=bool)
+        for k, (left, right) in enumerate(self._rows):
+            cost = self._cost(k, left, right, points, vis, inverse)
+            label = int(np.argmin(cost))
+            self._before[k] = [(points.copy(), vis.copy())] + self._before[k][:1]
+            self._labels[k] = label, self._labels[k, 0]
+            if label:
+                both, other = self._swaps[k]
+                points[both], vis[both] = points[other], vis[other]
+                if k == 0:
+                    swapped[:] = True
+                else:
+                    swapped[k - 1] ^= True
+        return points[:n, :2], points[n:], vis[:n], swapped
+
+    def _cost(self, k: int, left, right, points, vis, inverse) -> np.ndarray:
+        """(2,) cost of keeping or swapping stage ``k``'s pairs in the new frame: the terms
+        of :func:`labelling_cost`, continuity as :func:`continuity_costs` has it."""
+        label = np.array([0, 1])
+        l1, l2 = self._labels[k]
+        change = (label != l1).astype(int)
+        cost = SWITCH_COST * change + SWAPPED_COST * label
+        for lag, (before, seen) in enumerate(self._before[k], start=1):  # from t-1, t-2
+            w = np.minimum(seen, vis) * inverse
+            wl, wr = w[left], w[right]
+            same = wl @ _dist(points[left], before[left]) + wr @ _dist(points[right], before[right])
+            swap = wl @ _dist(points[left], before[right]) + wr @ _dist(points[right], before[left])
+            if np.isfinite(same) and np.isfinite(swap):
+                moved = change if lag == 1 else (label != l2).astype(int)
+                cost += np.array([same, swap])[moved]
+        n = len(LANDMARKS)
+        if k == 0 and self.faces_camera:
+            cost += facing_costs(points[None, :n, :2])[0]
+        elif self._parents[k] is not None:
+            cost += attachment_costs(points[None, n:], self._stages[k], self._parents[k])[0]
+        return cost
+
+
+def _dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sqrt(((a - b) ** 2).sum(axis=1))
 
 
 def _relabel(arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs) -> None:

@@ -59,13 +59,13 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, MARKER_POINTS
 from markovmotion.video.cameras import CalibratedCamera
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
-from markovmotion.video.left_right import consistent_sides
+from markovmotion.video.left_right import OnlineSides, consistent_sides
 from markovmotion.video.render import read_frames
 
 #: The release whose bundled pose models load offline (the 1.x releases ship none).
 MEDIAPIPE_VERSION = "0.10.21"
 #: How left and right are labelled (:func:`track_monocular`).
-LEFT_RIGHT: tuple[str, ...] = ("mediapipe", "continuity", "facing")
+LEFT_RIGHT: tuple[str, ...] = ("mediapipe", "continuity", "facing", "online")
 #: Fewest landmarks that place a body (solvePnP needs at least 4; fewer is a guess).
 MIN_LANDMARKS = 6
 #: The foot landmarks whose lowest rests on the floor.
@@ -323,7 +323,10 @@ def track_monocular(
         yield from frames
 
     lm = detect_landmarks(all_frames(), max_frames)
-    if left_right != "mediapipe":
+    if left_right == "online":
+        pixels, world_lm, vis = online_sides(lm)
+        lm = Landmarks(pixels, world_lm, vis, lm.found, lm.seconds)
+    elif left_right != "mediapipe":
         pixels, world_lm, vis, _ = consistent_sides(
             lm.pixels, lm.world, lm.visibility, faces_camera=left_right == "facing"
         )
@@ -341,6 +344,19 @@ def track_monocular(
     return MonocularTrack(
         to_body_points(world), conf, scale, fps, time.perf_counter() - t0, lm, world
     )
+
+
+def online_sides(lm: Landmarks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The landmarks' left and right relabelled frame by frame as the camera page does
+    (:class:`~markovmotion.video.left_right.OnlineSides`: causal, no look-ahead)."""
+    sides = OnlineSides()
+    pixels, world, vis = lm.pixels.copy(), lm.world.copy(), lm.visibility.copy()
+    for t in range(len(pixels)):
+        if lm.found[t]:
+            pixels[t], world[t], vis[t], _ = sides.step(pixels[t], world[t], vis[t])
+        else:
+            sides.gap()
+    return pixels, world, vis
 
 
 def monocular_markers(points: np.ndarray, fps: float, name: str = "monocular") -> Markers:

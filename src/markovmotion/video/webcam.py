@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markovmotion.video.left_right import OnlineSides
 from markovmotion.video.monocular import (
     FEET,
     LANDMARKS,
@@ -105,7 +106,10 @@ class WebcamTracker:
     MediaPipe runs in video mode (each frame's landmarks start from the last frame's), so
     one tracker follows one camera. ``fov``: the camera's horizontal field of view
     (degrees). ``graphs``: MediaPipe graphs, frame ``n`` going to graph ``n % graphs``
-    (:data:`DEFAULT_GRAPHS`). :meth:`track` runs a frame from start to end; a pipeline
+    (:data:`DEFAULT_GRAPHS`). ``left_right``: ``"online"`` relabels MediaPipe's left and
+    right where they jump between frames, causally
+    (:class:`~markovmotion.video.left_right.OnlineSides`; on the real video's four cameras
+    it gives what the offline decoder gives), ``"mediapipe"`` keeps its labels. :meth:`track` runs a frame from start to end; a pipeline
     (:mod:`markovmotion.web.camera`) runs :meth:`landmarks` of several frames at once, each
     graph's frames in order, and :meth:`place` of every frame in order. Close it (or use it
     in a ``with``) to free MediaPipe's graphs.
@@ -114,10 +118,15 @@ class WebcamTracker:
         MotionFormatError: MediaPipe is not installed (``scripts/install-camera``).
     """
 
-    def __init__(self, fov: float = DEFAULT_FOV, graphs: int = DEFAULT_GRAPHS):
+    def __init__(
+        self, fov: float = DEFAULT_FOV, graphs: int = DEFAULT_GRAPHS, left_right: str = "online"
+    ):
         if graphs < 1:
             raise ValueError(f"graphs: at least 1, not {graphs}")
+        if left_right not in ("online", "mediapipe"):
+            raise ValueError(f"left_right: online or mediapipe, not {left_right!r}")
         self.fov = float(fov)
+        self._sides = OnlineSides() if left_right == "online" else None
         self._estimators = []
         try:
             for _ in range(graphs):
@@ -148,8 +157,12 @@ class WebcamTracker:
         """A frame's landmarks placed in the upright world (module docstring), or None when
         none were found or they cannot be placed; frames must come in order."""
         if found is None:
+            if self._sides is not None:
+                self._sides.gap()
             return None
         pixels, world, visibility = found.pixels, found.world, found.visibility
+        if self._sides is not None:
+            pixels, world, visibility, _ = self._sides.step(pixels, world, visibility)
         k = webcam_intrinsics(*found.size, self.fov)
         placed = place_frame(world, pixels, visibility, k, self._pose)
         if placed is None:
