@@ -102,3 +102,38 @@ def test_the_right_hand_is_found_by_body_point_names():
     assert right_hand(("LHand", "RHand")) == 1
     assert right_hand(("left_wrist", "right_wrist")) == 1
     assert right_hand(("HEAD", "L_HAND")) is None  # no right hand: no hand gap
+
+
+def test_bone_lengths_are_restored_along_each_segments_direction():
+    """Points whose segments were stretched frame by frame (as MediaPipe's are) come back to
+    the true lengths, each segment keeping its direction; the median recovers the lengths."""
+    from markovmotion.features.body_points import (
+        POINT_PARENTS,
+        bone_lengths,
+        with_bone_lengths,
+    )
+
+    rng = np.random.default_rng(0)
+    frames, n = 50, len(POINT_PARENTS)
+    true_len = rng.uniform(80, 400, n)
+    dirs = rng.normal(size=(frames, n, 3))
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    stretch = rng.uniform(0.8, 1.2, (frames, n))
+    stretch[:, 0] = 1.0
+
+    def build(lengths):
+        pts = np.zeros((frames, n, 3))
+        pts[:, 0] = rng.normal(0, 500, 3)
+        for j, parent in enumerate(POINT_PARENTS):
+            if parent >= 0:
+                pts[:, j] = pts[:, parent] + dirs[:, j] * lengths[..., j, None]
+        return pts
+
+    state = rng.bit_generator.state
+    truth = build(np.broadcast_to(true_len, (frames, n)))
+    rng.bit_generator.state = state  # the same root
+    noisy = build(true_len * stretch)
+    np.testing.assert_allclose(with_bone_lengths(noisy, true_len), truth, atol=1e-9)
+    got = bone_lengths(noisy)
+    assert np.isnan(got[0])
+    np.testing.assert_allclose(got[1:], true_len[1:], rtol=0.1)

@@ -126,6 +126,10 @@ def test_monocular_track_of_real_video(real_video, tmp_path, capsys):
     assert markers.n_frames == 100 and "L_SHOULDER" in markers.names
     feet = markers.positions[:, [markers.names.index(n) for n in ("L_ANKLE", "R_ANKLE")], 1]
     assert 0.0 < np.median(feet.min(axis=1)) < 200.0  # ankles just above the floor
+    at = {n: markers.positions[:, markers.names.index(n)] for n in markers.names}
+    for upper, lower in (("L_ELBOW", "L_WRIST"), ("R_KNEE", "R_ANKLE")):  # constant bones
+        length = np.linalg.norm(at[upper] - at[lower], axis=1)
+        assert 150 < length.mean() < 600 and np.ptp(length) < 1e-3 * length.mean()
 
 
 @pytest.mark.parametrize(

@@ -273,3 +273,30 @@ def points_motion(points: np.ndarray, fps: float, name: str = "points") -> Motio
     rotations = np.zeros((len(points), len(BODY_POINTS), 4))
     rotations[..., 3] = 1.0
     return Motion(POINT_SKELETON, rotations, translations, fps, name)
+
+
+def bone_lengths(points: np.ndarray) -> np.ndarray:
+    """(P,) each body point's median distance (mm) from its parent (:data:`POINT_PARENTS`)
+    over the frames (F, P, 3) where both are finite; NaN for the pelvis."""
+    out = np.full(len(POINT_PARENTS), np.nan)
+    for j, parent in enumerate(POINT_PARENTS):
+        if parent >= 0:
+            d = np.linalg.norm(points[:, j] - points[:, parent], axis=-1)
+            if np.isfinite(d).any():
+                out[j] = np.nanmedian(d)
+    return out
+
+
+def with_bone_lengths(points: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """(F, P, 3) body points whose segments have ``lengths`` (P,) (:func:`bone_lengths`):
+    from the pelvis out, each point moved along its own direction from its (moved) parent.
+    A tracker that finds each frame's points alone (MediaPipe) gives the same person bones
+    of a different length every frame; a person's bones do not change."""
+    out = np.array(points, dtype=float, copy=True)
+    for j, parent in enumerate(POINT_PARENTS):  # parents come before their children
+        if parent < 0 or not np.isfinite(lengths[j]):
+            continue
+        v = points[:, j] - points[:, parent]
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
+        out[:, j] = out[:, parent] + v / np.maximum(n, 1e-9) * lengths[j]
+    return out

@@ -56,7 +56,12 @@ import numpy as np
 
 from markovmotion.core.markers import Markers
 from markovmotion.errors import MotionFormatError
-from markovmotion.features.body_points import BODY_POINTS, MARKER_POINTS
+from markovmotion.features.body_points import (
+    BODY_POINTS,
+    MARKER_POINTS,
+    bone_lengths,
+    with_bone_lengths,
+)
 from markovmotion.video.cameras import CalibratedCamera
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 from markovmotion.video.left_right import OnlineSides, consistent_sides
@@ -299,13 +304,16 @@ def track_monocular(
     floor: float | None = 0.0,
     snap: bool = True,
     left_right: str = "continuity",
+    constant_bones: bool = True,
 ) -> MonocularTrack:
     """Track the person of one camera's video in 3-D (module docstring): body points in the
     world's mm, scaled so the feet rest on ``floor`` (None: MediaPipe's size), or so the
     person is ``stature`` mm tall if given. ``left_right`` (:data:`LEFT_RIGHT`): MediaPipe's
     own left and right, or made consistent over the video
     (:func:`~markovmotion.video.left_right.consistent_sides`), with the prior that the person
-    faces the camera for ``"facing"``."""
+    faces the camera for ``"facing"``. ``constant_bones``: each segment of the body points
+    given its median length over the video
+    (:func:`~markovmotion.features.body_points.with_bone_lengths`)."""
     if left_right not in LEFT_RIGHT:
         raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     t0 = time.perf_counter()
@@ -341,9 +349,10 @@ def track_monocular(
         scale = 1.0
     world = camera.centre + scale * (world - camera.centre)
     conf = np.where(placed, np.where(lm.found[:, None], lm.visibility, 0.0).mean(axis=1), 0.0)
-    return MonocularTrack(
-        to_body_points(world), conf, scale, fps, time.perf_counter() - t0, lm, world
-    )
+    points = to_body_points(world)
+    if constant_bones:
+        points = with_bone_lengths(points, bone_lengths(points))
+    return MonocularTrack(points, conf, scale, fps, time.perf_counter() - t0, lm, world)
 
 
 def online_sides(lm: Landmarks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

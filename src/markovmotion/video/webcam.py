@@ -30,10 +30,12 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
+from markovmotion.features.body_points import bone_lengths, with_bone_lengths
 from markovmotion.video.left_right import OnlineSides
 from markovmotion.video.monocular import (
     FEET,
@@ -53,6 +55,9 @@ PELVIS_HEIGHT = 950.0
 FLOOR_RATE = 0.2
 #: Camera frame (x right, y down, z forward) to the upright world (X right, Y up, Z back).
 CAMERA_TO_WORLD = np.array([1.0, -1.0, -1.0])
+
+#: Frames over which each body segment's median length is taken.
+BONE_MEMORY = 300
 
 _FEET = [LANDMARKS.index(n) for n in FEET]
 _HIPS = [LANDMARKS.index("left_hip"), LANDMARKS.index("right_hip")]
@@ -137,6 +142,7 @@ class WebcamTracker:
         self._pose: tuple[np.ndarray, np.ndarray] | None = None
         self._lift: float | None = None  # added to Y so that the floor is at 0
         self._frames = 0
+        self._bones: deque[np.ndarray] = deque(maxlen=BONE_MEMORY)
 
     @property
     def graphs(self) -> int:
@@ -193,6 +199,11 @@ class WebcamTracker:
     ) -> WebcamFrame:
         body = to_body_points(pts)
         body[:, 1] += lift
+        # each segment at its median length over the last BONE_MEMORY frames (a person's
+        # bones do not change; MediaPipe's do, frame to frame)
+        self._bones.append(bone_lengths(body[None]))
+        lengths = np.r_[np.nan, np.median(np.array(self._bones)[:, 1:], axis=0)]  # 0: pelvis
+        body = with_bone_lengths(body[None], lengths)[0]
         return WebcamFrame(body, pixels, vis, float(vis.mean()), time.perf_counter() - t0)
 
     def close(self) -> None:
