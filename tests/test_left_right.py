@@ -3,6 +3,7 @@
 import itertools
 
 import numpy as np
+import pytest
 
 from markovmotion.video import left_right
 from markovmotion.video.left_right import (
@@ -39,20 +40,30 @@ def _swap(pixels, world, frames, stems):
     return pixels, world
 
 
-def test_unswapped_sequence_is_unchanged():
+def _online(p, w, v):
+    """:class:`OnlineSides` frame by frame, stacked as :func:`consistent_sides` returns."""
+    sides = OnlineSides()
+    out = [sides.step(p[t], w[t], v[t]) for t in range(len(p))]
+    return tuple(np.stack(x) for x in zip(*out, strict=True))
+
+
+@pytest.mark.parametrize("decoder", [consistent_sides, _online], ids=["offline", "online"])
+def test_unswapped_sequence_is_unchanged(decoder):
     p, w, v = _walk()
-    q, x, _, swapped = consistent_sides(p, w, v)
+    q, x, _, swapped = decoder(p, w, v)
     assert not swapped.any()
     np.testing.assert_array_equal(q, p)
     np.testing.assert_array_equal(x, w)
 
 
-def test_full_and_partial_swaps_are_restored_exactly():
+@pytest.mark.parametrize("decoder", [consistent_sides, _online], ids=["offline", "online"])
+def test_full_and_partial_swaps_are_restored_exactly(decoder):
+    """The online decoder too: each swap is undone on the frame its jump appears."""
     p, w, v = _walk()
     every = [s for g in SIDE_GROUPS for s in g]
     bad_p, bad_w = _swap(p, w, np.arange(20, 35), every)  # the whole body
     bad_p, bad_w = _swap(bad_p, bad_w, np.arange(40, 50), ["wrist", "pinky", "index", "thumb"])
-    q, x, _, swapped = consistent_sides(bad_p, bad_w, v)
+    q, x, _, swapped = decoder(bad_p, bad_w, v)
     np.testing.assert_array_equal(q, p)
     np.testing.assert_array_equal(x, w)
     assert swapped[20:35].all() and swapped[40:50, 2].all() and not swapped[40:50, 0].any()
@@ -77,26 +88,6 @@ def test_continuity_cost_sees_a_jump():
     pair = [(LANDMARKS.index("left_shoulder"), LANDMARKS.index("right_shoulder"))]
     c = continuity_costs(bad, v, pair)
     assert c[5, 1] < c[5, 0] and (c[6:, 0] < c[6:, 1]).all()
-
-
-def _online(p, w, v, **kw):
-    sides = OnlineSides(**kw)
-    out = [sides.step(p[t], w[t], v[t]) for t in range(len(p))]
-    return tuple(np.stack(x) for x in zip(*out, strict=True))
-
-
-def test_online_restores_swaps_on_the_frame_they_appear():
-    p, w, v = _walk()
-    q, x, _, swapped = _online(p, w, v)
-    np.testing.assert_array_equal(q, p)
-    assert not swapped.any()
-    every = [s for g in SIDE_GROUPS for s in g]
-    bad_p, bad_w = _swap(p, w, np.arange(20, 35), every)
-    bad_p, bad_w = _swap(bad_p, bad_w, np.arange(40, 50), ["wrist", "pinky", "index", "thumb"])
-    q, x, _, swapped = _online(bad_p, bad_w, v)
-    np.testing.assert_array_equal(q, p)
-    np.testing.assert_array_equal(x, w)
-    assert swapped[20:35].all() and swapped[40:50, 2].all() and not swapped[40:50, 0].any()
 
 
 def test_online_decision_is_the_least_cost_next_label():
