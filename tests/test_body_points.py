@@ -96,7 +96,7 @@ def test_marker_names_that_are_body_points_join_into_a_stick_figure():
 
 
 def test_the_right_hand_is_found_by_body_point_names():
-    from markovmotion.evaluate.hmm import right_hand
+    from markovmotion.models.hmm.contact import right_hand
 
     assert right_hand(("TORSO", "L_HAND", "R_HAND")) == 2
     assert right_hand(("LHand", "RHand")) == 1

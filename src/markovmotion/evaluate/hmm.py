@@ -54,9 +54,9 @@ from markovmotion.evaluate import choose
 from markovmotion.evaluate.choose import ROLES
 from markovmotion.evaluate.takes import TestTakes, take_names, test_takes
 from markovmotion.evaluate.vlmm import trial_errors
-from markovmotion.features.body_points import BODY_POINTS, find_points
 from markovmotion.features.markers import turn_about_up
 from markovmotion.models.base import file_sha256
+from markovmotion.models.hmm.contact import CONTACT_MM, right_hand
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
 from markovmotion.progress import track
@@ -128,17 +128,6 @@ class Baselines:
         return self.model.frames_to_motion(idx, origin, yaw)
 
 
-#: Frames whose real right hands are closer than this are in contact (the Bütepage
-#: handshakes' hands meet at 9-113 mm, their data README; other hands stay 500 mm apart).
-CONTACT_MM = 150.0
-
-
-def right_hand(names: Sequence[str]) -> int | None:
-    """Index of the right hand among marker or body-point names (``R_HAND``, ``RHand``,
-    ``right_wrist`` ...: the body point ``right_wrist``, :func:`find_points`), or None."""
-    return find_points(names).get("right_wrist")
-
-
 def hand_gaps(
     model: DualHMM, a: np.ndarray, b: np.ndarray, generated: dict[str, np.ndarray]
 ) -> dict[str, np.ndarray] | None:
@@ -146,11 +135,7 @@ def hand_gaps(
     (closer than :data:`CONTACT_MM`): ``"real"`` and each generated B's. ``a``, ``b`` and
     ``generated`` are the positions the model compares people by (:meth:`DualHMM.body_positions`).
     None when the take has no such frame or the people have no right hand by name."""
-    if model.uses_markers:
-        names = list(model.marker_names_b_)
-    else:
-        names = list(BODY_POINTS) if model.points == "body" else list(model.skeleton_b_.names)
-    k = right_hand(names)
+    k = right_hand(model.compared_names())
     if k is None:
         return None
     real = np.linalg.norm(b[:, k] - a[:, k], axis=-1)

@@ -61,12 +61,17 @@ class RunningCentre(FeatureStep):
         return self.input_width()
 
     def transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
-        out = []
-        for s in sequences:
-            x = np.asarray(s, dtype=float)
-            t = np.arange(1, len(x) + 1)[:, None]
-            out.append(x - (self.prior * self.mean_ + np.cumsum(x, axis=0)) / (self.prior + t))
-        return out
+        return [self.centre(s) for s in sequences]
+
+    def centre(self, x: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
+        """One sequence (T, D) minus its causal running mean, over the rows ``seen`` (T,)
+        only (all if None): an unseen row (a frame of A that was missing, filled in) does
+        not enter the mean, as the online partner never sees it (:meth:`online`)."""
+        x = np.asarray(x, dtype=float)
+        seen = np.ones(len(x), dtype=bool) if seen is None else np.asarray(seen, dtype=bool)
+        total = np.cumsum(np.where(seen[:, None], x, 0.0), axis=0)
+        count = np.cumsum(seen)[:, None]
+        return x - (self.prior * self.mean_ + total) / np.maximum(self.prior + count, 1e-12)
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         return [np.asarray(s) for s in sequences]

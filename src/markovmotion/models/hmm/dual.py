@@ -91,6 +91,7 @@ from markovmotion.features.markers import (
 )
 from markovmotion.features.person import RunningCentre, on_average_body
 from markovmotion.models.base import Model, flatten
+from markovmotion.models.hmm.contact import HandContact, contact_shifts, right_hand
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner, finite_frames
 from markovmotion.models.hmm.trellis import (
@@ -125,6 +126,9 @@ _REGRESSION = ("reg_means_a_", "reg_means_b_", "reg_gains_")
 #: out on the Bütepage handshakes and waves among 1e-3, 0.1, 1 and 10 (docs/hmm.md).
 RIDGE = 1.0
 METHODS = ("standard", "windowed")
+#: The learnt parts of ``contact_weight`` above 0 (:class:`.contact.HandContact`; a hand of -1:
+#: the training takes held no contact).
+_CONTACT = ("contact_hand_", "contact_offset_", "contact_coef_")
 
 
 # ------------------------------------------------------------------ A's ground frame
@@ -273,6 +277,12 @@ class DualHMM(Model):
             (:func:`~markovmotion.algorithms.gaussian.state_regressions`, Gaussian mixture
             regression with one component per state), the states decoded by the same
             standard or windowed Viterbi, blended over ``blend_window`` frames.
+        contact_weight: 0 (the paper's placement) to 1: where A's right hand is out to B's,
+            B is moved (horizontally) this much of the way to where B's hand meets A's, as
+            the training pairs' hands met (:mod:`.contact`, our addition): a new pair of
+            people that stands further apart than the training pairs shows it in A's reach.
+            A model whose training takes hold no contact (waves) learns none and moves
+            nothing.
         var_floor: each state's variance along PCA feature j is kept at or above this
             fraction of feature j's variance over the training frames (and at least
             ``GaussianHMM``'s absolute ``min_covar``); :class:`GaussianHMM`. The default 0.3
@@ -316,6 +326,7 @@ class DualHMM(Model):
         markers: int = 0,
         normalise: str = "none",
         output: str = "frames",
+        contact_weight: float = 0.0,
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 0.3,
@@ -340,6 +351,7 @@ class DualHMM(Model):
         self.markers = markers
         self.normalise = normalise
         self.output = output
+        self.contact_weight = contact_weight
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -383,6 +395,11 @@ class DualHMM(Model):
             raise ValueError(f"energy must be above 0 and at most 1, got {self.energy!r}")
         if not (float(self.fps) > 0.0 and np.isfinite(float(self.fps))):
             raise ValueError(f"fps must be above 0, got {self.fps!r}")
+        if not (
+            isinstance(self.contact_weight, int | float | np.number)
+            and 0.0 <= float(self.contact_weight) <= 1.0
+        ):
+            raise ValueError(f"contact_weight must be 0 to 1, got {self.contact_weight!r}")
         if not float(self.var_floor) >= 0.0:
             raise ValueError(f"var_floor must be 0 or more, got {self.var_floor!r}")
         check_covariance_type(self.covariance_type)
@@ -425,7 +442,7 @@ class DualHMM(Model):
         for a, b in pairs:
             if a.n_frames != b.n_frames:
                 raise ValueError(f"{a.name} and {b.name} differ in length")
-        for k in _LEARNT + _LEARNT_MARKERS + _REGRESSION:  # a refit may change what it sees
+        for k in _LEARNT + _LEARNT_MARKERS + _REGRESSION + _CONTACT:  # a refit may change
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
             xa, xb, lengths = self._marker_features(pairs, groups)
@@ -437,10 +454,52 @@ class DualHMM(Model):
             self.reg_means_a_, self.reg_means_b_, self.reg_gains_ = state_regressions(
                 xa, xb, gamma, RIDGE
             )
+        if self.contact_weight > 0:
+            self._fit_contact(pairs)
         self.labels_ = sorted(set(labels or ()))
         self.record_training(flatten(pairs))
         self._trellis_cache = None
         return self
+
+    def _fit_contact(self, pairs) -> None:
+        """Learn :class:`~.contact.HandContact` from the training takes (``contact_weight``)."""
+        hand = right_hand(self.compared_names())
+        if hand is None:
+            raise SkeletonMismatchError(
+                "contact_weight needs a right hand by name (R_HAND, RightHand, right_wrist ...) "
+                "among the points people are compared by"
+            )
+        a_pts, b_pts, yaws = [], [], []
+        for a, b in pairs:
+            a, b = self._rate(a), self._rate(b)
+            a_pts.append(self.body_positions(a))
+            b_pts.append(self.body_positions(b))
+            yaws.append(self.placing(a)[1])
+        found = HandContact.learn(a_pts, b_pts, yaws, hand)
+        if found is None:
+            self.contact_hand_ = -1
+            self.contact_offset_, self.contact_coef_ = np.zeros(3), np.zeros(4)
+        else:
+            self.contact_hand_ = found.hand
+            self.contact_offset_ = found.offset
+            self.contact_coef_ = np.r_[found.coef, found.intercept]
+
+    @property
+    def contact(self) -> HandContact | None:
+        """What the model learnt of the hands' contact (``contact_weight`` above 0 and
+        contact in the training takes), else None."""
+        if not self.contact_weight or getattr(self, "contact_hand_", -1) < 0:
+            return None
+        coef = np.asarray(self.contact_coef_, dtype=float)
+        return HandContact(
+            int(self.contact_hand_), np.asarray(self.contact_offset_, float), coef[:3], coef[3]
+        )
+
+    def compared_names(self) -> list[str]:
+        """Names of the points people are compared by (:meth:`body_positions`)."""
+        if self.uses_markers:
+            return list(self.marker_names_b_)
+        return list(BODY_POINTS) if self.points == "body" else list(self.skeleton_b_.names)
 
     def _motion_features(
         self, pairs: Sequence[tuple[Motion, Motion]], groups: Sequence[str] | None = None
@@ -658,6 +717,15 @@ class DualHMM(Model):
             check_shape("reg_means_a_", self.reg_means_a_, (n, da))
             check_shape("reg_means_b_", self.reg_means_b_, (n, db))
             check_shape("reg_gains_", self.reg_gains_, (n, db, da))
+        if getattr(self, "contact_weight", 0):
+            require(self, *_CONTACT)
+            check_shape("contact_offset_", self.contact_offset_, (3,))
+            check_shape("contact_coef_", self.contact_coef_, (4,))
+            hand = self.contact_hand_
+            if not isinstance(hand, int | np.integer) or not -1 <= hand < len(
+                self.compared_names()
+            ):
+                raise StateError(f"contact_hand_: not a point's index, got {hand!r}")
         if on_markers:
             self._check_marker_state(t)
             return
@@ -785,7 +853,14 @@ class DualHMM(Model):
         if self.uses_markers:
             motion = self.input_markers(motion)
         missing = ~finite_frames(motion)
-        return self.pipeline_a_.transform([_fill_missing(motion, missing)])[0], missing
+        data = [_fill_missing(motion, missing)]
+        for step in self.pipeline_a_.steps:  # a missing frame, filled, is not A's running mean's
+            data = (
+                [step.centre(data[0], ~missing)]
+                if isinstance(step, RunningCentre)
+                else (step.transform(data))
+            )
+        return data[0], missing
 
     def score(self, motion_a: Motion) -> float:
         """log P(A's features | lambda_A): how well the model knows person A's motion.
@@ -838,7 +913,28 @@ class DualHMM(Model):
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
         placed = self.placing(_fill_missing(motion_a, missing), method, lift)
-        return self.frames_to_motion(idx, *placed, root, rot)
+        out = self.frames_to_motion(idx, *placed, root, rot)
+        contact = self.contact
+        if contact is None:
+            return out
+        a = self.body_positions(_fill_missing(motion_a, missing))
+        shifts = contact.shifts(a, placed[1], self.body_positions(out))
+        shifts[missing] = np.nan  # no evidence where A was not seen (as online)
+        return self.moved(out, contact_shifts(shifts, self.contact_weight, self.contact_memory))
+
+    @property
+    def contact_memory(self) -> int | None:
+        """Frames over which the contact's shifts are averaged: ``place_memory`` (all: 0)."""
+        return int(self.place_memory) or None
+
+    @staticmethod
+    def moved(b: Motion | Markers, shift: np.ndarray) -> Motion | Markers:
+        """B moved by ``shift`` (F, 3) mm, in place: a Markers' positions, a Motion's root."""
+        if isinstance(b, Markers):
+            b.positions[...] = b.positions + shift[:, None]
+        else:
+            b.translations[:, 0] += shift
+        return b
 
     def regression_positions(
         self, states: Sequence[int], xa: Sequence[np.ndarray | None]

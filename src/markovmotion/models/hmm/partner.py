@@ -29,6 +29,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
 from markovmotion.features.markers import Lift, MarkerFeatures
 from markovmotion.features.person import OnlineCentre, RunningCentre
+from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
 from markovmotion.progress import err_console
@@ -61,12 +62,15 @@ class SeenA:
         features: per frame A's features (Da,), or None for a missing frame (NaN).
         origin: (F, 3) where A stands (mm), B is placed by it.
         yaw: (F,) A's heading (radians).
+        points: (F, P, 3) A's compared points for ``contact_weight`` (NaN where missing),
+            else None.
     """
 
     log_b: np.ndarray
     features: list[np.ndarray | None]
     origin: np.ndarray
     yaw: np.ndarray
+    points: np.ndarray | None = None
 
 
 class Partner:
@@ -121,6 +125,13 @@ class Partner:
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
         self._unseen = np.zeros(len(hmm.means_))  # log b_j of a missing frame: no evidence
+        # contact_weight: A's compared points per frame (a ring beside the places; NaN: not
+        # seen) and the running mean of the contact's shifts (DualHMM.respond's, online)
+        self._contact = model.contact
+        if self._contact is not None:
+            points = len(model.compared_names())
+            self._a_points = np.full((len(self._places), points, 3), np.nan)
+            self._moves = OnlineContact(float(model.contact_weight), model.contact_memory)
 
     @property
     def skeleton(self) -> Skeleton | None:
@@ -143,7 +154,14 @@ class Partner:
         row = self._places[self._places_in % len(self._places)]
         row[:3], row[3] = place
         row[4], row[5] = math.cos(place[1]), math.sin(place[1])
+        if self._contact is not None:  # A's points unseen until _see_points says otherwise
+            self._a_points[self._places_in % len(self._places)] = np.nan
         self._places_in += 1
+
+    def _see_points(self, points: np.ndarray) -> None:
+        """A's compared points (P, 3) of the frame just added (``contact_weight``)."""
+        if self._contact is not None:
+            self._a_points[(self._places_in - 1) % len(self._places)] = points
 
     def step_log_frameprob(
         self, log_b: np.ndarray, xa: np.ndarray | None
@@ -260,9 +278,10 @@ class Partner:
             pos = frame.positions()
             origin, yaw = self.model.ground(frame, pos)
         self._place = (origin[0], float(yaw[0]))
-        return self._motion(
-            self.step_features(self._features(frame, pos, origin, yaw), self._place)
-        )
+        shown = self.step_features(self._features(frame, pos, origin, yaw), self._place)
+        if self._contact is not None:
+            self._see_points(self.model.body_positions(frame)[0])
+        return self._motion(shown)
 
     def _features(
         self, frame: Motion | Markers, pos: np.ndarray, origin: np.ndarray, yaw: np.ndarray
@@ -317,7 +336,12 @@ class Partner:
         for array in (xa, log_b, origin, yaw):  # shared by the sessions streaming the motion
             array.flags.writeable = False
         seen = [None if m else x for x, m in zip(xa, missing, strict=True)]
-        return SeenA(log_b, seen, origin, yaw)
+        points = None
+        if self._contact is not None:
+            points = self.model.body_positions(motion)
+            points[missing] = np.nan
+            points.flags.writeable = False
+        return SeenA(log_b, seen, origin, yaw, points)
 
     def step_seen(self, seen: SeenA, t: int) -> Motion | Markers | None:
         """:meth:`step` for frame ``t`` of A's motion seen by :meth:`see` (a missing frame,
@@ -326,6 +350,8 @@ class Partner:
             return self.skip()
         self._place = (seen.origin[t], float(seen.yaw[t]))
         self._add_place(self._place)
+        if seen.points is not None:
+            self._see_points(seen.points[t])
         return self._motion(self.step_log_frameprob(seen.log_b[t], seen.features[t]))
 
     def skip(self) -> Motion | Markers | None:
@@ -341,6 +367,8 @@ class Partner:
         self._add_place(self._place)
         if self._advance(self._unseen, None):
             self._shown_count += 1
+            if self._contact is not None:
+                self._moves.step(np.full(3, np.nan))
 
     def finish(self) -> list[Motion | Markers]:
         """B's frames still owed at the end of the stream."""
@@ -365,7 +393,12 @@ class Partner:
         if shown is None:
             return None
         origin, yaw = self._place_of(self._shown_count)
-        self._shown_count += 1
-        return self.model.frames_to_motion(
+        b = self.model.frames_to_motion(
             np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None], shown[2][None]
         )
+        if self._contact is not None:
+            a = self._a_points[self._shown_count % len(self._places)][None]
+            shift = self._contact.shifts(a, np.array([yaw]), self.model.body_positions(b))
+            b = self.model.moved(b, self._moves.step(shift[0])[None])
+        self._shown_count += 1
+        return b
