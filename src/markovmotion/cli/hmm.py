@@ -98,6 +98,13 @@ OUTPUT = typer.Option(
     help="B as real training frames through the trellis ('frames', the paper's) or, on "
     "markers, as the state-conditional regression on A ('regression').",
 )
+CONTACT_WEIGHT = ranged(
+    "weight",
+    0.0,
+    help="Where A's right hand is out to B's, how far B is moved toward where its hand meets "
+    "A's as the training pairs' hands met (0: the paper's placement; docs/hmm.md, 'The "
+    "hands' contact').",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 INITIAL = typer.Option(
@@ -143,7 +150,7 @@ MODEL_OPTIONS = {
             "mode", "observation", "candidates", "placement_window", "place_memory", "blend_window",
             "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
-            "normalise", "output",
+            "normalise", "output", "contact_weight",
             "covariance_type", "var_floor",
         )
     },
@@ -188,6 +195,7 @@ def train(
     markers: int = MARKERS,
     normalise: str = NORMALISE,
     output: str = OUTPUT,
+    contact_weight: float = CONTACT_WEIGHT,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,
@@ -518,6 +526,7 @@ def crossval(
     markers: int = MARKERS,
     normalise: str = NORMALISE,
     output: str = OUTPUT,
+    contact_weight: float = CONTACT_WEIGHT,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,

@@ -106,6 +106,8 @@ RANGES: dict[str, Range] = {
     "count": Range(1, 10_000),
     # fractions of variance (PCA energy) kept
     "fraction": Range(0, 1, lo_open=True),
+    # weights of a blend, 0 (none) to 1
+    "weight": Range(0, 1),
     # titles and labels drawn on pictures
     "title": Range(0, None, max_length=200),
 }
