@@ -101,8 +101,8 @@ def handshake_step(out: Path, index: MocapIndex, console: Console) -> list[Path]
 def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """A handshake of people the partner has never seen: a dual HMM of the markers-only
     handshakes of every other pair of people (both roles, ``normalise="person"``,
-    ``output="regression"``, ``place_memory=300``: docs/hmm.md, "New people") answers the last
-    pair's first take."""
+    ``output="regression"``, ``place_memory=300``, ``energy=0.99``, ``contact_weight=1``:
+    docs/hmm.md, "New people") answers the last pair's first take."""
     pairs = index.pairs(label=[HANDSHAKE], kind="markers")
     people = sorted({a.subject for a, _ in pairs})
     if len(people) < 2:
@@ -114,7 +114,14 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
     takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
     takes = both_roles(takes)
     # the setting `dualhmm train --choose` picks for handshakes (docs/hmm.md, "New people")
-    model = DualHMM(normalise="person", output="regression", place_memory=300, frame="heading")
+    model = DualHMM(
+        normalise="person",
+        output="regression",
+        place_memory=300,
+        frame="heading",
+        energy=0.99,
+        contact_weight=1.0,
+    )
     model.fit([(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2)
     a, b = (m.resample(model.fps) for m in index.load_pair(*test))
     virtual = model.respond(a, "windowed")

@@ -397,6 +397,7 @@ def describe(model: DualHMM) -> dict:
         "place_memory": model.place_memory,
         "normalise": model.normalise,
         "output": model.output,
+        "contact_weight": model.contact_weight,
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))
