@@ -278,12 +278,13 @@ def points_motion(points: np.ndarray, fps: float, name: str = "points") -> Motio
 def bone_lengths(points: np.ndarray) -> np.ndarray:
     """(P,) each body point's median distance (mm) from its parent (:data:`POINT_PARENTS`)
     over the frames (F, P, 3) where both are finite; NaN for the pelvis."""
+    parents = np.asarray(POINT_PARENTS)
+    child = np.nonzero(parents >= 0)[0]
+    d = np.linalg.norm(points[:, child] - points[:, parents[child]], axis=-1)
     out = np.full(len(POINT_PARENTS), np.nan)
-    for j, parent in enumerate(POINT_PARENTS):
-        if parent >= 0:
-            d = np.linalg.norm(points[:, j] - points[:, parent], axis=-1)
-            if np.isfinite(d).any():
-                out[j] = np.nanmedian(d)
+    seen = np.isfinite(d).any(axis=0)
+    if seen.any():
+        out[child[seen]] = np.nanmedian(d[:, seen], axis=0)
     return out
 
 

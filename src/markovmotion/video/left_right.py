@@ -303,11 +303,11 @@ class OnlineSides:
         l1, l2 = self._labels[k]
         change = (label != l1).astype(int)
         cost = SWITCH_COST * change + SWAPPED_COST * label
+        both, other = self._swaps[k]  # rows left + right, and right + left
         for lag, (before, seen) in enumerate(self._before[k], start=1):  # from t-1, t-2
-            w = np.minimum(seen, vis) * inverse
-            wl, wr = w[left], w[right]
-            same = wl @ _dist(points[left], before[left]) + wr @ _dist(points[right], before[right])
-            swap = wl @ _dist(points[left], before[right]) + wr @ _dist(points[right], before[left])
+            w = (np.minimum(seen, vis) * inverse)[both]
+            now = points[both]
+            same, swap = w @ _dist(now, before[both]), w @ _dist(now, before[other])
             if np.isfinite(same) and np.isfinite(swap):
                 moved = change if lag == 1 else (label != l2).astype(int)
                 cost += np.array([same, swap])[moved]
