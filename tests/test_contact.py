@@ -141,3 +141,14 @@ def test_contact_weight_is_checked():
     for bad in (-0.1, 1.5, "half", float("nan")):
         with pytest.raises(ValueError, match="contact_weight must be 0 to 1"):
             DualHMM(contact_weight=bad).check_params()
+
+
+def test_train_says_when_there_is_no_contact_to_learn(tmp_path, capsys):
+    """Waves: nobody's hands touch, so --contact-weight learns nothing, and says so."""
+    from markovmotion.cli import main
+
+    out = tmp_path / "wave.npz"
+    main(["dualhmm", "train", "--labels", "wave", "--kind", "markers", "--states", "4",
+          "--n-iter", "3", "--contact-weight", "1", "--out", str(out)])  # fmt: skip
+    assert "no frames whose right hands touch" in capsys.readouterr().err
+    assert Model.load(out).contact is None

@@ -231,6 +231,14 @@ def train(
             f"(worst of {len(inner)}: {max(inner.values()):.1f} mm)",
             highlight=False,
         )
+    if model.contact_weight and model.contact is None:
+        from markovmotion.models.hmm.contact import CONTACT_MM
+
+        err_console.print(
+            "note: --contact-weight: the training takes hold no frames whose right hands touch "
+            f"(closer than {CONTACT_MM:g} mm): B is placed without the contact",
+            highlight=False,
+        )
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
     both = " in both roles" if extras["roles"] == "both" else ""
