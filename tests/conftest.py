@@ -125,3 +125,16 @@ def needs_mediapipe() -> None:
         import mediapipe  # noqa: F401
     except ImportError:
         pytest.fail("the camera tests need MediaPipe: run scripts/install-camera", pytrace=False)
+
+
+def assert_seen_streams_as_stepped(model, a) -> None:
+    """A dual HMM's partner fed ``a`` seen at once (:meth:`Partner.see`, the live page's
+    path) gives, frame by frame, what stepping it frame by frame gives."""
+    stepped, streamed = model.partner(), model.partner()
+    seen = streamed.see(a)
+    assert seen is not None
+    for t in range(a.n_frames):
+        one, other = stepped.step(a.trim(t, t + 1)), streamed.step_seen(seen, t)
+        assert (one is None) == (other is None)
+        if one is not None:
+            np.testing.assert_allclose(other.positions, one.positions, atol=1e-9)

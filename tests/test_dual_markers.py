@@ -24,6 +24,7 @@ from markovmotion.io.bvh import write_bvh
 from markovmotion.io.c3d import read_c3d, write_c3d
 from markovmotion.models.base import Model
 from markovmotion.models.hmm.dual import DualHMM
+from tests.conftest import assert_seen_streams_as_stepped
 
 FRAMES = 360  # of each real take used (120 fps: 3 s, 90 frames at the model's 30 fps)
 
@@ -154,13 +155,7 @@ def test_the_online_partner_streams_what_windowed_respond_gives(model, marker_ta
 def test_markers_seen_at_once_stream_what_stepping_them_gives(model, marker_takes, capsys):
     a = model._rate(marker_takes[2][0])
     a.positions[10:13, 4] = np.nan
-    stepped, streamed = model.partner(), model.partner()
-    seen = streamed.see(a)
-    for t in range(a.n_frames):
-        one, other = stepped.step(a.trim(t, t + 1)), streamed.step_seen(seen, t)
-        assert (one is None) == (other is None)
-        if one is not None:
-            np.testing.assert_allclose(other.positions, one.positions, atol=1e-9)
+    assert_seen_streams_as_stepped(model, a)
     capsys.readouterr()
 
 
