@@ -19,7 +19,11 @@ Kinds: ``--kinds salsa,bend`` or, by default, chosen from INDEX.csv at run time:
 category of skeleton takes, the label with the most takes (ties: the first listed).
 
     python3 benchmarks/held_out_kind.py [--data DIR] [--kinds A,B] [--seconds 3] [--start 1]
-        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--json]
+        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--guide none] [--json]
+
+``--guide mediapipe``: MediaPipe's landmarks in every view guide the filter, as ``track
+--guide mediapipe`` does (``track_video(..., guide=True)``); ``guide_seconds`` (MediaPipe's
+time, not in frames/s) and ``seen`` (share of views and frames with landmarks) are reported.
 """
 
 from __future__ import annotations
@@ -39,11 +43,7 @@ from rich.table import Table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.features.body_points import BODY_POINTS, body_points
-from markovmotion.video.annealed_particle_filter import (
-    AnnealedParticleFilter,
-    open_video,
-    track_features,
-)
+from markovmotion.video.annealed_particle_filter import track_video
 from markovmotion.video.multiview import (
     collection_body_model,
     render_multiview,
@@ -96,6 +96,8 @@ def main() -> None:
                         help="body models to run, comma-separated")  # fmt: skip
     parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
+    parser.add_argument("--guide", choices=("none", "mediapipe"), default="none",
+                        help="what guides the particle filter besides the images")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
 
@@ -109,7 +111,11 @@ def main() -> None:
             raise SystemExit(f"no skeleton take labelled {kind!r} in {index.root}")
         take = takes[0]
         t0 = time.perf_counter()
-        new = collection_body_model(args.data, leave_out=(kind,))
+        new = (
+            collection_body_model(args.data, leave_out=(kind,))
+            if "collection" in args.models.split(",")
+            else None
+        )
         build = time.perf_counter() - t0
         start = min(args.start, max(0.0, take.frames / take.fps - 0.1 - args.seconds))
         folder = args.cache / f"{take.name}-{start:g}-{args.seconds:g}s"
@@ -119,28 +125,31 @@ def main() -> None:
         for name, body in (("interaction (old)", old), ("collection without it", new)):
             if name.split()[0] not in args.models.split(","):
                 continue
-            errs, limbs, fps = [], [], []
+            errs, limbs, fps, guide_s, seen = [], [], [], [], []
             low = floor(body, body_points(truth)[: int(round(args.seconds * FPS)) : 3])
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                mv = open_video(folder)
-                apf = AnnealedParticleFilter(body, mv.cameras, 200, 10, fps=mv.fps, seed=seed)
-                result = track_features(mv.features(seed), apf)
+                result = track_video(folder, body, seed=seed, guide=args.guide == "mediapipe")
                 motion = body.motion(result.states, result.fps)
                 e = tracking_errors(motion, truth)
                 errs.append(e["mpjpe_mm"])
                 limbs.append(np.mean([e["per_joint_mm"][p] for p in GUIDE_POINTS]))
                 fps.append(len(result.states) / result.seconds)
+                guide_s.append(result.guide_seconds)
+                seen.append(result.guide_seen if result.guide_seen is not None else np.nan)
             rows.append(
                 {
                     "kind": kind,
                     "take": take.file,
                     "body_model": name,
+                    "guide": args.guide,
                     "mpjpe_mm": round(float(np.mean(errs)), 1),
                     "mpjpe_runs": errs,
                     "limbs_mm": round(float(np.mean(limbs)), 1),
                     "floor_mm": round(float(low.mean()), 1),
                     "floor_limbs_mm": round(float(low[:, LIMBS].mean()), 1),
                     "fps": round(float(np.mean(fps)), 2),
+                    "guide_seconds": round(float(np.mean(guide_s)), 1),
+                    "guide_seen": round(float(np.mean(seen)), 3) if args.guide != "none" else None,
                     "build_seconds": round(build, 1) if name != "interaction (old)" else None,
                     "load": round(os.getloadavg()[0], 1),
                 }
@@ -150,16 +159,21 @@ def main() -> None:
     if args.json:
         print(json.dumps({"rows": rows, "cpus": os.cpu_count(), "seconds": args.seconds}))
         return
-    table = Table(title=f"Held-out kinds ({args.seconds:g} s from {args.start:g} s, 3 views)")
+    table = Table(
+        title=f"Held-out kinds ({args.seconds:g} s from {args.start:g} s, 3 views, "
+        f"guide {args.guide})"
+    )
     cols = ("kind", "take", "body model", "MPJPE mm", "runs", "limbs mm", "floor", "floor limbs",
-            "frames/s", "load")  # fmt: skip
+            "frames/s", "guide s", "seen", "load")  # fmt: skip
     for col in cols:
         table.add_column(col)
     for r in rows:
         table.add_row(
             r["kind"], Path(r["take"]).name, r["body_model"], f"{r['mpjpe_mm']:.1f}",
             " ".join(f"{e:.0f}" for e in r["mpjpe_runs"]), f"{r['limbs_mm']:.1f}",
-            f"{r['floor_mm']:.1f}", f"{r['floor_limbs_mm']:.1f}", f"{r['fps']:.2f}", str(r["load"]),
+            f"{r['floor_mm']:.1f}", f"{r['floor_limbs_mm']:.1f}", f"{r['fps']:.2f}",
+            f"{r['guide_seconds']:.1f}", "-" if r["guide_seen"] is None else f"{r['guide_seen']:.2f}",
+            str(r["load"]),
         )  # fmt: skip
     Console().print(table)
 

@@ -220,4 +220,5 @@ def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
           "--guide", "mediapipe"])  # fmt: skip
     s = json.loads(capsys.readouterr().out)
     assert s["guide"] == "mediapipe" and s["guide_seconds"] >= 0.0
+    assert 0.0 <= s["guide_seen"] <= 1.0
     assert s["frames"] == 3 and 0 < s["fps_with_guide"] <= s["fps"]

@@ -744,6 +744,9 @@ class TrackResult:
     flipped: int = 0
     #: Seconds MediaPipe took over every view for the guide (before the clock starts).
     guide_seconds: float = 0.0
+    #: Share of (view, frame) pairs in which the guide has a landmark to pull towards
+    #: (MediaPipe found the person and triangulation kept the view); None without a guide.
+    guide_seen: float | None = None
 
 
 def multiview_frames(
@@ -884,7 +887,8 @@ def track_video(
     every camera catch front/back flips (:mod:`markovmotion.video.sides`); with ``guide``,
     MediaPipe's landmarks in every camera, triangulated to reject the views that disagree,
     guide the filter (:mod:`markovmotion.video.triangulation`). MediaPipe runs before the
-    clock starts (``guide_seconds`` of the result)."""
+    clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
+    frames it gave the filter landmarks in)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = guided = None
     if sides or guide:  # MediaPipe once over every camera, for both uses
@@ -901,4 +905,6 @@ def track_video(
     result = track_features(mv.features(seed), apf)
     result.background_notes = mv.background_notes
     result.guide_seconds = guided.seconds if guided is not None else 0.0
+    if guided is not None:
+        result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())
     return result

@@ -315,7 +315,8 @@ def track_take(
     (:func:`~markovmotion.video.annealed_particle_filter.track_video`); the summary then has
     ``flips`` (frames searched again) and ``left_flipped`` (frames left flipped).
     ``guide``: MediaPipe in every view guides the filter; the summary then has
-    ``guide_seconds`` (MediaPipe's time, not in ``fps``) and ``fps_with_guide``.
+    ``guide_seconds`` (MediaPipe's time, not in ``fps``), ``guide_seen`` (the share of views
+    and frames with landmarks to pull towards) and ``fps_with_guide``.
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -342,6 +343,7 @@ def track_take(
             {
                 "guide": "mediapipe",
                 "guide_seconds": round(result.guide_seconds, 1),
+                "guide_seen": round(result.guide_seen or 0.0, 3),
                 "fps_with_guide": round(
                     len(result.states) / max(result.seconds + result.guide_seconds, 1e-9), 2
                 ),
