@@ -835,17 +835,28 @@ class DualHMM(Model):
             return Markers(self.marker_names_b_, self.markers_b_.astype(float), self.fps, "B")
         return self.expmaps_b_.inverse_transform([self.frames_b_.astype(float)])[0]
 
-    def body_positions(self, motion: Motion | Markers, body_centred: bool = False) -> np.ndarray:
+    def body_positions(
+        self,
+        motion: Motion | Markers,
+        body_centred: bool = False,
+        positions: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(F, P, 3) the positions (mm) people are compared by: the body points (world or
         body-centred), or every joint with ``points="all"``. A marker model compares B's
-        markers (a Motion gets its virtual markers), world or about their own ground frame."""
+        markers (a Motion gets its virtual markers), world or about their own ground frame.
+        ``positions``: a Motion's world joint positions, if already computed (not used for
+        body-centred positions nor on markers)."""
         if self.uses_markers:
             markers = self.as_markers(motion).select(self.marker_names_b_)
             step = MarkerFeatures(body_centred=body_centred).fit([markers])
             return step.pose(markers)
+        if body_centred:
+            positions = None
         if self.points == "all":
+            if positions is not None:
+                return positions
             return motion.body_centred_positions() if body_centred else motion.positions()
-        return body_points(motion, BODY_POINTS, body_centred=body_centred)
+        return body_points(motion, BODY_POINTS, body_centred=body_centred, positions=positions)
 
     def features_a(self, motion: Motion | Markers) -> tuple[np.ndarray, np.ndarray]:
         """A's model features (F, Da) at the model's rate and which frames are missing (NaN;
@@ -854,12 +865,11 @@ class DualHMM(Model):
             motion = self.input_markers(motion)
         missing = ~finite_frames(motion)
         data = [_fill_missing(motion, missing)]
-        for step in self.pipeline_a_.steps:  # a missing frame, filled, is not A's running mean's
-            data = (
-                [step.centre(data[0], ~missing)]
-                if isinstance(step, RunningCentre)
-                else (step.transform(data))
-            )
+        for step in self.pipeline_a_.steps:
+            if isinstance(step, RunningCentre):  # a missing frame, filled, is not in A's mean
+                data = [step.centre(data[0], ~missing)]
+            else:
+                data = step.transform(data)
         return data[0], missing
 
     def score(self, motion_a: Motion) -> float:

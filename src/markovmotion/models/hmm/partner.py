@@ -279,8 +279,9 @@ class Partner:
             origin, yaw = self.model.ground(frame, pos)
         self._place = (origin[0], float(yaw[0]))
         shown = self.step_features(self._features(frame, pos, origin, yaw), self._place)
-        if self._contact is not None:
-            self._see_points(self.model.body_positions(frame)[0])
+        if self._contact is not None:  # a Motion's joint positions are computed already
+            known = None if isinstance(frame, Markers) else pos
+            self._see_points(self.model.body_positions(frame, positions=known)[0])
         return self._motion(shown)
 
     def _features(
