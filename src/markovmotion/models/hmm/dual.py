@@ -922,12 +922,13 @@ class DualHMM(Model):
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
-        placed = self.placing(_fill_missing(motion_a, missing), method, lift)
+        filled = _fill_missing(motion_a, missing)
+        placed = self.placing(filled, method, lift)
         out = self.frames_to_motion(idx, *placed, root, rot)
         contact = self.contact
         if contact is None:
             return out
-        a = self.body_positions(_fill_missing(motion_a, missing))
+        a = self.body_positions(filled)
         shifts = contact.shifts(a, placed[1], self.body_positions(out))
         shifts[missing] = np.nan  # no evidence where A was not seen (as online)
         return self.moved(out, contact_shifts(shifts, self.contact_weight, self.contact_memory))
