@@ -42,11 +42,14 @@ function send() {
   grab.getContext("2d").drawImage(video, 0, 0, grab.width, grab.height);
   session.pending.push(t);
   session.sent += 1;
+  const socket = ws; // the socket this frame is for: the page may stop while it is encoded
   grab.toBlob(async (blob) => {
-    if (!ws || ws.readyState !== WebSocket.OPEN) return;
+    if (!blob || !socket || socket.readyState !== WebSocket.OPEN) return;
     const data = await blob.arrayBuffer();
+    // stopped (or closed) during the await: the frame is dropped, not sent to a closed socket
+    if (socket !== ws || socket.readyState !== WebSocket.OPEN) return;
     if (session) keep(session.encode, performance.now() - t); // grab + JPEG, ms
-    ws.send(data);
+    socket.send(data);
   }, "image/jpeg", 0.8);
 }
 
@@ -151,7 +154,8 @@ async function start() {
   session = null;
   setRunning(true);
   $("status").textContent = "Starting the tracker …";
-  ws.onopen = () => ws.send(JSON.stringify({ fov }));
+  const socket = ws;
+  socket.onopen = () => socket.send(JSON.stringify({ fov }));
   ws.onmessage = onMessage;
   ws.onclose = () => { if (ws) stopped(session ? `Stopped after ${session.frames} frames.` : ""); };
 }

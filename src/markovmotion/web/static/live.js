@@ -76,14 +76,15 @@ async function start() {
   ws = new WebSocket(`${proto}://${location.host}/ws/live`);
   session = null;
   setRunning(true);
-  ws.onopen = () => ws.send(JSON.stringify(request));
+  const socket = ws;
+  socket.onopen = () => socket.send(JSON.stringify(request));
   ws.onmessage = onMessage;
   ws.onclose = () => { if (ws) stopped(session ? `Stopped after ${session.frames} frames.` : ""); };
 }
 
 $("start").addEventListener("click", start);
 $("stop").addEventListener("click", () => {
-  if (ws) { ws.send(JSON.stringify({ type: "stop" })); }
+  if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ type: "stop" }));
 });
 $("upload").addEventListener("change", () => { if ($("upload").files[0]) $("motion").value = ""; });
 
