@@ -440,6 +440,22 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         page.click("#stop")
         page.wait_for_function("() => document.getElementById('start').disabled === false")
         assert not errors, errors
+        # Stopped while frames are being encoded: each JPEG now takes a second to read, so the
+        # socket closes with frames still in the encoder; they are dropped, not sent (CI saw
+        # "Cannot read properties of null (reading 'send')" from this race).
+        page.evaluate(
+            """() => { const read = Blob.prototype.arrayBuffer;
+            Blob.prototype.arrayBuffer = function () {
+              return new Promise((done) => setTimeout(() => done(read.call(this)), 1000)); }; }"""
+        )
+        page.click("#start")
+        page.wait_for_function(
+            "() => Number(document.body.dataset.frames || 0) >= 2", timeout=60000
+        )
+        page.click("#stop")
+        page.wait_for_function("() => document.getElementById('start').disabled === false")
+        page.wait_for_timeout(2500)  # the frames in the encoder come out after the close
+        assert not errors, errors
         context.close()
     finally:
         fake.close()
