@@ -46,8 +46,12 @@ from __future__ import annotations
 
 import csv
 import os
+import sys
+import tempfile
+import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -112,8 +116,78 @@ def to_body_points(landmarks: np.ndarray) -> np.ndarray:
     return np.einsum("pl,...lc->...pc", LANDMARK_WEIGHTS, landmarks)
 
 
-def pose_estimator(static: bool = False):
-    """MediaPipe Pose with its bundled full landmark model (offline), or a one-line error.
+#: MediaPipe's start-up lines (its C++ logging, at the graph's creation and its first found
+#: person): benign, and held back by :func:`native_start_up_lines_held`.
+START_UP_LINES = (
+    "Created TensorFlow Lite XNNPACK delegate",
+    "All log messages before absl::InitializeLog",
+    "inference_feedback_manager.cc",
+    "landmark_projection_calculator.cc",
+    "gl_context",
+    "GPU suport",
+)
+_STDERR_HELD = threading.Lock()
+
+
+@contextmanager
+def native_start_up_lines_held() -> Iterator[None]:
+    """Hold what is written to file descriptor 2 in the block, then pass on every line except
+    MediaPipe's start-up lines (:data:`START_UP_LINES`).
+
+    Written here because nothing else reaches those lines: MediaPipe's C++ logging (absl)
+    writes them to the descriptor directly, and neither Python's logging nor the
+    environment variables ``GLOG_minloglevel`` / ``TF_CPP_MIN_LOG_LEVEL`` silence them
+    (google-ai-edge/mediapipe#5737). One block at a time in the process (a lock), so two
+    graphs started in two threads cannot leave the descriptor pointing at the wrong file.
+    Nothing else is lost: other lines written meanwhile, Python's too, come out after it."""
+    with _STDERR_HELD, tempfile.TemporaryFile() as held:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(held.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            for line in held.read().decode("utf-8", "replace").splitlines(keepends=True):
+                if not any(known in line for known in START_UP_LINES):
+                    sys.stderr.write(line)
+            sys.stderr.flush()
+
+
+class QuietPose:
+    """MediaPipe Pose whose start-up lines are held back (:func:`native_start_up_lines_held`):
+    at its creation, and in each frame until it has found a person the first time (the last
+    start-up line is written then). Afterwards frames go straight through."""
+
+    def __init__(self, make):
+        with native_start_up_lines_held():
+            self._pose = make()
+        self._starting = True
+
+    def process(self, rgb: np.ndarray):
+        if not self._starting:
+            return self._pose.process(rgb)
+        with native_start_up_lines_held():
+            res = self._pose.process(rgb)
+        self._starting = res.pose_landmarks is None
+        return res
+
+    def close(self) -> None:
+        self._pose.close()
+
+    def __enter__(self) -> QuietPose:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def pose_estimator(static: bool = False) -> QuietPose:
+    """MediaPipe Pose with its bundled full landmark model (offline), its start-up lines held
+    back (:class:`QuietPose`), or a one-line error.
 
     Raises:
         MotionFormatError: mediapipe is not installed (``scripts/install-camera``).
@@ -125,12 +199,14 @@ def pose_estimator(static: bool = False):
             "MediaPipe Pose (--method monocular or triangulate, --guide, --sides)",
             f"needs MediaPipe {MEDIAPIPE_VERSION}: run scripts/install-camera (pip install --no-deps mediapipe=={MEDIAPIPE_VERSION} absl-py attrs flatbuffers 'protobuf>=4.25.3,<5')",
         ) from None
-    return pose.Pose(
-        static_image_mode=static,
-        model_complexity=1,
-        smooth_landmarks=True,
-        min_detection_confidence=0.5,
-        min_tracking_confidence=0.5,
+    return QuietPose(
+        lambda: pose.Pose(
+            static_image_mode=static,
+            model_complexity=1,
+            smooth_landmarks=True,
+            min_detection_confidence=0.5,
+            min_tracking_confidence=0.5,
+        )
     )
 
 
