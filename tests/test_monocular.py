@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -62,6 +63,35 @@ def _standing_landmarks(rng: np.random.Generator, frames: int) -> np.ndarray:
     out = base + rng.normal(0, 30, (frames, *base.shape))
     out[:, [LANDMARKS.index(n) for n in FEET], 1] = 0.0
     return out + [500.0, 0.0, -300.0]
+
+
+def test_a_lens_over_the_real_video_is_undone_as_its_frames_are_read(real_video, tmp_path):
+    """Camera 0's real frames seen through a barrel lens (k1 = -0.3, OpenCV's model; written
+    losslessly), read with that camera's distortion in cameras.json, are the original frames
+    again (within resampling), where read as they are they are not."""
+    import cv2
+
+    from markovmotion.video.cameras import load_cameras, save_cameras
+    from markovmotion.video.render import write_video
+
+    (cam, *_), doc = load_cameras(real_video)
+    lens = replace(cam, distortion=(-0.3, 0.1, 0.0, 0.0, 0.0), background="", video="frames")
+    w, h = cam.width, cam.height
+    grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1).astype(np.float32)
+    seen = cv2.undistortPoints(grid.reshape(-1, 1, 2), cam.K, np.array(lens.distortion), P=cam.K)
+    maps = seen.reshape(h, w, 2)
+    original = [f for _, f in zip(range(2), read_frames(real_video / cam.video), strict=False)]
+    write_video([cv2.remap(f, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR) for f in original],
+                tmp_path / "frames", doc["fps"])  # fmt: skip
+    save_cameras([lens], tmp_path / "cameras.json", doc["fps"])
+    (back,), _ = load_cameras(tmp_path)
+    centre = (slice(h // 6, 5 * h // 6), slice(w // 6, 5 * w // 6))
+    for k, (fixed, raw) in enumerate(
+        zip(read_frames(tmp_path / "frames", back), read_frames(tmp_path / "frames"), strict=True)
+    ):
+        truth = original[k].astype(float)[centre]
+        assert np.abs(fixed.astype(float)[centre] - truth).mean() < 3.0
+        assert np.abs(raw.astype(float)[centre] - truth).mean() > 6.0
 
 
 def test_landmark_weights_make_the_named_points():

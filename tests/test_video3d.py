@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -43,6 +44,45 @@ def test_camera_file_round_trip(tmp_path):
     assert path == tmp_path / "cameras.json"
 
 
+def test_a_distorted_camera_reads_its_frames_as_its_pinhole_image(tmp_path):
+    """Dots drawn where a lens with barrel distortion puts known points (OpenCV's model) are
+    read back where the camera's pinhole projection puts them; the distortion survives
+    cameras.json; a frame of another size is one error naming the video."""
+    import cv2
+
+    from markovmotion.video.render import read_frames, write_video
+
+    (cam,) = ring_of_cameras(np.zeros(3), 3000.0, 1, (320, 240))
+    dist = [-0.25, 0.08, 0.001, -0.002, 0.0]
+    grid = [(u, v) for u in (30, 110, 210, 290) for v in (25, 120, 215)]  # out to the corners
+    pts = np.array([cam.centre + 3000.0 * cam.ray(np.array(p, float)) for p in grid])
+    seen, _ = cv2.projectPoints(pts, cv2.Rodrigues(cam.R)[0], cam.t, cam.K, np.array(dist))
+    frame = np.zeros((240, 320, 3), np.uint8)
+    for u, v in seen[:, 0]:
+        cv2.circle(
+            frame, (round(u * 16), round(v * 16)), 3 * 16, (255, 255, 255), -1, cv2.LINE_AA, 4
+        )
+    frames = tmp_path / "frames"
+    write_video([frame, frame], frames, 25.0)  # PNG frames: lossless
+    save_cameras([replace(cam, distortion=tuple(dist))], tmp_path / "cameras.json", 25.0)
+    (back,), _ = load_cameras(tmp_path)
+    assert back.distortion == pytest.approx(dist)
+    got = next(read_frames(frames, back))[..., 0].astype(float)
+    pinhole, _ = cam.project(pts)
+    moved = np.linalg.norm(seen[:, 0] - pinhole, axis=1)
+    assert moved.max() > 8  # the lens moves the dots, by up to this many pixels
+    for (u, v), d in zip(pinhole, moved, strict=True):  # each dot's centre, back where it belongs
+        x0, y0 = int(u) - 8, int(v) - 8
+        patch = got[y0 : y0 + 17, x0 : x0 + 17]
+        ys, xs = np.mgrid[y0 : y0 + 17, x0 : x0 + 17]
+        centre = np.array([(xs * patch).sum(), (ys * patch).sum()]) / patch.sum()
+        assert np.linalg.norm(centre - [u, v]) < 0.5, d
+    small = tmp_path / "small"
+    write_video([frame[:200]], small, 25.0)
+    with pytest.raises(MotionFormatError, match="frame 0 is 320x200, camera cam0 is 320x240"):
+        next(read_frames(small, back))
+
+
 def test_camera_looks_at_its_target():
     cam = look_at(np.array([0.0, 1500.0, -4000.0]), np.array([0.0, 900.0, 0.0]), 320, 240, 300.0)
     pix, depth = cam.project(np.array([[0.0, 900.0, 0.0], [0.0, 1900.0, 0.0]]))
@@ -56,7 +96,9 @@ def test_camera_looks_at_its_target():
         (lambda d: d.update(cameras=3), "'cameras' must be a list"),
         (lambda d: d["cameras"][0].update(K=[[1, 0], [0, 1]]), "K must be"),
         (lambda d: d["cameras"][0].update(R=[[2, 0, 0], [0, 1, 0], [0, 0, 1]]), "not a rotation"),
-        (lambda d: d["cameras"][0].update(distortion=[0.1, 0, 0, 0, 0]), "distortion"),
+        (lambda d: d["cameras"][0].update(distortion=[0.1, 0, 0]), "distortion must be a list"),
+        (lambda d: d["cameras"][0].update(distortion=[0.1, 0, 0, "x"]), "distortion must be"),
+        (lambda d: d["cameras"][0].update(distortion=[1e9, 0, 0, 0, 0]), "beyond"),
         (lambda d: d["cameras"][0].update(width=-5), "width and height"),
         (lambda d: d["cameras"][0].update(t=["a", 0, 0]), ".t must be"),
     ],

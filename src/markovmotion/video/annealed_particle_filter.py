@@ -86,21 +86,25 @@ STATURE = 1700.0
 
 # ----------------------------------------------------------------------------- image features
 def estimate_background(
-    video: str | os.PathLike[str], frames: int = BACKGROUND_FRAMES
+    video: str | os.PathLike[str],
+    frames: int = BACKGROUND_FRAMES,
+    camera: CalibratedCamera | None = None,
 ) -> np.ndarray:
-    """(H, W, 3) uint8 per-pixel median of up to ``frames`` frames spread over the video."""
+    """(H, W, 3) uint8 per-pixel median of up to ``frames`` frames spread over the video
+    (``camera``'s: undistorted, :func:`~markovmotion.video.render.read_frames`)."""
     from markovmotion.video.render import frame_count
 
     n = frame_count(video)
     keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
-    stack = [f for i, f in enumerate(read_frames(video)) if i in keep]
+    stack = [f for i, f in enumerate(read_frames(video, camera)) if i in keep]
     if not stack:
         raise MotionFormatError(video, "no frames in this video")
     return np.median(np.stack(stack), axis=0).astype(np.uint8)
 
 
-def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """An RGB image (H, W, 3) uint8 of ``size`` (W, H)."""
+def read_image(path: Path, camera: CalibratedCamera) -> np.ndarray:
+    """An RGB image (H, W, 3) uint8 of ``camera``'s size (W, H), undistorted as its frames."""
+    size = (camera.width, camera.height)
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise MotionFormatError(path, "not an image")
@@ -108,7 +112,9 @@ def read_image(path: Path, size: tuple[int, int]) -> np.ndarray:
         raise MotionFormatError(
             path, f"background is {img.shape[1]}x{img.shape[0]}, camera {size[0]}x{size[1]}"
         )
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    rgb = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    fix = camera.undistorter()
+    return rgb if fix is None else fix(rgb)
 
 
 def _sobel(smooth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -750,10 +756,14 @@ class TrackResult:
 
 
 def multiview_frames(
-    videos: Sequence[Path], max_frames: int | None = None
+    videos: Sequence[Path],
+    max_frames: int | None = None,
+    cameras: Sequence[CalibratedCamera] | None = None,
 ) -> Iterator[list[np.ndarray]]:
-    """One frame per camera at a time, until the shortest video ends."""
-    readers = [read_frames(v) for v in videos]
+    """One frame per camera at a time, until the shortest video ends (undistorted by their
+    ``cameras``, :func:`~markovmotion.video.render.read_frames`)."""
+    cams = list(cameras) if cameras is not None else [None] * len(videos)
+    readers = [read_frames(v, c) for v, c in zip(videos, cams, strict=True)]
     n = 0
     for frames in zip(*readers, strict=False):
         if max_frames is not None and n >= max_frames:
@@ -825,18 +835,18 @@ def open_video(
     backgrounds, notes = [], []
     for v, b, c in zip(videos, images, cameras, strict=True):
         if b is not None:
-            backgrounds.append(read_image(b, (c.width, c.height)))
+            backgrounds.append(read_image(b, c))
         elif learn_background and _has_mediapipe():
             from markovmotion.video.background import learn_background as learn
 
-            _, learnt, check = learn(v, BACKGROUND_FRAMES)
+            _, learnt, check = learn(v, BACKGROUND_FRAMES, c)
             backgrounds.append(learnt)
             notes.append(check.message(c.name) + "; using the median where the person is not")
         else:
-            backgrounds.append(estimate_background(v))
+            backgrounds.append(estimate_background(v, camera=c))
             why = "" if not learn_background else " (MediaPipe not installed)"
             notes.append(f"{c.name}: median background, not checked for the person{why}")
-    frames = multiview_frames(videos, max_frames)
+    frames = multiview_frames(videos, max_frames, cameras)
     return MultiviewVideo(
         cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes
     )

@@ -125,17 +125,19 @@ def person_background(frames: Sequence[np.ndarray], masks: np.ndarray) -> np.nda
     return np.round(clean).astype(np.uint8)
 
 
-def learn_background(video, frames: int = 31) -> tuple[np.ndarray, np.ndarray, BackgroundCheck]:
-    """The plain median of up to ``frames`` frames spread over ``video``, the background learnt
-    where MediaPipe Pose finds no person (:func:`person_background`), and the check of the plain
-    median (:func:`check_background`)."""
+def learn_background(
+    video, frames: int = 31, camera=None
+) -> tuple[np.ndarray, np.ndarray, BackgroundCheck]:
+    """The plain median of up to ``frames`` frames spread over ``video`` (``camera``'s:
+    undistorted), the background learnt where MediaPipe Pose finds no person
+    (:func:`person_background`), and the check of the plain median (:func:`check_background`)."""
     from markovmotion.errors import MotionFormatError
     from markovmotion.video.monocular import detect_landmarks
     from markovmotion.video.render import frame_count, read_frames
 
     n = frame_count(video)
     keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
-    stack = [f for i, f in enumerate(read_frames(video)) if i in keep]
+    stack = [f for i, f in enumerate(read_frames(video, camera)) if i in keep]
     if not stack:
         raise MotionFormatError(video, "no frames in this video")
     lm = detect_landmarks(stack)

@@ -2,8 +2,11 @@
 
 A camera maps world points (mm, Y up) to pixels (x right, y down, pixel
 centres at integer coordinates) by ``x_cam = R X + t`` and
-``u = fx x/z + cx``, ``v = fy y/z + cy`` (OpenCV's convention; no lens
-distortion). ``cameras.json`` lies beside the videos::
+``u = fx x/z + cx``, ``v = fy y/z + cy`` (OpenCV's convention). A camera with
+lens distortion (``distortion``: OpenCV's coefficients k1 k2 p1 p2 [k3 ...],
+4, 5, 8, 12 or 14 of them) has its frames undistorted as they are read
+(:meth:`CalibratedCamera.undistorter`), so everything after sees that pinhole
+camera. ``cameras.json`` lies beside the videos::
 
     {"units": "mm", "fps": 30.0,
      "cameras": [{"name": "cam0", "video": "cam0.mp4", "width": 320, "height": 240,
@@ -22,9 +25,11 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from markovmotion.errors import MotionFormatError
@@ -34,6 +39,10 @@ CAMERAS_FILE = "cameras.json"
 MAX_CAMERAS = 4
 MAX_SIDE = 4096
 MAX_JSON_BYTES = 1_000_000
+#: How many lens distortion coefficients OpenCV takes (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1-s4 [tx ty]]]]).
+DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
+#: Largest magnitude of a distortion coefficient accepted (real lenses: well under 10).
+MAX_DISTORTION = 1000.0
 
 
 @dataclass(frozen=True)
@@ -48,6 +57,22 @@ class CalibratedCamera:
     name: str = "cam"
     video: str = ""
     background: str = ""
+    #: OpenCV's lens distortion coefficients (k1 k2 p1 p2 [k3 ...]); () or zeros: none.
+    distortion: tuple[float, ...] = ()
+
+    def undistorter(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """None without lens distortion; else a function that makes a frame of this camera
+        (H, W, C) the image of its pinhole model (same ``K``): OpenCV's undistortion maps
+        (``cv2.initUndistortRectifyMap``), made once, applied by ``cv2.remap`` (bilinear)."""
+        if not any(self.distortion):
+            return None
+        maps = cv2.initUndistortRectifyMap(
+            self.K, np.asarray(self.distortion, float), None, self.K,
+            (self.width, self.height), cv2.CV_16SC2,
+        )  # fmt: skip
+        return lambda image: cv2.remap(
+            image, *maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
 
     @property
     def focal(self) -> float:
@@ -88,7 +113,7 @@ class CalibratedCamera:
             "K": self.K.tolist(),
             "R": self.R.tolist(),
             "t": self.t.tolist(),
-            "distortion": [0.0] * 5,
+            "distortion": [float(d) for d in self.distortion] or [0.0] * 5,
             **({"background": self.background} if self.background else {}),
         }
 
@@ -159,6 +184,20 @@ def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray
     return a
 
 
+def _distortion(path: Path, where: str, value) -> tuple[float, ...]:
+    """OpenCV's distortion coefficients of a camera, () when all are 0 (none)."""
+    if isinstance(value, list) and not value:
+        return ()
+    if not isinstance(value, list) or len(value) not in DISTORTION_LENGTHS:
+        raise MotionFormatError(
+            path, f"{where} must be a list of {', '.join(map(str, DISTORTION_LENGTHS))} numbers"
+        )
+    a = _matrix(path, where, value, (len(value),))
+    if np.abs(a).max() > MAX_DISTORTION:
+        raise MotionFormatError(path, f"{where}: coefficients beyond {MAX_DISTORTION:g}")
+    return tuple(a.tolist()) if a.any() else ()
+
+
 def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
     """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
     ``video`` or beside the video file ``video``.
@@ -188,7 +227,7 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
     Raises:
         MotionFormatError: no such file, not JSON, or a camera without valid
             size, intrinsics, an orthonormal rotation, a translation, or with
-            lens distortion (not supported).
+            distortion coefficients OpenCV does not take.
     """
     path = Path(path)
     if path.is_dir():
@@ -224,11 +263,7 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
             raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
         t = _matrix(path, f"{where}.t", c.get("t"), (3,))
-        dist = c.get("distortion", [])
-        if dist and any(not isinstance(d, (int, float)) or d != 0 for d in dist):
-            raise MotionFormatError(
-                path, f"{where}: lens distortion is not supported (undistort first)"
-            )
+        dist = _distortion(path, f"{where}.distortion", c.get("distortion", []))
         video = c.get("video", "")
         if not isinstance(video, str) or len(video) > 255:
             raise MotionFormatError(path, f"{where}.video must be a file name")
@@ -236,7 +271,7 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         if not isinstance(bg, str) or len(bg) > 255:
             raise MotionFormatError(path, f"{where}.background must be a file name")
         name = c.get("name", f"cam{i}")
-        out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg))
+        out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist))
     doc["fps"] = float(fps)
     return out, doc
 

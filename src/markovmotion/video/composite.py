@@ -113,7 +113,7 @@ def respond_in_video(
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
     video_path = Path(video) if single else camera_videos(where, cams)[view]
-    frames = read_frames(video_path)
+    frames = read_frames(video_path, cams[view])
     written = write_video(composite_frames(frames, cams[view], body_points(a), b), out, result.fps)
     summary.update(
         {
@@ -162,7 +162,7 @@ def respond_monocular(
     a = points_motion(tr.points, tr.fps, path.name)
     b = _respond(dual, a, method)
     written = write_video(
-        composite_frames(read_frames(path), cams[view], tr.points, b), out, tr.fps
+        composite_frames(read_frames(path, cams[view]), cams[view], tr.points, b), out, tr.fps
     )
     n = len(tr.points)
     return {
@@ -256,7 +256,7 @@ def _respond_live(
     b = concatenate(b_frames, partner.fps)
     if every > 1:  # B at the video's rate, to be drawn over every frame
         b = b.resample(mv.fps)
-    frames = read_frames(mv.videos[view])  # decoded again: no frame is kept in memory
+    frames = read_frames(mv.videos[view], mv.cameras[view])  # decoded again: none kept
     written = write_video(
         composite_frames(frames, mv.cameras[view], body_points(a), b), out, mv.fps
     )

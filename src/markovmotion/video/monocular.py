@@ -402,9 +402,11 @@ def track_monocular(
             f"{first.shape[1]}x{first.shape[0]}",
         )
 
+    fix = camera.undistorter()  # a camera with lens distortion: its pinhole image
+
     def all_frames():
-        yield first
-        yield from frames
+        yield first if fix is None else fix(first)
+        yield from frames if fix is None else map(fix, frames)
 
     lm = detect_landmarks(all_frames(), max_frames)
     if left_right == "online":

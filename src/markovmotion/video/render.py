@@ -18,6 +18,7 @@ import os
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -25,6 +26,9 @@ import numpy as np
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.joint_shape import MAJOR_JOINTS, Person
 from markovmotion.io.files import atomic_path
+
+if TYPE_CHECKING:
+    from markovmotion.video.cameras import CalibratedCamera
 
 #: Capsules of the body between joints of :data:`MAJOR_JOINTS`, radius in mm.
 CAPSULES = (
@@ -311,9 +315,26 @@ def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps:
     return path
 
 
-def read_frames(path: str | os.PathLike[str]) -> Iterator[np.ndarray]:
-    """RGB frames of a video file (anything OpenCV/FFmpeg reads) or of a folder of images."""
+def read_frames(
+    path: str | os.PathLike[str], camera: CalibratedCamera | None = None
+) -> Iterator[np.ndarray]:
+    """RGB frames of a video file (anything OpenCV/FFmpeg reads) or of a folder of images;
+    with ``camera``, each frame is checked to be the camera's size and, if the camera has
+    lens distortion, undistorted (:meth:`CalibratedCamera.undistorter`)."""
     path = Path(path)
+    fix = camera.undistorter() if camera is not None else None
+    for n, frame in enumerate(_decoded(path)):
+        if fix is not None:
+            if frame.shape[:2] != (camera.height, camera.width):
+                raise MotionFormatError(
+                    path, f"frame {n} is {frame.shape[1]}x{frame.shape[0]}, camera "
+                    f"{camera.name} is {camera.width}x{camera.height}",
+                )  # fmt: skip
+            frame = fix(frame)
+        yield frame
+
+
+def _decoded(path: Path) -> Iterator[np.ndarray]:
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
         if not files:

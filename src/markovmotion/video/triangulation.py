@@ -203,7 +203,10 @@ class ViewLandmarks:
     ) -> ViewLandmarks:
         """MediaPipe Pose over each camera's video (``scripts/install-camera``), cut to the
         shortest."""
-        got: list[Landmarks] = [detect_landmarks(read_frames(v), max_frames) for v in videos]
+        got: list[Landmarks] = [
+            detect_landmarks(read_frames(v, c), max_frames)
+            for v, c in zip(videos, cameras, strict=True)
+        ]
         n = min(len(g.found) for g in got)
         return cls(
             list(cameras),
