@@ -42,6 +42,30 @@ def render(
     err_console.print(f"wrote {views} videos and {path}", highlight=False)
 
 
+@app.command("cameras")
+def cameras(
+    calibration: Path = typer.Argument(..., help="Pose2Sim / Anipose calibration (Calib.toml)."),
+    videos: list[Path] = typer.Argument(..., help="One video per camera, in the file's order."),
+    out: Path = typer.Option(
+        None, help="Camera file to write (default: cameras.json beside the videos)."
+    ),
+    fps: float = ranged("fps", None, help="Frame rate (default: the first video's)."),
+    up: str = typer.Option(
+        "z", callback=choice(("z", "y", "-y")), help="The calibration's up axis (Pose2Sim: z)."
+    ),
+    units: str = typer.Option(
+        "m", callback=choice(("m", "mm")), help="The calibration's length unit (Pose2Sim: m)."
+    ),
+    force: bool = typer.Option(False, "--force", help="Replace an existing camera file."),
+) -> None:
+    """Write cameras.json for your videos from a Pose2Sim / Anipose calibration: the world
+    turned to Y up in mm, the intrinsics scaled to the videos' size, the lens distortion kept."""
+    from markovmotion.video.calibration import import_calibration
+
+    path = import_calibration(calibration, videos, out, fps, up, units, force)
+    err_console.print(f"wrote {path} ({len(videos)} cameras)", highlight=False)
+
+
 def register(root: typer.Typer) -> None:
     """Attach ``track`` to the root command."""
     root.command("track")(track)

@@ -184,7 +184,20 @@ def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray
     return a
 
 
-def _distortion(path: Path, where: str, value) -> tuple[float, ...]:
+def valid_camera(path: Path, where: str, camera: CalibratedCamera) -> None:
+    """Raise a one-line :class:`MotionFormatError` naming ``path`` and ``where`` unless
+    ``camera`` has a size of 16 to :data:`MAX_SIDE` pixels, positive focal lengths (``K``'s
+    last row 0 0 1) and a rotation ``R``."""
+    if not all(16 <= v <= MAX_SIDE for v in (camera.width, camera.height)):
+        raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
+    k, r = camera.K, camera.R
+    if not (k[0, 0] > 0 and k[1, 1] > 0) or not np.allclose(k[2], [0, 0, 1]):
+        raise MotionFormatError(path, f"{where}.K: focal lengths must be positive, last row 0 0 1")
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
+        raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
+
+
+def read_distortion(path: Path, where: str, value) -> tuple[float, ...]:
     """OpenCV's distortion coefficients of a camera, () when all are 0 (none)."""
     if isinstance(value, list) and not value:
         return ()
@@ -252,18 +265,12 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         if not isinstance(c, dict):
             raise MotionFormatError(path, f"{where} must be an object")
         w, h = c.get("width"), c.get("height")
-        if not all(isinstance(v, int) and 16 <= v <= MAX_SIDE for v in (w, h)):
+        if not all(isinstance(v, int) for v in (w, h)):
             raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
         k = _matrix(path, f"{where}.K", c.get("K"), (3, 3))
-        if not (k[0, 0] > 0 and k[1, 1] > 0) or not np.allclose(k[2], [0, 0, 1]):
-            raise MotionFormatError(
-                path, f"{where}.K: focal lengths must be positive, last row 0 0 1"
-            )
         r = _matrix(path, f"{where}.R", c.get("R"), (3, 3))
-        if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
-            raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
         t = _matrix(path, f"{where}.t", c.get("t"), (3,))
-        dist = _distortion(path, f"{where}.distortion", c.get("distortion", []))
+        dist = read_distortion(path, f"{where}.distortion", c.get("distortion", []))
         video = c.get("video", "")
         if not isinstance(video, str) or len(video) > 255:
             raise MotionFormatError(path, f"{where}.video must be a file name")
@@ -272,6 +279,7 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
             raise MotionFormatError(path, f"{where}.background must be a file name")
         name = c.get("name", f"cam{i}")
         out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist))
+        valid_camera(path, where, out[-1])
     doc["fps"] = float(fps)
     return out, doc
 

@@ -1,0 +1,165 @@
+"""Cameras from a Pose2Sim / Anipose calibration file (``Calib.toml``) to ``cameras.json``.
+
+Multi-camera labs calibrate with Pose2Sim or Anipose (aniposelib), which write one TOML
+section per camera::
+
+    [cam_01]
+    name = "cam_01"
+    size = [1088.0, 1920.0]              # width, height of the calibrated images (px)
+    matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
+    distortions = [k1, k2, p1, p2]       # OpenCV's model
+    rotation = [rx, ry, rz]              # world to camera, a Rodrigues vector (OpenCV)
+    translation = [tx, ty, tz]           # world to camera (Pose2Sim: metres)
+    fisheye = false
+
+:func:`cameras_from_toml` reads such a file into the project's cameras
+(:mod:`markovmotion.video.cameras`): the translation in mm, the world turned from the
+calibration's up axis (Pose2Sim's world is Z up) to the project's Y up, the intrinsics scaled
+to the size of the videos given (``u' = (u + 1/2) s - 1/2``: pixel centres kept, so a video
+shrunk to a quarter keeps its calibration), the lens distortion kept (dimensionless: it does
+not scale). Written here because neither Pose2Sim nor aniposelib is a dependency (nor
+needed for the reading: Python's ``tomllib`` reads the file; ``cv2.Rodrigues`` turns the
+rotation). OpenCV's fisheye model is a different lens model and is refused.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from markovmotion.errors import MotionFormatError
+from markovmotion.video.cameras import (
+    CAMERAS_FILE,
+    MAX_CAMERAS,
+    MAX_JSON_BYTES,
+    CalibratedCamera,
+    read_distortion,
+    save_cameras,
+    valid_camera,
+)
+from markovmotion.video.render import video_fps
+
+#: The calibration's up axis to the project's world (Y up, mm): rows are the project's X,
+#: Y, Z in the calibration's axes (a rotation, so handedness is kept).
+UP_AXES: dict[str, np.ndarray] = {
+    "z": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),  # Pose2Sim, Qualisys: X=x, Y=z, Z=-y
+    "y": np.eye(3),
+    "-y": np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]]),  # OpenCV's camera-like: Y down
+}
+#: Metres (Pose2Sim) or millimetres (Anipose with a board measured in mm) to mm.
+UNITS: dict[str, float] = {"m": 1000.0, "mm": 1.0}
+
+
+def _field(path: Path, name: str, section: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        a = np.array(section.get(key), dtype=float)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != shape or not np.isfinite(a).all():
+        raise MotionFormatError(path, f"[{name}] {key} must be finite numbers of shape {shape}")
+    return a
+
+
+def _video_size(video: Path) -> tuple[int, int]:
+    cap = cv2.VideoCapture(str(video))
+    ok, frame = cap.read() if cap.isOpened() else (False, None)
+    cap.release()
+    if not ok:
+        raise MotionFormatError(video, "cannot read a frame of this video")
+    return frame.shape[1], frame.shape[0]
+
+
+def cameras_from_toml(
+    path: str | os.PathLike[str],
+    videos: list[Path],
+    up: str = "z",
+    units: str = "m",
+) -> list[CalibratedCamera]:
+    """The cameras of a Pose2Sim / Anipose ``Calib.toml`` (module docstring), one per
+    section with a ``matrix``, in the file's order, for ``videos`` (one per camera, same
+    order: each camera's intrinsics are scaled to its video's size).
+
+    Raises:
+        MotionFormatError: not TOML, a camera without a valid field, a fisheye camera,
+            another number of videos than cameras, or a video of another shape than its
+            calibrated images."""
+    path = Path(path)
+    if up not in UP_AXES or units not in UNITS:
+        raise ValueError(f"up must be one of {', '.join(UP_AXES)} and units of {', '.join(UNITS)}")
+    if not path.is_file():
+        raise MotionFormatError(path, "no such calibration file")
+    if path.stat().st_size > MAX_JSON_BYTES:
+        raise MotionFormatError(path, f"calibration file larger than {MAX_JSON_BYTES} bytes")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise MotionFormatError(path, f"not a TOML calibration file ({exc})") from None
+    sections = [(k, v) for k, v in doc.items() if isinstance(v, dict) and "matrix" in v]
+    if not 1 <= len(sections) <= MAX_CAMERAS:
+        raise MotionFormatError(
+            path, f"{len(sections)} cameras (sections with a matrix): 1 to {MAX_CAMERAS} are read"
+        )
+    if len(videos) != len(sections):
+        raise MotionFormatError(
+            path, f"{len(sections)} cameras but {len(videos)} videos: give one video per camera"
+        )
+    turn = UP_AXES[up]
+    out = []
+    for (key, sec), video in zip(sections, videos, strict=True):
+        name = str(sec.get("name", key))[:64]
+        if sec.get("fisheye", False):
+            raise MotionFormatError(path, f"[{key}] is a fisheye camera: not supported")
+        size = _field(path, key, sec, "size", (2,))
+        k = _field(path, key, sec, "matrix", (3, 3))
+        dist = read_distortion(path, f"[{key}] distortions", sec.get("distortions", []))
+        rvec = _field(path, key, sec, "rotation", (3,))
+        t = _field(path, key, sec, "translation", (3,)) * UNITS[units]
+        width, height = _video_size(video)
+        if not (size > 0).all() or abs(width / height - size[0] / size[1]) > 0.01 * width / height:
+            raise MotionFormatError(
+                video, f"is {width}x{height}; camera {name} was calibrated at "
+                f"{size[0]:g}x{size[1]:g} (another shape)",
+            )  # fmt: skip
+        scale = np.array([width / size[0], height / size[1]])
+        k = k.copy()
+        k[:2, :2] *= scale[:, None]
+        k[:2, 2] = (k[:2, 2] + 0.5) * scale - 0.5
+        r = cv2.Rodrigues(rvec)[0] @ turn.T  # the project's world to the camera
+        cam = CalibratedCamera(k, r, t, width, height, name, video.name, "", dist)
+        valid_camera(path, f"[{key}]", cam)
+        out.append(cam)
+    return out
+
+
+def import_calibration(
+    calibration: str | os.PathLike[str],
+    videos: list[Path],
+    out: str | os.PathLike[str] | None = None,
+    fps: float | None = None,
+    up: str = "z",
+    units: str = "m",
+    force: bool = False,
+) -> Path:
+    """``video cameras``: write ``cameras.json`` for ``videos`` from ``calibration`` (a
+    Pose2Sim / Anipose TOML, :func:`cameras_from_toml`) beside the videos (or at ``out``),
+    at ``fps`` (default: the first video's rate). The videos must share one folder. An
+    existing camera file is replaced only with ``force``."""
+    if not videos:
+        raise MotionFormatError(calibration, "no videos given: one per camera, in its order")
+    folders = {Path(os.path.abspath(v)).parent for v in videos}  # links not followed
+    if len(folders) != 1:
+        raise MotionFormatError(
+            videos[0], "the videos must be in one folder (cameras.json names them)"
+        )
+    cameras = cameras_from_toml(calibration, videos, up, units)
+    rate = fps if fps is not None else video_fps(videos[0], 0.0)
+    if not rate > 0:
+        raise MotionFormatError(videos[0], "no frame rate in this video: give --fps")
+    target = Path(out) if out is not None else folders.pop() / CAMERAS_FILE
+    if target.exists() and not force:
+        raise MotionFormatError(target, "exists: give --force to replace it (or --out)")
+    return save_cameras(cameras, target, rate, source=str(Path(calibration).name), up=up)
