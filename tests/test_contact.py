@@ -85,6 +85,31 @@ def test_new_people_are_placed_better(held_out):
     assert np.mean(errors[1.0]) < np.mean(errors[0.0])
 
 
+def test_a_hand_raised_or_out_to_the_side_is_not_a_handshake(held_out):
+    """The regression is linear in A's hand: a hand held high or far to the side reads as
+    "out" to it. Only where the hand lies as the training handshakes' did (and the pair would
+    stand as they did) is it contact: A's real handshake hand is taken in its contact frames,
+    the same hand moved 600 mm up or 500 mm sideways (in A's ground frame) in none of them."""
+    from markovmotion.features.markers import turn_about_up
+
+    model = held_out[0][1.0]
+    contact = model.contact
+    assert contact.bounds.shape == (4, 2)
+    a, b = held_out[1][0]
+    a_pts, real = model.body_positions(model._rate(a)), model.body_positions(model._rate(b))
+    n = min(len(a_pts), len(real))
+    a_pts, real = a_pts[:n], real[:n]
+    yaw = model.placing(model._rate(a))[1][:n]
+    gen = model.body_positions(model.respond(a, "windowed"))[:n]
+    touch = np.linalg.norm(real[:, contact.hand] - a_pts[:, contact.hand], axis=-1) < CONTACT_MM
+    taken = np.isfinite(contact.shifts(a_pts, yaw, gen)).all(axis=1)
+    assert taken[touch].mean() > 0.5
+    for move in ([0.0, 600.0, 0.0], [-500.0, 0.0, 0.0], [500.0, 0.0, 0.0]):
+        moved = a_pts.copy()
+        moved[:, contact.hand] += turn_about_up(np.broadcast_to(move, (n, 1, 3)), yaw)[:, 0]
+        assert not np.isfinite(contact.shifts(moved, yaw, gen)).all(axis=1)[touch].any()
+
+
 def _apart(b: np.ndarray, a: np.ndarray, n: int) -> np.ndarray:
     """(n,) horizontal distance between the two people's centroids."""
     return np.linalg.norm((b[:n] - a[:n]).mean(axis=1)[:, [0, 2]], axis=-1)

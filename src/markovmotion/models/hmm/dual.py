@@ -442,7 +442,7 @@ class DualHMM(Model):
         for a, b in pairs:
             if a.n_frames != b.n_frames:
                 raise ValueError(f"{a.name} and {b.name} differ in length")
-        for k in _LEARNT + _LEARNT_MARKERS + _REGRESSION + _CONTACT:  # a refit may change
+        for k in (*_LEARNT, *_LEARNT_MARKERS, *_REGRESSION, *_CONTACT, "contact_bounds_"):
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
             xa, xb, lengths = self._marker_features(pairs, groups)
@@ -479,10 +479,12 @@ class DualHMM(Model):
         if found is None:
             self.contact_hand_ = -1
             self.contact_offset_, self.contact_coef_ = np.zeros(3), np.zeros(4)
+            self.contact_bounds_ = np.zeros((4, 2))
         else:
             self.contact_hand_ = found.hand
             self.contact_offset_ = found.offset
             self.contact_coef_ = np.r_[found.coef, found.intercept]
+            self.contact_bounds_ = np.asarray(found.bounds, float)
 
     @property
     def contact(self) -> HandContact | None:
@@ -491,9 +493,11 @@ class DualHMM(Model):
         if not self.contact_weight or getattr(self, "contact_hand_", -1) < 0:
             return None
         coef = np.asarray(self.contact_coef_, dtype=float)
+        bounds = getattr(self, "contact_bounds_", None)  # None: saved before they were learnt
         return HandContact(
-            int(self.contact_hand_), np.asarray(self.contact_offset_, float), coef[:3], coef[3]
-        )
+            int(self.contact_hand_), np.asarray(self.contact_offset_, float), coef[:3], coef[3],
+            None if bounds is None else np.asarray(bounds, float),
+        )  # fmt: skip
 
     def compared_names(self) -> list[str]:
         """Names of the points people are compared by (:meth:`body_positions`)."""
@@ -721,6 +725,8 @@ class DualHMM(Model):
             require(self, *_CONTACT)
             check_shape("contact_offset_", self.contact_offset_, (3,))
             check_shape("contact_coef_", self.contact_coef_, (4,))
+            if getattr(self, "contact_bounds_", None) is not None:
+                check_shape("contact_bounds_", self.contact_bounds_, (4, 2))
             hand = self.contact_hand_
             if not isinstance(hand, int | np.integer) or not -1 <= hand < len(
                 self.compared_names()
