@@ -166,3 +166,26 @@ def test_a_missing_video_is_named_not_its_camera_file(tmp_path, capsys, method):
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "cam9.mp4: no such video file" in err
     assert "cameras.json" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_index_mistakes_say_what_to_do(tmp_path, capsys):
+    """A take given where an INDEX.csv is asked for, a row with an open quote, a label the
+    index lacks: one line each, saying what is wrong (not "get the data")."""
+    from markovmotion.data.index import data_root
+
+    take = next(data_root().glob("buetepage/shaking/*.c3d"))
+    index = tmp_path / "INDEX.csv"
+    index.write_text(
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+        'a.c3d,lab,"p9,rec0,interaction,handshake,b.c3d,30,10,my capture\n'
+        "b.c3d,lab,p9,rec0,interaction,handshake,a.c3d,30,10,my capture\n"
+    )
+    for args, message in (
+        (["dualhmm", "crossval", "--data", str(take)], "is a file, not an INDEX.csv"),
+        (["data", "list", "--data", str(tmp_path)], "check its quotes and commas"),
+        (["dualhmm", "train", "--labels", "handshak", "--out", str(tmp_path / "m.npz")], "its two-person labels: "),
+    ):  # fmt: skip
+        with pytest.raises(SystemExit) as stop:
+            main(args)
+        err = capsys.readouterr().err
+        assert stop.value.code == 2 and message in err and len(err.strip().splitlines()) == 1, err

@@ -75,6 +75,12 @@ def data_root(path: str | os.PathLike[str] | None = None) -> Path:
         if (cand / INDEX_NAME).is_file():
             return cand
     where = ", ".join(str(p) for p in looked) or "(nowhere: no project root found)"
+    given = [p for p in looked if p.is_file() and p.name != INDEX_NAME]
+    if path is not None and given:  # a take named where an index is asked for
+        raise DataNotFoundError(
+            f"{given[0]} is a file, not an {INDEX_NAME}: give the {INDEX_NAME} that lists it "
+            "(or its folder)"
+        )
     raise DataNotFoundError(
         f"no motion-capture {INDEX_NAME} found (looked in {where}); {HOW_TO_GET}"
     )
@@ -173,7 +179,13 @@ class MocapIndex:
                         )
                     )
                 except ValueError as exc:
-                    raise MotionFormatError(csv_path, f"bad row ({exc})", line) from None
+                    why = str(exc)
+                    if None in row.values():  # fewer fields than the header: an open quote
+                        why = (
+                            f"{sum(v is not None for v in row.values())} of "
+                            f"{len(reader.fieldnames or [])} columns: check its quotes and commas"
+                        )
+                    raise MotionFormatError(csv_path, f"bad row ({why})", line) from None
         return cls(root, entries)
 
     def __len__(self) -> int:

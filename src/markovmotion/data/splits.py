@@ -129,9 +129,11 @@ def select_pairs(
             )
         pairs = [p for p in pairs if (p[0].trial.lstrip("0") in wanted) == held_out]
     if not pairs:
+        known = sorted({a.label for a, _ in index.pairs()})
         raise DataNotFoundError(
             f"no two-person takes in {index.root / 'INDEX.csv'} match "
-            f"labels={labels or 'any'} trials={trials or 'any'}"
+            f"labels={labels or 'any'} trials={trials or 'any'} "
+            f"(its two-person labels: {', '.join(known) or 'none'})"
         )
     return pairs
 
