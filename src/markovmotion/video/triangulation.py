@@ -226,13 +226,16 @@ class ViewLandmarks:
         )
 
 
+#: Cost per frame (torso lengths) of taking, of a labelling and its mirror, the one that swaps
+#: every seeing view's labels, against the one that keeps them all (:func:`views_sides`).
+MIRROR_COST = 1.0
 #: How MediaPipe's left and right are made consistent before triangulation
 #: (:func:`consistent_views`).
 LEFT_RIGHT: tuple[str, ...] = ("views", "continuity", "both", "mediapipe")
 
 
 def views_sides(
-    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY
+    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY, over_time: bool = True
 ) -> tuple[ViewLandmarks, np.ndarray]:
     """MediaPipe's landmarks with left and right made to agree across the views, and which
     views' groups were swapped back (V, F, len(SIDE_GROUPS)).
@@ -249,10 +252,19 @@ def views_sides(
     (MediaPipe's labels where most views agree); ties keep MediaPipe's labels."""
     from itertools import product
 
-    from markovmotion.video.left_right import SIDE_GROUPS, _pairs
+    from markovmotion.video.left_right import (
+        SIDE_GROUPS,
+        _pairs,
+        continuity_costs,
+        decode_labels,
+        torso_lengths,
+    )
 
     v_n, f_n, l_n = views.visibility.shape
     w = np.where(views.visibility >= min_visibility, views.visibility, 0.0)
+    plain = triangulate_views(views, min_visibility).landmarks  # torso: the same either way
+    torso = torso_lengths(plain)
+    torso = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
     pixels, vis, world = views.pixels.copy(), views.visibility.copy(), views.world
     world = None if world is None else world.copy()
     swapped = np.zeros((v_n, f_n, len(SIDE_GROUPS)), dtype=bool)
@@ -275,10 +287,25 @@ def views_sides(
         e2 = _errors2(views.cameras, px.reshape(v_n, -1, 2), pts)
         score = (wc.reshape(v_n, -1) * np.minimum(e2, tau2)).sum(axis=0)
         score = np.where(np.isfinite(pts).all(axis=1), score, 0.0).reshape(c_n, f_n, n).sum(-1)
-        best = labellings[np.argmin(score, axis=0)]  # (F, V); ties: the first, all kept
+        pick = np.argmin(score, axis=0)  # (F,); ties: the first, all kept
+        best = labellings[pick]  # (F, V)
         seen = w[:, :, own].sum(axis=-1).T  # (F, V) each view's weight of the group
-        mirror = (seen * best).sum(axis=1) > (seen * ~best).sum(axis=1)
+        share = (seen * best).sum(axis=1) / np.maximum(seen.sum(axis=1), 1e-9)
+        mirror = share > 0.5
         best ^= mirror[:, None]
+        share = np.where(mirror, 1.0 - share, share)  # of the views' weight swapped
+        if over_time:
+            # the triangulated group (the majority's labels) over time: a mirror chosen
+            # against the frames around it is a jump of its left and right points
+            got = pts.reshape(c_n, f_n, n, 3)[pick, np.arange(f_n)]
+            got = np.where(mirror[:, None, None], got[:, np.r_[n // 2 : n, 0 : n // 2]], got)
+            body = np.full((f_n, l_n, 3), np.nan)
+            body[:, own] = got
+            ones = np.ones((f_n, l_n))
+            pairs = [_pairs(s) for s in stems]
+            cont = [continuity_costs(body, ones, pairs, lag, torso) for lag in (1, 2)]
+            unary = MIRROR_COST * np.c_[share, 1.0 - share]
+            best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
         swapped[:, :, g] = best.T
         for v in range(v_n):
             at = np.nonzero(best[:, v])[0]
@@ -460,11 +487,16 @@ def track_triangulated_video(
     max_frames: int | None = None,
     reference: str | os.PathLike[str] | None = None,
     views: int | None = None,
+    left_right: str = "views",
 ) -> tuple[TriangulatedTrack, dict]:
     """Track a multi-view video (a folder with ``cameras.json``, or that file) by MediaPipe in
     every view, triangulated (module docstring, 1); the track and a JSON-ready summary (with
-    ``reference``, its errors)."""
+    ``reference``, its errors); ``left_right`` (:data:`LEFT_RIGHT`): how MediaPipe's left and
+    right are made consistent across the views first (:func:`consistent_views`)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
 
     t0 = time.perf_counter()
     where = camera_file(video, cameras)
@@ -476,7 +508,7 @@ def track_triangulated_video(
         cams, videos = cams[:views], videos[:views]
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
-    lm = ViewLandmarks.from_videos(videos, cams, max_frames)
+    lm = consistent_views(ViewLandmarks.from_videos(videos, cams, max_frames), left_right)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
@@ -493,6 +525,7 @@ def track_triangulated_video(
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
+        "left_right": left_right,
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
