@@ -163,7 +163,8 @@ def real_video():
         (["--method", "triangulate", "--out", "x.bvh"], "use a .c3d name"),
         (["--method", "triangulate", "--left-right", "facing"], "--method monocular"),
         (["--left-right", "mediapipe"], "--method monocular"),
-        (["--method", "monocular", "--left-right", "both"], "must be one of"),
+        (["--method", "monocular", "--left-right", "both"], "--method triangulate"),
+        (["--method", "monocular", "--left-right", "sideways"], "must be one of"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(
@@ -262,8 +263,8 @@ def test_views_sides_undoes_swaps_injected_into_some_views():
     expected = np.zeros((4, 40, len(SIDE_GROUPS)), bool)
     everything = [_pairs(s) for stems in SIDE_GROUPS for s in stems]
     li, ri = (list(x) for x in zip(*everything, strict=True))
-    given[1][10:30][:, li + ri] = pixels[1][10:30][:, ri + li]
-    expected[1, 10:30] = True
+    given[0][10:30][:, li + ri] = pixels[0][10:30][:, ri + li]
+    expected[0, 10:30] = True
     knee = SIDE_GROUPS.index(("knee",))
     kl, kr = _pairs("knee")
     given[2][5:9][:, [kl, kr]] = pixels[2][5:9][:, [kr, kl]]
@@ -276,7 +277,7 @@ def test_views_sides_undoes_swaps_injected_into_some_views():
     np.testing.assert_allclose(tri.landmarks, truth, atol=1.0)
     assert tri.used.all()  # every view agrees now
     raw = triangulate_views(consistent_views(views, "mediapipe"))
-    assert not raw.used[1, 10:30].all()  # MSAC drops the swapped view where pairs lie apart
+    assert not raw.used[0, 10:30].all()  # MSAC drops the swapped view where pairs lie apart
     with pytest.raises(ValueError, match="world points"):
         consistent_views(views, "continuity")
     with pytest.raises(ValueError, match="left_right"):
