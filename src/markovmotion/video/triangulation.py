@@ -22,6 +22,9 @@ multi-view video" (the dual-HMM paper's tracker, §3, Deutscher et al. 2000). Tw
    remain, tried first, can end on a wrong pair: on the real video's frame 80 it kept two
    views that put the right wrist on the floor.) The landmarks map to the 19 body points by
    the monocular path's weight matrix (:func:`~markovmotion.video.monocular.to_body_points`).
+   Before it, MediaPipe's left and right are made to agree across the views
+   (:func:`consistent_views`, default ``views``: :func:`views_sides`), since the camera behind
+   the person sees it mirrored.
 2. **Guide** (``track --guide mediapipe``). :class:`Guide` adds to the particle filter's cost
    (the ``E`` of ``w = exp(-beta E)``) a term for the distance between a particle's 12 limb
    joints projected into each view and MediaPipe's 2-D landmarks there, weighted by
