@@ -98,6 +98,9 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
     parser.add_argument("--guide", choices=("none", "mediapipe"), default="none",
                         help="what guides the particle filter besides the images")  # fmt: skip
+    parser.add_argument("--left-right", choices=("views", "continuity", "both", "mediapipe"),
+                        default="views", help="with the guide: MediaPipe's left and right made "
+                        "consistent (triangulation.LEFT_RIGHT)")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
 
@@ -128,7 +131,10 @@ def main() -> None:
             errs, limbs, fps, guide_s, seen = [], [], [], [], []
             low = floor(body, body_points(truth)[: int(round(args.seconds * FPS)) : 3])
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                result = track_video(folder, body, seed=seed, guide=args.guide == "mediapipe")
+                result = track_video(
+                    folder, body, seed=seed, guide=args.guide == "mediapipe",
+                    left_right=args.left_right,
+                )  # fmt: skip
                 motion = body.motion(result.states, result.fps)
                 e = tracking_errors(motion, truth)
                 errs.append(e["mpjpe_mm"])
@@ -142,6 +148,7 @@ def main() -> None:
                     "take": take.file,
                     "body_model": name,
                     "guide": args.guide,
+                    "left_right": args.left_right,
                     "mpjpe_mm": round(float(np.mean(errs)), 1),
                     "mpjpe_runs": errs,
                     "limbs_mm": round(float(np.mean(limbs)), 1),

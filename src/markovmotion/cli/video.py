@@ -124,13 +124,15 @@ def track(
     ),
     guide: str = guide_option(),
     body_model: str = body_model_option(),
-    left_right: str = typer.Option(
-        "continuity",
-        callback=choice(("mediapipe", "continuity", "facing", "online")),
-        help="Monocular: continuity: MediaPipe's left and right relabelled where they jump "
-        "between frames (offline, whole video); online: the same frame by frame, causally "
-        "(as the camera page does); facing: continuity, and the person faces the camera (a "
-        "webcam's user); mediapipe: its own labels.",
+    left_right: str | None = typer.Option(
+        None,
+        callback=choice(("mediapipe", "continuity", "facing", "online", "views", "both")),
+        help="Monocular (default continuity): continuity: MediaPipe's left and right "
+        "relabelled where they jump between frames (offline, whole video); online: the same "
+        "frame by frame, causally (as the camera page does); facing: continuity, and the "
+        "person faces the camera (a webcam's user); mediapipe: its own labels. Triangulate "
+        "and --guide mediapipe (default views): views: made to agree across the views by "
+        "triangulation; continuity: each view over time; both; mediapipe.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -139,8 +141,20 @@ def track(
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
         )
-    if method != "monocular" and left_right != "continuity":
+    multiview = method == "triangulate" or guide == "mediapipe"
+    if left_right is None:
+        left_right = "views" if multiview else "continuity"
+    elif left_right in ("views", "both") and not multiview:
+        raise typer.BadParameter(
+            "is for --method triangulate or --guide mediapipe", param_hint="--left-right"
+        )
+    elif left_right in ("facing", "online") and method != "monocular":
         raise typer.BadParameter("is for --method monocular", param_hint="--left-right")
+    elif method == "apf" and guide != "mediapipe":
+        raise typer.BadParameter(
+            "is for --method monocular, triangulate or --guide mediapipe",
+            param_hint="--left-right",
+        )
     if method in ("monocular", "triangulate"):
         _track_landmarks(
             method,
@@ -200,6 +214,7 @@ def track(
         background == "learn",
         sides,
         guide == "mediapipe",
+        left_right,
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -264,7 +279,9 @@ def _track_landmarks(
             raise typer.BadParameter("is for --method monocular", param_hint="--stature")
         from markovmotion.video.triangulation import track_triangulated_video
 
-        tr, summary = track_triangulated_video(video, cameras, max_frames, reference, views)
+        tr, summary = track_triangulated_video(
+            video, cameras, max_frames, reference, views, left_right
+        )
         where = f"{summary['views']} views"
     else:
         tr, summary = track_monocular_video(

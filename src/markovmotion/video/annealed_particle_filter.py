@@ -891,12 +891,14 @@ def track_video(
     learn_background: bool = False,
     sides: bool = False,
     guide: bool = False,
+    left_right: str = "views",
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
     every camera catch front/back flips (:mod:`markovmotion.video.sides`); with ``guide``,
     MediaPipe's landmarks in every camera, triangulated to reject the views that disagree,
-    guide the filter (:mod:`markovmotion.video.triangulation`). MediaPipe runs before the
+    guide the filter (:mod:`markovmotion.video.triangulation`; ``left_right``: how its left
+    and right are made consistent first, :data:`~markovmotion.video.triangulation.LEFT_RIGHT`). MediaPipe runs before the
     clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
     frames it gave the filter landmarks in)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
@@ -907,7 +909,11 @@ def track_video(
 
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
         check = SideCheck.from_landmarks(views) if sides else None
-        guided = Guide.from_views(views, triangulate_views(views)) if guide else None
+        if guide:  # left and right made consistent first (triangulation.consistent_views)
+            from markovmotion.video.triangulation import consistent_views
+
+            agreed = consistent_views(views, left_right)
+            guided = Guide.from_views(agreed, triangulate_views(agreed))
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,

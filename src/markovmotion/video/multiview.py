@@ -305,6 +305,7 @@ def track_take(
     learn_background: bool = False,
     sides: bool = False,
     guide: bool = False,
+    left_right: str = "views",
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
@@ -316,7 +317,9 @@ def track_take(
     ``flips`` (frames searched again) and ``left_flipped`` (frames left flipped).
     ``guide``: MediaPipe in every view guides the filter; the summary then has
     ``guide_seconds`` (MediaPipe's time, not in ``fps``), ``guide_seen`` (the share of views
-    and frames with landmarks to pull towards) and ``fps_with_guide``.
+    and frames with landmarks to pull towards) and ``fps_with_guide``; ``left_right``: how
+    MediaPipe's left and right are made consistent across the views first
+    (:data:`~markovmotion.video.triangulation.LEFT_RIGHT`).
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -325,7 +328,7 @@ def track_take(
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
     result = track_video(
         video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background,
-        sides, guide,
+        sides, guide, left_right,
     )  # fmt: skip
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {

@@ -22,6 +22,9 @@ multi-view video" (the dual-HMM paper's tracker, §3, Deutscher et al. 2000). Tw
    remain, tried first, can end on a wrong pair: on the real video's frame 80 it kept two
    views that put the right wrist on the floor.) The landmarks map to the 19 body points by
    the monocular path's weight matrix (:func:`~markovmotion.video.monocular.to_body_points`).
+   Before it, MediaPipe's left and right are made to agree across the views
+   (:func:`consistent_views`, default ``views``: :func:`views_sides`), since the camera behind
+   the person sees it mirrored.
 2. **Guide** (``track --guide mediapipe``). :class:`Guide` adds to the particle filter's cost
    (the ``E`` of ``w = exp(-beta E)``) a term for the distance between a particle's 12 limb
    joints projected into each view and MediaPipe's 2-D landmarks there, weighted by
@@ -112,6 +115,21 @@ def _refine(
     return out
 
 
+def _tau2(cameras: Sequence[CalibratedCamera], angle: float) -> np.ndarray:
+    """(V, 1) squared pixel scale of ``angle`` focal lengths in each camera."""
+    return np.array([(angle * c.focal) ** 2 for c in cameras])[:, None]
+
+
+def _errors2(cameras: Sequence[CalibratedCamera], pixels: np.ndarray, points: np.ndarray):
+    """(V, N) squared pixel errors of points (N, 3) projected against ``pixels`` (V, N, 2)."""
+    return np.stack(
+        [
+            ((c.project(np.nan_to_num(points))[0] - np.nan_to_num(p)) ** 2).sum(-1)
+            for c, p in zip(cameras, pixels, strict=True)
+        ]
+    )
+
+
 def triangulate_points(
     cameras: Sequence[CalibratedCamera],
     pixels: np.ndarray,
@@ -139,15 +157,10 @@ def triangulate_points(
             for p, c in zip(pixels, cameras, strict=True)
         ]
     )
-    tau2 = np.array([(outlier_angle * c.focal) ** 2 for c in cameras])[:, None]
+    tau2 = _tau2(cameras, outlier_angle)
 
-    def errors2(points: np.ndarray) -> np.ndarray:  # (V, N) squared pixel errors
-        return np.stack(
-            [
-                ((c.project(np.nan_to_num(points))[0] - np.nan_to_num(p)) ** 2).sum(-1)
-                for c, p in zip(cameras, pixels, strict=True)
-            ]
-        )
+    def errors2(points: np.ndarray) -> np.ndarray:
+        return _errors2(cameras, pixels, points)
 
     best = np.full(n, np.inf)
     choice = np.zeros((v_n, n), bool)
@@ -193,6 +206,8 @@ class ViewLandmarks:
     pixels: np.ndarray
     visibility: np.ndarray
     seconds: float = 0.0
+    #: MediaPipe's hip-centred world points (V, F, 33, 3) mm, if kept (``continuity`` needs them).
+    world: np.ndarray | None = None
 
     @classmethod
     def from_videos(
@@ -213,7 +228,122 @@ class ViewLandmarks:
             np.stack([g.pixels[:n] for g in got]),
             np.stack([np.where(g.found[:n, None], g.visibility[:n], 0.0) for g in got]),
             sum(g.seconds for g in got),
+            np.stack([g.world[:n] for g in got]),
         )
+
+
+#: Cost per frame (torso lengths) of taking, of a labelling and its mirror, the one that swaps
+#: every seeing view's labels, against the one that keeps them all (:func:`views_sides`).
+MIRROR_COST = 1.0
+#: How MediaPipe's left and right are made consistent before triangulation
+#: (:func:`consistent_views`).
+LEFT_RIGHT: tuple[str, ...] = ("views", "continuity", "both", "mediapipe")
+
+
+def views_sides(
+    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY, over_time: bool = True
+) -> tuple[ViewLandmarks, np.ndarray]:
+    """MediaPipe's landmarks with left and right made to agree across the views, and which
+    views' groups were swapped back (V, F, len(SIDE_GROUPS)).
+
+    One view cannot tell a person seen from behind from one facing it, and MediaPipe, assuming
+    the face, mirrors the whole body or some limbs (on the rendered held-out kinds, the camera
+    behind the person swaps a group in 40-80 % of the frames); several calibrated views can,
+    because a wrong labelling does not triangulate. Per frame and per group of
+    :data:`~markovmotion.video.left_right.SIDE_GROUPS`, every labelling of the views (each
+    view's pairs kept or swapped; a labelling and its mirror, every view swapped, triangulate
+    the same points and count as one) is triangulated by :func:`triangulate_points` and scored
+    as its MSAC does, ``sum_v w_v min(e_v^2, tau^2)`` over the group's landmarks; the best is
+    kept. Of it and its mirror, the one that swaps less of the views' visibility is taken
+    (MediaPipe's labels where most views agree); ties keep MediaPipe's labels."""
+    from itertools import product
+
+    from markovmotion.video.left_right import (
+        SIDE_GROUPS,
+        _pairs,
+        continuity_costs,
+        decode_labels,
+        torso_lengths,
+    )
+
+    v_n, f_n, l_n = views.visibility.shape
+    w = np.where(views.visibility >= min_visibility, views.visibility, 0.0)
+    plain = triangulate_views(views, min_visibility).landmarks  # torso: the same either way
+    torso = torso_lengths(plain)
+    torso = float(np.nanmedian(torso)) if np.isfinite(torso).any() else 1.0
+    pixels, vis, world = views.pixels.copy(), views.visibility.copy(), views.world
+    world = None if world is None else world.copy()
+    swapped = np.zeros((v_n, f_n, len(SIDE_GROUPS)), dtype=bool)
+    labellings = np.array([(0, *s) for s in product((0, 1), repeat=v_n - 1)], dtype=bool)
+    tau2 = _tau2(views.cameras, OUTLIER_ANGLE)
+    for g, stems in enumerate(SIDE_GROUPS):
+        li, ri = (list(x) for x in zip(*(_pairs(s) for s in stems), strict=True))
+        own, other = li + ri, ri + li
+        c_n, n = len(labellings), len(own)
+        # (V, C, F, 2n): each labelling's pixels and weights of the group's landmarks
+        px = np.where(
+            labellings.T[:, :, None, None, None],
+            views.pixels[:, None][:, :, :, other],
+            views.pixels[:, None][:, :, :, own],
+        )
+        wc = np.where(
+            labellings.T[:, :, None, None], w[:, None][:, :, :, other], w[:, None][:, :, :, own]
+        )
+        pts, _, _ = triangulate_points(views.cameras, px.reshape(v_n, -1, 2), wc.reshape(v_n, -1))
+        e2 = _errors2(views.cameras, px.reshape(v_n, -1, 2), pts)
+        score = (wc.reshape(v_n, -1) * np.minimum(e2, tau2)).sum(axis=0)
+        score = np.where(np.isfinite(pts).all(axis=1), score, 0.0).reshape(c_n, f_n, n).sum(-1)
+        pick = np.argmin(score, axis=0)  # (F,); ties: the first, all kept
+        best = labellings[pick]  # (F, V)
+        seen = w[:, :, own].sum(axis=-1).T  # (F, V) each view's weight of the group
+        share = (seen * best).sum(axis=1) / np.maximum(seen.sum(axis=1), 1e-9)
+        mirror = share > 0.5
+        best ^= mirror[:, None]
+        share = np.where(mirror, 1.0 - share, share)  # of the views' weight swapped
+        if over_time:
+            # the triangulated group (the majority's labels) over time: a mirror chosen
+            # against the frames around it is a jump of its left and right points
+            got = pts.reshape(c_n, f_n, n, 3)[pick, np.arange(f_n)]
+            got = np.where(mirror[:, None, None], got[:, np.r_[n // 2 : n, 0 : n // 2]], got)
+            body = np.full((f_n, l_n, 3), np.nan)
+            body[:, own] = got
+            ones = np.ones((f_n, l_n))
+            pairs = [_pairs(s) for s in stems]
+            cont = [continuity_costs(body, ones, pairs, lag, torso) for lag in (1, 2)]
+            unary = MIRROR_COST * np.c_[share, 1.0 - share]
+            best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
+        swapped[:, :, g] = best.T
+        for v in range(v_n):
+            at = np.nonzero(best[:, v])[0]
+            for arr in (pixels, vis) if world is None else (pixels, vis, world):
+                arr[v][np.ix_(at, own)] = arr[v][np.ix_(at, other)]
+    out = ViewLandmarks(views.cameras, pixels, vis, views.seconds, world)
+    return out, swapped
+
+
+def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLandmarks:
+    """Every view's MediaPipe landmarks with left and right made consistent (:data:`LEFT_RIGHT`):
+    ``views`` across the views (:func:`views_sides`); ``continuity`` each view over time
+    (:func:`~markovmotion.video.left_right.consistent_sides`, the monocular path's, which needs
+    the world points); ``both`` the one then the other; ``mediapipe`` its own labels."""
+    from markovmotion.video.left_right import consistent_sides
+
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
+    if left_right in ("continuity", "both"):
+        if views.world is None:
+            raise ValueError("left_right continuity needs MediaPipe's world points")
+        got = [
+            consistent_sides(p, wo, vi)
+            for p, wo, vi in zip(views.pixels, views.world, views.visibility, strict=True)
+        ]
+        views = ViewLandmarks(
+            views.cameras, *(np.stack([g[k] for g in got]) for k in (0, 2)), views.seconds,
+            np.stack([g[1] for g in got]),
+        )  # fmt: skip
+    if left_right in ("views", "both"):
+        views = views_sides(views)[0]
+    return views
 
 
 @dataclass
@@ -363,11 +493,16 @@ def track_triangulated_video(
     max_frames: int | None = None,
     reference: str | os.PathLike[str] | None = None,
     views: int | None = None,
+    left_right: str = "views",
 ) -> tuple[TriangulatedTrack, dict]:
     """Track a multi-view video (a folder with ``cameras.json``, or that file) by MediaPipe in
     every view, triangulated (module docstring, 1); the track and a JSON-ready summary (with
-    ``reference``, its errors)."""
+    ``reference``, its errors); ``left_right`` (:data:`LEFT_RIGHT`): how MediaPipe's left and
+    right are made consistent across the views first (:func:`consistent_views`)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
 
     t0 = time.perf_counter()
     where = camera_file(video, cameras)
@@ -379,7 +514,7 @@ def track_triangulated_video(
         cams, videos = cams[:views], videos[:views]
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
-    lm = ViewLandmarks.from_videos(videos, cams, max_frames)
+    lm = consistent_views(ViewLandmarks.from_videos(videos, cams, max_frames), left_right)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
@@ -396,6 +531,7 @@ def track_triangulated_video(
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
+        "left_right": left_right,
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
