@@ -35,9 +35,9 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
     MAX_CAMERAS,
-    MAX_JSON_BYTES,
     CalibratedCamera,
     read_distortion,
+    read_small_text,
     save_cameras,
     valid_camera,
 )
@@ -90,13 +90,10 @@ def cameras_from_toml(
     path = Path(path)
     if up not in UP_AXES or units not in UNITS:
         raise ValueError(f"up must be one of {', '.join(UP_AXES)} and units of {', '.join(UNITS)}")
-    if not path.is_file():
-        raise MotionFormatError(path, "no such calibration file")
-    if path.stat().st_size > MAX_JSON_BYTES:
-        raise MotionFormatError(path, f"calibration file larger than {MAX_JSON_BYTES} bytes")
+    text = read_small_text(path, "no such calibration file", "calibration file")
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
         raise MotionFormatError(path, f"not a TOML calibration file ({exc})") from None
     sections = [(k, v) for k, v in doc.items() if isinstance(v, dict) and "matrix" in v]
     if not 1 <= len(sections) <= MAX_CAMERAS:

@@ -184,6 +184,19 @@ def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray
     return a
 
 
+def read_small_text(path: Path, missing: str, what: str) -> str:
+    """The text (UTF-8) of a camera or calibration file, at most :data:`MAX_JSON_BYTES`;
+    else a one-line :class:`MotionFormatError` (``missing``: when there is no such file)."""
+    if not path.is_file():
+        raise MotionFormatError(path, missing)
+    if path.stat().st_size > MAX_JSON_BYTES:
+        raise MotionFormatError(path, f"{what} larger than {MAX_JSON_BYTES} bytes")
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise MotionFormatError(path, f"not a text {what} ({exc})") from None
+
+
 def valid_camera(path: Path, where: str, camera: CalibratedCamera) -> None:
     """Raise a one-line :class:`MotionFormatError` naming ``path`` and ``where`` unless
     ``camera`` has a size of 16 to :data:`MAX_SIDE` pixels, positive focal lengths (``K``'s
@@ -245,13 +258,10 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
     path = Path(path)
     if path.is_dir():
         path = path / CAMERAS_FILE
-    if not path.is_file():
-        raise MotionFormatError(path, "no camera file (cameras.json) for this video")
-    if path.stat().st_size > MAX_JSON_BYTES:
-        raise MotionFormatError(path, f"camera file larger than {MAX_JSON_BYTES} bytes")
+    text = read_small_text(path, "no camera file (cameras.json) for this video", "camera file")
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
         raise MotionFormatError(path, f"not a JSON camera file ({exc})") from None
     cams = doc.get("cameras") if isinstance(doc, dict) else None
     if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
