@@ -13,7 +13,6 @@ import atexit
 import gzip
 import json
 import os
-import resource
 import subprocess
 import sys
 import threading
@@ -52,48 +51,76 @@ class Run:
         return [ln for ln in self.stderr.splitlines() if ln.strip()]
 
 
-def _limits() -> None:  # pragma: no cover - runs in the child
-    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE_CAP, ADDRESS_SPACE_CAP))
+#: Runs the command line as its own child and writes that child's exit status, CPU time and
+#: peak resident memory to the file ``argv[1]``. Measured in a grandchild because Linux counts
+#: in a process's peak the memory it had before ``exec``: a child forked straight from this
+#: test process would start at the test process's size (a gigabyte late in the suite).
+LAUNCHER = """
+import json, os, resource, sys
+report, cap = sys.argv[1], int(sys.argv[2])
+pid = os.fork()
+if pid == 0:
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    cli = "from markovmotion.cli import main; main()"
+    os.execv(sys.executable, [sys.executable, "-c", cli, *sys.argv[3:]])
+_, status, usage = os.wait4(pid, 0)
+with open(report, "w") as f:
+    json.dump({"status": status, "cpu": usage.ru_utime + usage.ru_stime,
+               "rss": usage.ru_maxrss * 1024}, f)
+code = os.waitstatus_to_exitcode(status)
+sys.exit(code if code >= 0 else 128 - code)
+"""
 
 
 def run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float = 120) -> Run:
-    """Run ``markovmotion ARGS`` in a child process; kill it after ``timeout`` wall seconds."""
+    """Run ``markovmotion ARGS`` in a child process (:data:`LAUNCHER`); kill it after
+    ``timeout`` wall seconds."""
+    import signal
+    import tempfile
+
     full_env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     full_env.update(env or {})
     start = time.perf_counter()
-    proc = subprocess.Popen(
-        [*CLI, *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        env=full_env,
-        preexec_fn=_limits,
-    )
-    out: dict[str, bytes] = {}
-    readers = [
-        threading.Thread(target=lambda k=k, s=s: out.__setitem__(k, s.read()))
-        for k, s in (("out", proc.stdout), ("err", proc.stderr))
-    ]
-    for t in readers:
-        t.start()
-    killer = threading.Timer(timeout, proc.kill)
-    killer.start()
-    try:
-        _, status, usage = os.wait4(proc.pid, 0)
-    finally:
-        killer.cancel()
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "usage.json"
+        proc = subprocess.Popen(
+            [sys.executable, "-c", LAUNCHER, str(report), str(ADDRESS_SPACE_CAP), *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            env=full_env,
+            start_new_session=True,  # the launcher and the command line, killed together
+        )
+        out: dict[str, bytes] = {}
+        readers = [
+            threading.Thread(target=lambda k=k, s=s: out.__setitem__(k, s.read()))
+            for k, s in (("out", proc.stdout), ("err", proc.stderr))
+        ]
+        for t in readers:
+            t.start()
+        killer = threading.Timer(timeout, lambda: os.killpg(proc.pid, signal.SIGKILL))
+        killer.start()
+        try:
+            _, status, usage = os.wait4(proc.pid, 0)
+        finally:
+            killer.cancel()
+        for t in readers:
+            t.join()
+        for pipe in (proc.stdout, proc.stderr):  # read to the end; closed now
+            pipe.close()
+        if report.exists():  # the command line's own status and cost
+            got = json.loads(report.read_text())
+            status, cpu, rss = got["status"], got["cpu"], got["rss"]
+        else:  # the launcher was killed (timeout)
+            cpu, rss = usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024
     proc.returncode = os.waitstatus_to_exitcode(status)
-    for t in readers:
-        t.join()
-    for pipe in (proc.stdout, proc.stderr):  # read to the end; closed now, not when collected
-        pipe.close()
     return Run(
         code=proc.returncode,
         stdout=out.get("out", b"").decode("utf-8", "replace"),
         stderr=out.get("err", b"").decode("utf-8", "replace"),
-        cpu_s=usage.ru_utime + usage.ru_stime,
+        cpu_s=cpu,
         wall_s=time.perf_counter() - start,
-        max_rss_bytes=usage.ru_maxrss * 1024,
+        max_rss_bytes=rss,
     )
 
 
