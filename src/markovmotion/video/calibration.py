@@ -37,6 +37,7 @@ from markovmotion.video.cameras import (
     MAX_CAMERAS,
     CalibratedCamera,
     read_distortion,
+    read_matrix,
     read_small_text,
     save_cameras,
     valid_camera,
@@ -52,16 +53,6 @@ UP_AXES: dict[str, np.ndarray] = {
 }
 #: Metres (Pose2Sim) or millimetres (Anipose with a board measured in mm) to mm.
 UNITS: dict[str, float] = {"m": 1000.0, "mm": 1.0}
-
-
-def _field(path: Path, name: str, section: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
-    try:
-        a = np.array(section.get(key), dtype=float)
-    except (TypeError, ValueError):
-        a = np.zeros(0)
-    if a.shape != shape or not np.isfinite(a).all():
-        raise MotionFormatError(path, f"[{name}] {key} must be finite numbers of shape {shape}")
-    return a
 
 
 def _video_size(video: Path) -> tuple[int, int]:
@@ -110,11 +101,11 @@ def cameras_from_toml(
         name = str(sec.get("name", key))[:64]
         if sec.get("fisheye", False):
             raise MotionFormatError(path, f"[{key}] is a fisheye camera: not supported")
-        size = _field(path, key, sec, "size", (2,))
-        k = _field(path, key, sec, "matrix", (3, 3))
+        size = read_matrix(path, f"[{key}] size", sec.get("size"), (2,))
+        k = read_matrix(path, f"[{key}] matrix", sec.get("matrix"), (3, 3))
         dist = read_distortion(path, f"[{key}] distortions", sec.get("distortions", []))
-        rvec = _field(path, key, sec, "rotation", (3,))
-        t = _field(path, key, sec, "translation", (3,)) * UNITS[units]
+        rvec = read_matrix(path, f"[{key}] rotation", sec.get("rotation"), (3,))
+        t = read_matrix(path, f"[{key}] translation", sec.get("translation"), (3,)) * UNITS[units]
         width, height = _video_size(video)
         if not (size > 0).all() or abs(width / height - size[0] / size[1]) > 0.01 * width / height:
             raise MotionFormatError(

@@ -174,7 +174,8 @@ def save_cameras(
     return path
 
 
-def _matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray:
+def read_matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as finite numbers of ``shape``, else one line naming ``path`` and ``where``."""
     try:
         a = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -218,7 +219,7 @@ def read_distortion(path: Path, where: str, value) -> tuple[float, ...]:
         raise MotionFormatError(
             path, f"{where} must be a list of {', '.join(map(str, DISTORTION_LENGTHS))} numbers"
         )
-    a = _matrix(path, where, value, (len(value),))
+    a = read_matrix(path, where, value, (len(value),))
     if np.abs(a).max() > MAX_DISTORTION:
         raise MotionFormatError(path, f"{where}: coefficients beyond {MAX_DISTORTION:g}")
     return tuple(a.tolist()) if a.any() else ()
@@ -277,9 +278,9 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         w, h = c.get("width"), c.get("height")
         if not all(isinstance(v, int) for v in (w, h)):
             raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
-        k = _matrix(path, f"{where}.K", c.get("K"), (3, 3))
-        r = _matrix(path, f"{where}.R", c.get("R"), (3, 3))
-        t = _matrix(path, f"{where}.t", c.get("t"), (3,))
+        k = read_matrix(path, f"{where}.K", c.get("K"), (3, 3))
+        r = read_matrix(path, f"{where}.R", c.get("R"), (3, 3))
+        t = read_matrix(path, f"{where}.t", c.get("t"), (3,))
         dist = read_distortion(path, f"{where}.distortion", c.get("distortion", []))
         video = c.get("video", "")
         if not isinstance(video, str) or len(video) > 255:

@@ -200,7 +200,7 @@ def consistent_sides(
         facing_costs(pixels) if faces_camera else None,
         _continuity(pixels, world, visibility, everything, 2),
     ).astype(bool)
-    _relabel((pixels, world, visibility), body, everything)
+    relabel((pixels, world, visibility), body, everything)
     swapped[body] = True
     for g, stems in enumerate(SIDE_GROUPS):
         pairs = [_pairs(s) for s in stems]
@@ -216,7 +216,7 @@ def consistent_sides(
             _continuity(pixels, world, visibility, pairs, 2),
         ).astype(bool)
         swapped[:, g] ^= labels
-        _relabel((pixels, world, visibility), labels, pairs)
+        relabel((pixels, world, visibility), labels, pairs)
     return pixels, world, visibility, swapped
 
 
@@ -323,7 +323,7 @@ def _dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(((a - b) ** 2).sum(axis=1))
 
 
-def _relabel(arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs) -> None:
+def relabel(arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs) -> None:
     """Swap the left and right ``pairs`` of ``arrays`` (F, 33, ...) in place in ``rows``."""
     li, ri = (list(x) for x in zip(*pairs, strict=True))
     at = np.nonzero(rows)[0]

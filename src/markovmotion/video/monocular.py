@@ -393,7 +393,7 @@ def track_monocular(
     if left_right not in LEFT_RIGHT:
         raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     t0 = time.perf_counter()
-    frames = read_frames(video)
+    frames = read_frames(video, camera)  # a camera with lens distortion: its pinhole image
     first = next(frames)
     if first.shape[:2] != (camera.height, camera.width):
         raise MotionFormatError(
@@ -402,11 +402,9 @@ def track_monocular(
             f"{first.shape[1]}x{first.shape[0]}",
         )
 
-    fix = camera.undistorter()  # a camera with lens distortion: its pinhole image
-
     def all_frames():
-        yield first if fix is None else fix(first)
-        yield from frames if fix is None else map(fix, frames)
+        yield first
+        yield from frames
 
     lm = detect_landmarks(all_frames(), max_frames)
     if left_right == "online":

@@ -263,6 +263,7 @@ def views_sides(
         _pairs,
         continuity_costs,
         decode_labels,
+        relabel,
         torso_lengths,
     )
 
@@ -314,9 +315,8 @@ def views_sides(
             best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
         swapped[:, :, g] = best.T
         for v in range(v_n):
-            at = np.nonzero(best[:, v])[0]
-            for arr in (pixels, vis) if world is None else (pixels, vis, world):
-                arr[v][np.ix_(at, own)] = arr[v][np.ix_(at, other)]
+            arrays = (pixels[v], vis[v]) if world is None else (pixels[v], vis[v], world[v])
+            relabel(arrays, best[:, v], [_pairs(s) for s in stems])
     out = ViewLandmarks(views.cameras, pixels, vis, views.seconds, world)
     return out, swapped
 
