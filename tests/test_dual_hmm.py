@@ -406,8 +406,11 @@ def test_cli_train_respond_evaluate(tmp_path, capsys):
     assert report["test_files"] == ["a4.bvh", "b4.bvh"]
     assert report["left_out_training_files"] == []
 
-    # Without --test: the takes held out at training (recorded in the model file).
-    main(["dualhmm", "evaluate", "--model", str(model), "--json", "--plots", str(tmp_path)])
+    # Without --test: the takes held out at training (recorded in the model file); without
+    # --plots, nothing is written beside the model
+    before = set(tmp_path.iterdir())
+    main(["dualhmm", "evaluate", "--model", str(model), "--json"])
+    assert set(tmp_path.iterdir()) == before
     again = json.loads(capsys.readouterr().out)
     assert again["test_files"] == ["a4.bvh", "b4.bvh"]
     assert again["overall"]["standard_mm"] == overall["standard_mm"]

@@ -426,3 +426,18 @@ def test_demo_video_step_composites_the_partner_into_the_handshake(mocap, tmp_pa
         frames.append(frame)
         ok, frame = cap.read()
     assert len(frames) == 60 and not np.array_equal(frames[0], frames[-1])
+
+
+def test_the_partner_has_a_frame_for_every_video_frame():
+    """100 video frames at 60 fps are 50 partner frames at 30, which span 99 at 60: the last
+    partner frame is held over the last video frame (it was left without a partner)."""
+    from markovmotion.core.markers import Markers
+    from markovmotion.video.composite import at_video_rate
+
+    pos = np.arange(50, dtype=float)[:, None, None] * np.ones((1, 2, 3))
+    b = at_video_rate(Markers(["P", "Q"], pos, 30.0, "B"), 60.0, 100)
+    assert b.n_frames == 100 and b.fps == 60.0
+    np.testing.assert_allclose(b.positions[:99, 0, 0], np.arange(99) / 2)
+    np.testing.assert_allclose(b.positions[99], b.positions[98])
+    same = at_video_rate(Markers(["P", "Q"], pos, 30.0, "B"), 30.0, 50)
+    np.testing.assert_array_equal(same.positions, pos)

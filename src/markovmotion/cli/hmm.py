@@ -105,6 +105,13 @@ CONTACT_WEIGHT = ranged(
     "A's as the training pairs' hands met (0: the paper's placement; docs/hmm.md, 'The "
     "hands' contact').",
 )
+PLACE_SCALE = typer.Option(
+    "none",
+    callback=choice(("none", "size")),
+    help="B's distance from A as the training pairs' ('none', the paper's) or scaled by A's "
+    "size, measured by A's markers, with B of the average size ('size'; markers; docs/hmm.md, "
+    "'B's place and the pair's size').",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 INITIAL = typer.Option(
@@ -150,7 +157,7 @@ MODEL_OPTIONS = {
             "mode", "observation", "candidates", "placement_window", "place_memory", "blend_window",
             "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
-            "normalise", "output", "contact_weight",
+            "normalise", "output", "contact_weight", "place_scale",
             "covariance_type", "var_floor",
         )
     },
@@ -196,6 +203,7 @@ def train(
     normalise: str = NORMALISE,
     output: str = OUTPUT,
     contact_weight: float = CONTACT_WEIGHT,
+    place_scale: str = PLACE_SCALE,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,
@@ -498,7 +506,7 @@ def evaluate(
     labels: str = LABELS,
     test_trials: str = typer.Option(None, help="Only these comma-separated trials."),
     plots: Path = typer.Option(
-        None, help="Folder for the per-frame error plots (Figs. 6-8); default: MODEL-plots."
+        None, help="Folder for the per-frame error plots (Figs. 6-8); none if not given."
     ),
     json_out: bool = JSON,
 ) -> None:
@@ -512,7 +520,6 @@ def evaluate(
     from markovmotion.models.hmm.dual import DualHMM
 
     dual = DualHMM.load(model)
-    plots = plots or model.with_name(f"{model.name.split('.')[0]}-plots")
     _report(*evaluate_model(dual, test, _split(labels), _split(test_trials), plots), json_out)
 
 
@@ -535,6 +542,7 @@ def crossval(
     normalise: str = NORMALISE,
     output: str = OUTPUT,
     contact_weight: float = CONTACT_WEIGHT,
+    place_scale: str = PLACE_SCALE,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,

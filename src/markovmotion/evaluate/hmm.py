@@ -398,6 +398,7 @@ def describe(model: DualHMM) -> dict:
         "normalise": model.normalise,
         "output": model.output,
         "contact_weight": model.contact_weight,
+        "place_scale": getattr(model, "place_scale", "none"),
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))

@@ -68,10 +68,17 @@ class RunningCentre(FeatureStep):
         only (all if None): an unseen row (a frame of A that was missing, filled in) does
         not enter the mean, as the online partner never sees it (:meth:`online`)."""
         x = np.asarray(x, dtype=float)
+        return x - self.running_mean(x, seen)
+
+    def running_mean(self, x: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
+        """(T, D) the causal running mean of ``x`` (T, D) over the rows ``seen`` (all if
+        None), started from ``mean_`` with the weight of ``prior`` rows; an unseen row (NaN
+        allowed) keeps the mean of the rows before it."""
+        x = np.asarray(x, dtype=float)
         seen = np.ones(len(x), dtype=bool) if seen is None else np.asarray(seen, dtype=bool)
         total = np.cumsum(np.where(seen[:, None], x, 0.0), axis=0)
         count = np.cumsum(seen)[:, None]
-        return x - (self.prior * self.mean_ + total) / np.maximum(self.prior + count, 1e-12)
+        return (self.prior * self.mean_ + total) / np.maximum(self.prior + count, 1e-12)
 
     def inverse_transform(self, sequences: Sequence[np.ndarray]) -> list[np.ndarray]:
         return [np.asarray(s) for s in sequences]
@@ -174,3 +181,40 @@ def on_average_body(takes: Sequence[np.ndarray]) -> list[np.ndarray]:
     shapes = [p - p.mean(axis=1, keepdims=True) for p in takes]
     average = np.concatenate(shapes).mean(axis=0)
     return [p - s.mean(axis=0) + average for p, s in zip(takes, shapes, strict=True)]
+
+
+def body_radius(positions: np.ndarray) -> np.ndarray:
+    """(F,) a person's size per frame: the root mean square distance (mm) of the frame's
+    points (F, P, 3) from their centroid (NaN where a point is)."""
+    p = np.asarray(positions, dtype=float)
+    return np.sqrt(((p - p.mean(axis=1, keepdims=True)) ** 2).sum(axis=-1).mean(axis=-1))
+
+
+def size_scale(
+    radius: np.ndarray, seen: np.ndarray, size: float, prior: float = 30.0
+) -> np.ndarray:
+    """(F,) how far a pair stands apart, against the training pairs' average, from A's size
+    alone: ``(r_t + size) / (2 size)``, with ``r_t`` the causal running mean of A's
+    :func:`body_radius` (:meth:`RunningCentre.running_mean`, started from ``size``, the
+    training people's mean, with the weight of ``prior`` frames) and B taken to be of the
+    average size, as ``normalise="person"`` draws B (``DualHMM(place_scale="size")``)."""
+    step = RunningCentre(prior)
+    step.mean_ = np.array([float(size)])
+    running = step.running_mean(np.asarray(radius, dtype=float)[:, None], seen)[:, 0]
+    return (running + size) / (2.0 * size)
+
+
+class OnlineSizeScale:
+    """:func:`size_scale` one frame at a time (the live partner's)."""
+
+    def __init__(self, size: float, prior: float = 30.0):
+        self.size = float(size)
+        self._centre = OnlineCentre(np.array([prior * self.size]), float(prior))
+        self.scale = 1.0  # before the first frame: the training people's average
+
+    def __call__(self, radius: float) -> float:
+        """Take in A's radius of one seen frame; the scale now."""
+        r = np.array([float(radius)])
+        mean = float((r - self._centre(r))[0])
+        self.scale = (mean + self.size) / (2.0 * self.size)
+        return self.scale

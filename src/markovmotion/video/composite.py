@@ -253,9 +253,7 @@ def _respond_live(
         raise MotionFormatError(mv.source, "no frames tracked")
     filled = _fill_forward(states)
     a = body.motion(filled, mv.fps)
-    b = concatenate(b_frames, partner.fps)
-    if every > 1:  # B at the video's rate, to be drawn over every frame
-        b = b.resample(mv.fps)
+    b = at_video_rate(concatenate(b_frames, partner.fps), mv.fps, len(states))
     frames = read_frames(mv.videos[view], mv.cameras[view])  # decoded again: none kept
     written = write_video(
         composite_frames(frames, mv.cameras[view], body_points(a), b), out, mv.fps
@@ -301,5 +299,18 @@ def _fill_forward(states: list[np.ndarray | None]) -> np.ndarray:
 
 def _respond(dual, a: Motion, method: str) -> Motion | Markers:
     """B's response at the video's rate (the model works at its own)."""
-    b = dual.respond(a, method)
-    return b.resample(a.fps) if not np.isclose(b.fps, a.fps) else b
+    return at_video_rate(dual.respond(a, method), a.fps, a.n_frames)
+
+
+def at_video_rate(b: Motion | Markers, fps: float, frames: int) -> Motion | Markers:
+    """B resampled to the video's rate with a frame for each of the video's ``frames``: at the
+    model's rate B ends up to a video frame early (100 frames at 60 fps are 50 at 30, which
+    span 99 at 60), so its last frame is held to the end."""
+    from markovmotion.models.online import concatenate
+
+    if not np.isclose(b.fps, fps):
+        b = b.resample(fps)
+    if b.n_frames >= frames:
+        return b
+    last = b.trim(b.n_frames - 1, b.n_frames)
+    return concatenate([b] + [last] * (frames - b.n_frames), fps)

@@ -89,7 +89,7 @@ from markovmotion.features.markers import (
     out_of_marker_frame,
     virtual_markers,
 )
-from markovmotion.features.person import RunningCentre, on_average_body
+from markovmotion.features.person import RunningCentre, body_radius, on_average_body, size_scale
 from markovmotion.models.base import Model, flatten
 from markovmotion.models.hmm.contact import HandContact, contact_shifts, right_hand
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
@@ -120,6 +120,9 @@ POINTS = ("body", "all")
 FRAMES = ("auto", "heading", "world")
 NORMALISE = ("none", "person")
 OUTPUTS = ("frames", "regression")
+PLACE_SCALES = ("none", "size")
+#: The ground plane's axes (y is up).
+HORIZONTAL = [0, 2]
 #: The learnt parts of ``output="regression"`` (:func:`state_regressions`).
 _REGRESSION = ("reg_means_a_", "reg_means_b_", "reg_gains_")
 #: Its ridge, in units of A's features' mean variance: chosen by leaving one pair of people
@@ -283,6 +286,16 @@ class DualHMM(Model):
             people that stands further apart than the training pairs shows it in A's reach.
             A model whose training takes hold no contact (waves) learns none and moves
             nothing.
+        place_scale: ``"none"`` (the paper's) or ``"size"`` (a marker model only; our
+            addition): how far B stands from A scales with the pair's size. Each training
+            take's B place (its centroid's horizontal offset in A's ground frame) is taken
+            to the average pair by ``2 r / (r_A + r_B)``, with ``r_A``, ``r_B`` the two
+            people's mean :func:`~markovmotion.features.person.body_radius` and ``r``
+            (``place_size_``) the training people's mean; B's answer is taken back by
+            ``(r_A(t) + r) / (2 r)``, with ``r_A(t)`` the running mean of the real A's radius
+            (:func:`~markovmotion.features.person.size_scale`, online) and B of the average
+            size. On the Bütepage pairs the separation over the pair's summed radius varies
+            less than the separation (docs/hmm.md, "B's place and the pair's size").
         var_floor: each state's variance along PCA feature j is kept at or above this
             fraction of feature j's variance over the training frames (and at least
             ``GaussianHMM``'s absolute ``min_covar``); :class:`GaussianHMM`. The default 0.3
@@ -327,6 +340,7 @@ class DualHMM(Model):
         normalise: str = "none",
         output: str = "frames",
         contact_weight: float = 0.0,
+        place_scale: str = "none",
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 0.3,
@@ -352,6 +366,7 @@ class DualHMM(Model):
         self.normalise = normalise
         self.output = output
         self.contact_weight = contact_weight
+        self.place_scale = place_scale
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -384,6 +399,8 @@ class DualHMM(Model):
             raise ValueError(f"place_memory must be 0 to 100000 frames, got {self.place_memory!r}")
         if self.output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {self.output!r}")
+        if self.place_scale not in PLACE_SCALES:
+            raise ValueError(f"place_scale must be one of {PLACE_SCALES}, got {self.place_scale!r}")
         counts = ("n_states", "window", "candidates", "placement_window", "blend_window", "n_iter")
         for name in counts:
             value = getattr(self, name)
@@ -426,6 +443,11 @@ class DualHMM(Model):
                 "output 'regression' generates B's markers: train on markers (C3D takes, or "
                 "virtual markers placed on skeletons with markers=N)"
             )
+        if self.place_scale == "size" and not markers_in:
+            raise SkeletonMismatchError(
+                "place_scale 'size' measures people by their markers: train on markers (C3D "
+                "takes, or virtual markers placed on skeletons with markers=N)"
+            )
         if not pairs:
             raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
@@ -442,7 +464,14 @@ class DualHMM(Model):
         for a, b in pairs:
             if a.n_frames != b.n_frames:
                 raise ValueError(f"{a.name} and {b.name} differ in length")
-        for k in (*_LEARNT, *_LEARNT_MARKERS, *_REGRESSION, *_CONTACT, "contact_bounds_"):
+        for k in (
+            *_LEARNT,
+            *_LEARNT_MARKERS,
+            *_REGRESSION,
+            *_CONTACT,
+            "contact_bounds_",
+            "place_size_",
+        ):
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
             xa, xb, lengths = self._marker_features(pairs, groups)
@@ -579,6 +608,8 @@ class DualHMM(Model):
             b_rel.append(
                 into_marker_frame(b, *self._training_place(first.place(first.select(a).positions)))
             )
+        if self.place_scale == "size":
+            b_rel = self._fit_place_size(first, a_list, b_list, b_rel)
         if self.normalise == "person":
             moved = on_average_body([b.positions for b in b_rel])
             b_rel = [Markers(b.names, p, b.fps, b.name) for b, p in zip(b_rel, moved, strict=True)]
@@ -593,6 +624,53 @@ class DualHMM(Model):
         self.markers_b_ = np.concatenate([b.select(names).positions for b in b_rel])
         self.markers_b_ = self.markers_b_.astype(np.float32)
         return xa, xb, lengths
+
+    def _fit_place_size(
+        self, first: MarkerFeatures, a_list: list, b_list: list, b_rel: list
+    ) -> list[Markers]:
+        """``place_scale="size"``: learn ``place_size_`` and take each training take's B
+        place to the average pair's (the parameter's docstring)."""
+        radii = []
+        for a, b in zip(a_list, b_list, strict=True):
+            try:
+                radii.append(
+                    [float(np.mean(body_radius(first.select(x).positions))) for x in (a, b)]
+                )
+            except SkeletonMismatchError as err:
+                raise SkeletonMismatchError(
+                    f"place_scale 'size' measures A and B by the same markers: {err}"
+                ) from None
+        radii = np.asarray(radii)
+        self.place_size_ = float(radii.mean())
+        out = []
+        for b, (ra, rb) in zip(b_rel, radii, strict=True):
+            pos = np.array(b.positions, dtype=float)
+            centre = pos.mean(axis=1, keepdims=True)
+            pos[..., HORIZONTAL] += (2.0 * self.place_size_ / (ra + rb) - 1.0) * centre[
+                ..., HORIZONTAL
+            ]
+            out.append(Markers(b.names, pos, b.fps, b.name))
+        return out
+
+    def place_scales(self, motion_a: Markers, missing: np.ndarray, lag: int) -> np.ndarray | None:
+        """(F,) ``place_scale="size"``: the scale of B's place for each of B's frames, from A's
+        markers (``motion_a``, the model's, at its rate) seen up to the frame ``lag`` frames
+        later (the windowed partner's: what it has seen when it shows the frame); None for
+        ``place_scale="none"``."""
+        if getattr(self, "place_scale", "none") != "size":
+            return None
+        radius = body_radius(self.input_markers(motion_a).positions)
+        scale = size_scale(radius, ~missing & np.isfinite(radius), self.place_size_)
+        return scale[np.minimum(np.arange(len(scale)) + lag, len(scale) - 1)]
+
+    @staticmethod
+    def scaled_root(root: np.ndarray, scale: np.ndarray | float | None) -> np.ndarray:
+        """B's root(s) (..., 3) in A's ground frame with the horizontal offset from A scaled."""
+        if scale is None:
+            return root
+        root = np.array(root, dtype=float)
+        root[..., HORIZONTAL] *= np.asarray(scale, dtype=float)[..., None]
+        return root
 
     def _training_place(
         self, place: tuple[np.ndarray, np.ndarray]
@@ -732,6 +810,11 @@ class DualHMM(Model):
                 self.compared_names()
             ):
                 raise StateError(f"contact_hand_: not a point's index, got {hand!r}")
+        if getattr(self, "place_scale", "none") == "size":
+            require(self, "place_size_")
+            size = self.place_size_
+            if not (isinstance(size, int | float | np.number) and 0.0 < float(size) < 1e6):
+                raise StateError(f"place_size_: must be a size in mm above 0, got {size!r}")
         if on_markers:
             self._check_marker_state(t)
             return
@@ -929,6 +1012,8 @@ class DualHMM(Model):
             root = np.array([c[1] for c in chosen])
             rot = np.array([c[2] for c in chosen])
         filled = _fill_missing(motion_a, missing)
+        lag = self.window - 1 if method == "windowed" else 0
+        root = self.scaled_root(root, self.place_scales(motion_a, missing, lag))
         placed = self.placing(filled, method, lift)
         out = self.frames_to_motion(idx, *placed, root, rot)
         contact = self.contact

@@ -28,7 +28,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
 from markovmotion.features.markers import Lift, MarkerFeatures
-from markovmotion.features.person import OnlineCentre, RunningCentre
+from markovmotion.features.person import OnlineCentre, OnlineSizeScale, RunningCentre, body_radius
 from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
@@ -124,6 +124,9 @@ class Partner:
         self._lifted = 0.0  # the last frame's lift (mm)
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
+        self._size: OnlineSizeScale | None = None  # B's place scaled by A's size (place_scale)
+        if getattr(model, "place_scale", "none") == "size":
+            self._size = OnlineSizeScale(model.place_size_)
         self._unseen = np.zeros(len(hmm.means_))  # log b_j of a missing frame: no evidence
         # contact_weight: A's compared points per frame (a ring beside the places; NaN: not
         # seen) and the running mean of the contact's shifts (DualHMM.respond's, online)
@@ -269,6 +272,8 @@ class Partner:
             return self.skip()
         if isinstance(frame, Markers):
             pos = frame.positions
+            if self._size is not None:
+                self._size(body_radius(pos)[0])
             origin, yaw = self.model.place(frame)
             origin[:, 1] -= self._lifted
         else:
@@ -318,14 +323,14 @@ class Partner:
         decoder, the trellis and B, not A's forward kinematics, features and densities
         (:meth:`DualHMM.features_a` over the motion, as :meth:`DualHMM.respond` computes
         them). None for a model whose A features depend on the stream before the motion
-        (the running centre of ``normalise="person"``, kept across loops): step it frame by
-        frame.
+        (the running centre of ``normalise="person"``, or A's running size of
+        ``place_scale="size"``, kept across loops): step it frame by frame.
 
         Raises:
             SkeletonMismatchError: a motion the model cannot answer (``check_input``).
         """
         steps = self.model.pipeline_a_.steps
-        if any(isinstance(step, RunningCentre) for step in steps):
+        if self._size is not None or any(isinstance(step, RunningCentre) for step in steps):
             return None
         self.model.check_input(motion)
         motion, lift = self.model.a_in(motion)
@@ -394,8 +399,11 @@ class Partner:
         if shown is None:
             return None
         origin, yaw = self._place_of(self._shown_count)
+        root = shown[1][None]
+        if self._size is not None:
+            root = self.model.scaled_root(root, np.array([self._size.scale]))
         b = self.model.frames_to_motion(
-            np.array([shown[0]]), origin[None], np.array([yaw]), shown[1][None], shown[2][None]
+            np.array([shown[0]]), origin[None], np.array([yaw]), root, shown[2][None]
         )
         if self._contact is not None:
             a = self._a_points[self._shown_count % len(self._places)][None]
