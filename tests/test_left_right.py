@@ -100,7 +100,7 @@ def test_online_decision_is_the_least_cost_next_label():
     for _ in range(6):  # swaps at random frames, some only half way (a jump of half a swap)
         at = rng.choice(40, size=rng.integers(1, 8), replace=False)
         p, w = _swap(p, w, at, every[: rng.integers(1, len(every) + 1)])
-    pairs = [left_right._pairs(s) for s in every]
+    pairs = [left_right.landmark_pair(s) for s in every]
     cont = left_right._continuity(p, w, v, pairs)
     skip = left_right._continuity(p, w, v, pairs, 2)
     sides = OnlineSides()

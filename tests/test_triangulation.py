@@ -228,14 +228,14 @@ def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
 def _standing_landmarks(frames: int) -> np.ndarray:
     """(F, 33, 3) mm: a person's landmarks, left at +x and right at -x of their middle line,
     each pair at its own height, walking slowly along z."""
-    from markovmotion.video.left_right import SIDE_GROUPS, _pairs
+    from markovmotion.video.left_right import SIDE_GROUPS, landmark_pair
 
     pts = np.zeros((frames, len(LANDMARKS), 3))
     pts[:, LANDMARKS.index("nose")] = [0.0, 1650.0, 80.0]
     height = 1600.0
     for stems in SIDE_GROUPS:
         for stem in stems:
-            left, right = _pairs(stem)
+            left, right = landmark_pair(stem)
             width = 120.0 + 60.0 * np.sin(height)  # pairs of differing widths
             pts[:, left] = [width, height, 0.0]
             pts[:, right] = [-width, height, 0.0]
@@ -248,7 +248,7 @@ def test_views_sides_undoes_swaps_injected_into_some_views():
     """MediaPipe's swaps injected into one view (the whole body, as seen from behind) and
     another (the knees alone) are undone, view by view and group by group, and the triangulated
     landmarks come back; MediaPipe's labels alone leave them wrong."""
-    from markovmotion.video.left_right import SIDE_GROUPS, _pairs
+    from markovmotion.video.left_right import SIDE_GROUPS, landmark_pair
     from markovmotion.video.triangulation import (
         ViewLandmarks,
         consistent_views,
@@ -261,12 +261,12 @@ def test_views_sides_undoes_swaps_injected_into_some_views():
     pixels = np.stack([c.project(truth.reshape(-1, 3))[0].reshape(40, -1, 2) for c in cams])
     given = pixels.copy()
     expected = np.zeros((4, 40, len(SIDE_GROUPS)), bool)
-    everything = [_pairs(s) for stems in SIDE_GROUPS for s in stems]
+    everything = [landmark_pair(s) for stems in SIDE_GROUPS for s in stems]
     li, ri = (list(x) for x in zip(*everything, strict=True))
     given[0][10:30][:, li + ri] = pixels[0][10:30][:, ri + li]
     expected[0, 10:30] = True
     knee = SIDE_GROUPS.index(("knee",))
-    kl, kr = _pairs("knee")
+    kl, kr = landmark_pair("knee")
     given[2][5:9][:, [kl, kr]] = pixels[2][5:9][:, [kr, kl]]
     expected[2, 5:9, knee] = True
     views = ViewLandmarks(cams, given, np.full((4, 40, len(LANDMARKS)), 0.9))
@@ -288,14 +288,14 @@ def test_views_sides_keeps_the_majority_over_time_not_frame_by_frame():
     """Three views; the middle one swapped throughout (the person's back to it) and, for three
     frames, another too: the majority that frame says mirror, continuity of the triangulated
     points says not; the labels of the frames around win."""
-    from markovmotion.video.left_right import SIDE_GROUPS, _pairs
+    from markovmotion.video.left_right import SIDE_GROUPS, landmark_pair
     from markovmotion.video.triangulation import ViewLandmarks, views_sides
 
     cams = _cameras(3)
     truth = _standing_landmarks(30)
     pixels = np.stack([c.project(truth.reshape(-1, 3))[0].reshape(30, -1, 2) for c in cams])
     given = pixels.copy()
-    everything = [_pairs(s) for stems in SIDE_GROUPS for s in stems]
+    everything = [landmark_pair(s) for stems in SIDE_GROUPS for s in stems]
     li, ri = (list(x) for x in zip(*everything, strict=True))
     given[1][:, li + ri] = pixels[1][:, ri + li]
     given[2][12:15][:, li + ri] = pixels[2][12:15][:, ri + li]

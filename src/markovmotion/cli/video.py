@@ -141,20 +141,7 @@ def track(
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
         )
-    multiview = method == "triangulate" or guide == "mediapipe"
-    if left_right is None:
-        left_right = "views" if multiview else "continuity"
-    elif left_right in ("views", "both") and not multiview:
-        raise typer.BadParameter(
-            "is for --method triangulate or --guide mediapipe", param_hint="--left-right"
-        )
-    elif left_right in ("facing", "online") and method != "monocular":
-        raise typer.BadParameter("is for --method monocular", param_hint="--left-right")
-    elif method == "apf" and guide != "mediapipe":
-        raise typer.BadParameter(
-            "is for --method monocular, triangulate or --guide mediapipe",
-            param_hint="--left-right",
-        )
+    left_right = _left_right_for(method, guide, left_right)
     if method in ("monocular", "triangulate"):
         _track_landmarks(
             method,
@@ -214,7 +201,7 @@ def track(
         background == "learn",
         sides,
         guide == "mediapipe",
-        left_right,
+        left_right or "views",  # --sides alone reads the views' agreed left and right
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -250,6 +237,36 @@ def track(
             ),
             highlight=False,
         )
+
+
+#: The --left-right choices of each way MediaPipe's landmarks are read, and the default first.
+LEFT_RIGHT = {
+    "one camera": ("continuity", "mediapipe", "facing", "online"),
+    "views": ("views", "mediapipe", "continuity", "both"),
+}
+
+
+def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
+    """``track``'s --left-right, defaulted or checked against what reads the landmarks:
+    one camera (``--method monocular``) or several views (``triangulate``, ``--guide
+    mediapipe``); the particle filter alone reads none."""
+    if method == "triangulate" or guide == "mediapipe":
+        use = "views"
+    elif method == "monocular":
+        use = "one camera"
+    elif left_right is None:
+        return None
+    else:
+        raise typer.BadParameter(
+            "is for --method monocular, triangulate or --guide mediapipe",
+            param_hint="--left-right",
+        )
+    if left_right is None:
+        return LEFT_RIGHT[use][0]
+    if left_right not in LEFT_RIGHT[use]:  # a choice of the other use
+        where = "triangulate or --guide mediapipe" if use == "one camera" else "monocular"
+        raise typer.BadParameter(f"is for --method {where}", param_hint="--left-right")
+    return left_right
 
 
 def _track_landmarks(

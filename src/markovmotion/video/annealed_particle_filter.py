@@ -905,14 +905,19 @@ def track_video(
     check = guided = None
     if sides or guide:  # MediaPipe once over every camera, for both uses
         from markovmotion.video.sides import SideCheck
-        from markovmotion.video.triangulation import Guide, ViewLandmarks, triangulate_views
+        from markovmotion.video.triangulation import (
+            Guide,
+            ViewLandmarks,
+            consistent_views,
+            triangulate_views,
+        )
 
+        # left and right made consistent first (triangulation.consistent_views): a camera
+        # behind the person, whose MediaPipe mirrors the body, is put right by the others
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        check = SideCheck.from_landmarks(views) if sides else None
-        if guide:  # left and right made consistent first (triangulation.consistent_views)
-            from markovmotion.video.triangulation import consistent_views
-
-            agreed = consistent_views(views, left_right)
+        agreed = consistent_views(views, left_right) if len(mv.cameras) > 1 else views
+        check = SideCheck.from_landmarks(agreed) if sides else None
+        if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,

@@ -51,7 +51,8 @@ ATTACH_COST = 0.1
 FACING_COST = 0.1
 
 
-def _pairs(stem: str) -> tuple[int, int]:
+def landmark_pair(stem: str) -> tuple[int, int]:
+    """The indices of MediaPipe's left and right landmark of ``stem`` ("wrist", "mouth" ...)."""
     names = ("mouth_left", "mouth_right") if stem == "mouth" else (f"left_{stem}", f"right_{stem}")
     return LANDMARKS.index(names[0]), LANDMARKS.index(names[1])
 
@@ -194,7 +195,7 @@ def consistent_sides(
     swapped = np.zeros((len(pixels), len(SIDE_GROUPS)), dtype=bool)
     # the whole body first (MediaPipe's swaps are mostly whole-body mirrorings, which a
     # group seen edge on, such as the shoulders, may hardly jump at), then each group
-    everything = [_pairs(s) for stems in SIDE_GROUPS for s in stems]
+    everything = [landmark_pair(s) for stems in SIDE_GROUPS for s in stems]
     body = decode_labels(
         _continuity(pixels, world, visibility, everything),
         facing_costs(pixels) if faces_camera else None,
@@ -203,12 +204,12 @@ def consistent_sides(
     relabel((pixels, world, visibility), body, everything)
     swapped[body] = True
     for g, stems in enumerate(SIDE_GROUPS):
-        pairs = [_pairs(s) for s in stems]
+        pairs = [landmark_pair(s) for s in stems]
         up = PARENTS[g]
         unary = (
             None
             if up is None
-            else attachment_costs(world, pairs, [_pairs(x) for x in SIDE_GROUPS[up]])
+            else attachment_costs(world, pairs, [landmark_pair(x) for x in SIDE_GROUPS[up]])
         )
         labels = decode_labels(
             _continuity(pixels, world, visibility, pairs),
@@ -245,8 +246,8 @@ class OnlineSides:
 
     def __init__(self, faces_camera: bool = False, memory: int = 900):
         self.faces_camera = faces_camera
-        self._stages = [[_pairs(s) for stems in SIDE_GROUPS for s in stems]] + [
-            [_pairs(s) for s in stems] for stems in SIDE_GROUPS
+        self._stages = [[landmark_pair(s) for stems in SIDE_GROUPS for s in stems]] + [
+            [landmark_pair(s) for s in stems] for stems in SIDE_GROUPS
         ]
         n = len(LANDMARKS)
         # each stage's left and right rows in the stacked [pixels (x, y, 0); world] (66, 3)
@@ -256,7 +257,7 @@ class OnlineSides:
         ]
         self._swaps = [(np.r_[left, right], np.r_[right, left]) for left, right in self._rows]
         self._parents = [None] + [
-            None if up is None else [_pairs(x) for x in SIDE_GROUPS[up]] for up in PARENTS
+            None if up is None else [landmark_pair(x) for x in SIDE_GROUPS[up]] for up in PARENTS
         ]
         self._labels = np.zeros((len(self._stages), 2), dtype=int)  # at t-1, t-2
         self._before: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in self._stages]

@@ -260,9 +260,9 @@ def views_sides(
 
     from markovmotion.video.left_right import (
         SIDE_GROUPS,
-        _pairs,
         continuity_costs,
         decode_labels,
+        landmark_pair,
         relabel,
         torso_lengths,
     )
@@ -278,7 +278,7 @@ def views_sides(
     labellings = np.array([(0, *s) for s in product((0, 1), repeat=v_n - 1)], dtype=bool)
     tau2 = _tau2(views.cameras, OUTLIER_ANGLE)
     for g, stems in enumerate(SIDE_GROUPS):
-        li, ri = (list(x) for x in zip(*(_pairs(s) for s in stems), strict=True))
+        li, ri = (list(x) for x in zip(*(landmark_pair(s) for s in stems), strict=True))
         own, other = li + ri, ri + li
         c_n, n = len(labellings), len(own)
         # (V, C, F, 2n): each labelling's pixels and weights of the group's landmarks
@@ -309,14 +309,14 @@ def views_sides(
             body = np.full((f_n, l_n, 3), np.nan)
             body[:, own] = got
             ones = np.ones((f_n, l_n))
-            pairs = [_pairs(s) for s in stems]
+            pairs = [landmark_pair(s) for s in stems]
             cont = [continuity_costs(body, ones, pairs, lag, torso) for lag in (1, 2)]
             unary = MIRROR_COST * np.c_[share, 1.0 - share]
             best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
         swapped[:, :, g] = best.T
         for v in range(v_n):
             arrays = (pixels[v], vis[v]) if world is None else (pixels[v], vis[v], world[v])
-            relabel(arrays, best[:, v], [_pairs(s) for s in stems])
+            relabel(arrays, best[:, v], [landmark_pair(s) for s in stems])
     out = ViewLandmarks(views.cameras, pixels, vis, views.seconds, world)
     return out, swapped
 
