@@ -69,6 +69,22 @@ def default_kinds(index: MocapIndex) -> list[str]:
 LIMBS = [BODY_POINTS.index(p) for p in GUIDE_POINTS]
 
 
+def rendered(index: MocapIndex, kind: str, seconds: float, start: float, cache: Path):
+    """``(take, folder, truth)``: the first skeleton take labelled ``kind``, rendered to 3
+    cameras from ``start`` for ``seconds`` (into ``cache``, once; a take too short starts
+    earlier) and its capture at the rendered rate from the same frame."""
+    takes = index.query(label=kind, kind="skeleton")
+    if not takes:
+        raise SystemExit(f"no skeleton take labelled {kind!r} in {index.root}")
+    take = takes[0]
+    start = min(start, max(0.0, take.frames / take.fps - 0.1 - seconds))
+    folder = cache / f"{take.name}-{start:g}-{seconds:g}s"
+    if not (folder / "cameras.json").is_file():
+        render_multiview(take.path, folder, views=3, seconds=seconds, fps=FPS, start=start)
+    truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
+    return take, folder, truth
+
+
 def floor(body, truth: np.ndarray) -> np.ndarray:
     """(F, 19) distances (mm) of the body model fitted to true body points (F, 19, 3), each
     frame from the last one's state (the first: the best of 8 headings)."""
@@ -109,10 +125,6 @@ def main() -> None:
     old = training_body_model(args.data)
     rows = []
     for kind in kinds:
-        takes = index.query(label=kind, kind="skeleton")
-        if not takes:
-            raise SystemExit(f"no skeleton take labelled {kind!r} in {index.root}")
-        take = takes[0]
         t0 = time.perf_counter()
         new = (
             collection_body_model(args.data, leave_out=(kind,))
@@ -120,11 +132,7 @@ def main() -> None:
             else None
         )
         build = time.perf_counter() - t0
-        start = min(args.start, max(0.0, take.frames / take.fps - 0.1 - args.seconds))
-        folder = args.cache / f"{take.name}-{start:g}-{args.seconds:g}s"
-        if not (folder / "cameras.json").is_file():
-            render_multiview(take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start)
-        truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
+        take, folder, truth = rendered(index, kind, args.seconds, args.start, args.cache)
         for name, body in (("interaction (old)", old), ("collection without it", new)):
             if name.split()[0] not in args.models.split(","):
                 continue

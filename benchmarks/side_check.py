@@ -20,16 +20,14 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from held_out_kind import FPS, default_kinds
+from held_out_kind import default_kinds, rendered
 from rich.console import Console
 from rich.table import Table
 from scipy.spatial.transform import Rotation
 
 from markovmotion.data import MocapIndex
-from markovmotion.data.index import read_listed_motion
 from markovmotion.features.body_points import body_points
 from markovmotion.video.cameras import camera_videos, load_cameras
-from markovmotion.video.multiview import render_multiview
 from markovmotion.video.sides import SideCheck
 from markovmotion.video.triangulation import ViewLandmarks, consistent_views
 
@@ -64,15 +62,7 @@ def main() -> None:
     totals = np.zeros((2, 2), dtype=int)
     frames_all = 0
     for kind in kinds:
-        takes = index.query(label=kind, kind="skeleton")
-        if not takes:
-            raise SystemExit(f"no skeleton take labelled {kind!r} in {index.root}")
-        take = takes[0]
-        start = min(args.start, max(0.0, take.frames / take.fps - 0.1 - args.seconds))
-        folder = args.cache / f"{take.name}-{start:g}-{args.seconds:g}s"
-        if not (folder / "cameras.json").is_file():
-            render_multiview(take.path, folder, views=3, seconds=args.seconds, fps=FPS, start=start)
-        truth = read_listed_motion(take.path).resample(FPS).trim(int(round(start * FPS)))
+        _, folder, truth = rendered(index, kind, args.seconds, args.start, args.cache)
         cams, _ = load_cameras(folder)
         views = ViewLandmarks.from_videos(camera_videos(folder, cams), cams)
         n = min(views.pixels.shape[1], truth.n_frames)

@@ -157,3 +157,15 @@ def test_place_scale_is_checked():
     pair = (make_motion(40, seed=0), make_motion(40, seed=1))
     with pytest.raises(SkeletonMismatchError, match="place_scale 'size'"):
         DualHMM(place_scale="size", n_states=2, n_iter=1).fit([pair])
+
+
+def test_train_with_place_scale_on_skeletons_is_one_line(tmp_path, capsys):
+    from markovmotion.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "train", "--labels", "handshake", "--kind", "skeleton", "--states", "2",
+              "--n-iter", "1", "--place-scale", "size", "--out", str(tmp_path / "m.npz")])  # fmt: skip
+    assert exc.value.code == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("note:")]
+    assert len(err) == 1 and "place_scale 'size' measures people by their markers" in err[0]
+    assert not (tmp_path / "m.npz").exists()

@@ -234,14 +234,19 @@ class ViewLandmarks:
 
 #: Cost per frame (torso lengths) of taking, of a labelling and its mirror, the one that swaps
 #: every seeing view's labels, against the one that keeps them all (:func:`views_sides`).
-MIRROR_COST = 1.0
+#: Chosen by leaving one kind of motion out over 11 rendered held-out kinds among 0, 0.25,
+#: 0.5, 1, 2 and 4 (``benchmarks/mirror_cost.py``; every fold chose 0.25; docs/video.md).
+MIRROR_COST = 0.25
 #: How MediaPipe's left and right are made consistent before triangulation
 #: (:func:`consistent_views`).
 LEFT_RIGHT: tuple[str, ...] = ("views", "continuity", "both", "mediapipe")
 
 
 def views_sides(
-    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY, over_time: bool = True
+    views: ViewLandmarks,
+    min_visibility: float = MIN_VISIBILITY,
+    over_time: bool = True,
+    mirror_cost: float = MIRROR_COST,
 ) -> tuple[ViewLandmarks, np.ndarray]:
     """MediaPipe's landmarks with left and right made to agree across the views, and which
     views' groups were swapped back (V, F, len(SIDE_GROUPS)).
@@ -311,7 +316,7 @@ def views_sides(
             ones = np.ones((f_n, l_n))
             pairs = [landmark_pair(s) for s in stems]
             cont = [continuity_costs(body, ones, pairs, lag, torso) for lag in (1, 2)]
-            unary = MIRROR_COST * np.c_[share, 1.0 - share]
+            unary = mirror_cost * np.c_[share, 1.0 - share]
             best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
         swapped[:, :, g] = best.T
         for v in range(v_n):
