@@ -44,14 +44,25 @@ def turned_round(points: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description="How often track --sides's front/back check is wrong (false alarms on the true poses) and right (the true poses turned round, caught), on rendered held-out kinds, with MediaPipe's own left and right or the views' agreed ones. About 2 min (MediaPipe over 3 views per kind); renders are cached in --cache."
+    )
     parser.add_argument("--data", type=Path, default=None, help="folder with INDEX.csv")
     parser.add_argument(
         "--kinds", default=None, help="comma-separated labels (default: per category)"
     )
-    parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--start", type=float, default=1.0)
-    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
+    parser.add_argument(
+        "--seconds", type=float, default=3.0, help="rendered seconds per kind (default 3)"
+    )
+    parser.add_argument(
+        "--start", type=float, default=1.0, help="seconds into the take (default 1)"
+    )
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=Path(tempfile.gettempdir()) / "mm-kinds",
+        help="folder the rendered kinds are kept in (default: TMP/mm-kinds)",
+    )
     args = parser.parse_args()
 
     index = MocapIndex.load(args.data)

@@ -189,3 +189,30 @@ def test_index_mistakes_say_what_to_do(tmp_path, capsys):
             main(args)
         err = capsys.readouterr().err
         assert stop.value.code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_no_help_text_loses_square_brackets():
+    """Typer shows help through Rich, whose markup takes ``[word]`` as a style and drops it
+    ("needs [camera]" was shown as "needs "): no option's help may hold one."""
+    import re
+
+    import click
+    import typer
+
+    from markovmotion.cli import _register, app
+
+    _register()
+
+    def walk(command: click.Command, path: str):
+        for param in command.params:
+            yield path, param
+        for name, sub in getattr(command, "commands", {}).items():
+            yield from walk(sub, f"{path} {name}")
+
+    tag = re.compile(r"(?<!\\)\[[a-zA-Z/ =_-]+\]")
+    found = [
+        f"{path} {param.name}: {param.help}"
+        for path, param in walk(typer.main.get_command(app), "markovmotion")
+        if getattr(param, "help", None) and tag.search(param.help)
+    ]
+    assert not found, found

@@ -165,6 +165,8 @@ def real_video():
         (["--left-right", "mediapipe"], "--method monocular"),
         (["--method", "monocular", "--left-right", "both"], "--method triangulate"),
         (["--method", "monocular", "--left-right", "sideways"], "must be one of"),
+        (["--method", "monocular", "--sides"], "--method apf"),
+        (["--left-right", "facing", "--sides"], "facing is for --method monocular"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(

@@ -250,8 +250,13 @@ def train(
     hmm = model.lambda_a_
     seen = f"{len(model.marker_names_b_)} markers, " if model.uses_markers else ""
     both = " in both roles" if extras["roles"] == "both" else ""
+    if test_people:
+        both += f" (held out: {', '.join(_split(test_people))})"
+    if model.place_scale == "size":
+        both += f", B's place scaled by A's size (mean {model.place_size_:.0f} mm)"
+    takes = f"{len(pairs)} take{'' if len(pairs) == 1 else 's'}"
     err_console.print(
-        f"wrote {out}: {len(pairs)} takes{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
+        f"wrote {out}: {takes}{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
         f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
         f"{hmm.n_iter_} EM iterations "
         f"({'converged' if hmm.converged_ else f'stopped at --n-iter {n_iter}, not converged'}), "
@@ -330,7 +335,7 @@ def respond(
         "apf",
         callback=choice(("apf", "monocular")),
         help="With --video, how A is tracked: apf (annealed particle filter, all views) or "
-        "monocular (MediaPipe Pose in the --view camera alone, needs the [camera] extra).",
+        "monocular (MediaPipe Pose in the --view camera alone, needs scripts/install-camera).",
     ),
     guide: str = guide_option(),
     body_model: str = body_model_option(),

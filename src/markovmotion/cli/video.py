@@ -95,7 +95,7 @@ def track(
         callback=choice(("apf", "monocular", "triangulate")),
         help="apf: annealed particle filter (all views); monocular: MediaPipe Pose in one "
         "camera placed by PnP; triangulate: MediaPipe Pose in every camera, triangulated "
-        "(both need the [camera] extra; --out is then markers, .c3d).",
+        "(both need scripts/install-camera; --out is then markers, .c3d).",
     ),
     stature: float = ranged(
         "stature",
@@ -108,7 +108,7 @@ def track(
     body_size: str = typer.Option(
         "template",
         help="The person's size: template (the body model's); video (measured by MediaPipe in "
-        "the first camera, needs [camera]); or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
+        "the first camera, needs scripts/install-camera); or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
     ),
     background: str = typer.Option(
         "learn",
@@ -119,7 +119,7 @@ def track(
     sides: bool = typer.Option(
         False,
         help="Catch front/back flips with MediaPipe's left and right in every camera "
-        "(needs [camera]): a flipped pose is searched again turned round, or its confidence "
+        "(needs scripts/install-camera): a flipped pose is searched again turned round, or its confidence "
         "lowered.",
     ),
     guide: str = guide_option(),
@@ -130,9 +130,9 @@ def track(
         help="Monocular (default continuity): continuity: MediaPipe's left and right "
         "relabelled where they jump between frames (offline, whole video); online: the same "
         "frame by frame, causally (as the camera page does); facing: continuity, and the "
-        "person faces the camera (a webcam's user); mediapipe: its own labels. Triangulate "
-        "and --guide mediapipe (default views): views: made to agree across the views by "
-        "triangulation; continuity: each view over time; both; mediapipe.",
+        "person faces the camera (a webcam's user); mediapipe: its own labels. Triangulate, "
+        "--guide mediapipe and --sides (default views): views: made to agree across the views "
+        "by triangulation; continuity: each view over time; both; mediapipe.",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -141,7 +141,10 @@ def track(
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
         )
-    left_right = _left_right_for(method, guide, left_right)
+    if sides and method != "apf":
+        raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
+    reads = "sides" if sides and guide != "mediapipe" else guide
+    left_right = _left_right_for(method, reads, left_right)
     if method in ("monocular", "triangulate"):
         _track_landmarks(
             method,
@@ -201,7 +204,7 @@ def track(
         background == "learn",
         sides,
         guide == "mediapipe",
-        left_right or "views",  # --sides alone reads the views' agreed left and right
+        left_right or "views",
     )
     for note in summary["background"]:
         err_console.print(note, highlight=False)
@@ -231,7 +234,8 @@ def track(
             f"tracked {summary['frames']} frames in {summary['views']} views at "
             f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries"
             + (
-                f"; {summary['flips']} flips searched again, {summary['left_flipped']} left"
+                f"; {summary['flips']} flipped frames searched again, "
+                f"{summary['left_flipped']} left flipped (confidence lowered)"
                 if sides
                 else ""
             ),
@@ -249,8 +253,9 @@ LEFT_RIGHT = {
 def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
     """``track``'s --left-right, defaulted or checked against what reads the landmarks:
     one camera (``--method monocular``) or several views (``triangulate``, ``--guide
-    mediapipe``); the particle filter alone reads none."""
-    if method == "triangulate" or guide == "mediapipe":
+    mediapipe``, the particle filter's ``--sides``, given here as ``guide="sides"``); the
+    particle filter alone reads none."""
+    if method == "triangulate" or guide in ("mediapipe", "sides"):
         use = "views"
     elif method == "monocular":
         use = "one camera"
@@ -258,14 +263,14 @@ def _left_right_for(method: str, guide: str | None, left_right: str | None) -> s
         return None
     else:
         raise typer.BadParameter(
-            "is for --method monocular, triangulate or --guide mediapipe",
+            "is for --method monocular, triangulate, --guide mediapipe or --sides",
             param_hint="--left-right",
         )
     if left_right is None:
         return LEFT_RIGHT[use][0]
     if left_right not in LEFT_RIGHT[use]:  # a choice of the other use
-        where = "triangulate or --guide mediapipe" if use == "one camera" else "monocular"
-        raise typer.BadParameter(f"is for --method {where}", param_hint="--left-right")
+        where = "triangulate, --guide mediapipe or --sides" if use == "one camera" else "monocular"
+        raise typer.BadParameter(f"{left_right} is for --method {where}", param_hint="--left-right")
     return left_right
 
 

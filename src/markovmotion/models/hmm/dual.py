@@ -441,12 +441,12 @@ class DualHMM(Model):
         if self.output == "regression" and not markers_in:
             raise SkeletonMismatchError(
                 "output 'regression' generates B's markers: train on markers (C3D takes, or "
-                "virtual markers placed on skeletons with markers=N)"
+                "virtual markers placed on skeletons: markers=N, --markers N)"
             )
         if self.place_scale == "size" and not markers_in:
             raise SkeletonMismatchError(
                 "place_scale 'size' measures people by their markers: train on markers (C3D "
-                "takes, or virtual markers placed on skeletons with markers=N)"
+                "takes, or virtual markers placed on skeletons: markers=N, --markers N)"
             )
         if not pairs:
             raise ValueError("no two-person takes to learn from")
