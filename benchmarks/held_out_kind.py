@@ -101,17 +101,26 @@ def floor(body, truth: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def kind_arguments(description: str, kinds: str | None = None) -> argparse.ArgumentParser:
+    """A parser with the options of the rendered kinds (:func:`rendered`): --data, --kinds
+    (default ``kinds``, else :func:`default_kinds`), --seconds, --start, --cache."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data", type=Path, default=None, help="folder with INDEX.csv")
-    parser.add_argument("--kinds", default=None, help="labels, comma-separated")
-    parser.add_argument("--seconds", type=float, default=3.0, help="seconds of each take")
-    parser.add_argument("--start", type=float, default=1.0, help="seconds into the take")
+    parser.add_argument("--kinds", default=kinds,
+                        help="labels, comma-separated (default: " + (kinds or "per category") + ")")  # fmt: skip
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds of each take (default 3)")  # fmt: skip
+    parser.add_argument("--start", type=float, default=1.0, help="seconds into the take (default 1)")  # fmt: skip
+    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds",
+                        help="folder the rendered kinds are kept in (default: TMP/mm-kinds)")  # fmt: skip
+    return parser
+
+
+def main() -> None:
+    parser = kind_arguments(__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1, help="runs per body model")
     parser.add_argument("--models", default="interaction,collection",
                         help="body models to run, comma-separated")  # fmt: skip
     parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
-    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "mm-kinds")
     parser.add_argument("--guide", choices=("none", "mediapipe"), default="none",
                         help="what guides the particle filter besides the images")  # fmt: skip
     parser.add_argument("--left-right", choices=("views", "continuity", "both", "mediapipe"),

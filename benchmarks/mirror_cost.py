@@ -14,12 +14,8 @@ reported: the cross-validated error beside each fixed cost's.
 
 from __future__ import annotations
 
-import argparse
-import tempfile
-from pathlib import Path
-
 import numpy as np
-from held_out_kind import LIMBS, rendered
+from held_out_kind import LIMBS, kind_arguments, rendered
 from rich.console import Console
 from rich.table import Table
 
@@ -44,24 +40,11 @@ def limb_error(views: ViewLandmarks, truth: np.ndarray) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description="Choose MIRROR_COST (the cost of taking, of a left/right labelling of the views and its mirror, the one that swaps every view) by leaving one kind of motion out: triangulated limb-joint error (mm) per kind and cost, and the cross-validated choice. About 3 min; renders are cached in --cache."
+    parser = kind_arguments(
+        "Choose MIRROR_COST (the cost of taking, of a left/right labelling of the views and its mirror, the one that swaps every view) by leaving one kind of motion out: triangulated limb-joint error (mm) per kind and cost, and the cross-validated choice. About 3 min; renders are cached in --cache.",
+        KINDS,
     )
-    parser.add_argument("--data", type=Path, default=None, help="folder with INDEX.csv")
-    parser.add_argument("--kinds", default=KINDS, help="comma-separated labels")
     parser.add_argument("--costs", default="0,0.25,0.5,1,2,4", help="MIRROR_COST values")
-    parser.add_argument(
-        "--seconds", type=float, default=3.0, help="rendered seconds per kind (default 3)"
-    )
-    parser.add_argument(
-        "--start", type=float, default=1.0, help="seconds into the take (default 1)"
-    )
-    parser.add_argument(
-        "--cache",
-        type=Path,
-        default=Path(tempfile.gettempdir()) / "mm-kinds",
-        help="folder the rendered kinds are kept in (default: TMP/mm-kinds)",
-    )
     args = parser.parse_args()
 
     from markovmotion.data import MocapIndex

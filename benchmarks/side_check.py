@@ -15,12 +15,8 @@ raises false alarms with its own labels.
 
 from __future__ import annotations
 
-import argparse
-import tempfile
-from pathlib import Path
-
 import numpy as np
-from held_out_kind import default_kinds, rendered
+from held_out_kind import default_kinds, kind_arguments, rendered
 from rich.console import Console
 from rich.table import Table
 from scipy.spatial.transform import Rotation
@@ -44,24 +40,8 @@ def turned_round(points: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description="How often track --sides's front/back check is wrong (false alarms on the true poses) and right (the true poses turned round, caught), on rendered held-out kinds, with MediaPipe's own left and right or the views' agreed ones. About 2 min (MediaPipe over 3 views per kind); renders are cached in --cache."
-    )
-    parser.add_argument("--data", type=Path, default=None, help="folder with INDEX.csv")
-    parser.add_argument(
-        "--kinds", default=None, help="comma-separated labels (default: per category)"
-    )
-    parser.add_argument(
-        "--seconds", type=float, default=3.0, help="rendered seconds per kind (default 3)"
-    )
-    parser.add_argument(
-        "--start", type=float, default=1.0, help="seconds into the take (default 1)"
-    )
-    parser.add_argument(
-        "--cache",
-        type=Path,
-        default=Path(tempfile.gettempdir()) / "mm-kinds",
-        help="folder the rendered kinds are kept in (default: TMP/mm-kinds)",
+    parser = kind_arguments(
+        "How often track --sides's front/back check is wrong (false alarms on the true poses) and right (the true poses turned round, caught), on rendered held-out kinds, with MediaPipe's own left and right or the views' agreed ones. About 2 min (MediaPipe over 3 views per kind); renders are cached in --cache."
     )
     args = parser.parse_args()
 
