@@ -185,7 +185,7 @@ def on_average_body(takes: Sequence[np.ndarray]) -> list[np.ndarray]:
 
 def body_radius(positions: np.ndarray) -> np.ndarray:
     """(F,) a person's size per frame: the root mean square distance (mm) of the frame's
-    points (F, P, 3) from their centroid (NaN where a point is)."""
+    points (F, P, 3) from their centroid (NaN in a frame with a point unseen, NaN)."""
     p = np.asarray(positions, dtype=float)
     return np.sqrt(((p - p.mean(axis=1, keepdims=True)) ** 2).sum(axis=-1).mean(axis=-1))
 
