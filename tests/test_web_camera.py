@@ -291,6 +291,7 @@ class _TwoGraphs:
         return SimpleNamespace(points=np.full((19, 3), float(found)), pixels=np.zeros((33, 2)))
 
     def close(self):
+        time.sleep(0.2)  # slow to release: the session must wait for it before the socket ends
         self.closed = True
 
 

@@ -398,6 +398,7 @@ async def camera_session(
     resampler = TickResampler(partner, partner.fps or 30.0)
     running: set[asyncio.Future] = set()
     error: tuple[str, int] | None = None
+    ended = False  # the client stopped: close the socket once the graphs are released
     try:
         await _send(
             ws,
@@ -415,7 +416,7 @@ async def camera_session(
         async with asyncio.TaskGroup() as group:
             group.create_task(_receive_frames(ws, tracker, pending, running))
             group.create_task(_answer_frames(ws, tracker, resampler, pending))
-        await _close(ws)
+        ended = True
     except* _Garbage as exc:
         first = exc.exceptions[0]
         error = (str(first), first.code)
@@ -425,11 +426,14 @@ async def camera_session(
         pass
     finally:
         _leave(sessions, ws)
-        if error is not None:
-            await _fail(ws, *error)
-        # a graph's thread cannot be stopped: let every frame finish before closing them
+        # a graph's thread cannot be stopped: let every frame finish before closing them, and
+        # close them before the socket, so that a session the client sees ended holds nothing
         await asyncio.gather(*running, return_exceptions=True)
         await asyncio.to_thread(tracker.close)
+        if error is not None:
+            await _fail(ws, *error)
+        elif ended:
+            await _close(ws)
 
 
 async def _fail(ws: WebSocket, message: str, code: int) -> None:
