@@ -243,22 +243,19 @@ def track(
         )
 
 
-#: The --left-right choices of each way MediaPipe's landmarks are read, and the default first.
-LEFT_RIGHT = {
-    "one camera": ("continuity", "mediapipe", "facing", "online"),
-    "views": ("views", "mediapipe", "continuity", "both"),
-}
-
-
 def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
     """``track``'s --left-right, defaulted or checked against what reads the landmarks:
-    one camera (``--method monocular``) or several views (``triangulate``, ``--guide
-    mediapipe``, the particle filter's ``--sides``, given here as ``guide="sides"``); the
+    one camera (``--method monocular``: ``monocular.LEFT_RIGHT``, default continuity) or
+    several views (``triangulate``, ``--guide mediapipe``, the particle filter's ``--sides``,
+    given here as ``guide="sides"``: ``triangulation.LEFT_RIGHT``, default views); the
     particle filter alone reads none."""
+    from markovmotion.video import monocular, triangulation
+
     if method == "triangulate" or guide in ("mediapipe", "sides"):
-        use = "views"
+        choices, default, other = triangulation.LEFT_RIGHT, "views", "monocular"
     elif method == "monocular":
-        use = "one camera"
+        choices, default = monocular.LEFT_RIGHT, "continuity"
+        other = "triangulate, --guide mediapipe or --sides"
     elif left_right is None:
         return None
     else:
@@ -267,10 +264,9 @@ def _left_right_for(method: str, guide: str | None, left_right: str | None) -> s
             param_hint="--left-right",
         )
     if left_right is None:
-        return LEFT_RIGHT[use][0]
-    if left_right not in LEFT_RIGHT[use]:  # a choice of the other use
-        where = "triangulate, --guide mediapipe or --sides" if use == "one camera" else "monocular"
-        raise typer.BadParameter(f"{left_right} is for --method {where}", param_hint="--left-right")
+        return default
+    if left_right not in choices:  # a choice of the other way of reading them
+        raise typer.BadParameter(f"{left_right} is for --method {other}", param_hint="--left-right")
     return left_right
 
 

@@ -201,7 +201,12 @@ def size_scale(
     step = RunningCentre(prior)
     step.mean_ = np.array([float(size)])
     running = step.running_mean(np.asarray(radius, dtype=float)[:, None], seen)[:, 0]
-    return (running + size) / (2.0 * size)
+    return _pair_scale(running, size)
+
+
+def _pair_scale(radius_a, size: float):
+    """The pair's size against the training pairs', A of ``radius_a`` and B of ``size``."""
+    return (radius_a + size) / (2.0 * size)
 
 
 class OnlineSizeScale:
@@ -215,6 +220,5 @@ class OnlineSizeScale:
     def __call__(self, radius: float) -> float:
         """Take in A's radius of one seen frame; the scale now."""
         r = np.array([float(radius)])
-        mean = float((r - self._centre(r))[0])
-        self.scale = (mean + self.size) / (2.0 * self.size)
+        self.scale = _pair_scale(float((r - self._centre(r))[0]), self.size)
         return self.scale

@@ -898,8 +898,8 @@ def track_video(
     every camera catch front/back flips (:mod:`markovmotion.video.sides`); with ``guide``,
     MediaPipe's landmarks in every camera, triangulated to reject the views that disagree,
     guide the filter (:mod:`markovmotion.video.triangulation`; ``left_right``: how its left
-    and right are made consistent first, :data:`~markovmotion.video.triangulation.LEFT_RIGHT`). MediaPipe runs before the
-    clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
+    and right are made consistent first, :data:`~markovmotion.video.triangulation.LEFT_RIGHT`).
+    MediaPipe runs before the clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
     frames it gave the filter landmarks in)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = guided = None
@@ -915,7 +915,7 @@ def track_video(
         # left and right made consistent first (triangulation.consistent_views): a camera
         # behind the person, whose MediaPipe mirrors the body, is put right by the others
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        agreed = consistent_views(views, left_right) if len(mv.cameras) > 1 else views
+        agreed = consistent_views(views, left_right)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))

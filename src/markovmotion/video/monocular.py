@@ -45,6 +45,7 @@ after the rigid alignment of each frame (Kabsch, no scale) and without it.
 from __future__ import annotations
 
 import csv
+import itertools
 import os
 import sys
 import tempfile
@@ -402,11 +403,7 @@ def track_monocular(
             f"{first.shape[1]}x{first.shape[0]}",
         )
 
-    def all_frames():
-        yield first
-        yield from frames
-
-    lm = detect_landmarks(all_frames(), max_frames)
+    lm = detect_landmarks(itertools.chain([first], frames), max_frames)
     if left_right == "online":
         pixels, world_lm, vis = online_sides(lm)
         lm = Landmarks(pixels, world_lm, vis, lm.found, lm.seconds)

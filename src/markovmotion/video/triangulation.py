@@ -283,7 +283,8 @@ def views_sides(
     labellings = np.array([(0, *s) for s in product((0, 1), repeat=v_n - 1)], dtype=bool)
     tau2 = _tau2(views.cameras, OUTLIER_ANGLE)
     for g, stems in enumerate(SIDE_GROUPS):
-        li, ri = (list(x) for x in zip(*(landmark_pair(s) for s in stems), strict=True))
+        pairs = [landmark_pair(s) for s in stems]
+        li, ri = (list(x) for x in zip(*pairs, strict=True))
         own, other = li + ri, ri + li
         c_n, n = len(labellings), len(own)
         # (V, C, F, 2n): each labelling's pixels and weights of the group's landmarks
@@ -314,14 +315,13 @@ def views_sides(
             body = np.full((f_n, l_n, 3), np.nan)
             body[:, own] = got
             ones = np.ones((f_n, l_n))
-            pairs = [landmark_pair(s) for s in stems]
             cont = [continuity_costs(body, ones, pairs, lag, torso) for lag in (1, 2)]
             unary = mirror_cost * np.c_[share, 1.0 - share]
             best ^= decode_labels(cont[0], unary, cont[1]).astype(bool)[:, None]
         swapped[:, :, g] = best.T
         for v in range(v_n):
             arrays = (pixels[v], vis[v]) if world is None else (pixels[v], vis[v], world[v])
-            relabel(arrays, best[:, v], [landmark_pair(s) for s in stems])
+            relabel(arrays, best[:, v], pairs)
     out = ViewLandmarks(views.cameras, pixels, vis, views.seconds, world)
     return out, swapped
 
@@ -330,11 +330,11 @@ def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLan
     """Every view's MediaPipe landmarks with left and right made consistent (:data:`LEFT_RIGHT`):
     ``views`` across the views (:func:`views_sides`); ``continuity`` each view over time
     (:func:`~markovmotion.video.left_right.consistent_sides`, the monocular path's, which needs
-    the world points); ``both`` the one then the other; ``mediapipe`` its own labels."""
+    the world points); ``both`` the one then the other; ``mediapipe`` its own labels. One view
+    has nothing to agree with: ``views`` leaves it as it is."""
     from markovmotion.video.left_right import consistent_sides
 
-    if left_right not in LEFT_RIGHT:
-        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
+    check_left_right(left_right)
     if left_right in ("continuity", "both"):
         if views.world is None:
             raise ValueError("left_right continuity needs MediaPipe's world points")
@@ -346,9 +346,15 @@ def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLan
             views.cameras, *(np.stack([g[k] for g in got]) for k in (0, 2)), views.seconds,
             np.stack([g[1] for g in got]),
         )  # fmt: skip
-    if left_right in ("views", "both"):
+    if left_right in ("views", "both") and len(views.cameras) > 1:
         views = views_sides(views)[0]
     return views
+
+
+def check_left_right(left_right: str) -> None:
+    """Raise ValueError (one line) unless ``left_right`` is one of :data:`LEFT_RIGHT`."""
+    if left_right not in LEFT_RIGHT:
+        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
 
 
 @dataclass
@@ -506,9 +512,7 @@ def track_triangulated_video(
     right are made consistent across the views first (:func:`consistent_views`)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
 
-    if left_right not in LEFT_RIGHT:
-        raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
-
+    check_left_right(left_right)  # before MediaPipe's minutes
     t0 = time.perf_counter()
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)

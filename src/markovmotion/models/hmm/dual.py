@@ -644,12 +644,9 @@ class DualHMM(Model):
         self.place_size_ = float(radii.mean())
         out = []
         for b, (ra, rb) in zip(b_rel, radii, strict=True):
-            pos = np.array(b.positions, dtype=float)
-            centre = pos.mean(axis=1, keepdims=True)
-            pos[..., HORIZONTAL] += (2.0 * self.place_size_ / (ra + rb) - 1.0) * centre[
-                ..., HORIZONTAL
-            ]
-            out.append(Markers(b.names, pos, b.fps, b.name))
+            centre = b.positions.mean(axis=1, keepdims=True)
+            moved = self.scaled_root(centre, 2.0 * self.place_size_ / (ra + rb)) - centre
+            out.append(Markers(b.names, b.positions + moved, b.fps, b.name))
         return out
 
     def place_scales(self, motion_a: Markers, missing: np.ndarray, lag: int) -> np.ndarray | None:
