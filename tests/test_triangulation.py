@@ -306,3 +306,76 @@ def test_views_sides_keeps_the_majority_over_time_not_frame_by_frame():
     np.testing.assert_allclose(fixed.pixels, pixels)
     _, frame_by_frame = views_sides(views, over_time=False)
     assert frame_by_frame[0, 12:15].all()  # the majority alone mirrors those frames
+
+
+def test_views_that_see_different_things_never_break_the_triangulation():
+    """Pixels that no one point explains (two people, one per view) give points in front of
+    every camera used, or NaN: no error, no point behind a camera or at infinity."""
+    rng = np.random.default_rng(5)
+    cams = _cameras(4, (1088, 1920))
+    n = 4000
+    pix = rng.uniform([-200, -200], [1300, 2100], (4, n, 2))
+    w = rng.uniform(0.0, 1.0, (4, n)) * (rng.random((4, n)) < 0.8)
+    pts, used, _ = triangulate_points(cams, pix, w)
+    placed = np.isfinite(pts).all(axis=1)
+    assert placed.any() and not placed.all()
+    for v, cam in enumerate(cams):
+        depth = (pts[placed & used[v]] @ cam.R.T + cam.t)[:, 2]
+        assert (depth > 0).all()
+
+
+def _two_people(frames: int = 30, mirror_view: int | None = None):
+    """Landmarks of person P and of Q 1.2 m to the side, walking on, in 5 cameras."""
+    from markovmotion.video.left_right import landmark_pair
+
+    rng = np.random.default_rng(6)
+    body = rng.uniform([-250, 0, -150], [250, 1750, 150], (len(LANDMARKS), 3))
+    walk = np.linspace(0, 300, frames)[:, None, None] * np.array([0.0, 0.0, 1.0])
+    p = body[None] + walk
+    q = body[None] + walk + np.array([1200.0, 0.0, 300.0])
+    cams = _cameras(5, (1088, 1920))
+    pixels = np.stack([np.stack([c.project(x)[0] for x in p]) for c in cams])
+    other = np.stack([np.stack([c.project(x)[0] for x in q]) for c in cams])
+    if mirror_view is not None:  # that camera's MediaPipe swaps every left and right
+        for stem in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle", "ear"):
+            a, b = landmark_pair(stem)
+            pixels[mirror_view][:, [a, b]] = pixels[mirror_view][:, [b, a]]
+    return cams, pixels, other, np.ones((5, frames, len(LANDMARKS)))
+
+
+@pytest.mark.parametrize("mirror_view", [None, 1])
+def test_one_person_drops_the_views_of_someone_else_and_keeps_to_one_person(mirror_view):
+    """Views 0-3 see P and view 4 sees Q; then, for 10 frames, views 2-4 see Q: the person
+    the views followed is kept (a view that mirrors P included) and every view of Q dropped.
+    Landmark by landmark, the triangulation alone takes Q where more views see Q."""
+    from markovmotion.video.triangulation import ViewLandmarks, one_person, triangulate_views
+
+    cams, pixels, other, vis = _two_people(mirror_view=mirror_view)
+    seen = pixels.copy()
+    seen[4] = other[4]
+    seen[2:4, 20:] = other[2:4, 20:]
+    views = ViewLandmarks(cams, seen, vis)
+    agreed, kept = one_person(views, fps=30.0)
+    expected = np.ones((5, 30), bool)
+    expected[4] = False
+    expected[2:4, 20:] = False
+    assert (kept == expected).all()
+    assert (agreed.visibility[~expected] == 0).all()
+    alone = triangulate_views(ViewLandmarks(cams, pixels, vis)).points
+    if mirror_view is None:
+        got = triangulate_views(agreed).points
+        assert np.nanmax(np.linalg.norm(got - alone, axis=-1)) < 1.0
+    mixed = triangulate_views(views).points
+    assert np.nanmean(np.linalg.norm(mixed[20:] - alone[20:], axis=-1)) > 1000.0
+
+
+def test_the_crop_around_a_person_is_a_square_with_a_margin_inside_the_image():
+    from markovmotion.video.triangulation import CROP_MARGIN, _crop_box
+
+    xy = np.array([[500.0, 200.0], [540.0, 400.0]])
+    x0, y0, x1, y1 = _crop_box(xy, 1000, 1000)
+    side = (1 + 2 * CROP_MARGIN) * 200
+    assert (x1 - x0, y1 - y0) == (int(520 + side / 2) - int(520 - side / 2),) * 2
+    assert x0 <= 500 and x1 >= 540 and y0 <= 200 and y1 >= 400
+    assert _crop_box(xy, 600, 1000)[2] == 600  # cut to the image
+    assert _crop_box(np.array([[5.0, 5.0], [6.0, 6.0]]), 100, 100) is None  # too small

@@ -909,13 +909,16 @@ def track_video(
             Guide,
             ViewLandmarks,
             consistent_views,
+            look_again,
             triangulate_views,
         )
 
-        # left and right made consistent first (triangulation.consistent_views): a camera
-        # behind the person, whose MediaPipe mirrors the body, is put right by the others
+        # views of someone else dropped and left and right made consistent first
+        # (triangulation.consistent_views): a camera behind the person, whose MediaPipe
+        # mirrors the body, is put right by the others
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        agreed = consistent_views(views, left_right)
+        views = look_again(views, mv.videos, mv.fps)
+        agreed = consistent_views(views, left_right, mv.fps)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))

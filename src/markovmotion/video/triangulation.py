@@ -62,6 +62,8 @@ from markovmotion.video.render import read_frames
 #: at least 3 views see the landmark (0.03: 12 px at the real video's 272x480, focal ~400 px;
 #: its reference's own residual is about 5 px).
 OUTLIER_ANGLE = 0.03
+#: Nearest depth (mm) in front of a camera a triangulated point may lie.
+MIN_DEPTH = 1.0
 #: Scale of the guide's robust distance, in focal lengths (0.025: 10 px at focal 400 px).
 GUIDE_ANGLE = 0.025
 #: Scale (mm) of the robust loss fitting the body model to the triangulated points.
@@ -71,7 +73,9 @@ FIT_SCALE = 50.0
 def _dlt(proj: list[np.ndarray], xy: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Points (N, 3) by the weighted DLT (module docstring) from normalised image points
     ``xy`` (V, N, 2) with weights ``w`` (V, N) (0: view not used); NaN where fewer than 2
-    views are used."""
+    views are used, and where the point is not in front of every view used (the cheirality
+    test, Hartley and Zisserman §21.6: rays that do not meet before the cameras, as when two
+    views see two different people, meet behind them or at infinity)."""
     v_n, n = w.shape
     rows = np.zeros((n, 2 * v_n, 4))
     for v in range(v_n):
@@ -82,6 +86,9 @@ def _dlt(proj: list[np.ndarray], xy: np.ndarray, w: np.ndarray) -> np.ndarray:
     if ok.any():
         h = np.linalg.svd(rows[ok])[2][:, -1]
         out[ok] = h[:, :3] / np.where(np.abs(h[:, 3:]) > 1e-12, h[:, 3:], 1e-12)
+    depth = np.stack([out @ p[2, :3] + p[2, 3] for p in proj])  # (V, N), NaN where out is
+    behind = ((w > 0) & ~(depth > MIN_DEPTH)).any(axis=0)
+    out[behind] = np.nan
     return out
 
 
@@ -102,16 +109,28 @@ def _refine(
         jtr = np.zeros((len(x), 3))
         for c, pix, wv in zip(cameras, pixels[:, ok], w[:, ok], strict=True):
             cam = x @ c.R.T + c.t
-            z = np.maximum(cam[:, 2:], 1.0)
+            z = np.maximum(cam[:, 2:], MIN_DEPTH)
             res = np.nan_to_num(c.project(x)[0] - pix)  # (n, 2)
             ju = c.K[0, 0] * (c.R[0] - cam[:, :1] / z * c.R[2]) / z  # (n, 3)
             jv = c.K[1, 1] * (c.R[1] - cam[:, 1:2] / z * c.R[2]) / z
             jac = np.stack([ju, jv], axis=1) * wv[:, None, None] ** 0.5  # (n, 2, 3)
             jtj += np.einsum("nki,nkj->nij", jac, jac)
             jtr += np.einsum("nki,nk->ni", jac, res * wv[:, None] ** 0.5)
-        x -= np.linalg.solve(jtj + 1e-9 * np.eye(3), jtr[..., None])[..., 0]
+        # Levenberg's damping, relative to the system's scale: a point whose views nearly
+        # agree on one ray only (rank 1) still takes a finite step along the others
+        damp = 1e-9 * (np.trace(jtj, axis1=1, axis2=2) + 1.0)
+        x -= np.linalg.solve(jtj + damp[:, None, None] * np.eye(3), jtr[..., None])[..., 0]
     out = points.copy()
     out[ok] = x
+    return _in_front(cameras, w, out)
+
+
+def _in_front(cameras: Sequence[CalibratedCamera], w: np.ndarray, points: np.ndarray):
+    """``points`` (N, 3) with NaN where a point is not in front of every view whose weight
+    (``w`` (V, N)) is positive (the cheirality test of :func:`_dlt`)."""
+    depth = np.stack([points @ c.R[2] + c.t[2] for c in cameras])
+    out = points.copy()
+    out[((w > 0) & ~(depth > MIN_DEPTH)).any(axis=0)] = np.nan
     return out
 
 
@@ -326,15 +345,236 @@ def views_sides(
     return out, swapped
 
 
-def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLandmarks:
+#: A view sees the tracked person when its mirror-invariant points lie within this many focal
+#: lengths (median) of the person triangulated from other views (:func:`one_person`; 0.05: 21
+#: px at the real video's 272x480, where two people half a metre apart at 3 m are 0.17 apart).
+PERSON_ANGLE = 0.05
+#: Speed (mm/s) that :func:`one_person` takes as one unit of cost per frame of the tracked
+#: person's centre moving: a view of someone else a metre away costs tens of units, far more
+#: than losing every view (at most one unit each).
+PERSON_SPEED = 1500.0
+#: MediaPipe's left/right landmark stems whose midpoints (with the nose) are the same whether
+#: a view mirrors the body or not: what :func:`one_person` compares across the views.
+MIDLINE_STEMS: tuple[str, ...] = ("ear", "shoulder", "elbow", "wrist", "hip", "knee", "ankle")
+
+
+def midline_points(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY):
+    """Each view's mirror-invariant points: the nose and the midpoint of each left/right pair
+    of :data:`MIDLINE_STEMS`, pixels (V, F, P, 2) and weights (V, F, P) (the pair's smaller
+    visibility; 0 below ``min_visibility``). A camera behind the person, which MediaPipe sees
+    mirrored, gives the same points as if it had not mirrored it."""
+    from markovmotion.video.left_right import landmark_pair
+
+    w = np.where(views.visibility >= min_visibility, views.visibility, 0.0)
+    nose = LANDMARKS.index("nose")
+    pairs = [landmark_pair(s) for s in MIDLINE_STEMS]
+    left, right = (list(x) for x in zip(*pairs, strict=True))
+    pixels = np.concatenate(
+        [views.pixels[:, :, [nose]], 0.5 * (views.pixels[:, :, left] + views.pixels[:, :, right])],
+        axis=2,
+    )
+    weights = np.concatenate([w[:, :, [nose]], np.minimum(w[:, :, left], w[:, :, right])], axis=2)
+    return pixels, weights
+
+
+def one_person(
+    views: ViewLandmarks,
+    fps: float,
+    min_visibility: float = MIN_VISIBILITY,
+    angle: float = PERSON_ANGLE,
+) -> tuple[ViewLandmarks, np.ndarray]:
+    """MediaPipe's landmarks with every view that saw someone else in a frame dropped
+    (visibility 0), and which views were kept (V, F).
+
+    MediaPipe Pose (0.10.21's bundled model) finds one person per image. With two or more
+    people in the room, each camera may pick another (in Pose2Sim's multi-person demo, two of
+    four cameras see the woman in front of the man), and triangulating landmarks of different
+    people puts points between them. Per frame, with each view's :func:`midline_points`
+    (mirror-invariant, so the camera behind the person still counts), every subset of 2 or
+    more seeing views is triangulated (the weighted DLT) and each seeing view scored by the
+    visibility-weighted median reprojection error of its points, ``e_v`` in focal lengths;
+    a subset whose own views all lie within ``angle`` is a candidate person, with the views
+    within ``angle`` (its inliers) and the MSAC cost ``sum_v min(e_v, angle)^2 / angle^2``
+    (a view without the person costs 1). Over time the path of least cost through the
+    candidates (and "no one": every view costs 1), each frame's step costing the distance
+    between the two candidates' centres over :data:`PERSON_SPEED` per frame (Viterbi, Rabiner
+    eqs. 32-35, with costs that depend on the frame), follows one person: the one most views
+    see at the start, kept while the views find him. Leaving "no one" for a person costs as
+    much as losing every view for a frame.
+
+    Written here, not taken from a library: multi-person association across calibrated views
+    (as in Pose2Sim's ``personAssociation``) needs every person's detection in every view;
+    MediaPipe's bundled model gives one, so the question is only which views agree on it.
+    """
+    from itertools import combinations
+
+    v_n, f_n, _ = views.visibility.shape
+    if v_n < 2:
+        return views, views.visibility.max(axis=2) > 0
+    pixels, weights = midline_points(views, min_visibility)
+    p_n = pixels.shape[2]
+    cams = views.cameras
+    proj = [np.c_[c.R, c.t] for c in cams]
+    xy = np.stack(
+        [
+            (np.c_[np.nan_to_num(px.reshape(-1, 2)), np.ones(f_n * p_n)] @ np.linalg.inv(c.K).T)[
+                :, :2
+            ]
+            for px, c in zip(pixels, cams, strict=True)
+        ]
+    )  # (V, F P, 2)
+    focal = np.array([c.focal for c in cams])
+    seeing = weights.sum(axis=2) > 0  # (V, F)
+    subsets = [s for k in range(2, v_n + 1) for s in combinations(range(v_n), k)]
+    c_n = len(subsets) + 1  # the last: no one
+    cost = np.full((f_n, c_n), np.inf)
+    cost[:, -1] = v_n
+    inliers = np.zeros((f_n, c_n, v_n), dtype=bool)
+    centres = np.full((f_n, c_n, 3), np.nan)
+    wflat = weights.reshape(v_n, -1)
+    for c, subset in enumerate(subsets):
+        mask = np.zeros((v_n, 1), bool)
+        mask[list(subset)] = True
+        pts = _dlt(proj, xy, np.where(mask, wflat, 0.0)).reshape(f_n, p_n, 3)
+        err = np.full((v_n, f_n), np.inf)
+        for v, cam in enumerate(cams):
+            e = np.linalg.norm(cam.project(np.nan_to_num(pts))[0] - pixels[v], axis=-1)
+            e = np.where(np.isfinite(pts).all(axis=-1) & (weights[v] > 0), e / focal[v], np.nan)
+            err[v] = _weighted_median(e, weights[v])
+        ok = np.isfinite(err) & (err < angle)  # (V, F)
+        valid = ok[list(subset)].all(axis=0) & seeing[list(subset)].all(axis=0)
+        score = np.where(ok, (err / angle) ** 2, 1.0).sum(axis=0)
+        cost[valid, c] = score[valid]
+        inliers[:, c] = ok.T
+        centres[:, c] = np.nanmean(pts, axis=1)
+    step = PERSON_SPEED / max(float(fps), 1e-9)
+    path = _person_path(cost, centres, step, float(v_n))
+    kept = inliers[np.arange(f_n), path].T  # (V, F)
+    vis = np.where(kept[:, :, None], views.visibility, 0.0)
+    out = ViewLandmarks(views.cameras, views.pixels, vis, views.seconds, views.world)
+    return out, kept
+
+
+#: Margin around the tracked person's projected landmarks, as a share of the box's longer side,
+#: of the image :func:`look_again` gives MediaPipe.
+CROP_MARGIN = 0.25
+
+
+def look_again(
+    views: ViewLandmarks,
+    videos: Sequence[str | os.PathLike[str]],
+    fps: float,
+    min_visibility: float = MIN_VISIBILITY,
+) -> ViewLandmarks:
+    """``views`` with MediaPipe run again, on a crop around the tracked person, in every view
+    and frame that saw someone else or no one (:func:`one_person`).
+
+    The person the most views agree on is triangulated from them; in each other view the
+    square around the projection of their landmarks (with :data:`CROP_MARGIN`) is cut out
+    and given to MediaPipe on its own (static-image mode), and what it finds there is put
+    back in the view's pixels. :func:`one_person` then keeps it only if it agrees with the
+    other views: a crop that still holds someone else in front is dropped as before."""
+    from markovmotion.video.monocular import frame_landmarks, pose_estimator
+
+    agreed, kept = one_person(views, fps, min_visibility)
+    redo = ~kept  # (V, F)
+    if not redo.any() or not kept.any():
+        return views
+    body = triangulate_views(agreed, min_visibility).landmarks  # (F, 33, 3)
+    known = np.isfinite(body).all(axis=-1).sum(axis=1) >= 8
+    redo &= known[None]
+    if not redo.any():
+        return views
+    pixels, vis = views.pixels.copy(), views.visibility.copy()
+    world = None if views.world is None else views.world.copy()
+    t0 = time.perf_counter()
+    with pose_estimator(static=True) as est:
+        for v, (video, cam) in enumerate(zip(videos, views.cameras, strict=True)):
+            if not redo[v].any():
+                continue
+            for f, rgb in enumerate(read_frames(video, cam)):
+                if f >= redo.shape[1]:
+                    break
+                if not redo[v, f]:
+                    continue
+                xy = cam.project(body[f][np.isfinite(body[f]).all(axis=-1)])[0]
+                box = _crop_box(xy, rgb.shape[1], rgb.shape[0])
+                if box is None:
+                    continue
+                x0, y0, x1, y1 = box
+                got = frame_landmarks(est, rgb[y0:y1, x0:x1])
+                if got is None:
+                    continue
+                pixels[v, f] = got[0] + (x0, y0)
+                vis[v, f] = got[2]
+                if world is not None:
+                    world[v, f] = got[1]
+    seconds = views.seconds + time.perf_counter() - t0
+    return ViewLandmarks(views.cameras, pixels, vis, seconds, world)
+
+
+def _crop_box(xy: np.ndarray, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """The square (x0, y0, x1, y1) around pixels ``xy`` (N, 2) with :data:`CROP_MARGIN`, cut
+    to the image; None when it leaves fewer than 32 pixels a side."""
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    side = (1.0 + 2.0 * CROP_MARGIN) * float((hi - lo).max())
+    mid = 0.5 * (lo + hi)
+    x0, y0 = (int(max(0.0, c - side / 2)) for c in mid)
+    x1, y1 = int(min(width, mid[0] + side / 2)), int(min(height, mid[1] + side / 2))
+    if x1 - x0 < 32 or y1 - y0 < 32:
+        return None
+    return x0, y0, x1, y1
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Per row of ``values`` (F, P) (NaN: not counted), the weighted median; NaN for a row
+    with nothing counted."""
+    w = np.where(np.isfinite(values), weights, 0.0)
+    order = np.argsort(np.where(w > 0, values, np.inf), axis=1)
+    v = np.take_along_axis(values, order, axis=1)
+    cw = np.cumsum(np.take_along_axis(w, order, axis=1), axis=1)
+    total = cw[:, -1:]
+    at = np.argmax(cw >= 0.5 * total, axis=1)
+    out = v[np.arange(len(v)), at]
+    return np.where(total[:, 0] > 0, out, np.nan)
+
+
+def _person_path(cost: np.ndarray, centres: np.ndarray, step: float, switch: float) -> np.ndarray:
+    """(F,) the candidates (columns of ``cost`` (F, C); the last is "no one") of least total
+    cost, each frame's change of candidate costing the distance between their ``centres``
+    (F, C, 3) over ``step`` (mm per frame), and "no one" to or from a candidate ``switch``."""
+    f_n, c_n = cost.shape
+    total = cost[0].copy()
+    back = np.zeros((f_n, c_n), dtype=int)
+    for t in range(1, f_n):
+        move = np.linalg.norm(centres[t - 1][:, None] - centres[t][None], axis=-1) / step
+        move[-1, :], move[:, -1] = switch, switch
+        move[-1, -1] = 0.0
+        move = np.where(np.isfinite(move), move, np.inf)
+        through = total[:, None] + move  # (from, to)
+        back[t] = np.argmin(through, axis=0)
+        total = through[back[t], np.arange(c_n)] + cost[t]
+    path = np.zeros(f_n, dtype=int)
+    path[-1] = int(np.argmin(total))
+    for t in range(f_n - 1, 0, -1):
+        path[t - 1] = back[t, path[t]]
+    return path
+
+
+def consistent_views(
+    views: ViewLandmarks, left_right: str = "views", fps: float | None = None
+) -> ViewLandmarks:
     """Every view's MediaPipe landmarks with left and right made consistent (:data:`LEFT_RIGHT`):
     ``views`` across the views (:func:`views_sides`); ``continuity`` each view over time
     (:func:`~markovmotion.video.left_right.consistent_sides`, the monocular path's, which needs
     the world points); ``both`` the one then the other; ``mediapipe`` its own labels. One view
-    has nothing to agree with: ``views`` leaves it as it is."""
+    has nothing to agree with: ``views`` leaves it as it is. With ``fps`` (the video's rate),
+    first every view that saw someone else in a frame is dropped from it (:func:`one_person`)."""
     from markovmotion.video.left_right import consistent_sides
 
     check_left_right(left_right)
+    if fps is not None:
+        views = one_person(views, fps)[0]
     if left_right in ("continuity", "both"):
         if views.world is None:
             raise ValueError("left_right continuity needs MediaPipe's world points")
@@ -523,12 +763,15 @@ def track_triangulated_video(
         cams, videos = cams[:views], videos[:views]
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
-    lm = consistent_views(ViewLandmarks.from_videos(videos, cams, max_frames), left_right)
+    fps = float(doc["fps"])
+    found = look_again(ViewLandmarks.from_videos(videos, cams, max_frames), videos, fps)
+    lm = consistent_views(found, left_right, fps)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
     n = len(tr.points)
+    someone_else = (found.visibility.max(axis=2) > 0) & (lm.visibility.max(axis=2) <= 0)
     seen = (lm.visibility >= MIN_VISIBILITY).sum()
     summary = {
         "method": "triangulate",
@@ -537,6 +780,7 @@ def track_triangulated_video(
         "frames_placed": int(tr.placed.sum()),
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
+        "views_of_someone_else": int(someone_else.sum()),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
