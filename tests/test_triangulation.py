@@ -379,3 +379,23 @@ def test_the_crop_around_a_person_is_a_square_with_a_margin_inside_the_image():
     assert x0 <= 500 and x1 >= 540 and y0 <= 200 and y1 >= 400
     assert _crop_box(xy, 600, 1000)[2] == 600  # cut to the image
     assert _crop_box(np.array([[5.0, 5.0], [6.0, 6.0]]), 100, 100) is None  # too small
+
+
+def test_of_two_people_seen_alike_the_one_the_cameras_aim_at_is_kept_even_when_lost():
+    """Two views see P (where the ring of cameras is aimed) and two see Q, 1.2 m out; for 10
+    frames no view finds P: P is followed throughout (no one in those frames), never Q.
+    Without "no one" holding where P was lost, coming back to anyone would be free."""
+    from markovmotion.video.triangulation import ViewLandmarks, capture_centre, one_person
+
+    cams, pixels, other, vis = _two_people()
+    cams, pixels, other, vis = cams[:4], pixels[:4], other[:4], vis[:4]
+    assert np.linalg.norm(capture_centre(cams) - [0.0, 900.0, 0.0]) < 1.0
+    seen = pixels.copy()
+    seen[:2] = other[:2]
+    vis = vis.copy()
+    vis[2:, 10:20] = 0.0  # P lost
+    _, kept = one_person(ViewLandmarks(cams, seen, vis), fps=30.0)
+    expected = np.zeros((4, 30), bool)
+    expected[2:] = True
+    expected[2:, 10:20] = False
+    assert (kept == expected).all()

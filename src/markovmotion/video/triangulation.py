@@ -353,9 +353,28 @@ PERSON_ANGLE = 0.05
 #: person's centre moving: a view of someone else a metre away costs tens of units, far more
 #: than losing every view (at most one unit each).
 PERSON_SPEED = 1500.0
+#: Cost per frame and metre of the tracked person's centre from where the cameras look
+#: (:func:`capture_centre`): of people seen by as many views, the one the cameras are
+#: aimed at is followed (a metre further out weighs as much as one view fewer).
+PERSON_CENTRE_COST = 1.0
 #: MediaPipe's left/right landmark stems whose midpoints (with the nose) are the same whether
 #: a view mirrors the body or not: what :func:`one_person` compares across the views.
 MIDLINE_STEMS: tuple[str, ...] = ("ear", "shoulder", "elbow", "wrist", "hip", "knee", "ankle")
+
+
+def capture_centre(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
+    """The point (3,) mm nearest every camera's optical axis (least squares): where the
+    cameras are aimed, the middle of the capture volume; None when the axes are (nearly)
+    parallel."""
+    a, b = np.zeros((3, 3)), np.zeros(3)
+    for c in cameras:
+        axis = c.R[2]  # the optical axis in the world (R's third row)
+        m = np.eye(3) - np.outer(axis, axis)
+        a += m
+        b += m @ (-c.R.T @ c.t)
+    if np.linalg.cond(a) > 1e6:
+        return None
+    return np.linalg.solve(a, b)
 
 
 def midline_points(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY):
@@ -395,12 +414,15 @@ def one_person(
     visibility-weighted median reprojection error of its points, ``e_v`` in focal lengths;
     a subset whose own views all lie within ``angle`` is a candidate person, with the views
     within ``angle`` (its inliers) and the MSAC cost ``sum_v min(e_v, angle)^2 / angle^2``
-    (a view without the person costs 1). Over time the path of least cost through the
+    (a view without the person costs 1), plus :data:`PERSON_CENTRE_COST` per metre of the
+    candidate's centre from where the cameras are aimed (:func:`capture_centre`). Over time
+    the path of least cost through the
     candidates (and "no one": every view costs 1), each frame's step costing the distance
     between the two candidates' centres over :data:`PERSON_SPEED` per frame (Viterbi, Rabiner
     eqs. 32-35, with costs that depend on the frame), follows one person: the one most views
-    see at the start, kept while the views find him. Leaving "no one" for a person costs as
-    much as losing every view for a frame.
+    see over the take (of people seen alike, the one the cameras are aimed at), kept while
+    the views find them. Leaving "no one" for a person costs as much as losing every view
+    for a frame.
 
     Written here, not taken from a library: multi-person association across calibrated views
     (as in Pose2Sim's ``personAssociation``) needs every person's detection in every view;
@@ -426,6 +448,7 @@ def one_person(
     focal = np.array([c.focal for c in cams])
     seeing = weights.sum(axis=2) > 0  # (V, F)
     subsets = [s for k in range(2, v_n + 1) for s in combinations(range(v_n), k)]
+    middle = capture_centre(cams)
     c_n = len(subsets) + 1  # the last: no one
     cost = np.full((f_n, c_n), np.inf)
     cost[:, -1] = v_n
@@ -446,7 +469,10 @@ def one_person(
         score = np.where(ok, (err / angle) ** 2, 1.0).sum(axis=0)
         cost[valid, c] = score[valid]
         inliers[:, c] = ok.T
-        centres[:, c] = np.nanmean(pts, axis=1)
+        centres[:, c] = _nanmean_points(pts)
+    if middle is not None:
+        cost[:, :-1] += PERSON_CENTRE_COST * np.linalg.norm(centres[:, :-1] - middle, axis=-1) / 1e3
+    cost = np.where(np.isfinite(cost), cost, np.inf)
     step = PERSON_SPEED / max(float(fps), 1e-9)
     path = _person_path(cost, centres, step, float(v_n))
     kept = inliers[np.arange(f_n), path].T  # (V, F)
@@ -455,6 +481,9 @@ def one_person(
     return out, kept
 
 
+#: Seconds over which :func:`look_again` looks for a person lost in every view where they
+#: were last (or will next be) triangulated.
+LOST_SECONDS = 0.5
 #: Margin around the tracked person's projected landmarks, as a share of the box's longer side,
 #: of the image :func:`look_again` gives MediaPipe.
 CROP_MARGIN = 0.25
@@ -482,6 +511,7 @@ def look_again(
         return views
     body = triangulate_views(agreed, min_visibility).landmarks  # (F, 33, 3)
     known = np.isfinite(body).all(axis=-1).sum(axis=1) >= 8
+    body, known = _held_over_gaps(body, known, int(round(fps * LOST_SECONDS)))
     redo &= known[None]
     if not redo.any():
         return views
@@ -513,6 +543,20 @@ def look_again(
     return ViewLandmarks(views.cameras, pixels, vis, seconds, world)
 
 
+def _held_over_gaps(body: np.ndarray, known: np.ndarray, frames: int):
+    """Landmarks (F, 33, 3) with each frame not ``known`` (F,) given the nearest known frame's,
+    if one is at most ``frames`` away; and which frames now have one."""
+    idx = np.flatnonzero(known)
+    if not len(idx) or frames <= 0:
+        return body, known
+    at = np.arange(len(body))
+    nearest = idx[np.clip(np.searchsorted(idx, at), 0, len(idx) - 1)]
+    before = idx[np.clip(np.searchsorted(idx, at, side="right") - 1, 0, len(idx) - 1)]
+    nearest = np.where(np.abs(before - at) <= np.abs(nearest - at), before, nearest)
+    near = np.abs(nearest - at) <= frames
+    return np.where(near[:, None, None], body[nearest], body), near
+
+
 def _crop_box(xy: np.ndarray, width: int, height: int) -> tuple[int, int, int, int] | None:
     """The square (x0, y0, x1, y1) around pixels ``xy`` (N, 2) with :data:`CROP_MARGIN`, cut
     to the image; None when it leaves fewer than 32 pixels a side."""
@@ -524,6 +568,14 @@ def _crop_box(xy: np.ndarray, width: int, height: int) -> tuple[int, int, int, i
     if x1 - x0 < 32 or y1 - y0 < 32:
         return None
     return x0, y0, x1, y1
+
+
+def _nanmean_points(points: np.ndarray) -> np.ndarray:
+    """(F, 3) mean of each frame's finite points (F, P, 3); NaN where none is."""
+    ok = np.isfinite(points).all(axis=-1)
+    total = np.where(ok[..., None], points, 0.0).sum(axis=1)
+    count = ok.sum(axis=1)[:, None]
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -542,18 +594,26 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def _person_path(cost: np.ndarray, centres: np.ndarray, step: float, switch: float) -> np.ndarray:
     """(F,) the candidates (columns of ``cost`` (F, C); the last is "no one") of least total
     cost, each frame's change of candidate costing the distance between their ``centres``
-    (F, C, 3) over ``step`` (mm per frame), and "no one" to or from a candidate ``switch``."""
+    (F, C, 3) over ``step`` (mm per frame). "No one" holds the centre of the person it was
+    entered from (the person is lost, not gone: coming back elsewhere costs the distance from
+    where they were lost); before anyone was seen, leaving it costs ``switch``."""
     f_n, c_n = cost.shape
     total = cost[0].copy()
     back = np.zeros((f_n, c_n), dtype=int)
+    held = np.full(3, np.nan)  # where "no one"'s best path lost its person
     for t in range(1, f_n):
-        move = np.linalg.norm(centres[t - 1][:, None] - centres[t][None], axis=-1) / step
-        move[-1, :], move[:, -1] = switch, switch
+        before = centres[t - 1].copy()
+        before[-1] = held
+        move = np.linalg.norm(before[:, None] - centres[t][None], axis=-1) / step
+        move[:, -1] = 0.0  # losing the person costs the frames without them
+        move[-1, :-1] = np.where(np.isfinite(held).all(), move[-1, :-1], switch)
         move[-1, -1] = 0.0
         move = np.where(np.isfinite(move), move, np.inf)
         through = total[:, None] + move  # (from, to)
         back[t] = np.argmin(through, axis=0)
         total = through[back[t], np.arange(c_n)] + cost[t]
+        if back[t, -1] != c_n - 1:
+            held = centres[t - 1, back[t, -1]]
     path = np.zeros(f_n, dtype=int)
     path[-1] = int(np.argmin(total))
     for t in range(f_n - 1, 0, -1):
