@@ -323,6 +323,12 @@ def _track_landmarks(
             f"{where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
+        if summary.get("views_of_someone_else"):
+            err_console.print(
+                f"note: in {summary['views_of_someone_else']} frames of a view MediaPipe found "
+                "someone else than the person tracked; those were left out",
+                highlight=False,
+            )
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:

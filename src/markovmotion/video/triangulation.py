@@ -22,7 +22,10 @@ multi-view video" (the dual-HMM paper's tracker, §3, Deutscher et al. 2000). Tw
    remain, tried first, can end on a wrong pair: on the real video's frame 80 it kept two
    views that put the right wrist on the floor.) The landmarks map to the 19 body points by
    the monocular path's weight matrix (:func:`~markovmotion.video.monocular.to_body_points`).
-   Before it, MediaPipe's left and right are made to agree across the views
+   Before it, the views that saw someone else in a frame are left out and MediaPipe looks
+   again around the tracked person there (:func:`one_person`, :func:`look_again`: MediaPipe
+   finds one person per image, and with two people in the room each camera may pick another),
+   and MediaPipe's left and right are made to agree across the views
    (:func:`consistent_views`, default ``views``: :func:`views_sides`), since the camera behind
    the person sees it mirrored.
 2. **Guide** (``track --guide mediapipe``). :class:`Guide` adds to the particle filter's cost
