@@ -15,6 +15,8 @@ import numpy as np
 from markovmotion.core.skeleton import Skeleton
 
 UP = np.array([0.0, 1.0, 0.0])
+#: The ground plane's axes (x and z: Y is up), for horizontal parts of positions.
+GROUND = [0, 2]
 
 
 @dataclass(eq=False)
@@ -239,7 +241,7 @@ class Motion:
         out.translations[:, 0] = turn.apply(self.translations[:, 0])
         if to_origin:
             pelvis0 = turn.apply(pos[0, self.skeleton.body_root])
-            out.translations[:, 0, [0, 2]] -= pelvis0[[0, 2]]
+            out.translations[:, 0, GROUND] -= pelvis0[GROUND]
         return out
 
     def body_centred_positions(self, positions: np.ndarray | None = None) -> np.ndarray:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markovmotion.core.motion import Motion
+from markovmotion.core.motion import GROUND, Motion
 from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionFormatError
 from markovmotion.io import read_motion, write_motion
 from markovmotion.io.files import atomic_write, read_text
@@ -73,7 +73,7 @@ def without_displacement(motion: Motion) -> Motion:
     """The motion on the spot: the pelvis's horizontal travel removed (paper §6.1 "static")."""
     pelvis = motion.positions()[:, motion.skeleton.body_root]
     out = motion.copy()
-    out.translations[:, 0, [0, 2]] -= pelvis[:, [0, 2]] - pelvis[0, [0, 2]]
+    out.translations[:, 0, GROUND] -= pelvis[:, GROUND] - pelvis[0, GROUND]
     return out
 
 

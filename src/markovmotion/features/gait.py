@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from markovmotion.core.motion import UP, Motion
+from markovmotion.core.motion import GROUND, UP, Motion
 from markovmotion.errors import MotionFormatError
 
 SIDES = ("L", "R")
@@ -106,7 +106,7 @@ def heel_strikes(motion: Motion, positions: np.ndarray | None = None) -> dict[st
     out = {}
     for side, (ankle, _) in foot_joints(motion).items():
         h = pos[:, ankle, 1]
-        speed = np.linalg.norm(np.gradient(pos[:, ankle, [0, 2]], axis=0), axis=1) * motion.fps
+        speed = np.linalg.norm(np.gradient(pos[:, ankle, GROUND], axis=0), axis=1) * motion.fps
         floor, top = np.percentile(h, [5, 95])
         fast = np.percentile(speed, 95)
         swing = speed > SWING_SPEED * fast
@@ -266,6 +266,6 @@ def foot_slide(motion: Motion, boundaries: np.ndarray, sides: tuple[str, ...]) -
         now = seg[np.arange(1, len(t)), which]
         before = seg[np.arange(len(t) - 1), which]
         low = np.maximum(now[:, 1], before[:, 1]) < floor + CONTACT_HEIGHT * (top - floor)
-        moves = np.linalg.norm((now - before)[:, [0, 2]], axis=1)
+        moves = np.linalg.norm((now - before)[:, GROUND], axis=1)
         out.append(float(moves[low].sum()))
     return np.array(out)

@@ -48,7 +48,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from markovmotion.core.markers import Markers
-from markovmotion.core.motion import Motion
+from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.base import FeatureStep
@@ -351,7 +351,7 @@ def principal_heading(positions: np.ndarray) -> np.ndarray:
     out = np.full(len(positions), np.nan)
     prev = None
     for t, pos in enumerate(positions):
-        seen = pos[np.isfinite(pos).all(axis=1)][:, [0, 2]]
+        seen = pos[np.isfinite(pos).all(axis=1)][:, GROUND]
         if len(seen) < 2:
             continue
         centred = seen - seen.mean(axis=0)

@@ -25,9 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from markovmotion.core.motion import Motion
+from markovmotion.core.motion import GROUND, Motion
 from markovmotion.data.index import MocapIndex, listed_entry, read_listed_motion
-from markovmotion.data.kinds import choose_kind
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, body_points
@@ -109,7 +108,7 @@ def render_multiview(
     pts = [body_points(m) for m in bodies]
     pelvis = np.concatenate([p[:, 0] for p in pts])
     centre = pelvis.mean(axis=0)
-    reach = np.linalg.norm((pelvis - centre)[:, [0, 2]], axis=1).max()
+    reach = np.linalg.norm((pelvis - centre)[:, GROUND], axis=1).max()
     # camera 0 sees A from the side of its mean heading, at 45 degrees
     heading = float(np.median(a.heading())) if a.n_frames else 0.0
     cams = ring_of_cameras(
@@ -144,7 +143,7 @@ def training_body_model(
 ) -> BodyModel:
     """The body model learnt from both people of the collection's training takes of ``labels``
     (its skeleton: person A's of the first take): skeleton takes only, markers takes of
-    the labels left out (:func:`~markovmotion.data.kinds.choose_kind` says so)."""
+    the labels left out without a word (the tracker's body model is not a model of them)."""
     index = MocapIndex.load(data)
     pairs = index.pairs(label=list(labels))
     if not any(a.kind == "skeleton" for a, _ in pairs):
@@ -152,8 +151,9 @@ def training_body_model(
             f"no skeleton two-person takes labelled {', '.join(labels)} in {index.root} "
             "for the body model"
         )
-    what = "two-person takes for the tracker's body model"
-    pairs, _ = choose_kind(pairs, None, what, lambda p: p[0], ("skeleton",))
+    # skeleton takes only, by design: no note about the markers takes left out (the user
+    # asked for a tracker, not for a model of these takes)
+    pairs = [p for p in pairs if p[0].kind == "skeleton"]
     train, test = held_out_pairs(pairs)
     motions = []
     for a, b in train + (test if include_held_out else []):

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from markovmotion.core.motion import GROUND
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.joint_shape import MAJOR_JOINTS, Person
 from markovmotion.io.files import atomic_path
@@ -104,7 +105,7 @@ def side_camera(
     centre[1] = 0.0
     axis = np.array([1.0, 0.0, 0.0])
     if len(people) > 1:
-        sep = refs[:, 1, [0, 2]] - refs[:, 0, [0, 2]]
+        sep = refs[:, 1, GROUND] - refs[:, 0, GROUND]
         _, _, vt = np.linalg.svd(sep, full_matrices=False)
         axis = np.array([vt[0, 0], 0.0, vt[0, 1]])
     forward = np.cross(axis, [0.0, 1.0, 0.0])

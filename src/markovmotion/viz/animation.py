@@ -32,7 +32,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from markovmotion.core.motion import Motion
+from markovmotion.core.motion import GROUND, UP, Motion
 from markovmotion.errors import LimitError
 from markovmotion.features.body_points import point_bones
 from markovmotion.io.files import atomic_write
@@ -54,7 +54,6 @@ COLOURS = (
 )
 POINT_LIGHT_BACKGROUND = "black"
 POINT_LIGHT_COLOUR = "white"
-UP = np.array([0.0, 1.0, 0.0])
 ELEVATION = np.radians(18.0)
 QUARTER_TRAVEL = np.radians(20.0)
 QUARTER_STILL = np.radians(40.0)
@@ -165,13 +164,13 @@ def _finite_mean(a: np.ndarray, axis: int) -> np.ndarray:
 def _centre_track(t: _Track) -> np.ndarray:
     """Per-frame horizontal position (F, 2) of the pelvis (of the centroid for markers)."""
     p = t.positions[:, 0] if t.facing is not None else _finite_mean(t.positions, axis=1)
-    return p[:, [0, 2]]
+    return p[:, GROUND]
 
 
 def _camera(tracks: list[_Track]) -> _Camera:
     """The view of the module docstring, from all frames of all tracks."""
     facings = [t.facing for t in tracks if t.facing is not None]
-    mean_facing = np.mean(np.vstack(facings), axis=0)[[0, 2]] if facings else np.zeros(2)
+    mean_facing = np.mean(np.vstack(facings), axis=0)[GROUND] if facings else np.zeros(2)
     centres = [c[np.isfinite(c).all(axis=1)] for c in map(_centre_track, tracks)]
     centred = np.vstack([c - c.mean(axis=0) for c in centres if len(c)])
     axis = mean_facing / np.linalg.norm(mean_facing) if np.linalg.norm(mean_facing) > 0.3 else None
@@ -231,11 +230,11 @@ def _panels(
         if not len(pts):
             raise ValueError("nothing visible to draw: every position is NaN")
         clouds.append(pts)
-    spans = [np.ptp(pts[:, [0, 2]], axis=0).max() for pts in clouds]
+    spans = [np.ptp(pts[:, GROUND], axis=0).max() for pts in clouds]
     step = _grid_step(float(max(spans)) + 600.0)  # one grid for all panels, like the scale
     panels = []
     for group, pts in zip(groups, clouds, strict=True):
-        lo, hi = pts[:, [0, 2]].min(0), pts[:, [0, 2]].max(0)
+        lo, hi = pts[:, GROUND].min(0), pts[:, GROUND].max(0)
         g0 = np.floor((lo - 0.25 * step) / step) * step
         g1 = np.ceil((hi + 0.25 * step) / step) * step
         xs = np.arange(g0[0], g1[0] + step / 2, step)

@@ -74,7 +74,7 @@ from markovmotion.algorithms.gaussian import (
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.windowed_viterbi import INITIAL, leavable
 from markovmotion.core.markers import Markers
-from markovmotion.core.motion import Motion
+from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, JointPositions
@@ -122,7 +122,6 @@ NORMALISE = ("none", "person")
 OUTPUTS = ("frames", "regression")
 PLACE_SCALES = ("none", "size")
 #: The ground plane's axes (y is up).
-HORIZONTAL = [0, 2]
 #: The learnt parts of ``output="regression"`` (:func:`state_regressions`).
 _REGRESSION = ("reg_means_a_", "reg_means_b_", "reg_gains_")
 #: Its ridge, in units of A's features' mean variance: chosen by leaving one pair of people
@@ -666,7 +665,7 @@ class DualHMM(Model):
         if scale is None:
             return root
         root = np.array(root, dtype=float)
-        root[..., HORIZONTAL] *= np.asarray(scale, dtype=float)[..., None]
+        root[..., GROUND] *= np.asarray(scale, dtype=float)[..., None]
         return root
 
     def _training_place(
