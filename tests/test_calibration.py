@@ -109,3 +109,80 @@ def test_a_calibration_that_is_not_a_file_is_one_line_not_a_hang(tmp_path, capsy
             main(["video", "cameras", str(tmp_path / name), str(tmp_path / "v.mp4")])
         err = capsys.readouterr().err
         assert stop.value.code == 2 and message in err and "Traceback" not in err
+
+
+def _qca(cameras, serials, extra: str = "") -> str:
+    """A Qualisys .qca.txt of ``cameras`` (the project's) as QTM writes it: sub-pixel units
+    (1/64 px) of the full-size images, each camera's position (mm) and orientation in a Z-up
+    world, camera axes OpenCV's turned half a turn about x; ``extra``: more camera elements."""
+    cams = []
+    for c, serial in zip(cameras, serials, strict=True):
+        s = np.array([FULL[0] / c.width, FULL[1] / c.height])
+        K = c.K.copy()
+        K[:2, :2] *= s[:, None]
+        K[:2, 2] = (K[:2, 2] + 0.5) * s - 0.5
+        r = c.R @ UP_AXES["z"]  # Z-up world to OpenCV's camera axes
+        m = np.diag([1.0, -1.0, -1.0]) @ r
+        pos = -r.T @ c.t
+        rot = " ".join(f'r{i + 1}{j + 1}="{float(m[i, j])!r}"' for i in range(3) for j in range(3))
+        lens = (
+            f'radialDistortion1="{LENS[0] * 64}" radialDistortion2="{LENS[1] * 64}" '
+            f'radialDistortion3="0" tangentalDistortion1="{LENS[2] * 64}" '
+            f'tangentalDistortion2="{LENS[3] * 64}"'
+        )
+        cams.append(
+            f'<camera active="1" model="Miqus Video" serial="{serial}">'
+            f'<fov_video left="0" top="0" right="{FULL[0] - 1}" bottom="{FULL[1] - 1}"/>'
+            f'<transform {rot} x="{float(pos[0])!r}" y="{float(pos[1])!r}" z="{float(pos[2])!r}"/>'
+            f'<intrinsic focalLengthU="{float(K[0, 0] * 64)!r}" focalLengthV="{float(K[1, 1] * 64)!r}" '
+            f'centerPointU="{float(K[0, 2] * 64)!r}" centerPointV="{float(K[1, 2] * 64)!r}" {lens}/>'
+            "</camera>"
+        )
+    return (
+        "<?xml version='1.0' encoding='ASCII'?><calibration><cameras>"
+        + extra + "".join(cams) + "</cameras></calibration>"
+    )  # fmt: skip
+
+
+def test_a_qualisys_calibration_gives_the_cameras_of_the_real_video(real_video, tmp_path):
+    """The real video's cameras written as Qualisys writes them (the file its calibration
+    came from) come back as the same cameras: marker-only cameras skipped, the video cameras
+    in the natural order of their serials (cam2 before cam10), the lens as Pose2Sim reads it."""
+    from markovmotion.video.calibration import cameras_from_qca
+
+    truth, _ = load_cameras(real_video)
+    marker_only = '<camera active="1" model="Miqus M3" serial="m1"/>'
+    calib = tmp_path / "Calib.qca.txt"
+    # written out of order: the reader sorts cam2, cam3, cam4 before cam10
+    order = ["cam10", "cam2", "cam3", "cam4"]
+    calib.write_text(_qca([truth[3], truth[0], truth[1], truth[2]], order, marker_only))
+    videos = _videos(real_video, tmp_path)
+    got = cameras_from_qca(calib, [videos[1], videos[2], videos[3], videos[0]])
+    assert [c.name for c in got] == ["cam2", "cam3", "cam4", "cam10"]
+    pts = np.random.default_rng(0).uniform([-800, 0, -800], [800, 1900, 800], (200, 3))
+    for a, b in zip([truth[0], truth[1], truth[2], truth[3]], got, strict=True):
+        assert (b.width, b.height) == (a.width, a.height)
+        assert np.abs(a.project(pts)[0] - b.project(pts)[0]).max() < 1e-6
+        assert b.distortion == pytest.approx(LENS)
+    main(["video", "cameras", str(calib), *map(str, [videos[1], videos[2], videos[3], videos[0]])])
+    assert len(load_cameras(tmp_path)[0]) == 4
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("<calibration><cameras>", "not a Qualisys calibration file"),
+        ('<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]><calibration/>', "DOCTYPE"),
+        ('<calibration><cameras><camera serial="c1"/></cameras></calibration>', "needs fov_video"),
+        ("<calibration><cameras></cameras></calibration>", "0 video cameras"),
+    ],
+)
+def test_a_bad_qualisys_calibration_is_one_line(real_video, tmp_path, capsys, text, says):
+    calib = tmp_path / "Calib.qca.txt"
+    calib.write_text(text)
+    videos = _videos(real_video, tmp_path, 1)
+    with pytest.raises(SystemExit) as stop:
+        main(["video", "cameras", str(calib), str(videos[0])])
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and says in err and "Traceback" not in err
+    assert len(err.splitlines()) == 1

@@ -44,7 +44,9 @@ def render(
 
 @app.command("cameras")
 def cameras(
-    calibration: Path = typer.Argument(..., help="Pose2Sim / Anipose calibration (Calib.toml)."),
+    calibration: Path = typer.Argument(
+        ..., help="Pose2Sim / Anipose calibration (Calib.toml) or Qualisys (.qca.txt)."
+    ),
     videos: list[Path] = typer.Argument(..., help="One video per camera, in the file's order."),
     out: Path = typer.Option(
         None, help="Camera file to write (default: cameras.json beside the videos)."
@@ -54,12 +56,15 @@ def cameras(
         "z", callback=choice(("z", "y", "-y")), help="The calibration's up axis (Pose2Sim: z)."
     ),
     units: str = typer.Option(
-        "m", callback=choice(("m", "mm")), help="The calibration's length unit (Pose2Sim: m)."
+        "m",
+        callback=choice(("m", "mm")),
+        help="The TOML calibration's length unit (Pose2Sim: m; a .qca.txt is in mm).",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing camera file."),
 ) -> None:
-    """Write cameras.json for your videos from a Pose2Sim / Anipose calibration: the world
-    turned to Y up in mm, the intrinsics scaled to the videos' size, the lens distortion kept."""
+    """Write cameras.json for your videos from a Pose2Sim / Anipose or Qualisys calibration:
+    the world turned to Y up in mm, the intrinsics scaled to the videos' size, the lens
+    distortion kept."""
     from markovmotion.video.calibration import import_calibration
 
     path = import_calibration(calibration, videos, out, fps, up, units, force)

@@ -20,12 +20,23 @@ shrunk to a quarter keeps its calibration), the lens distortion kept (dimensionl
 not scale). Written here because neither Pose2Sim nor aniposelib is a dependency (nor
 needed for the reading: Python's ``tomllib`` reads the file; ``cv2.Rodrigues`` turns the
 rotation). OpenCV's fisheye model is a different lens model and is refused.
+
+Qualisys systems (the Miqus video cameras of the real video, ``../shared/data/video``) write
+a ``.qca.txt`` XML file instead; :func:`cameras_from_qca` reads it as Pose2Sim's
+``calib_qca_to_toml`` converts it (so both give the same cameras): the video cameras only
+(model "Miqus Video ..." or "none"), in the natural order of their serials; the intrinsics
+in the file's sub-pixel units (1/64 px) and relative to the video's field of view; the
+lens distortion likewise divided by 64 (Pose2Sim's reading); each camera's ``transform`` its
+position (mm) and orientation in the world, whose camera axes are OpenCV's turned half a turn
+about x. :func:`calibration_cameras` picks the reader by the file's first characters.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import tomllib
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import cv2
@@ -106,21 +117,141 @@ def cameras_from_toml(
         dist = read_distortion(path, f"[{key}] distortions", sec.get("distortions", []))
         rvec = read_matrix(path, f"[{key}] rotation", sec.get("rotation"), (3,))
         t = read_matrix(path, f"[{key}] translation", sec.get("translation"), (3,)) * UNITS[units]
-        width, height = _video_size(video)
-        if not (size > 0).all() or abs(width / height - size[0] / size[1]) > 0.01 * width / height:
-            raise MotionFormatError(
-                video, f"is {width}x{height}; camera {name} was calibrated at "
-                f"{size[0]:g}x{size[1]:g} (another shape)",
-            )  # fmt: skip
-        scale = np.array([width / size[0], height / size[1]])
-        k = k.copy()
-        k[:2, :2] *= scale[:, None]
-        k[:2, 2] = (k[:2, 2] + 0.5) * scale - 0.5
         r = cv2.Rodrigues(rvec)[0] @ turn.T  # the project's world to the camera
-        cam = CalibratedCamera(k, r, t, width, height, name, video.name, "", dist)
-        valid_camera(path, f"[{key}]", cam)
-        out.append(cam)
+        out.append(_for_video(path, f"[{key}]", name, video, size, k, r, t, dist))
     return out
+
+
+#: Qualisys camera models with video (:func:`cameras_from_qca`; "none": written by a tool).
+QCA_VIDEO_MODELS = ("miqus video", "none")
+
+
+def _number(path: Path, where: str, attrib: dict, key: str) -> float:
+    """A finite number from an XML element's attribute, or one line naming it."""
+    try:
+        value = float(attrib[key])
+    except (KeyError, ValueError):
+        raise MotionFormatError(path, f"{where}: no number {key}") from None
+    if not np.isfinite(value):
+        raise MotionFormatError(path, f"{where}: {key} is not finite")
+    return value
+
+
+def cameras_from_qca(
+    path: str | os.PathLike[str], videos: list[Path], up: str = "z"
+) -> list[CalibratedCamera]:
+    """The video cameras of a Qualisys ``.qca.txt`` calibration (module docstring), in the
+    natural order of their serials, for ``videos`` (one per camera, same order; each
+    camera's intrinsics scaled to its video's size, as :func:`cameras_from_toml`).
+
+    Raises:
+        MotionFormatError: not a Qualisys calibration (or one with a DOCTYPE), a camera
+            without a valid field, another number of videos than video cameras, or a video
+            of another shape than its field of view."""
+    path = Path(path)
+    if up not in UP_AXES:
+        raise ValueError(f"up must be one of {', '.join(UP_AXES)}")
+    text = read_small_text(path, "no such calibration file", "calibration file")
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:
+        raise MotionFormatError(path, "a calibration file with a DOCTYPE or entities is not read")
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise MotionFormatError(path, f"not a Qualisys calibration file ({exc})") from None
+    found = [
+        c
+        for c in root.findall("cameras/camera")
+        if str(c.get("model", "none")).lower().startswith(QCA_VIDEO_MODELS)
+    ]
+    if not 1 <= len(found) <= MAX_CAMERAS:
+        raise MotionFormatError(
+            path, f"{len(found)} video cameras (cameras/camera): 1 to {MAX_CAMERAS} are read"
+        )
+    found.sort(
+        key=lambda c: [
+            int(x) if x.isdigit() else x.lower() for x in re.split(r"(\d+)", c.get("serial", ""))
+        ]
+    )
+    if len(videos) != len(found):
+        raise MotionFormatError(
+            path, f"{len(found)} video cameras but {len(videos)} videos: give one video per camera"
+        )
+    turn = UP_AXES[up]
+    out = []
+    for cam_el, video in zip(found, videos, strict=True):
+        name = str(cam_el.get("serial", f"cam{len(out) + 1}"))[:64]
+        where = f"camera {name}"
+        fov, intr, tr = (cam_el.find(k) for k in ("fov_video", "intrinsic", "transform"))
+        if fov is None or intr is None or tr is None:
+            raise MotionFormatError(path, f"{where}: needs fov_video, intrinsic and transform")
+        left, top, right, bottom = (
+            _number(path, f"{where} fov_video", fov.attrib, k)
+            for k in ("left", "top", "right", "bottom")
+        )
+        size = np.array([right - left + 1.0, bottom - top + 1.0])
+        fu, fv, cu, cv = (
+            _number(path, f"{where} intrinsic", intr.attrib, k) / 64.0
+            for k in ("focalLengthU", "focalLengthV", "centerPointU", "centerPointV")
+        )
+        k = np.array([[fu, 0.0, cu - left], [0.0, fv, cv - top], [0.0, 0.0, 1.0]])
+        dist = tuple(
+            _number(path, f"{where} intrinsic", intr.attrib, key) / 64.0
+            for key in (
+                "radialDistortion1", "radialDistortion2", "tangentalDistortion1",
+                "tangentalDistortion2",
+            )
+        )  # fmt: skip
+        m = np.array(
+            [
+                [_number(path, f"{where} transform", tr.attrib, f"r{i}{j}") for j in "123"]
+                for i in "123"
+            ]
+        )
+        position = np.array([_number(path, f"{where} transform", tr.attrib, a) for a in "xyz"])
+        r = np.diag([1.0, -1.0, -1.0]) @ m  # the world to OpenCV's camera axes
+        t = -r @ position
+        out.append(_for_video(path, where, name, video, size, k, r @ turn.T, t, dist))
+    return out
+
+
+def _for_video(
+    path: Path,
+    where: str,
+    name: str,
+    video: Path,
+    size: np.ndarray,
+    k: np.ndarray,
+    r: np.ndarray,
+    t: np.ndarray,
+    dist: tuple[float, ...],
+) -> CalibratedCamera:
+    """A camera calibrated at ``size`` (width, height) made for ``video``: its intrinsics ``k``
+    scaled to the video's size (pixel centres kept), checked; one line when the video has
+    another shape."""
+    width, height = _video_size(video)
+    if not (size > 0).all() or abs(width / height - size[0] / size[1]) > 0.01 * width / height:
+        raise MotionFormatError(
+            video, f"is {width}x{height}; camera {name} was calibrated at "
+            f"{size[0]:g}x{size[1]:g} (another shape)",
+        )  # fmt: skip
+    scale = np.array([width / size[0], height / size[1]])
+    k = k.copy()
+    k[:2, :2] *= scale[:, None]
+    k[:2, 2] = (k[:2, 2] + 0.5) * scale - 0.5
+    cam = CalibratedCamera(k, r, t, width, height, name, video.name, "", dist)
+    valid_camera(path, where, cam)
+    return cam
+
+
+def calibration_cameras(
+    path: str | os.PathLike[str], videos: list[Path], up: str = "z", units: str = "m"
+) -> list[CalibratedCamera]:
+    """The cameras of a calibration file: a Qualisys ``.qca.txt`` (XML: :func:`cameras_from_qca`,
+    its own units, mm) or a Pose2Sim / Anipose TOML (:func:`cameras_from_toml`)."""
+    head = read_small_text(Path(path), "no such calibration file", "calibration file")[:200]
+    if head.lstrip().startswith("<"):
+        return cameras_from_qca(path, videos, up)
+    return cameras_from_toml(path, videos, up, units)
 
 
 def import_calibration(
@@ -133,7 +264,8 @@ def import_calibration(
     force: bool = False,
 ) -> Path:
     """``video cameras``: write ``cameras.json`` for ``videos`` from ``calibration`` (a
-    Pose2Sim / Anipose TOML, :func:`cameras_from_toml`) beside the videos (or at ``out``),
+    Pose2Sim / Anipose TOML or a Qualisys ``.qca.txt``, :func:`calibration_cameras`) beside
+    the videos (or at ``out``),
     at ``fps`` (default: the first video's rate). The videos must share one folder. An
     existing camera file is replaced only with ``force``."""
     if not videos:
@@ -143,7 +275,7 @@ def import_calibration(
         raise MotionFormatError(
             videos[0], "the videos must be in one folder (cameras.json names them)"
         )
-    cameras = cameras_from_toml(calibration, videos, up, units)
+    cameras = calibration_cameras(calibration, videos, up, units)
     rate = fps if fps is not None else video_fps(videos[0], 0.0)
     if not rate > 0:
         raise MotionFormatError(videos[0], "no frame rate in this video: give --fps")
