@@ -424,8 +424,8 @@ def one_person(
     between the two candidates' centres over :data:`PERSON_SPEED` per frame (Viterbi, Rabiner
     eqs. 32-35, with costs that depend on the frame), follows one person: the one most views
     see over the take (of people seen alike, the one the cameras are aimed at), kept while
-    the views find them. Leaving "no one" for a person costs as much as losing every view
-    for a frame.
+    the views find them. "No one" holds where the person was lost, so that coming back as
+    someone else costs the distance too (:func:`_person_path`).
 
     Written here, not taken from a library: multi-person association across calibrated views
     (as in Pose2Sim's ``personAssociation``) needs every person's detection in every view;
