@@ -439,7 +439,9 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
             f"{data['sent']}, answered {data['frames']}"
         )
         page.click("#stop")
-        page.wait_for_function("() => document.getElementById('start').disabled === false")
+        page.wait_for_function(  # the session ends once the frames in flight are answered
+            "() => document.getElementById('start').disabled === false", timeout=120000
+        )
         assert not errors, errors
         # Stopped while frames are being encoded: each JPEG now takes a second to read, so the
         # socket closes with frames still in the encoder; they are dropped, not sent (CI saw
@@ -454,7 +456,9 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
             "() => Number(document.body.dataset.frames || 0) >= 2", timeout=60000
         )
         page.click("#stop")
-        page.wait_for_function("() => document.getElementById('start').disabled === false")
+        page.wait_for_function(  # the session ends once the frames in flight are answered
+            "() => document.getElementById('start').disabled === false", timeout=120000
+        )
         page.wait_for_timeout(2500)  # the frames in the encoder come out after the close
         assert not errors, errors
         context.close()
