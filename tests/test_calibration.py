@@ -172,6 +172,7 @@ def test_a_qualisys_calibration_gives_the_cameras_of_the_real_video(real_video, 
     ("text", "says"),
     [
         ("<calibration><cameras>", "not a Qualisys calibration file"),
+        ("", "not a Qualisys calibration file"),  # empty: told by its name, not as a TOML
         ('<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]><calibration/>', "DOCTYPE"),
         ('<calibration><cameras><camera serial="c1"/></cameras></calibration>', "needs fov_video"),
         ("<calibration><cameras></cameras></calibration>", "0 video cameras"),
@@ -186,3 +187,13 @@ def test_a_bad_qualisys_calibration_is_one_line(real_video, tmp_path, capsys, te
     err = capsys.readouterr().err.strip()
     assert stop.value.code == 2 and says in err and "Traceback" not in err
     assert len(err.splitlines()) == 1
+
+
+def test_a_missing_video_is_named(real_video, tmp_path, capsys):
+    truth, _ = load_cameras(real_video)
+    calib = tmp_path / "Calib.qca.txt"
+    calib.write_text(_qca(truth[:1], ["cam1"]))
+    with pytest.raises(SystemExit) as stop:
+        main(["video", "cameras", str(calib), str(tmp_path / "nope.mp4")])
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and err.endswith("nope.mp4: no such video file")

@@ -246,6 +246,7 @@ def track(
             ),
             highlight=False,
         )
+        _someone_else_notes(summary.get("views_of_someone_else", 0))
 
 
 def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
@@ -324,16 +325,33 @@ def _track_landmarks(
             else ""
         )
         err_console.print(
-            f"tracked {summary['frames']} frames ({summary['frames_placed']} placed) of "
-            f"{where} at {summary['fps']:.2f} frames/s{err}",
+            f"tracked {summary['frames']} frames ({summary['frames_placed']} with all 19 body "
+            f"points) of {where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
-        if summary.get("views_of_someone_else"):
+        _someone_else_notes(summary.get("views_of_someone_else", 0))
+        away = summary.get("from_capture_centre_m")
+        if away is not None and away > FAR_FROM_CENTRE_M:
             err_console.print(
-                f"note: in {summary['views_of_someone_else']} frames of a view MediaPipe found "
-                "someone else than the person tracked; those were left out",
+                f"note: the person tracked stands {away:.1f} m from where the cameras are "
+                "aimed; MediaPipe finds one person per image, so with several people in view "
+                "the one the views agree on is followed",
                 highlight=False,
             )
+
+
+#: Metres from where the cameras are aimed beyond which ``track`` says whom it followed.
+FAR_FROM_CENTRE_M = 1.0
+
+
+def _someone_else_notes(count: int) -> None:
+    """One line when MediaPipe found someone else than the person tracked in some views."""
+    if count:
+        err_console.print(
+            f"note: {count} camera frames showed someone else than the person tracked (MediaPipe "
+            "finds one person per image); they were left out",
+            highlight=False,
+        )
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:

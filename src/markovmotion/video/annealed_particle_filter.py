@@ -753,6 +753,9 @@ class TrackResult:
     #: Share of (view, frame) pairs in which the guide has a landmark to pull towards
     #: (MediaPipe found the person and triangulation kept the view); None without a guide.
     guide_seen: float | None = None
+    #: (view, frame) pairs in which MediaPipe found someone else than the person tracked
+    #: (left out of the guide, :func:`~markovmotion.video.triangulation.one_person`).
+    guide_someone_else: int = 0
 
 
 def multiview_frames(
@@ -910,6 +913,7 @@ def track_video(
             ViewLandmarks,
             consistent_views,
             look_again,
+            someone_else_count,
             triangulate_views,
         )
 
@@ -919,6 +923,7 @@ def track_video(
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
         views = look_again(views, mv.videos, mv.fps)
         agreed = consistent_views(views, left_right, mv.fps)
+        someone_else = someone_else_count(views, agreed)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))
@@ -931,4 +936,5 @@ def track_video(
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())
+        result.guide_someone_else = someone_else
     return result

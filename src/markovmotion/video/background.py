@@ -92,8 +92,9 @@ class BackgroundCheck:
         if not self.holds_person:
             return f"{camera}: the median background is the empty scene (holds {self.held:.0%})"
         return (
-            f"{camera}: the median background still holds the person ({self.held:.0%} of their "
-            f"silhouette; {self.unseen:.0%} never uncovered): give an empty-scene image "
+            f"{camera}: the median background still holds the person (an area of "
+            f"{self.held:.0%} of their mean silhouette; {self.unseen:.0%} never uncovered): "
+            "give an empty-scene image "
             "('background' in cameras.json)"
         )
 

@@ -67,6 +67,8 @@ UNITS: dict[str, float] = {"m": 1000.0, "mm": 1.0}
 
 
 def _video_size(video: Path) -> tuple[int, int]:
+    if not Path(video).is_file():
+        raise MotionFormatError(video, "no such video file")
     cap = cv2.VideoCapture(str(video))
     ok, frame = cap.read() if cap.isOpened() else (False, None)
     cap.release()
@@ -249,7 +251,7 @@ def calibration_cameras(
     """The cameras of a calibration file: a Qualisys ``.qca.txt`` (XML: :func:`cameras_from_qca`,
     its own units, mm) or a Pose2Sim / Anipose TOML (:func:`cameras_from_toml`)."""
     head = read_small_text(Path(path), "no such calibration file", "calibration file")[:200]
-    if head.lstrip().startswith("<"):
+    if head.lstrip().startswith("<") or Path(path).name.lower().endswith((".qca.txt", ".qca")):
         return cameras_from_qca(path, videos, up)
     return cameras_from_toml(path, videos, up, units)
 

@@ -130,6 +130,17 @@ START_UP_LINES = (
 _STDERR_HELD = threading.Lock()
 
 
+def _flush_c_streams() -> None:
+    """``fflush(NULL)``: the C library's buffered output streams written out (MediaPipe's
+    TensorFlow Lite writes its start-up line through one)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C library to ask (not Linux or macOS)
+        pass
+
+
 @contextmanager
 def native_start_up_lines_held() -> Iterator[None]:
     """Hold what is written to file descriptor 2 in the block, then pass on every line except
@@ -149,6 +160,7 @@ def native_start_up_lines_held() -> Iterator[None]:
             yield
         finally:
             sys.stderr.flush()
+            _flush_c_streams()  # what the C library still buffers goes to the held file too
             os.dup2(saved, 2)
             os.close(saved)
             held.seek(0)
@@ -166,6 +178,9 @@ class QuietPose:
     def __init__(self, make):
         with native_start_up_lines_held():
             self._pose = make()
+            # the graph opens its models in its own threads after make() returns, and
+            # TensorFlow Lite says so then: one blank frame waits for them, inside the block
+            self._pose.process(np.zeros((64, 64, 3), dtype=np.uint8))
         self._starting = True
 
     def process(self, rgb: np.ndarray):

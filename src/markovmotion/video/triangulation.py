@@ -594,6 +594,12 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.where(total[:, 0] > 0, out, np.nan)
 
 
+def someone_else_count(found: ViewLandmarks, kept: ViewLandmarks) -> int:
+    """(view, frame) pairs in which MediaPipe ``found`` someone but :func:`one_person` (in
+    ``kept``) left the view out: someone else than the person tracked."""
+    return int(((found.visibility.max(axis=2) > 0) & (kept.visibility.max(axis=2) <= 0)).sum())
+
+
 def _person_path(cost: np.ndarray, centres: np.ndarray, step: float, switch: float) -> np.ndarray:
     """(F,) the candidates (columns of ``cost`` (F, C); the last is "no one") of least total
     cost, each frame's change of candidate costing the distance between their ``centres``
@@ -834,7 +840,11 @@ def track_triangulated_video(
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
     n = len(tr.points)
-    someone_else = (found.visibility.max(axis=2) > 0) & (lm.visibility.max(axis=2) <= 0)
+    middle = capture_centre(cams)
+    centre = _nanmean_points(tr.points)
+    from_middle = (
+        np.linalg.norm(centre - middle, axis=1) if middle is not None else np.full(n, np.nan)
+    )
     seen = (lm.visibility >= MIN_VISIBILITY).sum()
     summary = {
         "method": "triangulate",
@@ -843,7 +853,12 @@ def track_triangulated_video(
         "frames_placed": int(tr.placed.sum()),
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
-        "views_of_someone_else": int(someone_else.sum()),
+        "views_of_someone_else": someone_else_count(found, lm),
+        "from_capture_centre_m": (
+            round(float(np.nanmedian(from_middle)) / 1e3, 2)
+            if np.isfinite(from_middle).any()
+            else None
+        ),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
