@@ -210,6 +210,8 @@ def test_triangulated_track_of_real_video(real_video, tmp_path, capsys):
     assert s["median_residual_px"] < 8.0 and 0 < s["landmark_views_dropped"]
     assert s["mean_mm"] <= 110.0
     assert out.is_file()
+    # one person in the room: no view is left out, and he stands where the cameras are aimed
+    assert s["views_of_someone_else"] == 0 and s["from_capture_centre_m"] < 1.0
 
 
 def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
@@ -223,6 +225,7 @@ def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
           "--guide", "mediapipe"])  # fmt: skip
     s = json.loads(capsys.readouterr().out)
     assert s["guide"] == "mediapipe" and s["guide_seconds"] >= 0.0
+    assert s["views_of_someone_else"] >= 0
     assert 0.0 <= s["guide_seen"] <= 1.0
     assert s["frames"] == 3 and 0 < s["fps_with_guide"] <= s["fps"]
 
