@@ -402,3 +402,24 @@ def test_of_two_people_seen_alike_the_one_the_cameras_aim_at_is_kept_even_when_l
     expected[2:] = True
     expected[2:, 10:20] = False
     assert (kept == expected).all()
+
+
+def test_mediapipe_says_nothing_on_the_terminal(real_video, tmp_path):
+    """A fresh process (MediaPipe's TensorFlow Lite says its start-up line once a process):
+    ``track --method triangulate`` writes only its own lines; the line came after the graph's
+    creation, from its own threads, before this was held."""
+    import subprocess
+    import sys
+
+    _need_mediapipe()
+    run = subprocess.run(
+        [sys.executable, "-m", "markovmotion", "track", "--video", str(real_video),
+         "--method", "triangulate", "--max-frames", "3", "--out", str(tmp_path / "a.c3d")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.splitlines() == [
+        f"wrote {tmp_path / 'a.c3d'}",
+        "tracked 3 frames (3 with all 19 body points) of 4 views at "
+        + run.stderr.split(" at ")[-1].strip(),
+    ]
