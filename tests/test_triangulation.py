@@ -385,7 +385,7 @@ def test_the_crop_around_a_person_is_a_square_with_a_margin_inside_the_image():
 
 
 def test_of_two_people_seen_alike_the_one_the_cameras_aim_at_is_kept_even_when_lost():
-    """Two views see P (where the ring of cameras is aimed) and two see Q, 1.2 m out; for 10
+    """Two views see P (where the ring of cameras is aimed) and two see Q, 1.2 m out; for 5
     frames no view finds P: P is followed throughout (no one in those frames), never Q.
     Without "no one" holding where P was lost, coming back to anyone would be free."""
     from markovmotion.video.triangulation import ViewLandmarks, capture_centre, one_person
@@ -396,12 +396,30 @@ def test_of_two_people_seen_alike_the_one_the_cameras_aim_at_is_kept_even_when_l
     seen = pixels.copy()
     seen[:2] = other[:2]
     vis = vis.copy()
-    vis[2:, 10:20] = 0.0  # P lost
+    vis[2:, 10:15] = 0.0  # P lost
     _, kept = one_person(ViewLandmarks(cams, seen, vis), fps=30.0)
     expected = np.zeros((4, 30), bool)
     expected[2:] = True
-    expected[2:, 10:20] = False
+    expected[2:, 10:15] = False
     assert (kept == expected).all()
+
+
+def test_a_person_alone_far_from_where_the_cameras_aim_keeps_every_view():
+    """One person 4 m from where three cameras are aimed (a runner crossing the room): the
+    distance only ranks people against each other, so every view is kept."""
+    from markovmotion.video.triangulation import ViewLandmarks, capture_centre, one_person
+
+    cams = ring_of_cameras(np.array([0.0, 900.0, 0.0]), 12000.0, 3, (1088, 1920))
+    rng = np.random.default_rng(7)
+    body = rng.uniform([-250, 0, -150], [250, 1750, 150], (len(LANDMARKS), 3))
+    far = body + np.array([3200.0, 0.0, 2600.0])
+    assert np.linalg.norm(far.mean(axis=0) - capture_centre(cams)) > 3900.0
+    for c in cams:  # in every image
+        xy, _ = c.project(far)
+        assert ((xy > 0) & (xy < [c.width, c.height])).all()
+    pixels = np.stack([np.stack([c.project(far)[0]] * 10) for c in cams])
+    _, kept = one_person(ViewLandmarks(cams, pixels, np.ones((3, 10, len(LANDMARKS)))), 30.0)
+    assert kept.all()
 
 
 def test_mediapipe_says_nothing_on_the_terminal(real_video, tmp_path):

@@ -356,9 +356,10 @@ PERSON_ANGLE = 0.05
 #: person's centre moving: a view of someone else a metre away costs tens of units, far more
 #: than losing every view (at most one unit each).
 PERSON_SPEED = 1500.0
-#: Cost per frame and metre of the tracked person's centre from where the cameras look
-#: (:func:`capture_centre`): of people seen by as many views, the one the cameras are
-#: aimed at is followed (a metre further out weighs as much as one view fewer).
+#: Cost per frame and metre of a candidate person's centre from where the cameras look
+#: (:func:`capture_centre`), beyond the nearest candidate's: of people seen by as many views,
+#: the one the cameras are aimed at is followed (a metre further out weighs as much as one
+#: view fewer); a person alone pays nothing, however far out.
 PERSON_CENTRE_COST = 1.0
 #: MediaPipe's left/right landmark stems whose midpoints (with the nose) are the same whether
 #: a view mirrors the body or not: what :func:`one_person` compares across the views.
@@ -417,8 +418,9 @@ def one_person(
     visibility-weighted median reprojection error of its points, ``e_v`` in focal lengths;
     a subset whose own views all lie within ``angle`` is a candidate person, with the views
     within ``angle`` (its inliers) and the MSAC cost ``sum_v min(e_v, angle)^2 / angle^2``
-    (a view without the person costs 1), plus :data:`PERSON_CENTRE_COST` per metre of the
-    candidate's centre from where the cameras are aimed (:func:`capture_centre`). Over time
+    (a view without the person costs 1), plus :data:`PERSON_CENTRE_COST` per metre that the
+    candidate's centre is further than the nearest candidate's from where the cameras are
+    aimed (:func:`capture_centre`). Over time
     the path of least cost through the
     candidates (and "no one": every view costs 1), each frame's step costing the distance
     between the two candidates' centres over :data:`PERSON_SPEED` per frame (Viterbi, Rabiner
@@ -473,8 +475,12 @@ def one_person(
         cost[valid, c] = score[valid]
         inliers[:, c] = ok.T
         centres[:, c] = _nanmean_points(pts)
-    if middle is not None:
-        cost[:, :-1] += PERSON_CENTRE_COST * np.linalg.norm(centres[:, :-1] - middle, axis=-1) / 1e3
+    if middle is not None:  # relative to the nearest candidate: a lone person far out is
+        # still better than no one
+        away = np.linalg.norm(centres[:, :-1] - middle, axis=-1) / 1e3
+        away = np.where(np.isfinite(cost[:, :-1]), away, np.inf)
+        nearest = np.min(away, axis=1, keepdims=True)
+        cost[:, :-1] += PERSON_CENTRE_COST * (away - np.where(np.isfinite(nearest), nearest, 0.0))
     cost = np.where(np.isfinite(cost), cost, np.inf)
     step = PERSON_SPEED / max(float(fps), 1e-9)
     path = _person_path(cost, centres, step, float(v_n))
