@@ -921,9 +921,9 @@ def track_video(
         # (triangulation.consistent_views): a camera behind the person, whose MediaPipe
         # mirrors the body, is put right by the others
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        views = look_again(views, mv.videos, mv.fps)
-        agreed = consistent_views(views, left_right, mv.fps)
-        someone_else = someone_else_count(views, agreed)
+        views, person = look_again(views, mv.videos, mv.fps)
+        agreed = consistent_views(person, left_right)
+        someone_else = someone_else_count(views, person)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))

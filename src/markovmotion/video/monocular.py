@@ -130,17 +130,6 @@ START_UP_LINES = (
 _STDERR_HELD = threading.Lock()
 
 
-def _flush_c_streams() -> None:
-    """``fflush(NULL)``: the C library's buffered output streams written out (MediaPipe's
-    TensorFlow Lite writes its start-up line through one)."""
-    import ctypes
-
-    try:
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):  # no C library to ask (not Linux or macOS)
-        pass
-
-
 @contextmanager
 def native_start_up_lines_held() -> Iterator[None]:
     """Hold what is written to file descriptor 2 in the block, then pass on every line except
@@ -160,7 +149,6 @@ def native_start_up_lines_held() -> Iterator[None]:
             yield
         finally:
             sys.stderr.flush()
-            _flush_c_streams()  # what the C library still buffers goes to the held file too
             os.dup2(saved, 2)
             os.close(saved)
             held.seek(0)

@@ -89,10 +89,7 @@ def _dlt(proj: list[np.ndarray], xy: np.ndarray, w: np.ndarray) -> np.ndarray:
     if ok.any():
         h = np.linalg.svd(rows[ok])[2][:, -1]
         out[ok] = h[:, :3] / np.where(np.abs(h[:, 3:]) > 1e-12, h[:, 3:], 1e-12)
-    depth = np.stack([out @ p[2, :3] + p[2, 3] for p in proj])  # (V, N), NaN where out is
-    behind = ((w > 0) & ~(depth > MIN_DEPTH)).any(axis=0)
-    out[behind] = np.nan
-    return out
+    return _in_front(proj, w, out)
 
 
 def _refine(
@@ -125,16 +122,28 @@ def _refine(
         x -= np.linalg.solve(jtj + damp[:, None, None] * np.eye(3), jtr[..., None])[..., 0]
     out = points.copy()
     out[ok] = x
-    return _in_front(cameras, w, out)
+    return _in_front([np.c_[c.R, c.t] for c in cameras], w, out)
 
 
-def _in_front(cameras: Sequence[CalibratedCamera], w: np.ndarray, points: np.ndarray):
-    """``points`` (N, 3) with NaN where a point is not in front of every view whose weight
-    (``w`` (V, N)) is positive (the cheirality test of :func:`_dlt`)."""
-    depth = np.stack([points @ c.R[2] + c.t[2] for c in cameras])
+def _in_front(proj: list[np.ndarray], w: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``points`` (N, 3) with NaN where a point is not in front of every view (``proj``: each
+    camera's ``[R | t]``) whose weight (``w`` (V, N)) is positive (the cheirality test of
+    :func:`_dlt`; NaN points stay NaN)."""
+    depth = np.stack([points @ p[2, :3] + p[2, 3] for p in proj])  # (V, N)
     out = points.copy()
     out[((w > 0) & ~(depth > MIN_DEPTH)).any(axis=0)] = np.nan
     return out
+
+
+def _normalised(cameras: Sequence[CalibratedCamera], pixels: np.ndarray) -> np.ndarray:
+    """(V, N, 2) normalised image points ``K^-1 (u, v, 1)`` of ``pixels`` (V, N, 2) (NaN as 0:
+    their weight says they are not seen)."""
+    return np.stack(
+        [
+            (np.c_[np.nan_to_num(p), np.ones(len(p))] @ np.linalg.inv(c.K).T)[:, :2]
+            for p, c in zip(pixels, cameras, strict=True)
+        ]
+    )
 
 
 def _tau2(cameras: Sequence[CalibratedCamera], angle: float) -> np.ndarray:
@@ -173,12 +182,7 @@ def triangulate_points(
     seen = (weights > 0) & np.isfinite(pixels).all(axis=-1)
     w = np.where(seen, weights, 0.0)
     proj = [np.c_[c.R, c.t] for c in cameras]  # (3, 4) in normalised coordinates
-    xy = np.stack(
-        [
-            (np.c_[np.nan_to_num(p), np.ones(n)] @ np.linalg.inv(c.K).T)[:, :2]
-            for p, c in zip(pixels, cameras, strict=True)
-        ]
-    )
+    xy = _normalised(cameras, pixels)
     tau2 = _tau2(cameras, outlier_angle)
 
     def errors2(points: np.ndarray) -> np.ndarray:
@@ -442,14 +446,7 @@ def one_person(
     p_n = pixels.shape[2]
     cams = views.cameras
     proj = [np.c_[c.R, c.t] for c in cams]
-    xy = np.stack(
-        [
-            (np.c_[np.nan_to_num(px.reshape(-1, 2)), np.ones(f_n * p_n)] @ np.linalg.inv(c.K).T)[
-                :, :2
-            ]
-            for px, c in zip(pixels, cams, strict=True)
-        ]
-    )  # (V, F P, 2)
+    xy = _normalised(cams, pixels.reshape(v_n, -1, 2))  # (V, F P, 2)
     focal = np.array([c.focal for c in cams])
     seeing = weights.sum(axis=2) > 0  # (V, F)
     subsets = [s for k in range(2, v_n + 1) for s in combinations(range(v_n), k)]
@@ -503,9 +500,10 @@ def look_again(
     videos: Sequence[str | os.PathLike[str]],
     fps: float,
     min_visibility: float = MIN_VISIBILITY,
-) -> ViewLandmarks:
+) -> tuple[ViewLandmarks, ViewLandmarks]:
     """``views`` with MediaPipe run again, on a crop around the tracked person, in every view
-    and frame that saw someone else or no one (:func:`one_person`).
+    and frame that saw someone else or no one (:func:`one_person`); and those views with the
+    views of someone else left out (:func:`one_person` of them, decided once).
 
     The person the most views agree on is triangulated from them; in each other view the
     square around the projection of their landmarks (with :data:`CROP_MARGIN`) is cut out
@@ -517,13 +515,13 @@ def look_again(
     agreed, kept = one_person(views, fps, min_visibility)
     redo = ~kept  # (V, F)
     if not redo.any() or not kept.any():
-        return views
+        return views, agreed
     body = triangulate_views(agreed, min_visibility).landmarks  # (F, 33, 3)
     known = np.isfinite(body).all(axis=-1).sum(axis=1) >= 8
     body, known = _held_over_gaps(body, known, int(round(fps * LOST_SECONDS)))
     redo &= known[None]
     if not redo.any():
-        return views
+        return views, agreed
     pixels, vis = views.pixels.copy(), views.visibility.copy()
     world = None if views.world is None else views.world.copy()
     t0 = time.perf_counter()
@@ -549,7 +547,8 @@ def look_again(
                 if world is not None:
                     world[v, f] = got[1]
     seconds = views.seconds + time.perf_counter() - t0
-    return ViewLandmarks(views.cameras, pixels, vis, seconds, world)
+    found = ViewLandmarks(views.cameras, pixels, vis, seconds, world)
+    return found, one_person(found, fps, min_visibility)[0]
 
 
 def _held_over_gaps(body: np.ndarray, known: np.ndarray, frames: int):
@@ -636,20 +635,16 @@ def _person_path(cost: np.ndarray, centres: np.ndarray, step: float, switch: flo
     return path
 
 
-def consistent_views(
-    views: ViewLandmarks, left_right: str = "views", fps: float | None = None
-) -> ViewLandmarks:
+def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLandmarks:
     """Every view's MediaPipe landmarks with left and right made consistent (:data:`LEFT_RIGHT`):
     ``views`` across the views (:func:`views_sides`); ``continuity`` each view over time
     (:func:`~markovmotion.video.left_right.consistent_sides`, the monocular path's, which needs
     the world points); ``both`` the one then the other; ``mediapipe`` its own labels. One view
-    has nothing to agree with: ``views`` leaves it as it is. With ``fps`` (the video's rate),
-    first every view that saw someone else in a frame is dropped from it (:func:`one_person`)."""
+    has nothing to agree with: ``views`` leaves it as it is. The views of someone else are left
+    out before (:func:`look_again`)."""
     from markovmotion.video.left_right import consistent_sides
 
     check_left_right(left_right)
-    if fps is not None:
-        views = one_person(views, fps)[0]
     if left_right in ("continuity", "both"):
         if views.world is None:
             raise ValueError("left_right continuity needs MediaPipe's world points")
@@ -839,8 +834,8 @@ def track_triangulated_video(
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
     fps = float(doc["fps"])
-    found = look_again(ViewLandmarks.from_videos(videos, cams, max_frames), videos, fps)
-    lm = consistent_views(found, left_right, fps)
+    found, person = look_again(ViewLandmarks.from_videos(videos, cams, max_frames), videos, fps)
+    lm = consistent_views(person, left_right)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
@@ -859,7 +854,7 @@ def track_triangulated_video(
         "frames_placed": int(tr.placed.sum()),
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
-        "views_of_someone_else": someone_else_count(found, lm),
+        "views_of_someone_else": someone_else_count(found, person),
         "from_capture_centre_m": (
             round(float(np.nanmedian(from_middle)) / 1e3, 2)
             if np.isfinite(from_middle).any()
