@@ -162,7 +162,7 @@ def real_video():
         (["--method", "triangulate", "--stature", "1700"], "--method monocular"),
         (["--method", "triangulate", "--out", "x.bvh"], "use a .c3d name"),
         (["--method", "triangulate", "--left-right", "facing"], "--method monocular"),
-        (["--left-right", "mediapipe"], "--method monocular"),
+        (["--guide", "none", "--left-right", "mediapipe"], "--method monocular"),
         (["--method", "monocular", "--left-right", "both"], "--method triangulate"),
         (["--method", "monocular", "--left-right", "sideways"], "must be one of"),
         (["--method", "monocular", "--sides"], "--method apf"),
@@ -228,6 +228,43 @@ def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):
     assert s["views_of_someone_else"] >= 0
     assert 0.0 <= s["guide_seen"] <= 1.0
     assert s["frames"] == 3 and 0 < s["fps_with_guide"] <= s["fps"]
+
+
+def test_the_guide_is_on_for_real_people_and_off_for_rendered_ones(
+    real_video, tmp_path, take, capsys, monkeypatch
+):
+    """``--guide auto`` (the default): MediaPipe guides the filter on real video (a camera file
+    from a calibration), not on ``video render``'s (its capsule people mislead MediaPipe; an
+    older render is known by the take it names), and without MediaPipe it says so."""
+    import markovmotion.video.monocular as monocular
+    from markovmotion.video.cameras import load_cameras
+    from markovmotion.video.multiview import resolve_guide
+
+    _need_mediapipe()
+    out = tmp_path / "take"
+    main(["video", "render", str(take[1]), "--out", str(out), "--views", "2", "--seconds",
+          "0.1", "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
+    rendered, real = load_cameras(out)[1], load_cameras(real_video)[1]
+    assert rendered["rendered"] is True and "rendered" not in real
+    older = {k: v for k, v in rendered.items() if k != "rendered"}
+    assert [resolve_guide("auto", d) for d in (rendered, older, real)] == [
+        (False, None), (False, None), (True, None),
+    ]  # fmt: skip
+    assert resolve_guide("none", real) == (False, None)
+    assert resolve_guide("mediapipe", rendered) == (True, None)
+    with pytest.raises(ValueError, match="guide"):
+        resolve_guide("openpose", real)
+    # the real video, defaults: guided
+    main(["track", "--video", str(real_video), "--json", "--particles", "10", "--layers", "2",
+          "--max-frames", "2"])  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["guide"] == "mediapipe"
+    monkeypatch.setattr(monocular, "mediapipe_installed", lambda: False)
+    guided, note = resolve_guide("auto", real)
+    assert not guided and "scripts/install-camera" in note
+    main(["track", "--video", str(real_video), "--json", "--particles", "10", "--layers", "2",
+          "--max-frames", "2"])  # fmt: skip
+    run = capsys.readouterr()
+    assert "guide" not in json.loads(run.out) and "MediaPipe is not installed" in run.err
 
 
 def _standing_landmarks(frames: int) -> np.ndarray:

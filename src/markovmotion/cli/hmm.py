@@ -352,9 +352,9 @@ def respond(
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
-    if video is None and (method != "apf" or guide != "none"):
+    if video is None and (method != "apf" or guide not in ("auto", "none")):
         raise typer.BadParameter("--method and --guide are how A is tracked in --video")
-    if guide != "none" and (method != "apf" or realtime):
+    if guide == "mediapipe" and (method != "apf" or realtime):
         raise typer.BadParameter(
             "guides the particle filter over the whole video: --method apf, no --realtime",
             param_hint="--guide",
@@ -362,7 +362,7 @@ def respond(
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime, method, guide == "mediapipe", body_model,
+            realtime, method, guide, body_model,
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -410,14 +410,14 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method, guide=False, body_model="interaction",
+    method, guide="none", body_model="interaction",
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.composite import respond_in_video, respond_monocular
-    from markovmotion.video.multiview import default_body_model
+    from markovmotion.video.multiview import default_body_model, resolve_guide
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
@@ -426,9 +426,13 @@ def _respond_video(
             "--realtime tracks with the particle filter: no --method monocular"
         )
     where = camera_file(video, cameras)
-    cams, _ = load_cameras(where)
+    cams, doc = load_cameras(where)
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work
+    # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
+    guided, note = resolve_guide(guide, doc) if method == "apf" and not realtime else (False, None)
+    if note:
+        err_console.print(note, highlight=False)
     if getattr(DualHMM.load(model), "frame_", "heading") == "world":
         err_console.print(
             f"[yellow]note:[/] {model} places B along its capture room's axes from A "
@@ -462,7 +466,7 @@ def _respond_video(
         return
     summary = respond_in_video(
         model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
-        max_frames, "standard" if standard else "windowed", guide=guide,
+        max_frames, "standard" if standard else "windowed", guide=guided,
     )  # fmt: skip
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "

@@ -213,14 +213,15 @@ def body_model_option() -> Any:
 
 def guide_option() -> Any:
     """``--guide``: what guides the annealed particle filter besides the images (``track``
-    and ``dualhmm respond --video``)."""
+    and ``dualhmm respond --video``; :func:`markovmotion.video.multiview.resolve_guide`)."""
     return typer.Option(
-        "none",
-        callback=choice(("none", "mediapipe")),
+        "auto",
+        callback=choice(("auto", "none", "mediapipe")),
         help="mediapipe: MediaPipe Pose in every camera (needs the camera extra), triangulated to "
         "reject the views that disagree, pulls the particles' joints towards its landmarks "
-        "and restarts some from its pose (for real people: it misreads rendered ones); "
-        "none: the images alone.",
+        "and restarts some from its pose; none: the images alone; auto: mediapipe for real "
+        "people, none for video made by 'video render' (MediaPipe misreads its people) or "
+        "without the camera extra (said).",
     )
 
 

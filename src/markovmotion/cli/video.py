@@ -148,7 +148,17 @@ def track(
         )
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
-    reads = "sides" if sides and guide != "mediapipe" else guide
+    guided, note = False, None
+    if method == "apf":  # a bad camera file or a missing video: fail first
+        from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+        from markovmotion.video.multiview import resolve_guide
+
+        where = camera_file(video, cameras)
+        cams, doc = load_cameras(where)
+        if not video.is_file():
+            camera_videos(where, cams)
+        guided, note = resolve_guide(guide, doc)
+    reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)
     if method in ("monocular", "triangulate"):
         _track_landmarks(
@@ -166,15 +176,10 @@ def track(
         return
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
-    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.multiview import default_body_model, track_take
 
     if out is not None:
         check_motion_output(out)
-    where = camera_file(video, cameras)
-    cams, _ = load_cameras(where)  # a bad camera file or a missing video: fail first
-    if not video.is_file():
-        camera_videos(where, cams)
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     size = _body_size(body_size)
@@ -208,11 +213,11 @@ def track(
         start,
         background == "learn",
         sides,
-        guide == "mediapipe",
+        guided,
         left_right or "views",
     )
-    for note in summary["background"]:
-        err_console.print(note, highlight=False)
+    for line in ([note] if note else []) + summary["background"]:
+        err_console.print(line, highlight=False)
     if summary["views"] == 1:
         err_console.print(
             "note: one view leaves the particle filter depth and mirror ambiguous (hundreds of mm "

@@ -33,7 +33,8 @@ import cv2
 import numpy as np
 
 from markovmotion.errors import MotionFormatError
-from markovmotion.io.files import atomic_write
+from markovmotion.io import MOTION_SUFFIXES
+from markovmotion.io.files import atomic_write, base_suffix
 
 CAMERAS_FILE = "cameras.json"
 MAX_CAMERAS = 4
@@ -161,6 +162,17 @@ def ring_of_cameras(
         cam = look_at(pos, target, width, h, focal, f"cam{k}", f"cam{k}.mp4")
         out.append(replace(cam, background=f"cam{k}_background.png"))
     return out
+
+
+def is_rendered(doc: dict) -> bool:
+    """Whether a camera file's video was made by ``video render`` (its people are the body
+    model's capsules, not people): ``"rendered": true``, or, in a file written before that key,
+    a motion file as its ``source`` (the take rendered; ``video cameras`` names a calibration
+    there)."""
+    if doc.get("rendered") is True:
+        return True
+    source = doc.get("source")
+    return isinstance(source, str) and base_suffix(Path(source)) in MOTION_SUFFIXES
 
 
 def save_cameras(

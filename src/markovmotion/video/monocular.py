@@ -189,6 +189,13 @@ class QuietPose:
         self.close()
 
 
+def mediapipe_installed() -> bool:
+    """Whether MediaPipe can be imported (``scripts/install-camera``), without importing it."""
+    import importlib.util
+
+    return importlib.util.find_spec("mediapipe") is not None
+
+
 def pose_estimator(static: bool = False) -> QuietPose:
     """MediaPipe Pose with its bundled full landmark model (offline), its start-up lines held
     back (:class:`QuietPose`), or a one-line error.
