@@ -31,6 +31,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from markovmotion.cli import main
+from markovmotion.data.index import data_root
 from markovmotion.io.bvh import read_bvh, read_bvh_stream
 
 # ------------------------------------------------------------- the real process
@@ -288,3 +289,21 @@ def test_temporary_output_removed_when_killed(tmp_path, sig):
     proc.wait(timeout=30)
     proc.stdout.close()
     assert list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+
+
+def test_a_broken_video_is_one_line_in_a_real_process(tmp_path, monkeypatch):
+    """A video cut short (no index: FFmpeg says "moov atom not found" on its own) gives one
+    line of ours; FFmpeg's own log is held back (``OPENCV_FFMPEG_LOGLEVEL``)."""
+    real = data_root().parent / "video" / "pose2sim_balancing" / "cam0.mp4"
+    broken = tmp_path / "cam0.mp4"
+    broken.write_bytes(real.read_bytes()[: len(real.read_bytes()) // 2])
+    monkeypatch.delenv("OPENCV_FFMPEG_LOGLEVEL", raising=False)  # set by this process's imports
+    run = run_cli(["video", "cameras", str(tmp_path / "no.toml"), str(broken)])
+    assert "no such calibration file" in run.stderr  # the calibration is checked first
+    (tmp_path / "Calib.toml").write_text(
+        '[cam_1]\nname = "cam0"\nsize = [272.0, 480.0]\nmatrix = [[420.0, 0.0, 136.0], '
+        "[0.0, 420.0, 240.0], [0.0, 0.0, 1.0]]\ndistortions = [0.0, 0.0, 0.0, 0.0]\n"
+        "rotation = [0.0, 0.0, 0.0]\ntranslation = [0.0, 0.0, 3.0]\nfisheye = false\n"
+    )
+    run = run_cli(["video", "cameras", str(tmp_path / "Calib.toml"), str(broken)])
+    check_clean(run, "cam0.mp4", "cannot read")

@@ -28,6 +28,11 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.features.joint_shape import MAJOR_JOINTS, Person
 from markovmotion.io.files import atomic_path
 
+#: FFmpeg's own log lines (a broken file's "moov atom not found", a damaged frame's "Invalid NAL
+#: unit size") held back, so that a bad video gets our one line: OpenCV reads this when it first
+#: opens a video. A user's own setting is kept.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+
 if TYPE_CHECKING:
     from markovmotion.video.cameras import CalibratedCamera
 
