@@ -267,6 +267,36 @@ def test_the_guide_is_on_for_real_people_and_off_for_rendered_ones(
     assert "guide" not in json.loads(run.out) and "MediaPipe is not installed" in run.err
 
 
+def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
+    """A camera's video that ends before the others' (a recording cut short): both trackers
+    follow the frames the views have together and say which video ended, not silently."""
+    import itertools
+    import shutil
+
+    from markovmotion.video.render import read_frames, shortest_note, write_video
+
+    _need_mediapipe()
+    doc = json.loads((real_video / "cameras.json").read_text())
+    for cam in doc["cameras"]:
+        cam.pop("background", None)
+        if cam["name"] == "cam1":
+            frames = list(itertools.islice(read_frames(real_video / cam["video"]), 4))
+            write_video(frames, tmp_path / cam["video"], doc["fps"])
+        else:
+            shutil.copy(real_video / cam["video"], tmp_path / cam["video"])
+    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    said = "note: cam1.mp4 ended after 4 frames, before the other views: 4 frames tracked"
+    assert shortest_note(["cam0.mp4", "cam1.mp4"], [100, 4]) == said
+    assert shortest_note(["cam0.mp4", "cam1.mp4"], [4, 4]) is None
+    for extra in (["--method", "triangulate"], ["--guide", "none", "--particles", "10",
+                  "--layers", "2", "--background", "median"]):  # fmt: skip
+        main(["track", "--video", str(tmp_path), "--max-frames", "6", *extra])
+        err = capsys.readouterr().err
+        assert said in err and "tracked 4 frames" in err, err
+    main(["track", "--video", str(tmp_path), "--max-frames", "3", "--method", "triangulate"])
+    assert "ended after" not in capsys.readouterr().err  # cut by --max-frames: nothing to say
+
+
 def _standing_landmarks(frames: int) -> np.ndarray:
     """(F, 33, 3) mm: a person's landmarks, left at +x and right at -x of their middle line,
     each pair at its own height, walking slowly along z."""

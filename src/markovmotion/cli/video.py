@@ -216,7 +216,7 @@ def track(
         guided,
         left_right or "views",
     )
-    for line in ([note] if note else []) + summary["background"]:
+    for line in ([note] if note else []) + summary["background"] + summary["notes"]:
         err_console.print(line, highlight=False)
     if summary["views"] == 1:
         err_console.print(
@@ -335,6 +335,8 @@ def _track_landmarks(
             highlight=False,
         )
         _someone_else_notes(summary.get("views_of_someone_else", 0))
+        for line in summary.get("notes", []):
+            err_console.print(line, highlight=False)
         away = summary.get("from_capture_centre_m")
         if away is not None and away > FAR_FROM_CENTRE_M:
             err_console.print(

@@ -66,7 +66,8 @@ from markovmotion.video.cameras import (
     camera_videos,
     load_cameras,
 )
-from markovmotion.video.render import read_frames
+from markovmotion.video.monocular import mediapipe_installed
+from markovmotion.video.render import read_frames, shortest_note
 
 if TYPE_CHECKING:
     from markovmotion.video.sides import SideCheck
@@ -745,6 +746,8 @@ class TrackResult:
     recoveries: int
     cpu_seconds: float = 0.0
     background_notes: list[str] = field(default_factory=list)
+    #: One line when a camera's video ended before the others' (the track stops there).
+    video_notes: list[str] = field(default_factory=list)
     #: Frames MediaPipe found turned front to back (searched again), and those left so.
     flips: int = 0
     flipped: int = 0
@@ -762,17 +765,25 @@ def multiview_frames(
     videos: Sequence[Path],
     max_frames: int | None = None,
     cameras: Sequence[CalibratedCamera] | None = None,
+    notes: list[str] | None = None,
 ) -> Iterator[list[np.ndarray]]:
     """One frame per camera at a time, until the shortest video ends (undistorted by their
-    ``cameras``, :func:`~markovmotion.video.render.read_frames`)."""
+    ``cameras``, :func:`~markovmotion.video.render.read_frames`); a video that ends before
+    the others is said in ``notes`` (:func:`~markovmotion.video.render.shortest_note`)."""
     cams = list(cameras) if cameras is not None else [None] * len(videos)
     readers = [read_frames(v, c) for v, c in zip(videos, cams, strict=True)]
     n = 0
-    for frames in zip(*readers, strict=False):
-        if max_frames is not None and n >= max_frames:
-            break
+    while max_frames is None or n < max_frames:
+        frames = [next(r, None) for r in readers]
+        if any(f is None for f in frames):
+            note = shortest_note(
+                [Path(v).name for v in videos], [n + (f is not None) for f in frames]
+            )
+            if note is not None and notes is not None:
+                notes.append(note)
+            return
         n += 1
-        yield list(frames)
+        yield frames
 
 
 @dataclass
@@ -788,6 +799,8 @@ class MultiviewVideo:
     videos: list[Path]
     #: One line per camera without an empty-scene image: what its background is.
     background_notes: list[str] = field(default_factory=list)
+    #: One line when a camera's video ended before the others' (filled as the frames are read).
+    video_notes: list[str] = field(default_factory=list)
 
     def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
         """The features of one frame per camera (checked against the cameras' sizes)."""
@@ -839,7 +852,7 @@ def open_video(
     for v, b, c in zip(videos, images, cameras, strict=True):
         if b is not None:
             backgrounds.append(read_image(b, c))
-        elif learn_background and _has_mediapipe():
+        elif learn_background and mediapipe_installed():
             from markovmotion.video.background import learn_background as learn
 
             _, learnt, check = learn(v, BACKGROUND_FRAMES, c)
@@ -849,16 +862,12 @@ def open_video(
             backgrounds.append(estimate_background(v, camera=c))
             why = "" if not learn_background else " (MediaPipe not installed)"
             notes.append(f"{c.name}: median background, not checked for the person{why}")
-    frames = multiview_frames(videos, max_frames, cameras)
+    ended: list[str] = []
+    frames = multiview_frames(videos, max_frames, cameras, ended)
     return MultiviewVideo(
-        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes
-    )
-
-
-def _has_mediapipe() -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec("mediapipe") is not None
+        cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes,
+        ended,
+    )  # fmt: skip
 
 
 def track_features(
@@ -932,7 +941,7 @@ def track_video(
         guide=guided,
     )  # fmt: skip
     result = track_features(mv.features(seed), apf)
-    result.background_notes = mv.background_notes
+    result.background_notes, result.video_notes = mv.background_notes, mv.video_notes
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())

@@ -389,6 +389,7 @@ def track_take(
         ),
         "confidence": [round(float(c), 3) for c in result.confidence],
         "background": result.background_notes,
+        "notes": result.video_notes,
     }
     if truth is not None:
         _, doc = load_cameras(camera_file(video, cameras))

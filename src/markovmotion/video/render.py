@@ -321,6 +321,17 @@ def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps:
     return path
 
 
+def shortest_note(names: Sequence[str], lengths: Sequence[int]) -> str | None:
+    """One line when some views' videos (``names``) end before the others' (``lengths``: the
+    frames read of each): which, and how many frames the views have together, the ones
+    tracked; None when they end together (nothing is cut silently)."""
+    n = min(lengths)
+    if n == max(lengths):
+        return None
+    ended = ", ".join(name for name, k in zip(names, lengths, strict=True) if k == n)
+    return f"note: {ended} ended after {n} frames, before the other views: {n} frames tracked"
+
+
 def read_frames(
     path: str | os.PathLike[str], camera: CalibratedCamera | None = None
 ) -> Iterator[np.ndarray]:

@@ -59,7 +59,7 @@ from markovmotion.video.monocular import (
     detect_landmarks,
     reference_errors,
 )
-from markovmotion.video.render import read_frames
+from markovmotion.video.render import read_frames, shortest_note
 
 #: A view whose reprojection error exceeds this many focal lengths (radians) is dropped when
 #: at least 3 views see the landmark (0.03: 12 px at the real video's 272x480, focal ~400 px;
@@ -234,6 +234,9 @@ class ViewLandmarks:
     seconds: float = 0.0
     #: MediaPipe's hip-centred world points (V, F, 33, 3) mm, if kept (``continuity`` needs them).
     world: np.ndarray | None = None
+    #: One line when a camera's video ended before the others'
+    #: (:func:`~markovmotion.video.render.shortest_note`).
+    notes: list[str] = field(default_factory=list)
 
     @classmethod
     def from_videos(
@@ -249,12 +252,14 @@ class ViewLandmarks:
             for v, c in zip(videos, cameras, strict=True)
         ]
         n = min(len(g.found) for g in got)
+        note = shortest_note([Path(v).name for v in videos], [len(g.found) for g in got])
         return cls(
             list(cameras),
             np.stack([g.pixels[:n] for g in got]),
             np.stack([np.where(g.found[:n, None], g.visibility[:n], 0.0) for g in got]),
             sum(g.seconds for g in got),
             np.stack([g.world[:n] for g in got]),
+            [note] if note else [],
         )
 
 
@@ -834,7 +839,8 @@ def track_triangulated_video(
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
     fps = float(doc["fps"])
-    found, person = look_again(ViewLandmarks.from_videos(videos, cams, max_frames), videos, fps)
+    detected = ViewLandmarks.from_videos(videos, cams, max_frames)
+    found, person = look_again(detected, videos, fps)
     lm = consistent_views(person, left_right)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
@@ -864,6 +870,7 @@ def track_triangulated_video(
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
         "left_right": left_right,
+        "notes": detected.notes,
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
