@@ -12,7 +12,10 @@ import numpy as np
 
 
 def constant_acceleration_intervals(
-    configs: np.ndarray, velocities: np.ndarray, min_interval: float = 1.0, max_interval=np.inf
+    configs: np.ndarray,
+    velocities: np.ndarray,
+    min_interval: float = 1.0,
+    max_interval: float = np.inf,
 ) -> np.ndarray:
     """Time intervals between successive knots under constant acceleration (eq. 8).
 

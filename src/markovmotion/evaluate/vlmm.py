@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -77,6 +77,26 @@ class HorizonCurve:
         return float(self.mean[t - 1])
 
 
+class Predictor(Protocol):
+    """What :func:`evaluate_horizon` asks of a predictor (the VLMMs, the contour tracker's
+    model, the baselines here): features prepared once per sequence, sampled futures of
+    configurations from given frames, and the positions (mm) of configurations."""
+
+    def prepare(self, features: np.ndarray) -> Any: ...
+
+    def predict_configurations(
+        self,
+        features: np.ndarray,
+        prepared: Any,
+        frames: np.ndarray,
+        horizon: int,
+        n_samples: int,
+        rng: np.random.Generator,
+    ) -> np.ndarray: ...
+
+    def configuration_positions(self, configs: np.ndarray) -> np.ndarray: ...
+
+
 class ZeroVelocity:
     """The baseline that holds the last observed pose, over another predictor's features."""
 
@@ -115,7 +135,7 @@ class ConfigurationSpace:
 
 
 def evaluate_horizon(
-    predictor,
+    predictor: Predictor,
     sequences: Sequence[np.ndarray],
     horizon: int,
     fps: float,

@@ -25,7 +25,9 @@ def ground_frame(
     return origin, motion.heading(pos)
 
 
-def pelvis_centred(motion: Motion, positions: np.ndarray | None = None, turn: bool = True):
+def pelvis_centred(
+    motion: Motion, positions: np.ndarray | None = None, turn: bool = True
+) -> np.ndarray:
     """(F, J, 3) joint positions about the pelvis: turned to face +Z
     (:meth:`Motion.body_centred_positions`) or, with ``turn=False``, in the world's axes."""
     if turn:

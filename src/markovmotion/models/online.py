@@ -22,6 +22,7 @@ A model offers one through ``model.partner()``; ``respond --realtime``, the
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -102,7 +103,7 @@ def run(partner: OnlinePartner, motion: Motion) -> Motion:
     return concatenate(out, partner.fps)
 
 
-def replay(make_partner, motion: Motion) -> Replay:
+def replay(make_partner: Callable[[], OnlinePartner], motion: Motion) -> Replay:
     """Replay ``motion`` at its frame rate through a fresh partner from ``make_partner()``.
 
     ``motion`` must be at the partner's rate. A frame whose successor is

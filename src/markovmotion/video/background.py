@@ -18,13 +18,18 @@ which the pixel is uncovered (the plain median where it never is).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
+
+if TYPE_CHECKING:
+    from markovmotion.video.cameras import CalibratedCamera
 
 #: Limbs drawn as thick lines for a person's mask: pairs of landmark names.
 _LIMBS = tuple(
@@ -127,7 +132,9 @@ def person_background(frames: Sequence[np.ndarray], masks: np.ndarray) -> np.nda
 
 
 def learn_background(
-    video, frames: int = 31, camera=None
+    video: str | os.PathLike[str],
+    frames: int = 31,
+    camera: CalibratedCamera | None = None,
 ) -> tuple[np.ndarray, np.ndarray, BackgroundCheck]:
     """The plain median of up to ``frames`` frames spread over ``video`` (``camera``'s:
     undistorted), the background learnt where MediaPipe Pose finds no person

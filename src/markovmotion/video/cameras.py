@@ -186,7 +186,7 @@ def save_cameras(
     return path
 
 
-def read_matrix(path: Path, where: str, value, shape: tuple[int, ...]) -> np.ndarray:
+def read_matrix(path: Path, where: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
     """``value`` as finite numbers of ``shape``, else one line naming ``path`` and ``where``."""
     try:
         a = np.array(value, dtype=float)
@@ -223,7 +223,7 @@ def valid_camera(path: Path, where: str, camera: CalibratedCamera) -> None:
         raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
 
 
-def read_distortion(path: Path, where: str, value) -> tuple[float, ...]:
+def read_distortion(path: Path, where: str, value: object) -> tuple[float, ...]:
     """OpenCV's distortion coefficients of a camera, () when all are 0 (none)."""
     if isinstance(value, list) and not value:
         return ()

@@ -17,6 +17,7 @@ turned round): the labelling before the video counts as kept (MediaPipe's own), 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -120,7 +121,9 @@ def labelling_cost(
     return float(total)
 
 
-def attachment_costs(world: np.ndarray, pairs, parent) -> np.ndarray:
+def attachment_costs(
+    world: np.ndarray, pairs: Sequence[tuple[int, int]], parent: Sequence[tuple[int, int]]
+) -> np.ndarray:
     """(F, 2) cost of keeping or swapping a group's pairs (3-D world points (F, 33, 3))
     given its parent's pairs as labelled: :data:`ATTACH_COST` times how much nearer each
     landmark lies to the parent's other side than to its own, over the parent's width,
@@ -324,7 +327,9 @@ def _dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(((a - b) ** 2).sum(axis=1))
 
 
-def relabel(arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs) -> None:
+def relabel(
+    arrays: tuple[np.ndarray, ...], rows: np.ndarray, pairs: Sequence[tuple[int, int]]
+) -> None:
     """Swap the left and right ``pairs`` of ``arrays`` (F, 33, ...) in place in ``rows``."""
     li, ri = (list(x) for x in zip(*pairs, strict=True))
     at = np.nonzero(rows)[0]

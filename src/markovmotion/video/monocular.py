@@ -233,7 +233,9 @@ class Landmarks:
     seconds: float = 0.0
 
 
-def frame_landmarks(estimator, rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def frame_landmarks(
+    estimator: QuietPose, rgb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """One RGB frame through a :func:`pose_estimator`: (33, 2) pixels, (33, 3) world points
     (mm, hip-centred, Y down as MediaPipe's) and (33,) visibility; None when no person."""
     res = estimator.process(np.ascontiguousarray(rgb))

@@ -34,7 +34,7 @@ from markovmotion.io.files import atomic_path
 from markovmotion.limits import MAX_FRAMES
 from markovmotion.video.annealed_particle_filter import TrackResult, track_video
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel, local_rotvecs
-from markovmotion.video.cameras import ring_of_cameras, save_cameras
+from markovmotion.video.cameras import CalibratedCamera, ring_of_cameras, save_cameras
 from markovmotion.video.render import background, write_video
 from markovmotion.video.retarget import Template
 from markovmotion.video.shading import CLOTHES, DepthCanvas, capsule_colours
@@ -51,7 +51,11 @@ LABEL_FRAMES = 1000
 
 
 def shaded_frames(
-    people: list[np.ndarray], camera, bg: np.ndarray, noise: float = 4.0, seed: int = 0
+    people: list[np.ndarray],
+    camera: CalibratedCamera,
+    bg: np.ndarray,
+    noise: float = 4.0,
+    seed: int = 0,
 ) -> Iterator[np.ndarray]:
     """RGB frames of people (each (F, 19, 3) body points, mm) shaded over ``bg``, with noise."""
     rng = np.random.default_rng(seed)

@@ -231,7 +231,9 @@ MAJOR_SHAPE = BodyShape.build(
 )
 
 
-def draw_body(canvas: Canvas, joints: np.ndarray, camera, shape: BodyShape) -> None:
+def draw_body(
+    canvas: Canvas, joints: np.ndarray, camera: CalibratedCamera, shape: BodyShape
+) -> None:
     """Fill the body ``shape`` with joints (P, 3) mm seen by ``camera`` into ``canvas``.
 
     ``camera`` is anything with ``project(points) -> (pixels, depths)`` and a

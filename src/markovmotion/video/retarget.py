@@ -42,7 +42,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -267,7 +267,7 @@ def cache_dir() -> Path:
 
 
 def retarget_file(
-    template: Template, path: Path, read, stride: int
+    template: Template, path: Path, read: Callable[[], Motion], stride: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`Template.retarget` of the motion ``read()`` returns (the file at ``path``),
     kept in :func:`cache_dir` by the file's size and modification time, the stride and

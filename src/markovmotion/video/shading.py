@@ -15,12 +15,16 @@ averaging smooth the outline.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import cv2
 import numba
 import numpy as np
 
 from markovmotion.video.render import BodyShape
+
+if TYPE_CHECKING:
+    from markovmotion.video.cameras import CalibratedCamera
 
 LIGHT = np.array([-0.45, -0.6, -0.66])
 AMBIENT = 0.4
@@ -119,7 +123,12 @@ class DepthCanvas:
         self.ident = np.full((height * scale, width * scale), -1, np.int8)
 
     def body(
-        self, joints: np.ndarray, camera, shape: BodyShape, colours: np.ndarray, who: int = 0
+        self,
+        joints: np.ndarray,
+        camera: CalibratedCamera,
+        shape: BodyShape,
+        colours: np.ndarray,
+        who: int = 0,
     ) -> None:
         """Draw a body (joints (P, 3) mm) with ``colours`` (S, 3); ``who`` labels its pixels."""
         seg, radii = shape.segments()

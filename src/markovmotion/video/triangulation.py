@@ -390,7 +390,9 @@ def capture_centre(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
     return np.linalg.solve(a, b)
 
 
-def midline_points(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY):
+def midline_points(
+    views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY
+) -> tuple[np.ndarray, np.ndarray]:
     """Each view's mirror-invariant points: the nose and the midpoint of each left/right pair
     of :data:`MIDLINE_STEMS`, pixels (V, F, P, 2) and weights (V, F, P) (the pair's smaller
     visibility; 0 below ``min_visibility``). A camera behind the person, which MediaPipe sees

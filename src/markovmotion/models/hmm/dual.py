@@ -906,7 +906,9 @@ class DualHMM(Model):
             half = min(half, self.window - 1)
         return smooth_place(origin, yaw, half, max(half, int(self.place_memory)))
 
-    def ground(self, motion: Motion, positions: np.ndarray | None = None):
+    def ground(
+        self, motion: Motion, positions: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """A's ground frame (origin (F, 3), heading (F,)) as the model places B: A's own
         facing, or with ``frame_ == "world"`` the world's axes (heading 0) at A's place."""
         origin, yaw = ground_frame(motion, positions)
