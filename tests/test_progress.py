@@ -16,3 +16,18 @@ def test_long_work_logs_plain_lines_off_a_terminal(monkeypatch, capsys):
 def test_short_work_prints_nothing(capsys):
     assert list(progress.track(range(3), "fitting")) == [0, 1, 2]
     assert capsys.readouterr().err == ""
+
+
+def test_video_tracking_reports_its_frames(monkeypatch, capsys):
+    """``track`` on the real 4-view video: the particle filter's frames, counted against the
+    videos' own length, and (the guide, MediaPipe) each camera's pass, as progress lines."""
+    from markovmotion.cli import main
+    from markovmotion.data.index import data_root
+
+    monkeypatch.setattr(progress, "LOG_EVERY", 0.0)
+    video = data_root().parent / "video" / "pose2sim_balancing"
+    main(["track", "--video", str(video), "--max-frames", "3", "--particles", "10",
+          "--layers", "2"])  # fmt: skip
+    lines = [ln.split(",")[0] for ln in capsys.readouterr().err.splitlines()]
+    assert [ln for ln in lines if ln.startswith("tracking")][-1] == "tracking: 3/3"
+    assert {f"MediaPipe cam{k}: 3/3" for k in range(4)} <= set(lines)

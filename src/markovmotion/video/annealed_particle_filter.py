@@ -58,6 +58,7 @@ import numba
 import numpy as np
 
 from markovmotion.errors import MotionFormatError
+from markovmotion.progress import track
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
 from markovmotion.video.cameras import (
     CalibratedCamera,
@@ -67,7 +68,7 @@ from markovmotion.video.cameras import (
     load_cameras,
 )
 from markovmotion.video.monocular import mediapipe_installed
-from markovmotion.video.render import read_frames, shortest_note
+from markovmotion.video.render import expected_frames, read_frames, shortest_note
 
 if TYPE_CHECKING:
     from markovmotion.video.sides import SideCheck
@@ -873,11 +874,13 @@ def open_video(
 def track_features(
     features: Iterator[ViewFeatures] | Sequence[ViewFeatures],
     apf: AnnealedParticleFilter,
+    total: int | None = None,
 ) -> TrackResult:
-    """Run the filter over every frame's features; the wall time includes making them."""
+    """Run the filter over every frame's features, with a progress bar (of ``total``
+    frames, if known); the wall time includes making them."""
     states, conf = [], []
     t0, c0 = time.perf_counter(), time.process_time()
-    for feats in features:
+    for feats in track(features, "tracking", total):
         x, best = apf.step(feats)
         states.append(x)
         conf.append(1.0 - best)
@@ -940,7 +943,7 @@ def track_video(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
     )  # fmt: skip
-    result = track_features(mv.features(seed), apf)
+    result = track_features(mv.features(seed), apf, expected_frames(mv.videos, max_frames))
     result.background_notes, result.video_notes = mv.background_notes, mv.video_notes
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:

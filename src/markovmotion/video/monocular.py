@@ -67,10 +67,11 @@ from markovmotion.features.body_points import (
     bone_lengths,
     with_bone_lengths,
 )
+from markovmotion.progress import track
 from markovmotion.video.cameras import CalibratedCamera
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 from markovmotion.video.left_right import OnlineSides, consistent_sides
-from markovmotion.video.render import read_frames
+from markovmotion.video.render import expected_frames, read_frames
 
 #: The release whose bundled pose models load offline (the 1.x releases ship none).
 MEDIAPIPE_VERSION = "0.10.21"
@@ -251,10 +252,18 @@ def frame_landmarks(
     )
 
 
-def detect_landmarks(frames: Iterable[np.ndarray], max_frames: int | None = None) -> Landmarks:
-    """MediaPipe Pose landmarks of RGB frames, in video mode (tracking between frames)."""
+def detect_landmarks(
+    frames: Iterable[np.ndarray],
+    max_frames: int | None = None,
+    description: str | None = None,
+    total: int | None = None,
+) -> Landmarks:
+    """MediaPipe Pose landmarks of RGB frames, in video mode (tracking between frames); with
+    a ``description``, a progress bar (of ``total`` frames, if known)."""
     pixels, world, vis, found = [], [], [], []
     t0 = time.perf_counter()
+    if description is not None:
+        frames = track(frames, description, total)
     with pose_estimator() as est:
         for i, img in enumerate(frames):
             if max_frames is not None and i >= max_frames:
@@ -415,7 +424,12 @@ def track_monocular(
             f"{first.shape[1]}x{first.shape[0]}",
         )
 
-    lm = detect_landmarks(itertools.chain([first], frames), max_frames)
+    lm = detect_landmarks(
+        itertools.chain([first], frames),
+        max_frames,
+        f"MediaPipe {camera.name}",
+        expected_frames([video], max_frames),
+    )
     if left_right == "online":
         pixels, world_lm, vis = online_sides(lm)
         lm = Landmarks(pixels, world_lm, vis, lm.found, lm.seconds)

@@ -394,6 +394,24 @@ def frame_count(path: str | os.PathLike[str]) -> int:
     return n if n > 0 else sum(1 for _ in read_frames(path))
 
 
+def expected_frames(
+    videos: Sequence[str | os.PathLike[str]], max_frames: int | None = None
+) -> int | None:
+    """How many frames the videos give together, from their files' own counts (not decoded:
+    for a progress bar), at most ``max_frames``; None when a count is unknown."""
+    counts = []
+    for path in map(Path, videos):
+        if path.is_dir():
+            counts.append(frame_count(path))
+            continue
+        cap = cv2.VideoCapture(str(path))
+        counts.append(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0)
+        cap.release()
+    if not counts or min(counts) <= 0:
+        return max_frames
+    return min(counts) if max_frames is None else min(min(counts), max_frames)
+
+
 def video_fps(path: str | os.PathLike[str], default: float = 25.0) -> float:
     """Frame rate of a video file (``default`` for image folders or when unknown)."""
     path = Path(path)

@@ -59,7 +59,7 @@ from markovmotion.video.monocular import (
     detect_landmarks,
     reference_errors,
 )
-from markovmotion.video.render import read_frames, shortest_note
+from markovmotion.video.render import expected_frames, read_frames, shortest_note
 
 #: A view whose reprojection error exceeds this many focal lengths (radians) is dropped when
 #: at least 3 views see the landmark (0.03: 12 px at the real video's 272x480, focal ~400 px;
@@ -248,7 +248,12 @@ class ViewLandmarks:
         """MediaPipe Pose over each camera's video (``scripts/install-camera``), cut to the
         shortest."""
         got: list[Landmarks] = [
-            detect_landmarks(read_frames(v, c), max_frames)
+            detect_landmarks(
+                read_frames(v, c),
+                max_frames,
+                f"MediaPipe {c.name}",
+                expected_frames([v], max_frames),
+            )
             for v, c in zip(videos, cameras, strict=True)
         ]
         n = min(len(g.found) for g in got)
