@@ -167,6 +167,10 @@ def real_video():
         (["--method", "monocular", "--left-right", "sideways"], "must be one of"),
         (["--method", "monocular", "--sides"], "--method apf"),
         (["--left-right", "facing", "--sides"], "facing is for --method monocular"),
+        (["--method", "monocular", "--person", "cam0:10,10"], "--person"),
+        (["--guide", "none", "--person", "cam0:10,10"], "--guide mediapipe"),
+        (["--method", "triangulate", "--person", "cam7:10,10"], "no camera 'cam7'"),
+        (["--method", "triangulate", "--person", "cam0:300,10"], "outside cam0's 272x480"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(
@@ -469,6 +473,48 @@ def test_of_two_people_seen_alike_the_one_the_cameras_aim_at_is_kept_even_when_l
     expected[2:] = True
     expected[2:, 10:15] = False
     assert (kept == expected).all()
+
+
+def test_the_person_named_by_a_pixel_is_followed_where_the_cameras_aim_elsewhere():
+    """Two views see P (where the cameras are aimed) and two see Q, 1.2 m out: by default P is
+    followed; ``--person`` at Q's pixel in camera 0 (which sees P) follows Q throughout, also
+    after Q has walked off that pixel's ray; at P's pixel, P. The named person is where they
+    stood over the first half second: later, Q is kept as P was, by the views and continuity."""
+    from markovmotion.video.triangulation import ViewLandmarks, one_person, person_ray
+
+    cams, pixels, other, vis = _two_people(frames=60)
+    cams, pixels, other, vis = cams[:4], pixels[:4], other[:4], vis[:4]
+    seen = pixels.copy()
+    seen[:2] = other[:2]
+    views = ViewLandmarks(cams, seen, vis)
+    p_views = np.zeros((4, 60), bool)
+    p_views[2:] = True
+    assert (one_person(views, fps=30.0)[1] == p_views).all()
+    for who, points, expected in (("Q", other, ~p_views), ("P", pixels, p_views)):
+        u, v = np.median(points[0, 0], axis=0)  # camera 0, frame 0: the pixel a user clicks
+        aim = person_ray(cams, f"{cams[0].name}:{u:.0f},{v:.0f}", fps=30.0)
+        assert aim.frames == 15
+        _, kept = one_person(views, fps=30.0, aim=aim)
+        assert (kept == expected).all(), who
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("cam0", "is not CAMERA:U,V"),
+        ("cam0:1,2,3", "is not CAMERA:U,V"),
+        ("cam9:10,10", "no camera 'cam9'"),
+        ("7:10,10", "no camera '7'"),
+        ("cam0:-1,10", "outside cam0's"),
+        ("cam0:10,nan", "outside cam0's"),
+    ],
+)
+def test_a_bad_person_pixel_is_one_line(text, message):
+    from markovmotion.video.triangulation import person_ray
+
+    with pytest.raises(ValueError, match=message):
+        person_ray(_cameras(2), text)
+    assert person_ray(_cameras(2), "1:10,20").origin == pytest.approx(_cameras(2)[1].centre)
 
 
 def test_a_person_alone_far_from_where_the_cameras_aim_keeps_every_view():

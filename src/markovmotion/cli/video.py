@@ -139,6 +139,12 @@ def track(
         "--guide mediapipe and --sides (default views): views: made to agree across the views "
         "by triangulation; continuity: each view over time; both; mediapipe.",
     ),
+    person: str = typer.Option(
+        None,
+        help="With several people in view (triangulate, or the particle filter's guide): "
+        "follow the one at this pixel, CAMERA:U,V (a camera's name or number; e.g. "
+        "cam0:135,240); default: the one the views agree on.",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -149,7 +155,7 @@ def track(
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
     guided, note = False, None
-    if method == "apf":  # a bad camera file or a missing video: fail first
+    if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
         from markovmotion.video.multiview import resolve_guide
 
@@ -157,7 +163,9 @@ def track(
         cams, doc = load_cameras(where)
         if not video.is_file():
             camera_videos(where, cams)
-        guided, note = resolve_guide(guide, doc)
+        guided, note = resolve_guide(guide, doc) if method == "apf" else (False, None)
+    if person is not None:
+        _check_person(person, method, guided, cams)
     reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)
     if method in ("monocular", "triangulate"):
@@ -172,6 +180,7 @@ def track(
             reference,
             json_out,
             left_right,
+            person,
         )
         return
     from markovmotion.errors import MotionFormatError
@@ -215,6 +224,7 @@ def track(
         sides,
         guided,
         left_right or "views",
+        person,
     )
     for line in ([note] if note else []) + summary["background"] + summary["notes"]:
         err_console.print(line, highlight=False)
@@ -292,6 +302,7 @@ def _track_landmarks(
     reference: Path | None,
     json_out: bool,
     left_right: str = "continuity",
+    person: str | None = None,
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
     body points, written as the 13 markers."""
@@ -309,7 +320,7 @@ def _track_landmarks(
         from markovmotion.video.triangulation import track_triangulated_video
 
         tr, summary = track_triangulated_video(
-            video, cameras, max_frames, reference, views, left_right
+            video, cameras, max_frames, reference, views, left_right, person
         )
         where = f"{summary['views']} views"
     else:
@@ -338,7 +349,15 @@ def _track_landmarks(
         for line in summary.get("notes", []):
             err_console.print(line, highlight=False)
         away = summary.get("from_capture_centre_m")
-        if away is not None and away > FAR_FROM_CENTRE_M:
+        if person is not None:
+            away = summary.get("from_person_m")
+            if away is not None and away > FAR_FROM_RAY_M:
+                err_console.print(
+                    f"note: the person tracked stands {away:.1f} m from the ray of --person: "
+                    "no camera's MediaPipe found anyone nearer (it finds one person per image)",
+                    highlight=False,
+                )
+        elif away is not None and away > FAR_FROM_CENTRE_M:
             err_console.print(
                 f"note: the person tracked stands {away:.1f} m from where the cameras are "
                 "aimed; MediaPipe finds one person per image, so with several people in view "
@@ -349,6 +368,26 @@ def _track_landmarks(
 
 #: Metres from where the cameras are aimed beyond which ``track`` says whom it followed.
 FAR_FROM_CENTRE_M = 1.0
+#: ``--person``: a person followed whose centre stood further than this (m) from the ray through
+#: the pixel named is not the one named (a ray through a body passes within its width).
+FAR_FROM_RAY_M = 0.5
+
+
+def _check_person(person: str, method: str, guided: bool, cams: list) -> None:
+    """``--person``: for MediaPipe in several views (triangulate, the guide), a pixel of one
+    of the cameras (:func:`markovmotion.video.triangulation.person_ray`); else one line."""
+    from markovmotion.video.triangulation import person_ray
+
+    if method == "monocular" or (method == "apf" and not guided):
+        raise typer.BadParameter(
+            "picks whom MediaPipe follows across the views: --method triangulate, or the "
+            "particle filter with --guide mediapipe",
+            param_hint="--person",
+        )
+    try:
+        person_ray(cams, person)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--person") from None
 
 
 def _someone_else_notes(count: int) -> None:

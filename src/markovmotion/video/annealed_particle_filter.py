@@ -907,6 +907,7 @@ def track_video(
     sides: bool = False,
     guide: bool = False,
     left_right: str = "views",
+    person: str | None = None,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
@@ -915,7 +916,9 @@ def track_video(
     guide the filter (:mod:`markovmotion.video.triangulation`; ``left_right``: how its left
     and right are made consistent first, :data:`~markovmotion.video.triangulation.LEFT_RIGHT`).
     MediaPipe runs before the clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
-    frames it gave the filter landmarks in)."""
+    frames it gave the filter landmarks in); ``person`` (``CAMERA:U,V``): of several people,
+    MediaPipe follows the one at that pixel
+    (:func:`~markovmotion.video.triangulation.person_ray`)."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = guided = None
     if sides or guide:  # MediaPipe once over every camera, for both uses
@@ -925,6 +928,7 @@ def track_video(
             ViewLandmarks,
             consistent_views,
             look_again,
+            person_ray,
             someone_else_count,
             triangulate_views,
         )
@@ -932,10 +936,11 @@ def track_video(
         # views of someone else dropped and left and right made consistent first
         # (triangulation.consistent_views): a camera behind the person, whose MediaPipe
         # mirrors the body, is put right by the others
+        aim = person_ray(mv.cameras, person, mv.fps) if person is not None else None
         views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        views, person = look_again(views, mv.videos, mv.fps)
-        agreed = consistent_views(person, left_right)
-        someone_else = someone_else_count(views, person)
+        views, kept = look_again(views, mv.videos, mv.fps, aim=aim)
+        agreed = consistent_views(kept, left_right)
+        someone_else = someone_else_count(views, kept)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
             guided = Guide.from_views(agreed, triangulate_views(agreed))

@@ -342,6 +342,7 @@ def track_take(
     sides: bool = False,
     guide: bool = False,
     left_right: str = "views",
+    person: str | None = None,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
@@ -355,7 +356,8 @@ def track_take(
     ``guide_seconds`` (MediaPipe's time, not in ``fps``), ``guide_seen`` (the share of views
     and frames with landmarks to pull towards) and ``fps_with_guide``; ``left_right``: how
     MediaPipe's left and right are made consistent across the views first
-    (:data:`~markovmotion.video.triangulation.LEFT_RIGHT`).
+    (:data:`~markovmotion.video.triangulation.LEFT_RIGHT`); ``person`` (``CAMERA:U,V``): of
+    several people, the guide follows the one at that pixel.
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -364,7 +366,7 @@ def track_take(
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
     result = track_video(
         video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background,
-        sides, guide, left_right,
+        sides, guide, left_right, person,
     )  # fmt: skip
     motion = body.motion(result.states, result.fps, name=Path(video).name)
     summary = {

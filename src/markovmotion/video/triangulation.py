@@ -395,6 +395,75 @@ def capture_centre(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
     return np.linalg.solve(a, b)
 
 
+#: ``track --person``: the person named is the one nearest the ray through its pixel over the
+#: video's first this many seconds.
+PERSON_PICK_SECONDS = 0.5
+
+
+@dataclass(frozen=True)
+class Aim:
+    """Where :func:`one_person` looks for the person to follow: a point (mm; where the
+    cameras are aimed, :func:`capture_centre`) or, with a ``direction`` (unit), the line
+    through it over the first ``frames`` frames (the ray through a pixel a user names,
+    :func:`person_ray`)."""
+
+    origin: np.ndarray
+    direction: np.ndarray | None = None
+    frames: int | None = None
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(...) mm from points (..., 3) to the point, or to the line."""
+        d = np.asarray(points, dtype=float) - self.origin
+        if self.direction is not None:
+            d = d - (d @ self.direction)[..., None] * self.direction
+        return np.linalg.norm(d, axis=-1)
+
+
+def person_ray(cameras: Sequence[CalibratedCamera], text: str, fps: float = 30.0) -> Aim:
+    """``track --person CAMERA:U,V``: the ray through pixel (U, V) of the camera named CAMERA
+    (its name in the camera file, or its number from 0), in the video's own pixels (through
+    the lens's distortion when the camera has one), over the first
+    :data:`PERSON_PICK_SECONDS` of a video at ``fps``: the person there at the start.
+
+    Raises:
+        ValueError: one line: not CAMERA:U,V, no such camera, or a pixel outside its image.
+    """
+    name, _, pixel = str(text).rpartition(":")
+    try:
+        u, v = (float(x) for x in pixel.split(","))
+    except ValueError:
+        raise ValueError(f"{text!r} is not CAMERA:U,V (e.g. cam0:135,240)") from None
+    names = [c.name for c in cameras]
+    k = names.index(name) if name in names else int(name) if name.isdigit() else -1
+    if not 0 <= k < len(cameras):
+        raise ValueError(f"no camera {name!r} (the cameras: {', '.join(names)})")
+    cam = cameras[k]
+    if not (0 <= u < cam.width and 0 <= v < cam.height and np.isfinite([u, v]).all()):
+        raise ValueError(f"pixel {u:g},{v:g} is outside {cam.name}'s {cam.width}x{cam.height}")
+    xy = np.array([u, v])
+    if any(cam.distortion):
+        import cv2
+
+        xy = cv2.undistortPoints(
+            xy.reshape(1, 1, 2), cam.K, np.asarray(cam.distortion, float), P=cam.K
+        ).reshape(2)
+    frames = max(1, int(round(PERSON_PICK_SECONDS * fps)))
+    return Aim(cam.centre, cam.ray(xy), frames)
+
+
+def _where_named(aim: Aim, centres: np.ndarray, cost: np.ndarray) -> Aim | None:
+    """A ray's person as a point: the median centre, over the ray's first frames, of the
+    candidate (``centres`` (F, C, 3), finite ``cost`` (F, C)) nearest the ray in each; None
+    when no one is seen then."""
+    first = slice(0, aim.frames)
+    away = np.where(np.isfinite(cost[first]), aim.distance(centres[first]), np.inf)
+    seen = np.isfinite(away).any(axis=1)
+    if not seen.any():
+        return None
+    pick = centres[first][seen, np.argmin(away[seen], axis=1)]
+    return Aim(np.median(pick, axis=0))
+
+
 def midline_points(
     views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -421,6 +490,7 @@ def one_person(
     fps: float,
     min_visibility: float = MIN_VISIBILITY,
     angle: float = PERSON_ANGLE,
+    aim: Aim | None = None,
 ) -> tuple[ViewLandmarks, np.ndarray]:
     """MediaPipe's landmarks with every view that saw someone else in a frame dropped
     (visibility 0), and which views were kept (V, F).
@@ -436,7 +506,9 @@ def one_person(
     within ``angle`` (its inliers) and the MSAC cost ``sum_v min(e_v, angle)^2 / angle^2``
     (a view without the person costs 1), plus :data:`PERSON_CENTRE_COST` per metre that the
     candidate's centre is further than the nearest candidate's from where the cameras are
-    aimed (:func:`capture_centre`). Over time
+    aimed (:func:`capture_centre`), or from ``aim``: a ray through a pixel a user named
+    (:func:`person_ray`) stands for where the person nearest it over its first frames stood
+    then. Over time
     the path of least cost through the
     candidates (and "no one": every view costs 1), each frame's step costing the distance
     between the two candidates' centres over :data:`PERSON_SPEED` per frame (Viterbi, Rabiner
@@ -462,7 +534,9 @@ def one_person(
     focal = np.array([c.focal for c in cams])
     seeing = weights.sum(axis=2) > 0  # (V, F)
     subsets = [s for k in range(2, v_n + 1) for s in combinations(range(v_n), k)]
-    middle = capture_centre(cams)
+    if aim is None:
+        middle = capture_centre(cams)
+        aim = Aim(middle) if middle is not None else None
     c_n = len(subsets) + 1  # the last: no one
     cost = np.full((f_n, c_n), np.inf)
     cost[:, -1] = v_n
@@ -484,9 +558,11 @@ def one_person(
         cost[valid, c] = score[valid]
         inliers[:, c] = ok.T
         centres[:, c] = _nanmean_points(pts)
-    if middle is not None:  # relative to the nearest candidate: a lone person far out is
+    if aim is not None and aim.direction is not None:
+        aim = _where_named(aim, centres[:, :-1], cost[:, :-1])
+    if aim is not None:  # relative to the nearest candidate: a lone person far out is
         # still better than no one
-        away = np.linalg.norm(centres[:, :-1] - middle, axis=-1) / 1e3
+        away = aim.distance(centres[:, :-1]) / 1e3
         away = np.where(np.isfinite(cost[:, :-1]), away, np.inf)
         nearest = np.min(away, axis=1, keepdims=True)
         cost[:, :-1] += PERSON_CENTRE_COST * (away - np.where(np.isfinite(nearest), nearest, 0.0))
@@ -512,6 +588,7 @@ def look_again(
     videos: Sequence[str | os.PathLike[str]],
     fps: float,
     min_visibility: float = MIN_VISIBILITY,
+    aim: Aim | None = None,
 ) -> tuple[ViewLandmarks, ViewLandmarks]:
     """``views`` with MediaPipe run again, on a crop around the tracked person, in every view
     and frame that saw someone else or no one (:func:`one_person`); and those views with the
@@ -524,7 +601,7 @@ def look_again(
     other views: a crop that still holds someone else in front is dropped as before."""
     from markovmotion.video.monocular import frame_landmarks, pose_estimator
 
-    agreed, kept = one_person(views, fps, min_visibility)
+    agreed, kept = one_person(views, fps, min_visibility, aim=aim)
     redo = ~kept  # (V, F)
     if not redo.any() or not kept.any():
         return views, agreed
@@ -560,7 +637,7 @@ def look_again(
                     world[v, f] = got[1]
     seconds = views.seconds + time.perf_counter() - t0
     found = ViewLandmarks(views.cameras, pixels, vis, seconds, world)
-    return found, one_person(found, fps, min_visibility)[0]
+    return found, one_person(found, fps, min_visibility, aim=aim)[0]
 
 
 def _held_over_gaps(body: np.ndarray, known: np.ndarray, frames: int):
@@ -827,11 +904,14 @@ def track_triangulated_video(
     reference: str | os.PathLike[str] | None = None,
     views: int | None = None,
     left_right: str = "views",
+    person: str | None = None,
 ) -> tuple[TriangulatedTrack, dict]:
     """Track a multi-view video (a folder with ``cameras.json``, or that file) by MediaPipe in
     every view, triangulated (module docstring, 1); the track and a JSON-ready summary (with
     ``reference``, its errors); ``left_right`` (:data:`LEFT_RIGHT`): how MediaPipe's left and
-    right are made consistent across the views first (:func:`consistent_views`)."""
+    right are made consistent across the views first (:func:`consistent_views`); ``person``
+    (``CAMERA:U,V``, :func:`person_ray`): of several people, follow the one at that pixel
+    (the summary's ``from_person_m``: how far the person followed stood from its ray)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
 
     check_left_right(left_right)  # before MediaPipe's minutes
@@ -846,9 +926,10 @@ def track_triangulated_video(
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
     fps = float(doc["fps"])
+    aim = person_ray(cams, person, fps) if person is not None else None  # before MediaPipe
     detected = ViewLandmarks.from_videos(videos, cams, max_frames)
-    found, person = look_again(detected, videos, fps)
-    lm = consistent_views(person, left_right)
+    found, kept = look_again(detected, videos, fps, aim=aim)
+    lm = consistent_views(kept, left_right)
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
@@ -867,12 +948,8 @@ def track_triangulated_video(
         "frames_placed": int(tr.placed.sum()),
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
-        "views_of_someone_else": someone_else_count(found, person),
-        "from_capture_centre_m": (
-            round(float(np.nanmedian(from_middle)) / 1e3, 2)
-            if np.isfinite(from_middle).any()
-            else None
-        ),
+        "views_of_someone_else": someone_else_count(found, kept),
+        "from_capture_centre_m": _median_m(from_middle),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
@@ -880,6 +957,14 @@ def track_triangulated_video(
         "notes": detected.notes,
         "confidence": [round(float(c), 3) for c in conf],
     }
+    if aim is not None:  # where the person was named: at the start
+        summary["from_person_m"] = _median_m(aim.distance(centre[: aim.frames]))
     if reference is not None:
         summary.update(reference_errors(tr.points, reference))
     return tr, summary
+
+
+def _median_m(distances: np.ndarray) -> float | None:
+    """The median of distances (mm) in metres, to the centimetre; None when none is finite."""
+    d = np.asarray(distances, dtype=float)
+    return round(float(np.nanmedian(d)) / 1e3, 2) if np.isfinite(d).any() else None
