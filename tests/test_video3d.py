@@ -346,7 +346,42 @@ def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path,
     for extra in ([], ["--guide", "mediapipe"]):
         with pytest.raises(Tracked):
             main(args + extra)
-    assert seen == [False, True]
+    assert seen == [False, True]  # a rendered video: the default (auto) leaves it unguided
+
+
+def test_respond_passes_the_person_named_to_the_tracker(
+    rendered, dual_model, tmp_path, monkeypatch, capsys
+):
+    """``dualhmm respond --video DIR --guide mediapipe --person CAM:U,V``: the person reaches
+    the tracker; without the guide, or without --video, it is one line."""
+    import markovmotion.video.composite as composite
+
+    seen = []
+
+    class Tracked(Exception):
+        pass
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("person"))
+        raise Tracked
+
+    monkeypatch.setattr(composite, "track_take", spy)
+    args = ["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+            "--out", str(tmp_path / "c.mp4"), "--person", "0:10,10"]  # fmt: skip
+    with pytest.raises(Tracked):
+        main([*args, "--guide", "mediapipe"])
+    assert seen == ["0:10,10"]
+    capsys.readouterr()
+    for extra in ([], ["--realtime"]):
+        with pytest.raises(SystemExit) as exc:
+            main(args + extra)
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert "--person" in err and len(err.splitlines()) == 1
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(dual_model), "--input", str(rendered),
+              "--out", str(tmp_path / "b.bvh"), "--person", "0:10,10"])  # fmt: skip
+    assert exc.value.code == 2 and "--person" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

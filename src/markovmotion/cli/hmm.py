@@ -11,12 +11,14 @@ import typer
 
 from markovmotion.cli.options import (
     body_model_option,
+    check_person,
     choice,
     choose_option,
     grid_of,
     guide_option,
     kind_option,
     normalise_option,
+    person_option,
     ranged,
     roles_option,
 )
@@ -339,6 +341,7 @@ def respond(
     ),
     guide: str = guide_option(),
     body_model: str = body_model_option(),
+    person: str = person_option(),
 ) -> None:
     """Generate person B's response to person A's motion (or markers, for a marker model:
     a C3D file, or a BVH with the model's virtual markers placed on it; B comes out as C3D)."""
@@ -352,8 +355,8 @@ def respond(
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
-    if video is None and (method != "apf" or guide not in ("auto", "none")):
-        raise typer.BadParameter("--method and --guide are how A is tracked in --video")
+    if video is None and (method != "apf" or guide not in ("auto", "none") or person):
+        raise typer.BadParameter("--method, --guide and --person are how A is tracked in --video")
     if guide == "mediapipe" and (method != "apf" or realtime):
         raise typer.BadParameter(
             "guides the particle filter over the whole video: --method apf, no --realtime",
@@ -362,7 +365,7 @@ def respond(
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime, method, guide, body_model,
+            realtime, method, guide, body_model, person,
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -410,7 +413,7 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method, guide="none", body_model="interaction",
+    method, guide="none", body_model="interaction", person=None,
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
@@ -431,6 +434,7 @@ def _respond_video(
         camera_videos(where, cams)  # a missing video: fail before the work
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
     guided, note = resolve_guide(guide, doc) if method == "apf" and not realtime else (False, None)
+    check_person(person, cams, guided)
     if note:
         err_console.print(note, highlight=False)
     if getattr(DualHMM.load(model), "frame_", "heading") == "world":
@@ -466,7 +470,7 @@ def _respond_video(
         return
     summary = respond_in_video(
         model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
-        max_frames, "standard" if standard else "windowed", guide=guided,
+        max_frames, "standard" if standard else "windowed", guide=guided, person=person,
     )  # fmt: skip
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "

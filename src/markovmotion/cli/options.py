@@ -16,7 +16,7 @@ Usage::
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -223,6 +223,37 @@ def guide_option() -> Any:
         "people, none for video made by 'video render' (MediaPipe misreads its people) or "
         "without the camera extra (said).",
     )
+
+
+def person_option() -> Any:
+    """``--person CAMERA:U,V``: of several people in view, the one MediaPipe follows across the
+    views (``track`` and ``dualhmm respond --video``;
+    :func:`markovmotion.video.triangulation.person_ray`)."""
+    return typer.Option(
+        None,
+        help="With several people in view (triangulate, or the particle filter's guide): "
+        "follow the one at this pixel, CAMERA:U,V (a camera's name or number; e.g. "
+        "cam0:135,240); default: the one the views agree on.",
+    )
+
+
+def check_person(person: str | None, cameras: Sequence, usable: bool) -> None:
+    """``--person``, given, must name a pixel of one of ``cameras`` and be ``usable`` (MediaPipe
+    in several views: triangulate, or the particle filter's guide); else one line."""
+    if person is None:
+        return
+    if not usable:
+        raise typer.BadParameter(
+            "picks whom MediaPipe follows across the views: --method triangulate, or the "
+            "particle filter with --guide mediapipe (not --realtime)",
+            param_hint="--person",
+        )
+    from markovmotion.video.triangulation import person_ray
+
+    try:
+        person_ray(cameras, person)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--person") from None
 
 
 def choose_option(family: str, criterion: str, example: str) -> Any:

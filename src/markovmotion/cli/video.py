@@ -8,7 +8,14 @@ from pathlib import Path
 
 import typer
 
-from markovmotion.cli.options import body_model_option, choice, guide_option, ranged
+from markovmotion.cli.options import (
+    body_model_option,
+    check_person,
+    choice,
+    guide_option,
+    person_option,
+    ranged,
+)
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -139,12 +146,7 @@ def track(
         "--guide mediapipe and --sides (default views): views: made to agree across the views "
         "by triangulation; continuity: each view over time; both; mediapipe.",
     ),
-    person: str = typer.Option(
-        None,
-        help="With several people in view (triangulate, or the particle filter's guide): "
-        "follow the one at this pixel, CAMERA:U,V (a camera's name or number; e.g. "
-        "cam0:135,240); default: the one the views agree on.",
-    ),
+    person: str = person_option(),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -154,7 +156,7 @@ def track(
         )
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
-    guided, note = False, None
+    guided, note, cams = False, None, []
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
         from markovmotion.video.multiview import resolve_guide
@@ -164,8 +166,7 @@ def track(
         if not video.is_file():
             camera_videos(where, cams)
         guided, note = resolve_guide(guide, doc) if method == "apf" else (False, None)
-    if person is not None:
-        _check_person(person, method, guided, cams)
+    check_person(person, cams, method == "triangulate" or guided)
     reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)
     if method in ("monocular", "triangulate"):
@@ -371,23 +372,6 @@ FAR_FROM_CENTRE_M = 1.0
 #: ``--person``: a person followed whose centre stood further than this (m) from the ray through
 #: the pixel named is not the one named (a ray through a body passes within its width).
 FAR_FROM_RAY_M = 0.5
-
-
-def _check_person(person: str, method: str, guided: bool, cams: list) -> None:
-    """``--person``: for MediaPipe in several views (triangulate, the guide), a pixel of one
-    of the cameras (:func:`markovmotion.video.triangulation.person_ray`); else one line."""
-    from markovmotion.video.triangulation import person_ray
-
-    if method == "monocular" or (method == "apf" and not guided):
-        raise typer.BadParameter(
-            "picks whom MediaPipe follows across the views: --method triangulate, or the "
-            "particle filter with --guide mediapipe",
-            param_hint="--person",
-        )
-    try:
-        person_ray(cams, person)
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--person") from None
 
 
 def _someone_else_notes(count: int) -> None:

@@ -88,12 +88,14 @@ def respond_in_video(
     method: str = "windowed",
     live: bool = False,
     guide: bool = False,
+    person: str | None = None,
 ) -> dict:
     """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
     ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
     to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
     frame at the video's rate, through the online partner (:func:`_respond_live`).
-    ``guide``: MediaPipe guides the tracking of A (:func:`track_take`; not live)."""
+    ``guide``: MediaPipe guides the tracking of A (:func:`track_take`; not live), following
+    the ``person`` at a pixel (``CAMERA:U,V``) if several are in view."""
     if live and guide:
         raise ValueError("the MediaPipe guide runs over the whole video: not live")
     if live:
@@ -108,8 +110,9 @@ def respond_in_video(
         raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
     start = time.perf_counter()
     a, result, summary = track_take(
-        video, body, cameras, None, particles, layers, None, max_frames, guide=guide
-    )
+        video, body, cameras, None, particles, layers, None, max_frames, guide=guide,
+        person=person,
+    )  # fmt: skip
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
     video_path = Path(video) if single else camera_videos(where, cams)[view]
