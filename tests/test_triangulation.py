@@ -171,6 +171,8 @@ def real_video():
         (["--guide", "none", "--person", "cam0:10,10"], "--guide mediapipe"),
         (["--method", "triangulate", "--person", "cam7:10,10"], "no camera 'cam7'"),
         (["--method", "triangulate", "--person", "cam0:300,10"], "outside cam0's 272x480"),
+        (["--method", "triangulate", "--views", "2", "--person", "cam3:1,1"], "no camera 'cam3'"),
+        (["--views", "2", "--person", "cam3:1,1"], "no camera 'cam3'"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(
@@ -502,6 +504,7 @@ def test_the_person_named_by_a_pixel_is_followed_where_the_cameras_aim_elsewhere
     ("text", "message"),
     [
         ("cam0", "is not CAMERA:U,V"),
+        ("10,10", "is not CAMERA:U,V"),
         ("cam0:1,2,3", "is not CAMERA:U,V"),
         ("cam9:10,10", "no camera 'cam9'"),
         ("7:10,10", "no camera '7'"),

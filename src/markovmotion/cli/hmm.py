@@ -434,7 +434,7 @@ def _respond_video(
         camera_videos(where, cams)  # a missing video: fail before the work
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
     guided, note = resolve_guide(guide, doc) if method == "apf" and not realtime else (False, None)
-    check_person(person, cams, guided)
+    check_person(person, cams if not video.is_file() else cams[:1], guided)
     if note:
         err_console.print(note, highlight=False)
     if getattr(DualHMM.load(model), "frame_", "heading") == "world":

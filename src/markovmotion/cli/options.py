@@ -238,14 +238,15 @@ def person_option() -> Any:
 
 
 def check_person(person: str | None, cameras: Sequence, usable: bool) -> None:
-    """``--person``, given, must name a pixel of one of ``cameras`` and be ``usable`` (MediaPipe
-    in several views: triangulate, or the particle filter's guide); else one line."""
+    """``--person``, given, must name a pixel of one of the ``cameras`` tracked (two or more)
+    and be ``usable`` (MediaPipe in several views: triangulate, or the particle filter's
+    guide); else one line."""
     if person is None:
         return
-    if not usable:
+    if not usable or len(cameras) < 2:
         raise typer.BadParameter(
-            "picks whom MediaPipe follows across the views: --method triangulate, or the "
-            "particle filter with --guide mediapipe (not --realtime)",
+            "picks whom MediaPipe follows across two or more views: --method triangulate, "
+            "or the particle filter with --guide mediapipe (not --realtime)",
             param_hint="--person",
         )
     from markovmotion.video.triangulation import person_ray

@@ -166,7 +166,9 @@ def track(
         if not video.is_file():
             camera_videos(where, cams)
         guided, note = resolve_guide(guide, doc) if method == "apf" else (False, None)
-    check_person(person, cams, method == "triangulate" or guided)
+    if video.is_file() and video.suffix.lower() != ".json":  # one camera's video
+        cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
+    check_person(person, cams[:views] if views else cams, method == "triangulate" or guided)
     reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)
     if method in ("monocular", "triangulate"):

@@ -430,6 +430,8 @@ def person_ray(cameras: Sequence[CalibratedCamera], text: str, fps: float = 30.0
     """
     name, _, pixel = str(text).rpartition(":")
     try:
+        if not name:
+            raise ValueError
         u, v = (float(x) for x in pixel.split(","))
     except ValueError:
         raise ValueError(f"{text!r} is not CAMERA:U,V (e.g. cam0:135,240)") from None
