@@ -197,3 +197,17 @@ def test_a_missing_video_is_named(real_video, tmp_path, capsys):
         main(["video", "cameras", str(calib), str(tmp_path / "nope.mp4")])
     err = capsys.readouterr().err.strip()
     assert stop.value.code == 2 and err.endswith("nope.mp4: no such video file")
+
+
+def test_a_video_stretched_to_another_width_is_said(real_video, tmp_path, capsys):
+    """A video of a slightly other shape than its calibration (Pose2Sim's cam01/cam02 are
+    1080x1920 against a calibration at 1088x1920) is taken, its intrinsics scaled along each
+    axis, and said; the same shape is not."""
+    truth, _ = load_cameras(real_video)
+    calib = tmp_path / "Calib.toml"
+    calib.write_text(_toml(truth).replace("1088.0, 1920.0", "1096.0, 1920.0", 1))
+    got = cameras_from_toml(calib, _videos(real_video, tmp_path))
+    err = capsys.readouterr().err
+    assert err.count("note:") == 1 and "cam0.mp4 is 272x480" in err and "1096x1920" in err
+    assert got[0].K[0, 0] == pytest.approx(truth[0].K[0, 0] * 1088 / 1096, rel=1e-3)
+    assert got[0].K[1, 1] == pytest.approx(truth[0].K[1, 1], rel=1e-3)

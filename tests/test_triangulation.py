@@ -3,6 +3,7 @@ it gives the annealed particle filter (``track --guide mediapipe``)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -173,6 +174,8 @@ def real_video():
         (["--method", "triangulate", "--person", "cam0:300,10"], "outside cam0's 272x480"),
         (["--method", "triangulate", "--views", "2", "--person", "cam3:1,1"], "no camera 'cam3'"),
         (["--views", "2", "--person", "cam3:1,1"], "no camera 'cam3'"),
+        (["--stature", "1700"], "--method monocular"),
+        (["--method", "triangulate", "--truth", "x.bvh"], "--reference"),
     ],
 )
 def test_bad_guide_and_triangulate_options_are_one_line(
@@ -301,6 +304,43 @@ def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
         assert said in err and "tracked 4 frames" in err, err
     main(["track", "--video", str(tmp_path), "--max-frames", "3", "--method", "triangulate"])
     assert "ended after" not in capsys.readouterr().err  # cut by --max-frames: nothing to say
+
+
+def test_a_view_of_another_size_is_one_line(real_video, tmp_path, capsys):
+    """A camera's video of another size than the camera (a copy made smaller) is refused by
+    the triangulation as by the particle filter, not triangulated with the wrong pixels."""
+    import shutil
+
+    from markovmotion.video.render import read_frames, write_video
+
+    for k in range(4):
+        for name in (f"cam{k}.mp4", f"cam{k}_background.png"):
+            shutil.copy(real_video / name, tmp_path / name)
+    shutil.copy(real_video / "cameras.json", tmp_path / "cameras.json")
+    frames = [f[:, :240] for f in itertools.islice(read_frames(real_video / "cam1.mp4"), 3)]
+    write_video(frames, tmp_path / "cam1.mp4", 60.0)
+    for extra in (["--method", "triangulate"], ["--guide", "none"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["track", "--video", str(tmp_path), "--max-frames", "3", *extra])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert "camera cam1 is 272x480" in err and "240x480" in err, err
+        assert len(err.splitlines()) == 1
+
+
+def test_the_guided_filter_says_whom_it_followed(real_video, capsys):
+    """The guided particle filter's summary says whom MediaPipe followed, as the
+    triangulation's does; a pixel with no one at it is said on stderr, with --json too."""
+    _need_mediapipe()
+    args = ["track", "--video", str(real_video), "--max-frames", "4", "--particles", "10",
+            "--layers", "2", "--json"]  # fmt: skip
+    main(args)
+    s = json.loads(capsys.readouterr().out)
+    assert s["from_capture_centre_m"] < 1.0 and "from_person_m" not in s
+    main([*args, "--person", "cam0:5,5"])  # a corner of the room
+    run = capsys.readouterr()
+    assert json.loads(run.out)["from_person_m"] > 0.5
+    assert "from the ray of --person" in run.err
 
 
 def _standing_landmarks(frames: int) -> np.ndarray:

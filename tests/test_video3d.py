@@ -79,7 +79,9 @@ def test_a_distorted_camera_reads_its_frames_as_its_pinhole_image(tmp_path):
         assert np.linalg.norm(centre - [u, v]) < 0.5, d
     small = tmp_path / "small"
     write_video([frame[:200]], small, 25.0)
-    with pytest.raises(MotionFormatError, match="frame 0 is 320x200, camera cam0 is 320x240"):
+    with pytest.raises(
+        MotionFormatError, match="camera cam0 is 320x240 but frame 0 of its video is 320x200"
+    ):
         next(read_frames(small, back))
 
 
@@ -338,6 +340,7 @@ def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path,
 
     def spy(*args, **kwargs):
         seen.append(kwargs.get("guide"))
+        assert kwargs.get("learn_background")  # as track's default, --background learn
         raise Tracked
 
     monkeypatch.setattr(composite, "track_take", spy)

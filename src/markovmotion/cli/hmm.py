@@ -460,6 +460,8 @@ def _respond_video(
             model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
             max_frames, live=True,
         )  # fmt: skip
+        for line in live["background"] + live["notes"]:
+            err_console.print(line, highlight=False)
         err_console.print(
             f"live: {live['frames']} frames at the video's rate, {live['tracked']} tracked, "
             f"{live['skipped']} skipped; latency per frame median {live['latency_ms_median']} ms, "
@@ -472,10 +474,12 @@ def _respond_video(
         model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed", guide=guided, person=person,
     )  # fmt: skip
+    for line in summary["background"] + summary["notes"]:
+        err_console.print(line, highlight=False)
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "
-        f"({summary['fps']:.2f} frames/s), partner {summary['partner_frames']} frames; "
-        f"wrote {summary['out']}",
+        f"({summary['fps']:.2f} frames/s{', guided by MediaPipe' if guided else ''}), partner "
+        f"{summary['partner_frames']} frames; wrote {summary['out']}",
         highlight=False,
     )
 

@@ -231,9 +231,9 @@ def person_option() -> Any:
     :func:`markovmotion.video.triangulation.person_ray`)."""
     return typer.Option(
         None,
-        help="With several people in view (triangulate, or the particle filter's guide): "
-        "follow the one at this pixel, CAMERA:U,V (a camera's name or number; e.g. "
-        "cam0:135,240); default: the one the views agree on.",
+        help="With several people in view, MediaPipe in every camera follows the one at this "
+        "pixel, CAMERA:U,V (a camera's name or number; e.g. cam0:135,240); default: the one "
+        "the views agree on.",
     )
 
 
@@ -245,8 +245,9 @@ def check_person(person: str | None, cameras: Sequence, usable: bool) -> None:
         return
     if not usable or len(cameras) < 2:
         raise typer.BadParameter(
-            "picks whom MediaPipe follows across two or more views: --method triangulate, "
-            "or the particle filter with --guide mediapipe (not --realtime)",
+            "picks whom MediaPipe follows across two or more views: track's --method "
+            "triangulate, or the particle filter guided by MediaPipe (--guide mediapipe; not "
+            "--realtime)",
             param_hint="--person",
         )
     from markovmotion.video.triangulation import person_ray

@@ -156,6 +156,14 @@ def track(
         )
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
+    if truth is not None and method != "apf":
+        raise typer.BadParameter(
+            "is a rendered take's motion, for the particle filter; MediaPipe's tracks are "
+            "measured with --reference",
+            param_hint="--truth",
+        )
+    if stature is not None and method != "monocular":
+        raise typer.BadParameter("is for --method monocular", param_hint="--stature")
     guided, note, cams = False, None, []
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
@@ -247,6 +255,7 @@ def track(
     if out is not None:
         write_motion(motion, out)
         err_console.print(f"wrote {out}", highlight=False)
+    _whom_notes(summary, person)
     if json_out:
         typer.echo(json.dumps(summary))
     else:
@@ -254,8 +263,9 @@ def track(
         if "reference" in summary:
             err += f", {summary['reference']['mean_mm']:.1f} mm from the reference"
         err_console.print(
-            f"tracked {summary['frames']} frames in {summary['views']} views at "
-            f"{summary['fps']:.2f} frames/s{err}; {summary['recoveries']} recoveries"
+            f"tracked {summary['frames']} frames in {_views(summary['views'])}"
+            f"{' guided by MediaPipe' if guided else ''} at {summary['fps']:.2f} frames/s{err}; "
+            f"{summary['recoveries']} recoveries"
             + (
                 f"; {summary['flips']} flipped frames searched again, "
                 f"{summary['left_flipped']} left flipped (confidence lowered)"
@@ -264,7 +274,6 @@ def track(
             ),
             highlight=False,
         )
-        _someone_else_notes(summary.get("views_of_someone_else", 0))
 
 
 def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
@@ -325,7 +334,7 @@ def _track_landmarks(
         tr, summary = track_triangulated_video(
             video, cameras, max_frames, reference, views, left_right, person
         )
-        where = f"{summary['views']} views"
+        where = _views(summary["views"])
     else:
         tr, summary = track_monocular_video(
             video, cameras, max_frames, stature, reference, left_right
@@ -334,6 +343,9 @@ def _track_landmarks(
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)
+    for line in summary.get("notes", []):
+        err_console.print(line, highlight=False)
+    _whom_notes(summary, person)
     if json_out:
         typer.echo(json.dumps(summary))
     else:
@@ -348,25 +360,34 @@ def _track_landmarks(
             f"points) of {where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
-        _someone_else_notes(summary.get("views_of_someone_else", 0))
-        for line in summary.get("notes", []):
-            err_console.print(line, highlight=False)
-        away = summary.get("from_capture_centre_m")
-        if person is not None:
-            away = summary.get("from_person_m")
-            if away is not None and away > FAR_FROM_RAY_M:
-                err_console.print(
-                    f"note: the person tracked stands {away:.1f} m from the ray of --person: "
-                    "no camera's MediaPipe found anyone nearer (it finds one person per image)",
-                    highlight=False,
-                )
-        elif away is not None and away > FAR_FROM_CENTRE_M:
+
+
+def _views(n: int) -> str:
+    return f"{n} view" + ("s" if n != 1 else "")
+
+
+def _whom_notes(summary: dict, person: str | None) -> None:
+    """The lines that say whom MediaPipe followed, when it may not be the one meant: views of
+    someone else left out, a person followed far from where the cameras are aimed, or far
+    from the ray of the pixel named with ``--person`` (stderr, with or without ``--json``)."""
+    _someone_else_notes(summary.get("views_of_someone_else", 0))
+    if person is not None:
+        away = summary.get("from_person_m")
+        if away is not None and away > FAR_FROM_RAY_M:
             err_console.print(
-                f"note: the person tracked stands {away:.1f} m from where the cameras are "
-                "aimed; MediaPipe finds one person per image, so with several people in view "
-                "the one the views agree on is followed",
+                f"note: the person tracked stands {away:.1f} m from the ray of --person: "
+                "no camera's MediaPipe found anyone nearer (it finds one person per image)",
                 highlight=False,
             )
+        return
+    away = summary.get("from_capture_centre_m")
+    if away is not None and away > FAR_FROM_CENTRE_M:
+        err_console.print(
+            f"note: the person tracked stands {away:.1f} m from where the cameras are "
+            "aimed; MediaPipe finds one person per image, so with several people in view "
+            "the one the views agree on is followed",
+            highlight=False,
+        )
 
 
 #: Metres from where the cameras are aimed beyond which ``track`` says whom it followed.

@@ -760,6 +760,8 @@ class TrackResult:
     #: (view, frame) pairs in which MediaPipe found someone else than the person tracked
     #: (left out of the guide, :func:`~markovmotion.video.triangulation.one_person`).
     guide_someone_else: int = 0
+    #: Whom the guide followed (:func:`~markovmotion.video.triangulation.whom`).
+    guide_whom: dict = field(default_factory=dict)
 
 
 def multiview_frames(
@@ -931,6 +933,7 @@ def track_video(
             person_ray,
             someone_else_count,
             triangulate_views,
+            whom,
         )
 
         # views of someone else dropped and left and right made consistent first
@@ -943,7 +946,9 @@ def track_video(
         someone_else = someone_else_count(views, kept)
         check = SideCheck.from_landmarks(agreed) if sides else None
         if guide:
-            guided = Guide.from_views(agreed, triangulate_views(agreed))
+            points = triangulate_views(agreed)
+            guided = Guide.from_views(agreed, points)
+            followed = whom(points.points, mv.cameras, aim)
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
@@ -954,4 +959,5 @@ def track_video(
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())
         result.guide_someone_else = someone_else
+        result.guide_whom = followed
     return result

@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 from markovmotion.errors import MotionFormatError
+from markovmotion.progress import note
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
     MAX_CAMERAS,
@@ -237,6 +238,13 @@ def _for_video(
             f"{size[0]:g}x{size[1]:g} (another shape)",
         )  # fmt: skip
     scale = np.array([width / size[0], height / size[1]])
+    if not np.isclose(scale[0], scale[1], rtol=1e-4):
+        note(
+            f"{video.name} is {width}x{height} and camera {name} was calibrated at "
+            f"{size[0]:g}x{size[1]:g}: its intrinsics are scaled by {scale[0]:.4f} across and "
+            f"{scale[1]:.4f} down (a video stretched to another shape; if it was cropped "
+            "instead, its pixels are off by up to the difference)"
+        )
     k = k.copy()
     k[:2, :2] *= scale[:, None]
     k[:2, 2] = (k[:2, 2] + 0.5) * scale - 0.5

@@ -95,7 +95,8 @@ def respond_in_video(
     to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
     frame at the video's rate, through the online partner (:func:`_respond_live`).
     ``guide``: MediaPipe guides the tracking of A (:func:`track_take`; not live), following
-    the ``person`` at a pixel (``CAMERA:U,V``) if several are in view."""
+    the ``person`` at a pixel (``CAMERA:U,V``) if several are in view. A camera without an
+    empty-scene image gets the background ``track`` learns (``--background learn``)."""
     if live and guide:
         raise ValueError("the MediaPipe guide runs over the whole video: not live")
     if live:
@@ -111,7 +112,7 @@ def respond_in_video(
     start = time.perf_counter()
     a, result, summary = track_take(
         video, body, cameras, None, particles, layers, None, max_frames, guide=guide,
-        person=person,
+        person=person, learn_background=True,
     )  # fmt: skip
     tracked = time.perf_counter() - start
     b = _respond(dual, a, method)
@@ -202,7 +203,7 @@ def _respond_live(
     from markovmotion.models.online import concatenate
 
     dual = _load_partner_model(model)
-    mv = open_video(video, cameras, None, max_frames)
+    mv = open_video(video, cameras, None, max_frames, learn_background=True)  # before the clock
     if Path(video).is_file():
         view = 0
     if not 0 <= view < len(mv.cameras):
@@ -273,6 +274,8 @@ def _respond_live(
         "partner_frames": b.n_frames,
         "out": str(written),
         "view": view,
+        "background": mv.background_notes,
+        "notes": mv.video_notes,
     }
 
 

@@ -262,12 +262,11 @@ def detect_landmarks(
     a ``description``, a progress bar (of ``total`` frames, if known)."""
     pixels, world, vis, found = [], [], [], []
     t0 = time.perf_counter()
+    frames = itertools.islice(frames, max_frames)  # the bar's loop then always ends
     if description is not None:
         frames = track(frames, description, total)
     with pose_estimator() as est:
-        for i, img in enumerate(frames):
-            if max_frames is not None and i >= max_frames:
-                break
+        for img in frames:
             got = frame_landmarks(est, img)
             found.append(got is not None)
             if got is None:
@@ -352,11 +351,18 @@ def to_world(points_cam: np.ndarray, camera: CalibratedCamera) -> np.ndarray:
     return (points_cam - camera.t) @ camera.R
 
 
+def _lowest(heights: np.ndarray) -> np.ndarray:
+    """(F,) the least finite value of each row of (F, K); NaN for a row with none (a frame
+    without the person), without NumPy's all-NaN warning."""
+    low = np.where(np.isfinite(heights), heights, np.inf).min(axis=1)
+    return np.where(np.isfinite(low), low, np.nan)
+
+
 def floor_scale(world: np.ndarray, camera: CalibratedCamera, floor: float = 0.0) -> float:
     """The scale about the camera centre that puts the lowest foot landmark on the floor
     (median over frames; 1 if the camera is below the feet or no foot is seen)."""
     feet = [LANDMARKS.index(n) for n in FEET]
-    low = np.nanmin(world[:, feet, 1], axis=1)  # (F,) lowest foot
+    low = _lowest(world[:, feet, 1])  # (F,) lowest foot
     cy = camera.centre[1]
     ok = np.isfinite(low) & (np.abs(low - cy) > 1.0) & (np.sign(floor - cy) == np.sign(low - cy))
     if not ok.any():
@@ -368,7 +374,7 @@ def stature_scale(world: np.ndarray, stature: float) -> float:
     """The scale that makes the head's top ``stature`` mm above the lowest foot (median)."""
     feet = [LANDMARKS.index(n) for n in FEET]
     ears = [LANDMARKS.index("left_ear"), LANDMARKS.index("right_ear")]
-    height = world[:, ears, 1].mean(axis=1) + HEAD_TOP_MM - np.nanmin(world[:, feet, 1], axis=1)
+    height = world[:, ears, 1].mean(axis=1) + HEAD_TOP_MM - _lowest(world[:, feet, 1])
     height = height[np.isfinite(height) & (height > 100.0)]
     if not len(height):
         return 1.0

@@ -386,6 +386,7 @@ def track_take(
                 "guide_seconds": round(result.guide_seconds, 1),
                 "guide_seen": round(result.guide_seen or 0.0, 3),
                 "views_of_someone_else": result.guide_someone_else,
+                **result.guide_whom,
                 "fps_with_guide": round(
                     len(result.states) / max(result.seconds + result.guide_seconds, 1e-9), 2
                 ),

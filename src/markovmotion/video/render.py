@@ -343,14 +343,12 @@ def read_frames(
     path = Path(path)
     fix = camera.undistorter() if camera is not None else None
     for n, frame in enumerate(_decoded(path)):
-        if fix is not None:
-            if frame.shape[:2] != (camera.height, camera.width):
-                raise MotionFormatError(
-                    path, f"frame {n} is {frame.shape[1]}x{frame.shape[0]}, camera "
-                    f"{camera.name} is {camera.width}x{camera.height}",
-                )  # fmt: skip
-            frame = fix(frame)
-        yield frame
+        if camera is not None and frame.shape[:2] != (camera.height, camera.width):
+            raise MotionFormatError(
+                path, f"camera {camera.name} is {camera.width}x{camera.height} but frame {n} "
+                f"of its video is {frame.shape[1]}x{frame.shape[0]}",
+            )  # fmt: skip
+        yield frame if fix is None else fix(frame)
 
 
 def _decoded(path: Path) -> Iterator[np.ndarray]:

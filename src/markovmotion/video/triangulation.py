@@ -937,11 +937,6 @@ def track_triangulated_video(
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
     n = len(tr.points)
-    middle = capture_centre(cams)
-    centre = _nanmean_points(tr.points)
-    from_middle = (
-        np.linalg.norm(centre - middle, axis=1) if middle is not None else np.full(n, np.nan)
-    )
     seen = (lm.visibility >= MIN_VISIBILITY).sum()
     summary = {
         "method": "triangulate",
@@ -951,7 +946,7 @@ def track_triangulated_video(
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
         "views_of_someone_else": someone_else_count(found, kept),
-        "from_capture_centre_m": _median_m(from_middle),
+        **whom(tr.points, cams, aim),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
@@ -959,11 +954,26 @@ def track_triangulated_video(
         "notes": detected.notes,
         "confidence": [round(float(c), 3) for c in conf],
     }
-    if aim is not None:  # where the person was named: at the start
-        summary["from_person_m"] = _median_m(aim.distance(centre[: aim.frames]))
     if reference is not None:
         summary.update(reference_errors(tr.points, reference))
     return tr, summary
+
+
+def whom(points: np.ndarray, cameras: Sequence[CalibratedCamera], aim: Aim | None) -> dict:
+    """Whom a track followed, for the summaries: the median distance (m) of its body points'
+    centre (``points`` (F, P, 3)) from where the ``cameras`` are aimed,
+    ``from_capture_centre_m``, and with a person named (``aim``, :func:`person_ray`) from its
+    ray over the first frames, where the person was named, ``from_person_m``."""
+    centre = _nanmean_points(points)
+    middle = capture_centre(cameras)
+    out = {
+        "from_capture_centre_m": (
+            _median_m(np.linalg.norm(centre - middle, axis=1)) if middle is not None else None
+        )
+    }
+    if aim is not None:
+        out["from_person_m"] = _median_m(aim.distance(centre[: aim.frames]))
+    return out
 
 
 def _median_m(distances: np.ndarray) -> float | None:
