@@ -111,3 +111,27 @@ def test_track_bad_background_or_reference_is_one_line(tmp_path, capsys):
         assert exc.value.code == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1
+
+
+def test_the_learnt_background_is_the_median_of_the_frames_without_the_person():
+    """Band by band, the median of each pixel's uncovered frames (the plain median where the
+    person always covers it) agrees with NumPy's nanmedian over the whole stack (brute force),
+    bands of rows cut anywhere."""
+    import warnings
+
+    from markovmotion.video import background
+
+    rng = np.random.default_rng(0)
+    for n, h, w in ((1, 5, 4), (4, 70, 9), (11, 130, 7)):
+        frames = [rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(n)]
+        masks = rng.random((n, h, w)) < 0.6
+        masks[:, 0, 0] = True  # always covered
+        stack = np.stack(frames).astype(np.float32)
+        hidden = stack.copy()
+        hidden[masks] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            clean = np.nanmedian(hidden, axis=0)
+        expected = np.where(np.isfinite(clean), clean, np.median(stack, axis=0))
+        got = background.person_background(frames, masks)
+        assert np.array_equal(got, np.round(expected).astype(np.uint8))

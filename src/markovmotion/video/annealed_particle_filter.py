@@ -94,14 +94,9 @@ def estimate_background(
 ) -> np.ndarray:
     """(H, W, 3) uint8 per-pixel median of up to ``frames`` frames spread over the video
     (``camera``'s: undistorted, :func:`~markovmotion.video.render.read_frames`)."""
-    from markovmotion.video.render import frame_count
+    from markovmotion.video.render import spread_frames
 
-    n = frame_count(video)
-    keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
-    stack = [f for i, f in enumerate(read_frames(video, camera)) if i in keep]
-    if not stack:
-        raise MotionFormatError(video, "no frames in this video")
-    return np.median(np.stack(stack), axis=0).astype(np.uint8)
+    return np.median(np.stack(spread_frames(video, frames, camera)), axis=0).astype(np.uint8)
 
 
 def read_image(path: Path, camera: CalibratedCamera) -> np.ndarray:

@@ -392,6 +392,23 @@ def frame_count(path: str | os.PathLike[str]) -> int:
     return n if n > 0 else sum(1 for _ in read_frames(path))
 
 
+def spread_frames(
+    video: str | os.PathLike[str], frames: int, camera: CalibratedCamera | None = None
+) -> list[np.ndarray]:
+    """Up to ``frames`` frames spread evenly over ``video`` (``camera``'s: checked and
+    undistorted, :func:`read_frames`), for a background.
+
+    Raises:
+        MotionFormatError: no frames.
+    """
+    n = frame_count(video)
+    keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
+    stack = [f for i, f in enumerate(read_frames(video, camera)) if i in keep]
+    if not stack:
+        raise MotionFormatError(video, "no frames in this video")
+    return stack
+
+
 def expected_frames(
     videos: Sequence[str | os.PathLike[str]], max_frames: int | None = None
 ) -> int | None:
