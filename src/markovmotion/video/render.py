@@ -381,15 +381,16 @@ def _decoded(path: Path) -> Iterator[np.ndarray]:
         cap.release()
 
 
-def frame_count(path: str | os.PathLike[str]) -> int:
-    """Number of frames of a video file or image folder (counted by decoding if need be)."""
+def frame_count(path: str | os.PathLike[str], decode: bool = True) -> int:
+    """Number of frames of a video file or image folder: the file's own count, else (with
+    ``decode``) counted by decoding, else 0."""
     path = Path(path)
     if path.is_dir():
         return sum(1 for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
     cap = cv2.VideoCapture(str(path))
     n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
     cap.release()
-    return n if n > 0 else sum(1 for _ in read_frames(path))
+    return n if n > 0 or not decode else sum(1 for _ in read_frames(path))
 
 
 def spread_frames(
@@ -414,14 +415,7 @@ def expected_frames(
 ) -> int | None:
     """How many frames the videos give together, from their files' own counts (not decoded:
     for a progress bar), at most ``max_frames``; None when a count is unknown."""
-    counts = []
-    for path in map(Path, videos):
-        if path.is_dir():
-            counts.append(frame_count(path))
-            continue
-        cap = cv2.VideoCapture(str(path))
-        counts.append(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0)
-        cap.release()
+    counts = [frame_count(path, decode=False) for path in videos]
     if not counts or min(counts) <= 0:
         return max_frames
     return min(counts) if max_frames is None else min(min(counts), max_frames)
