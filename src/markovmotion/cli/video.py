@@ -119,8 +119,10 @@ def track(
     ),
     body_size: str = typer.Option(
         "template",
-        help="The person's size: template (the body model's); video (measured by MediaPipe in "
-        "the first camera, needs scripts/install-camera); or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
+        help="The person's size: template (the body model's); video (legs and arms measured by "
+        "MediaPipe in the first camera); views (upper arms, forearms, thighs, shins and the "
+        "shoulders' width, by MediaPipe triangulated from every camera); both need "
+        "scripts/install-camera; or SCALE,LEGS,ARMS (e.g. 0.97,0.95,1.05).",
     ),
     background: str = typer.Option(
         "learn",
@@ -213,7 +215,21 @@ def track(
             size = body_size_from_points(body, tr.points)
         except ValueError as exc:
             raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
-    if size != "template":
+    if size == "views":
+        from markovmotion.video.body_size import segment_body, segment_sizes_from_points
+        from markovmotion.video.triangulation import track_triangulated_video
+
+        tri, _ = track_triangulated_video(video, cameras, max_frames, views=views)
+        try:
+            size = segment_sizes_from_points(body, tri.points)
+        except ValueError as exc:
+            raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
+        body = segment_body(body, size)
+        err_console.print(
+            "body size (person to template): " + ", ".join(f"{k} {v:.3f}" for k, v in size.items()),
+            highlight=False,
+        )
+    elif size != "template":
         from markovmotion.video.body_size import scaled_body
 
         body = scaled_body(body, *size)
@@ -250,7 +266,9 @@ def track(
         from markovmotion.video.monocular import reference_errors
 
         summary["reference"] = reference_errors(body_points(motion), reference)
-    if size != "template":
+    if isinstance(size, dict):
+        summary["body_size"] = size
+    elif size != "template":
         summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:
         write_motion(motion, out)
@@ -408,8 +426,9 @@ def _someone_else_notes(count: int) -> None:
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:
-    """``--body-size``: template, video, or three factors; bad values are one usage error."""
-    if text in ("template", "video"):
+    """``--body-size``: template, video, views, or three factors; bad values are one usage
+    error."""
+    if text in ("template", "video", "views"):
         return text
     try:
         size = tuple(float(v) for v in text.split(","))
@@ -417,7 +436,7 @@ def _body_size(text: str) -> str | tuple[float, float, float]:
         size = ()
     if len(size) != 3 or not all(0.5 <= v <= 2.0 for v in size):
         raise typer.BadParameter(
-            "template, video or SCALE,LEGS,ARMS (three numbers 0.5 to 2)",
+            "template, video, views or SCALE,LEGS,ARMS (three numbers 0.5 to 2)",
             param_hint="--body-size",
         )
     return size  # type: ignore[return-value]

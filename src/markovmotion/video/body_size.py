@@ -89,3 +89,90 @@ def scaled_body(body: BodyModel, scale: float, legs: float = 1.0, arms: float = 
     factor = np.where(below[0], scale * legs, np.where(below[1], scale * arms, scale))
     skeleton = dataclasses.replace(sk, offsets=sk.offsets * factor[:, None])
     return dataclasses.replace(body, skeleton=skeleton, height=body.height * scale * legs)
+
+
+#: The segments :func:`segment_sizes_from_points` measures, each from one body point to the
+#: next on both sides (shoulders: from one to the other), and scales in :func:`segment_body`.
+SEGMENTS: tuple[tuple[str, str], ...] = (
+    ("shoulder", "elbow"),
+    ("elbow", "wrist"),
+    ("hip", "knee"),
+    ("knee", "ankle"),
+    ("shoulders", "width"),
+)
+
+
+def _span(points: np.ndarray, segment: tuple[str, str]) -> np.ndarray:
+    """(F,) a segment's length (mm) per frame of (F, 19, 3) body points, the mean of both
+    sides (or the shoulders' width)."""
+    at = {n: points[:, i] for i, n in enumerate(BODY_POINTS)}
+    if segment == ("shoulders", "width"):
+        return np.linalg.norm(at["left_shoulder"] - at["right_shoulder"], axis=-1)
+    a, b = segment
+    return np.mean(
+        [np.linalg.norm(at[f"{s}_{a}"] - at[f"{s}_{b}"], axis=-1) for s in ("left", "right")],
+        axis=0,
+    )
+
+
+def segment_sizes_from_points(body: BodyModel, points: np.ndarray) -> dict[str, float]:
+    """Each of :data:`SEGMENTS`' length, person to template (median over the frames in which
+    both its ends are seen), from a person's body points (F, 19, 3): e.g. MediaPipe's landmarks
+    triangulated from every camera (``track --body-size views``). The trunk and the hips are
+    not measured (MediaPipe's hip landmarks are not a skeleton's hip joints).
+
+    Raises:
+        ValueError: a segment never seen, or a factor outside :data:`SIZE_RANGE`.
+    """
+    template = body.joint_positions(body.standing(np.array([0.0, body.height, 0.0])))
+    out = {}
+    for segment in SEGMENTS:
+        person = _span(np.asarray(points, dtype=float), segment)
+        person = person[np.isfinite(person)]
+        if not len(person):
+            raise ValueError(f"{'-'.join(segment)} never seen")
+        out["-".join(segment)] = float(np.median(person) / _span(template, segment)[0])
+    bad = {k: round(v, 3) for k, v in out.items() if not SIZE_RANGE[0] <= v <= SIZE_RANGE[1]}
+    if bad:
+        raise ValueError(f"segment sizes {bad} outside {SIZE_RANGE}: not a measurement to trust")
+    return out
+
+
+def segment_body(body: BodyModel, sizes: dict[str, float]) -> BodyModel:
+    """The body model with each of :data:`SEGMENTS` scaled by ``sizes`` (person to template,
+    :func:`segment_sizes_from_points`): the bones from one body point to the next, on both
+    sides; the shoulders' width by the bones from the shoulders' common ancestor to each.
+    The legs' change moves the root's standing height with them."""
+    sk = body.skeleton
+    parents = [int(p) for p in sk.parents]
+    joint = {n: int(body.points[i]) for i, n in enumerate(BODY_POINTS)}
+    factor = np.ones(sk.n_joints)
+
+    def above(j: int) -> list[int]:
+        out = []
+        while j >= 0:
+            out.append(j)
+            j = parents[j]
+        return out
+
+    for (a, b), key in zip(SEGMENTS, ("-".join(s) for s in SEGMENTS), strict=True):
+        for side in ("left", "right"):
+            if (a, b) == ("shoulders", "width"):
+                other = set(above(joint[f"{'right' if side == 'left' else 'left'}_shoulder"]))
+                bones = [j for j in above(joint[f"{side}_shoulder"]) if j not in other]
+            else:
+                top = joint[f"{side}_{a}"]
+                chain = above(joint[f"{side}_{b}"])
+                bones = chain[: chain.index(top)] if top in chain else []
+            factor[bones] *= sizes.get(key, 1.0)
+    skeleton = dataclasses.replace(sk, offsets=sk.offsets * factor[:, None])
+    sized = dataclasses.replace(body, skeleton=skeleton)
+
+    def leg(m: BodyModel) -> float:  # hip to ankle, standing
+        return float(
+            _span(m.joint_positions(m.standing(np.array([0.0, m.height, 0.0]))), ("hip", "ankle"))[
+                0
+            ]
+        )
+
+    return dataclasses.replace(sized, height=body.height * leg(sized) / leg(body))
