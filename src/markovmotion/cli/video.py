@@ -215,28 +215,16 @@ def track(
             size = body_size_from_points(body, tr.points)
         except ValueError as exc:
             raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
-    if size == "views":
-        from markovmotion.video.body_size import segment_body, segment_sizes_from_points
-        from markovmotion.video.triangulation import track_triangulated_video
-
-        tri, _ = track_triangulated_video(video, cameras, max_frames, views=views)
-        try:
-            size = segment_sizes_from_points(body, tri.points)
-        except ValueError as exc:
-            raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
-        body = segment_body(body, size)
-        err_console.print(
-            "body size (person to template): " + ", ".join(f"{k} {v:.3f}" for k, v in size.items()),
-            highlight=False,
-        )
-    elif size != "template":
+    if size == "views" and video.is_file() and video.suffix.lower() != ".json":
+        raise MotionFormatError(video, "--body-size views needs the folder of every camera")
+    if size not in ("template", "views"):
         from markovmotion.video.body_size import scaled_body
 
         body = scaled_body(body, *size)
         err_console.print(
             "body size: scale {:.3f}, legs {:.3f}, arms {:.3f}".format(*size), highlight=False
         )
-    motion, _, summary = track_take(
+    motion, result, summary = track_take(
         video,
         body,
         cameras,
@@ -252,9 +240,17 @@ def track(
         guided,
         left_right or "views",
         person,
+        size == "views",
     )
     for line in ([note] if note else []) + summary["background"] + summary["notes"]:
         err_console.print(line, highlight=False)
+    if size == "views":
+        summary["body_size"] = result.body_size
+        err_console.print(
+            "body size (person to template): "
+            + ", ".join(f"{k} {v:.3f}" for k, v in result.body_size.items()),
+            highlight=False,
+        )
     if summary["views"] == 1:
         err_console.print(
             "note: one view leaves the particle filter depth and mirror ambiguous (hundreds of mm "
@@ -266,9 +262,7 @@ def track(
         from markovmotion.video.monocular import reference_errors
 
         summary["reference"] = reference_errors(body_points(motion), reference)
-    if isinstance(size, dict):
-        summary["body_size"] = size
-    elif size != "template":
+    if size not in ("template", "views"):
         summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:
         write_motion(motion, out)

@@ -757,6 +757,10 @@ class TrackResult:
     guide_someone_else: int = 0
     #: Whom the guide followed (:func:`~markovmotion.video.triangulation.whom`).
     guide_whom: dict = field(default_factory=dict)
+    #: With ``size_from_views``: the segments' sizes measured and the body model so scaled,
+    #: whose skeleton the states are of.
+    body_size: dict = field(default_factory=dict)
+    body: BodyModel | None = None
 
 
 def multiview_frames(
@@ -905,6 +909,7 @@ def track_video(
     guide: bool = False,
     left_right: str = "views",
     person: str | None = None,
+    size_from_views: bool = False,
 ) -> TrackResult:
     """Track the person of a video (see :func:`open_video`) with the annealed particle filter,
     from the pose ``start`` (a state) if given; with ``sides``, MediaPipe's left and right in
@@ -915,10 +920,16 @@ def track_video(
     MediaPipe runs before the clock starts (``guide_seconds`` of the result; ``guide_seen``: the share of views and
     frames it gave the filter landmarks in); ``person`` (``CAMERA:U,V``): of several people,
     MediaPipe follows the one at that pixel
-    (:func:`~markovmotion.video.triangulation.person_ray`)."""
+    (:func:`~markovmotion.video.triangulation.person_ray`); ``size_from_views``: the body's
+    segments scaled to the person's, measured from the same triangulated landmarks
+    (:func:`~markovmotion.video.body_size.segment_sizes_from_points`; the result's ``body``).
+
+    Raises:
+        MotionFormatError: ... or the body's size cannot be measured."""
     mv = open_video(video, cameras_file, views, max_frames, learn_background)
     check = guided = None
-    if sides or guide:  # MediaPipe once over every camera, for both uses
+    sizes: dict = {}
+    if sides or guide or size_from_views:  # MediaPipe once over every camera, for every use
         from markovmotion.video.sides import SideCheck
         from markovmotion.video.triangulation import (
             Guide,
@@ -940,8 +951,18 @@ def track_video(
         agreed = consistent_views(kept, left_right)
         someone_else = someone_else_count(views, kept)
         check = SideCheck.from_landmarks(agreed) if sides else None
+        points = triangulate_views(agreed) if guide or size_from_views else None
+        if size_from_views:
+            from markovmotion.video.body_size import segment_body, segment_sizes_from_points
+
+            try:
+                sizes = segment_sizes_from_points(body, points.points)
+            except ValueError as exc:
+                raise MotionFormatError(
+                    mv.source, f"cannot measure the body size ({exc})"
+                ) from None
+            body = segment_body(body, sizes)
         if guide:
-            points = triangulate_views(agreed)
             guided = Guide.from_views(agreed, points)
             followed = whom(points.points, mv.cameras, aim)
     apf = AnnealedParticleFilter(
@@ -955,4 +976,6 @@ def track_video(
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())
         result.guide_someone_else = someone_else
         result.guide_whom = followed
+    if size_from_views:
+        result.body_size, result.body = sizes, body
     return result

@@ -343,6 +343,7 @@ def track_take(
     guide: bool = False,
     left_right: str = "views",
     person: str | None = None,
+    size_from_views: bool = False,
 ) -> tuple[Motion, TrackResult, dict]:
     """Track a multi-view video; A's motion, the raw result, and a JSON-ready summary.
 
@@ -357,7 +358,9 @@ def track_take(
     and frames with landmarks to pull towards) and ``fps_with_guide``; ``left_right``: how
     MediaPipe's left and right are made consistent across the views first
     (:data:`~markovmotion.video.triangulation.LEFT_RIGHT`); ``person`` (``CAMERA:U,V``): of
-    several people, the guide follows the one at that pixel.
+    several people, the guide follows the one at that pixel; ``size_from_views``: the body's
+    segments measured from MediaPipe's landmarks of every view first (the summary's
+    ``body_size``; the motion is on the skeleton so scaled).
     """
     from markovmotion.video.cameras import camera_file, load_cameras
 
@@ -366,9 +369,9 @@ def track_take(
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
     result = track_video(
         video, body, cameras, particles, layers, views, max_frames, seed, first, learn_background,
-        sides, guide, left_right, person,
+        sides, guide, left_right, person, size_from_views,
     )  # fmt: skip
-    motion = body.motion(result.states, result.fps, name=Path(video).name)
+    motion = (result.body or body).motion(result.states, result.fps, name=Path(video).name)
     summary = {
         "frames": len(result.states),
         "fps": round(len(result.states) / max(result.seconds, 1e-9), 2),
