@@ -19,7 +19,8 @@ Kinds: ``--kinds salsa,bend`` or, by default, chosen from INDEX.csv at run time:
 category of skeleton takes, the label with the most takes (ties: the first listed).
 
     python3 benchmarks/held_out_kind.py [--data DIR] [--kinds A,B] [--seconds 3] [--start 1]
-        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--guide none] [--json]
+        [--seeds 1] [--first-seed 0] [--models interaction,collection] [--guide none]
+        [--body-size template] [--json]
 
 ``--guide mediapipe``: MediaPipe's landmarks in every view guide the filter, as ``track
 --guide mediapipe`` does (``track_video(..., guide=True)``); ``guide_seconds`` (MediaPipe's
@@ -126,6 +127,9 @@ def main() -> None:
     parser.add_argument("--left-right", choices=("views", "continuity", "both", "mediapipe"),
                         default="views", help="with the guide: MediaPipe's left and right made "
                         "consistent (triangulation.LEFT_RIGHT)")  # fmt: skip
+    parser.add_argument("--body-size", choices=("template", "views"), default="template",
+                        help="views: the segments scaled to the person's, measured from the "
+                        "guide's triangulated landmarks (track --body-size views)")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
 
@@ -150,9 +154,9 @@ def main() -> None:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 result = track_video(
                     folder, body, seed=seed, guide=args.guide == "mediapipe",
-                    left_right=args.left_right,
+                    left_right=args.left_right, size_from_views=args.body_size == "views",
                 )  # fmt: skip
-                motion = body.motion(result.states, result.fps)
+                motion = (result.body or body).motion(result.states, result.fps)
                 e = tracking_errors(motion, truth)
                 errs.append(e["mpjpe_mm"])
                 limbs.append(np.mean([e["per_joint_mm"][p] for p in GUIDE_POINTS]))
@@ -166,6 +170,7 @@ def main() -> None:
                     "body_model": name,
                     "guide": args.guide,
                     "left_right": args.left_right,
+                    "body_size": args.body_size,
                     "mpjpe_mm": round(float(np.mean(errs)), 1),
                     "mpjpe_runs": errs,
                     "limbs_mm": round(float(np.mean(limbs)), 1),

@@ -597,3 +597,20 @@ def test_mediapipe_says_nothing_on_the_terminal(real_video, tmp_path):
         "tracked 3 frames (3 with all 19 body points) of 4 views at "
         + run.stderr.split(" at ")[-1].strip(),
     ]
+
+
+def test_whom_notes_say_when_the_person_followed_may_not_be_the_one_meant():
+    """A track near where the cameras are aimed says nothing; far from it, or far from the
+    ray of a person named, or with views of someone else left out, one line each."""
+    from markovmotion.video.triangulation import FAR_FROM_CENTRE_M, FAR_FROM_RAY_M, whom_notes
+
+    near = {"from_capture_centre_m": FAR_FROM_CENTRE_M - 0.1, "views_of_someone_else": 0}
+    assert whom_notes(near) == []
+    far = {**near, "from_capture_centre_m": FAR_FROM_CENTRE_M + 0.2}
+    assert len(whom_notes(far)) == 1 and "1.2 m from where the cameras" in whom_notes(far)[0]
+    named = {**far, "from_person_m": FAR_FROM_RAY_M + 0.1}
+    (line,) = whom_notes(named, named=True)  # the ray decides, not the centre
+    assert "ray of --person" in line
+    assert whom_notes({**named, "from_person_m": FAR_FROM_RAY_M - 0.1}, named=True) == []
+    lines = whom_notes({**near, "views_of_someone_else": 3})
+    assert len(lines) == 1 and lines[0].startswith("note: 3 camera frames")

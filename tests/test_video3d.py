@@ -331,7 +331,10 @@ def test_respond_draws_the_partner_into_the_video(rendered, dual_model, tmp_path
 def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path, monkeypatch):
     """``dualhmm respond --video DIR --guide mediapipe``: A is tracked with MediaPipe's guide
     (what ``track --guide`` does; the tracker itself is tested in test_triangulation)."""
+    import inspect
+
     import markovmotion.video.composite as composite
+    import markovmotion.video.multiview as multiview
 
     seen = []
 
@@ -340,7 +343,9 @@ def test_respond_passes_the_guide_to_the_tracker(rendered, dual_model, tmp_path,
 
     def spy(*args, **kwargs):
         seen.append(kwargs.get("guide"))
-        assert kwargs.get("learn_background")  # as track's default, --background learn
+        # the background learnt, as track's default (--background learn) and track_take's
+        default = inspect.signature(multiview.track_take).parameters["learn_background"].default
+        assert kwargs.get("learn_background", default)
         raise Tracked
 
     monkeypatch.setattr(composite, "track_take", spy)

@@ -379,44 +379,12 @@ def _views(n: int) -> str:
 
 
 def _whom_notes(summary: dict, person: str | None) -> None:
-    """The lines that say whom MediaPipe followed, when it may not be the one meant: views of
-    someone else left out, a person followed far from where the cameras are aimed, or far
-    from the ray of the pixel named with ``--person`` (stderr, with or without ``--json``)."""
-    _someone_else_notes(summary.get("views_of_someone_else", 0))
-    if person is not None:
-        away = summary.get("from_person_m")
-        if away is not None and away > FAR_FROM_RAY_M:
-            err_console.print(
-                f"note: the person tracked stands {away:.1f} m from the ray of --person: "
-                "no camera's MediaPipe found anyone nearer (it finds one person per image)",
-                highlight=False,
-            )
-        return
-    away = summary.get("from_capture_centre_m")
-    if away is not None and away > FAR_FROM_CENTRE_M:
-        err_console.print(
-            f"note: the person tracked stands {away:.1f} m from where the cameras are "
-            "aimed; MediaPipe finds one person per image, so with several people in view "
-            "the one the views agree on is followed",
-            highlight=False,
-        )
+    """Print the lines that say whom MediaPipe followed (stderr, with or without ``--json``;
+    :func:`~markovmotion.video.triangulation.whom_notes`)."""
+    from markovmotion.video.triangulation import whom_notes
 
-
-#: Metres from where the cameras are aimed beyond which ``track`` says whom it followed.
-FAR_FROM_CENTRE_M = 1.0
-#: ``--person``: a person followed whose centre stood further than this (m) from the ray through
-#: the pixel named is not the one named (a ray through a body passes within its width).
-FAR_FROM_RAY_M = 0.5
-
-
-def _someone_else_notes(count: int) -> None:
-    """One line when MediaPipe found someone else than the person tracked in some views."""
-    if count:
-        err_console.print(
-            f"note: {count} camera frames showed someone else than the person tracked (MediaPipe "
-            "finds one person per image); they were left out",
-            highlight=False,
-        )
+    for line in whom_notes(summary, named=person is not None):
+        err_console.print(line, highlight=False)
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:

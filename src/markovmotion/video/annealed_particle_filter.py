@@ -826,7 +826,7 @@ def open_video(
     cameras_file: str | os.PathLike[str] | None = None,
     views: int | None = None,
     max_frames: int | None = None,
-    learn_background: bool = False,
+    learn_background: bool = True,
 ) -> MultiviewVideo:
     """A folder with ``cameras.json`` (or that file), or one camera's video file (with
     ``cameras_file``, or ``cameras.json`` beside it: the camera naming the file, else the
@@ -904,7 +904,7 @@ def track_video(
     max_frames: int | None = None,
     seed: int = 0,
     start: np.ndarray | None = None,
-    learn_background: bool = False,
+    learn_background: bool = True,
     sides: bool = False,
     guide: bool = False,
     left_right: str = "views",

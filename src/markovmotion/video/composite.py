@@ -112,9 +112,13 @@ def respond_in_video(
     start = time.perf_counter()
     a, result, summary = track_take(
         video, body, cameras, None, particles, layers, None, max_frames, guide=guide,
-        person=person, learn_background=True,
+        person=person,
     )  # fmt: skip
     tracked = time.perf_counter() - start
+    if guide:  # whom MediaPipe followed, when it may not be the one meant
+        from markovmotion.video.triangulation import whom_notes
+
+        summary["notes"] = summary["notes"] + whom_notes(summary, named=person is not None)
     b = _respond(dual, a, method)
     video_path = Path(video) if single else camera_videos(where, cams)[view]
     frames = read_frames(video_path, cams[view])
@@ -203,7 +207,7 @@ def _respond_live(
     from markovmotion.models.online import concatenate
 
     dual = _load_partner_model(model)
-    mv = open_video(video, cameras, None, max_frames, learn_background=True)  # before the clock
+    mv = open_video(video, cameras, None, max_frames)  # before the clock
     if Path(video).is_file():
         view = 0
     if not 0 <= view < len(mv.cameras):

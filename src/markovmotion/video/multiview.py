@@ -338,7 +338,7 @@ def track_take(
     max_frames: int | None = None,
     seed: int = 0,
     start: str | os.PathLike[str] | None = None,
-    learn_background: bool = False,
+    learn_background: bool = True,
     sides: bool = False,
     guide: bool = False,
     left_right: str = "views",

@@ -976,6 +976,44 @@ def whom(points: np.ndarray, cameras: Sequence[CalibratedCamera], aim: Aim | Non
     return out
 
 
+#: Metres from where the cameras are aimed beyond which :func:`whom_notes` says whom a
+#: track followed.
+FAR_FROM_CENTRE_M = 1.0
+#: A person named (``--person``) whose centre stood further than this (m) from the ray
+#: through the pixel named is not the one named (a ray through a body passes within its
+#: width).
+FAR_FROM_RAY_M = 0.5
+
+
+def whom_notes(summary: dict, named: bool = False) -> list[str]:
+    """The lines that say whom MediaPipe followed, when it may not be the one meant, from a
+    summary with :func:`whom`'s keys and ``views_of_someone_else``: views of someone else
+    left out, a person followed far from where the cameras are aimed, or (``named``: a
+    person named with a pixel) far from that pixel's ray."""
+    lines = []
+    if count := summary.get("views_of_someone_else", 0):
+        lines.append(
+            f"note: {count} camera frames showed someone else than the person tracked "
+            "(MediaPipe finds one person per image); they were left out"
+        )
+    if named:
+        away = summary.get("from_person_m")
+        if away is not None and away > FAR_FROM_RAY_M:
+            lines.append(
+                f"note: the person tracked stands {away:.1f} m from the ray of --person: "
+                "no camera's MediaPipe found anyone nearer (it finds one person per image)"
+            )
+        return lines
+    away = summary.get("from_capture_centre_m")
+    if away is not None and away > FAR_FROM_CENTRE_M:
+        lines.append(
+            f"note: the person tracked stands {away:.1f} m from where the cameras are "
+            "aimed; MediaPipe finds one person per image, so with several people in view "
+            "the one the views agree on is followed"
+        )
+    return lines
+
+
 def _median_m(distances: np.ndarray) -> float | None:
     """The median of distances (mm) in metres, to the centimetre; None when none is finite."""
     d = np.asarray(distances, dtype=float)
