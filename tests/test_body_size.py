@@ -79,7 +79,14 @@ def test_segments_scaled_and_measured_back_in_any_pose(body):
     b[3, BODY_POINTS.index("left_elbow")] = np.nan
     assert segment_sizes_from_points(body, b) == pytest.approx(want)
     assert segment_sizes_from_points(body, a) == pytest.approx(dict.fromkeys(want, 1.0))
-    b[..., 1] *= 3.0
+    notes: list[str] = []
+    wide = b.copy()  # one implausible segment: the template's kept for it alone, and said
+    wide[:, BODY_POINTS.index("left_ankle"), 1] -= 2000.0
+    wide[:, BODY_POINTS.index("right_ankle"), 1] -= 2000.0
+    got = segment_sizes_from_points(body, wide, notes)
+    assert got == pytest.approx({k: v for k, v in want.items() if k != "knee-ankle"})
+    assert len(notes) == 1 and "knee-ankle" in notes[0] and "template" in notes[0]
+    b *= 3.0  # every segment three times the template's: nothing to trust
     with pytest.raises(ValueError, match="not a measurement to trust"):
         segment_sizes_from_points(body, b)
 

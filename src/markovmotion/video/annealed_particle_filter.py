@@ -956,7 +956,7 @@ def track_video(
             from markovmotion.video.body_size import segment_body, segment_sizes_from_points
 
             try:
-                sizes = segment_sizes_from_points(body, points.points)
+                sizes = segment_sizes_from_points(body, points.points, mv.video_notes)
             except ValueError as exc:
                 raise MotionFormatError(
                     mv.source, f"cannot measure the body size ({exc})"

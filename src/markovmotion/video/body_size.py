@@ -122,26 +122,38 @@ def _span(points: np.ndarray, segment: tuple[str, str]) -> np.ndarray:
     )
 
 
-def segment_sizes_from_points(body: BodyModel, points: np.ndarray) -> dict[str, float]:
+def segment_sizes_from_points(
+    body: BodyModel, points: np.ndarray, notes: list[str] | None = None
+) -> dict[str, float]:
     """Each of :data:`SEGMENTS`' length, person to template (median over the frames in which
     both its ends are seen), from a person's body points (F, 19, 3): e.g. MediaPipe's landmarks
     triangulated from every camera (``track --body-size views``). The trunk and the hips are
-    not measured (MediaPipe's hip landmarks are not a skeleton's hip joints).
+    not measured (MediaPipe's hip landmarks are not a skeleton's hip joints). A segment never
+    seen, or whose factor is outside :data:`SIZE_RANGE`, is left out (the template's is kept,
+    :func:`segment_body`) and said in ``notes``: one implausible segment (a shoulder
+    landmark on the clothes) does not throw away the others.
 
     Raises:
-        ValueError: a segment never seen, or a factor outside :data:`SIZE_RANGE`.
+        ValueError: no segment measured within :data:`SIZE_RANGE`.
     """
     template = body.joint_positions(body.standing(np.array([0.0, body.height, 0.0])))
-    out = {}
+    out, left_out = {}, []
     for segment in SEGMENTS:
+        key = "-".join(segment)
         person = _span(np.asarray(points, dtype=float), segment)
         person = person[np.isfinite(person)]
         if not len(person):
-            raise ValueError(f"{'-'.join(segment)} never seen")
-        out["-".join(segment)] = float(np.median(person) / _span(template, segment)[0])
-    bad = {k: round(v, 3) for k, v in out.items() if not SIZE_RANGE[0] <= v <= SIZE_RANGE[1]}
-    if bad:
-        raise ValueError(f"segment sizes {bad} outside {SIZE_RANGE}: not a measurement to trust")
+            left_out.append(f"{key} never seen")
+            continue
+        factor = float(np.median(person) / _span(template, segment)[0])
+        if SIZE_RANGE[0] <= factor <= SIZE_RANGE[1]:
+            out[key] = factor
+        else:
+            left_out.append(f"{key} {factor:.3f} outside {SIZE_RANGE}")
+    if not out:
+        raise ValueError(f"{'; '.join(left_out)}: not a measurement to trust")
+    if left_out and notes is not None:
+        notes.append(f"body size: the template's kept for {'; '.join(left_out)}")
     return out
 
 
