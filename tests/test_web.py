@@ -470,6 +470,20 @@ class PageSocket:
         self.frames.append(json.loads(text))
 
 
+def _in_thread(function, *args, **kwargs):
+    """``function`` (one that calls ``asyncio.run``) in a thread of its own: the browser
+    tests' Playwright (a session fixture) keeps an event loop running in the main thread
+    once any of them has run, whatever the order the tests run in."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(function, *args, **kwargs).result()
+
+
+def _run(coroutine):
+    return _in_thread(asyncio.run, coroutine)
+
+
 def test_a_stream_served_late_starts_its_clock_with_its_first_frame():
     """A session's first frame served a second after the session began (a busy worker) is
     frame 0, nothing dropped, and frame 1 is due a frame after it, not at once and not
@@ -486,7 +500,7 @@ def test_a_stream_served_late_starts_its_clock_with_its_first_frame():
         await asyncio.sleep(0)
         return ws, stream, time.perf_counter()
 
-    ws, stream, now = asyncio.run(run())
+    ws, stream, now = _run(run())
     assert [(f["i"], f["skipped"]) for f in ws.frames] == [(0, 0)]
     assert stream.frame == 1 and 0 < stream.due - now <= 1 / 30
 
@@ -505,7 +519,7 @@ def test_a_slow_page_holds_up_only_its_own_send():
         await asyncio.wait_for(waiting, 1)
         assert slow.frames == [{"i": 1}]
 
-    asyncio.run(run())
+    _run(run())
 
 
 def test_live_session_from_an_uploaded_bvh(server):
@@ -558,7 +572,7 @@ def test_short_load_every_answer_is_stored(site, tmp_path):
     app = create_app(site / "lib", db, admin_token=ADMIN, partner=MirrorPartner)
     with running(app) as url:
         evaluators = simulate_evaluators(url, n=50, seconds=4.0)
-        live = simulate_live(url, "short.bvh", n=20, seconds=2.0)
+        live = _in_thread(simulate_live, url, "short.bvh", n=20, seconds=2.0)
     assert not evaluators.errors and evaluators.answers > 50
     assert open_results(db).count_answers() == evaluators.answers
     assert not live.errors and live.sessions == 20 and min(live.frames) > 0
@@ -569,7 +583,7 @@ def test_two_server_processes_share_the_sessions_and_store_every_answer(site, du
     options = AppOptions(site / "lib", db, admin_token=ADMIN, partner=dual)
     with running_workers(options, workers=2) as url:
         evaluators = simulate_evaluators(url, n=10, seconds=3.0)
-        live = simulate_live(url, "salsa_a.bvh", n=6, seconds=1.5)
+        live = _in_thread(simulate_live, url, "salsa_a.bvh", n=6, seconds=1.5)
         assert fetch(f"{url}/api/motions")[0] == 200
     # two writers on one SQLite file: every accepted answer is there once
     assert not evaluators.errors and evaluators.answers > 10
