@@ -78,6 +78,27 @@ def test_a_pose2sim_calibration_gives_the_cameras_of_the_real_video(real_video, 
     assert load_cameras(tmp_path)[1]["fps"] == 30.0
 
 
+def test_videos_given_in_another_order_than_the_cameras_are_refused(real_video, tmp_path, capsys):
+    """Cameras cam_01 ... cam_04 with videos cam1.mp4 ... cam4.mp4 given as 2, 1, 3, 4: one
+    line naming the order that matches, exit 2, nothing written; in their order, written."""
+    truth, _ = load_cameras(real_video)
+    calib = tmp_path / "Calib.toml"
+    calib.write_text(_toml(truth))
+    videos = []
+    for k in range(4):
+        (tmp_path / f"cam{k + 1}.mp4").symlink_to(real_video / f"cam{k}.mp4")
+        videos.append(tmp_path / f"cam{k + 1}.mp4")
+    swapped = [videos[1], videos[0], *videos[2:]]
+    with pytest.raises(SystemExit) as stop:
+        main(["video", "cameras", str(calib), *map(str, swapped)])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and len(err.strip().splitlines()) == 1
+    assert "another order" in err and "cam1.mp4 cam2.mp4 cam3.mp4 cam4.mp4" in err
+    assert not (tmp_path / "cameras.json").exists()
+    main(["video", "cameras", str(calib), *map(str, videos)])
+    assert [c.name for c in load_cameras(tmp_path)[0]] == [f"cam_0{k}" for k in range(1, 5)]
+
+
 @pytest.mark.parametrize(
     ("edit", "n_videos", "message"),
     [

@@ -264,6 +264,38 @@ def calibration_cameras(
     return cameras_from_toml(path, videos, up, units)
 
 
+def _one_number(text: str) -> int | None:
+    """The one whole number in ``text`` (``int_cam02_img`` gives 2), else None."""
+    found = re.findall(r"\d+", text)
+    return int(found[0]) if len(found) == 1 else None
+
+
+def check_order(
+    names: list[str], videos: list[Path], calibration: str | os.PathLike[str] = "calibration"
+) -> None:
+    """Refuse videos given in another order than the calibration's cameras, when both are
+    numbered alike (each camera's name and each video's file name hold one number, the same
+    numbers on both sides, in another order: ``cam02.mp4`` given for ``int_cam01_img``):
+    each camera would be paired with another camera's video, and every 3-D point would be
+    wrong without a word. Names that do not say (serials, other numbers) are not checked.
+
+    Raises:
+        MotionFormatError: the order that matches, in one line."""
+    cams = [_one_number(n) for n in names]
+    vids = [_one_number(Path(v).stem) for v in videos]
+    if None in cams or None in vids or len(set(cams)) != len(cams) or sorted(cams) != sorted(vids):
+        return
+    if cams != vids:
+        by_number = {n: Path(v).name for n, v in zip(vids, videos, strict=True)}
+        raise MotionFormatError(
+            calibration,
+            "the videos are in another order than its cameras ("
+            + ", ".join(names)
+            + "): give them as "
+            + " ".join(by_number[n] for n in cams),
+        )
+
+
 def import_calibration(
     calibration: str | os.PathLike[str],
     videos: list[Path],
@@ -286,6 +318,7 @@ def import_calibration(
             videos[0], "the videos must be in one folder (cameras.json names them)"
         )
     cameras = calibration_cameras(calibration, videos, up, units)
+    check_order([c.name for c in cameras], videos, calibration)
     rate = fps if fps is not None else video_fps(videos[0], 0.0)
     if not rate > 0:
         raise MotionFormatError(videos[0], "no frame rate in this video: give --fps")
