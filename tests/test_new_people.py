@@ -438,6 +438,15 @@ def test_takes_of_two_actions_with_the_same_file_stems_keep_their_own_names(moca
     assert all(n == f"{a.name}+{b.name}" for (a, b), n in take_names(one).items())
 
 
+def _strict_json(text: str) -> dict:
+    """JSON as a strict parser (a browser's ``JSON.parse``) reads it: NaN is refused."""
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
 def test_train_holds_out_pairs_of_people_and_evaluate_answers_them(mocap, tmp_path, capsys):
     """``dualhmm train --test-people P``: P's takes are not learnt and are what ``evaluate``
     (without ``--test``) answers, reported per pair of people; an unknown pair is one line."""
@@ -454,7 +463,7 @@ def test_train_holds_out_pairs_of_people_and_evaluate_answers_them(mocap, tmp_pa
     )
     capsys.readouterr()
     main(["dualhmm", "evaluate", "--model", str(model), "--json"])
-    report = json.loads(capsys.readouterr().out)
+    report = _strict_json(capsys.readouterr().out)  # one pair: no observer per pair, null
     assert list(report["per_people"]) == [held]
     assert report["overall"]["pairs"] == sum(a.subject == held for a, _ in pairs)
     assert not report["left_out_training_files"]
@@ -470,7 +479,7 @@ def test_nested_crossval_reports_each_folds_pick(tmp_path, capsys):
 
     main(["dualhmm", "crossval", "--labels", "handshake", "--kind", "markers", "--states", "3",
           "--n-iter", "2", "--choose", "blend_window=1,9", "--json"])  # fmt: skip
-    report = json.loads(capsys.readouterr().out)
+    report = _strict_json(capsys.readouterr().out)
     picks = report["chosen_per_fold"]
     assert set(picks) == set(report["per_people"])
     assert all(p in ({"blend_window": 1}, {"blend_window": 9}) for p in picks.values())

@@ -1,4 +1,5 @@
-"""Turning fitted estimators into JSON + arrays and back, for :mod:`markovmotion.persist`.
+"""Turning fitted estimators into JSON + arrays and back, for :mod:`markovmotion.persist`;
+and results as strict JSON text (:func:`json_text`).
 
 An estimator (feature step or model) follows scikit-learn's conventions: its
 constructor stores hyper-parameters (``get_params``), and everything learnt
@@ -9,6 +10,8 @@ attributes; arrays go to the ``.npz``, everything else to the JSON header.
 from __future__ import annotations
 
 import inspect
+import json
+import math
 from typing import Any
 
 import numpy as np
@@ -326,3 +329,21 @@ def _check_param(value: Any, default: Any, field: str) -> Any:
             f"{field}: expected {type(default).__name__}, found {type(value).__name__}"
         )
     return value
+
+
+def finite(value: object) -> object:
+    """``value`` with NaN and infinities (Python or NumPy floats, at any depth of dicts,
+    lists and tuples) as None: JSON has no NaN, and strict parsers (JavaScript's
+    ``JSON.parse``, ``json.loads`` with ``parse_constant``) refuse Python's ``NaN``."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):  # NumPy floats are floats
+        return None
+    return value
+
+
+def json_text(value: object, indent: int | None = None) -> str:
+    """``value`` as strict JSON (:func:`finite`: NaN as null)."""
+    return json.dumps(finite(value), indent=indent, allow_nan=False)

@@ -7,7 +7,6 @@ the held-out takes.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -21,7 +20,7 @@ from markovmotion.cli.options import (
     ranged,
     roles_option,
 )
-from markovmotion.cli.tables import print_table
+from markovmotion.cli.tables import print_json, print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs, people_out, select_pairs
@@ -395,7 +394,7 @@ def evaluate(
         partner_model, test, label, hypotheses, response, seed, sigma, resync, dual, takes
     )
     if as_json:
-        typer.echo(json.dumps(result, indent=2))
+        print_json(result, indent=2)
         return
     title = f"virtual partner on {len(result['takes'])} test takes ({result['unit']})"
     _print_errors(result, f"{title}, each person masked in turn", response)
@@ -469,7 +468,7 @@ def crossval(
         grid=grid,
     )
     if as_json:
-        typer.echo(json.dumps(report, indent=2))
+        print_json(report, indent=2)
         return
     rows = {
         "overall": report["overall"],

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -14,6 +13,7 @@ from markovmotion.evaluate.interaction import summarise_interaction
 from markovmotion.evaluate.perceptual import LABELS, RESEMBLANCE, TESTS, answers_csv, summarise
 from markovmotion.evaluate.store import open_results
 from markovmotion.io.files import atomic_write
+from markovmotion.state import json_text
 
 app = typer.Typer(
     help="Perceptual evaluation: synthesized walks (gait paper §6), generated interactions "
@@ -129,7 +129,7 @@ def report(
             fh.write(answers_csv(items))
     if json_out:
         with atomic_write(json_out) as fh:
-            fh.write(json.dumps(figures, indent=1))
+            fh.write(json_text(figures, indent=1))
 
 
 def _print_interaction(s: dict, console: Console) -> None:

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from markovmotion.cli.options import ranged
-from markovmotion.cli.tables import print_table
+from markovmotion.cli.tables import print_json, print_table
 from markovmotion.data.walks import SPLITS, load_walks
 from markovmotion.io import write_motion
 from markovmotion.persist import check_model_output
@@ -289,7 +289,6 @@ def evaluate(
     model (its training walks) is a class of the classifier but not a target
     of the models.
     """
-    import json
 
     from markovmotion.evaluate.gait import ROLES, StyleClassifier, evaluate_models, load_models
     from markovmotion.progress import progress_bar
@@ -329,7 +328,7 @@ def evaluate(
     finally:
         bar.stop()
     if as_json:
-        print(json.dumps(_finite(result), indent=1))
+        print_json(result, indent=1)
         return
     real = result["real"]
     columns = {
@@ -360,18 +359,6 @@ def evaluate(
         print_table(_sweep_table(result["sweep"], result.get("average")))
 
 
-def _finite(value: object) -> object:
-    """NaN and infinities as JSON null."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
-@app.command("steps")
 def steps_(
     data: list[Path] = typer.Option(None, help="INDEX.csv (or its folder) or walk files."),
     label: list[str] = typer.Option(None, help="Labels to list from an index (default all)."),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from markovmotion.cli.options import (
     ranged,
     roles_option,
 )
+from markovmotion.cli.tables import print_json
 from markovmotion.data.index import read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -590,7 +590,7 @@ def crossval(
 def _report(report: dict, written: list[Path], json_out: bool) -> None:
     """Print ``report`` as JSON (stdout) or as a table, and the plots written (stderr)."""
     if json_out:
-        typer.echo(json.dumps(report, indent=2))
+        print_json(report, indent=2)
     else:
         _print_table(report)
     for key in ("test_files", "left_out_training_files", "left_out_other_skeleton"):

@@ -1,4 +1,4 @@
-"""Printing result tables: Rich boxes on a terminal, full text everywhere else.
+"""Printing results: tables (Rich boxes on a terminal, full text everywhere else) and JSON.
 
 Rich squeezes a table into the console width and truncates cells with an
 ellipsis. On a terminal that is what a reader wants; piped into a file or a
@@ -16,6 +16,8 @@ import sys
 from rich.console import Console
 from rich.measure import Measurement
 from rich.table import Table
+
+from markovmotion.state import json_text
 
 #: The width assumed for output that is not a terminal.
 PLAIN_WIDTH = 80
@@ -57,3 +59,8 @@ def print_table(table: Table, console: Console | None = None) -> None:
         Console(width=PLAIN_WIDTH, file=console.file).print(table)
     else:
         (console.file or sys.stdout).write(table_as_csv(table))
+
+
+def print_json(value: object, indent: int | None = None) -> None:
+    """Print ``value`` as strict JSON on standard output (:func:`json_text`)."""
+    print(json_text(value, indent))

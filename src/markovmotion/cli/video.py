@@ -3,7 +3,6 @@ particle filtering (dual-HMM paper, §3)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -16,6 +15,7 @@ from markovmotion.cli.options import (
     person_option,
     ranged,
 )
+from markovmotion.cli.tables import print_json
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -269,7 +269,7 @@ def track(
         err_console.print(f"wrote {out}", highlight=False)
     _whom_notes(summary, person)
     if json_out:
-        typer.echo(json.dumps(summary))
+        print_json(summary)
     else:
         err = f", MPJPE {summary['mpjpe_mm']:.1f} mm" if "mpjpe_mm" in summary else ""
         if "reference" in summary:
@@ -359,7 +359,7 @@ def _track_landmarks(
         err_console.print(line, highlight=False)
     _whom_notes(summary, person)
     if json_out:
-        typer.echo(json.dumps(summary))
+        print_json(summary)
     else:
         err = (
             f", {summary['aligned_mean_mm']:.1f} mm after rigid alignment "

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +9,7 @@ import typer
 from rich.table import Table
 
 from markovmotion.cli.options import choice, kind_option, ranged
-from markovmotion.cli.tables import print_table
+from markovmotion.cli.tables import print_json, print_table
 from markovmotion.core.markers import Markers
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
@@ -397,7 +396,7 @@ def evaluate(
         result.plot(plot)
         err_console.print(f"wrote {plot}")
     if as_json:
-        typer.echo(json.dumps(result.result(), indent=2))
+        print_json(result.result(), indent=2)
         return
     table = Table(
         title=f"E_T ({'mm' if space == 'mm' else 'configuration space'}) on {', '.join(m.name for m in result.motions)}, "
@@ -447,7 +446,7 @@ def _evaluate_contours(
             "test_files": [e.file for e in entries],
             "E_T": {n: {f"{s:g}": c.at(s) for s in seconds} for n, c in curves.items()},
         }
-        typer.echo(json.dumps(out, indent=2))
+        print_json(out, indent=2)
         return
     table = Table(title=f"E_T ({unit}) on {', '.join(e.file for e in entries)}")
     table.add_column("model")

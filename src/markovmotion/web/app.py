@@ -45,6 +45,7 @@ from markovmotion.evaluate.perceptual import (
 )
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
 from markovmotion.evaluate.store import EvaluationError, EvaluationStore
+from markovmotion.state import json_text
 from markovmotion.viz.point_light import point_lights
 from markovmotion.web.camera import TrackerFactory, camera_session
 from markovmotion.web.library import (
@@ -415,7 +416,7 @@ def create_app(
             if s.interaction is not None
             else None
         )
-        return Response(json.dumps(report), media_type="application/json")
+        return Response(json_text(report), media_type="application/json")
 
     @app.get("/api/results.csv")
     def results_csv(token: str | None = None) -> Response:
