@@ -483,3 +483,34 @@ def test_nested_crossval_reports_each_folds_pick(tmp_path, capsys):
     picks = report["chosen_per_fold"]
     assert set(picks) == set(report["per_people"])
     assert all(p in ({"blend_window": 1}, {"blend_window": 9}) for p in picks.values())
+
+
+def test_evaluate_on_a_mixed_index_keeps_the_models_own_kind(mocap, tmp_path, capsys):
+    """A marker partner evaluated on an index of marker and skeleton takes (the collection)
+    answers the marker takes alone and lists the skeleton takes as of another kind, not in
+    one mean with them; a take whose A lacks a marker is listed with the marker named."""
+    from markovmotion.cli import main
+
+    pairs = mocap.pairs("handshake", kind="markers")
+    held = sorted({a.subject for a, _ in pairs})[-1]
+    model = tmp_path / "m.npz"
+    main(["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
+          "--n-iter", "2", "--test-people", held, "--out", str(model)])  # fmt: skip
+    capsys.readouterr()
+    main(["dualhmm", "evaluate", "--model", str(model), "--test", str(mocap.root), "--json"])
+    report = _strict_json(capsys.readouterr().out)
+    kinds = {e.file: e.kind for e in mocap.query(category="interaction")}
+    assert report["test_files"] and all(kinds[f] == "markers" for f in report["test_files"])
+    skeleton_takes = [a.file for a, _ in mocap.pairs("handshake") if a.kind == "skeleton"]
+    assert skeleton_takes and set(skeleton_takes) <= set(report["left_out_other_kind"])
+    assert list(report["per_people"]) == [held]
+
+    dual = DualHMM.load(model)
+    a, b = next((a, b) for a, b in pairs if a.subject == held)
+    xa, xb = mocap.load_pair(a, b)
+    names = tuple("RIGHT_HAND" if n == "R_HAND" else n for n in xa.names)
+    renamed = Markers(names, xa.positions, xa.fps, xa.name)
+    index = type("Index", (), {"load_pair": lambda self, ea, eb: (renamed, xb)})()
+    left: list[str] = []
+    assert not list(evaluation.pairs_that_fit(dual, index, [(a, b)], left))
+    assert left == [f"{a.file} (markers not found: R_HAND)", b.file]

@@ -593,7 +593,12 @@ def _report(report: dict, written: list[Path], json_out: bool) -> None:
         print_json(report, indent=2)
     else:
         _print_table(report)
-    for key in ("test_files", "left_out_training_files", "left_out_other_skeleton"):
+    for key in (
+        "test_files",
+        "left_out_training_files",
+        "left_out_other_kind",
+        "left_out_other_skeleton",
+    ):
         if report.get(key) and not json_out:
             err_console.print(f"{key.replace('_', ' ')}: {', '.join(report[key])}", highlight=False)
     for p in written:

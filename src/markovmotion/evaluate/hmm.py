@@ -34,6 +34,7 @@ the model's own held-out takes) and :func:`crossval_index`.
 from __future__ import annotations
 
 import os
+import re
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -632,22 +633,49 @@ def evaluation_pairs(
         held = getattr(model, "held_out_files_", None)
         if test is None and held:
             pairs = [p for p in pairs if p[0].file in held]
-    return index, test_takes(model, index, pairs, "two-person take")
+    pairs, other_kind = own_kind(model, pairs)
+    takes = test_takes(model, index, pairs, "two-person take")
+    takes.other_kind = TestTakes._files(other_kind)
+    return index, takes
+
+
+def own_kind(model: DualHMM, pairs: Sequence[Pair]) -> tuple[list[Pair], list[Pair]]:
+    """Of ``pairs``, those of the kind the model learnt (markers or skeletons) and the others,
+    when both are there: a marker model answers a skeleton's A through virtual markers, but
+    one mean over both kinds would mix two measures (a collection of C3D handshakes and a
+    CMU skeleton take); with takes of one kind alone, those are kept whatever their kind."""
+    own = "markers" if model.uses_markers else "skeleton"
+    kept = [p for p in pairs if p[0].kind == own]
+    if not kept or len(kept) == len(pairs):
+        return list(pairs), []
+    return kept, [p for p in pairs if p[0].kind != own]
 
 
 def pairs_that_fit(
     model: DualHMM, index: MocapIndex, pairs: Iterable[Pair], other_skeleton: list[str]
 ) -> Iterator[tuple[Entry, Entry, Motion, Motion]]:
     """The takes of ``pairs`` loaded, those whose person A the model can answer; the files
-    of the others (A on a skeleton without the model's body points) go to ``other_skeleton``."""
+    of the others (A on a skeleton without the model's body points, or without its markers)
+    go to ``other_skeleton``, each with why (``file (markers not found: R_HAND)``)."""
     for ea, eb in pairs:
         a, b = index.load_pair(ea, eb)
         try:
             model.check_input(a, ea.path)
-        except SkeletonMismatchError:
-            other_skeleton += [ea.file, eb.file]
+        except SkeletonMismatchError as exc:
+            other_skeleton += [f"{ea.file} ({_why(exc, ea)})", eb.file]
             continue
         yield ea, eb, a, b
+
+
+def _why(exc: Exception, entry: Entry) -> str:
+    """The innermost reason of a mismatch (``markers not found: R_HAND``), the take's file
+    left out: the message's last parenthesis, else the whole message."""
+    text = str(exc)
+    inner = re.search(r"\(([^()]*)\)\s*$", text)
+    reason = inner.group(1) if inner else text
+    for where in (str(entry.path), entry.file, entry.path.name):
+        reason = reason.removeprefix(f"{where}: ")
+    return reason
 
 
 def evaluate_model(
@@ -677,7 +705,8 @@ def evaluate_model(
             f"skeleton: {', '.join(incompatible)}"
         )
     report = summarise(results, model)
-    report.update(TestTakes(kept, takes.left_out).report(), left_out_other_skeleton=incompatible)
+    report.update(TestTakes(kept, takes.left_out, takes.other_kind).report())
+    report["left_out_other_skeleton"] = incompatible
     return report, plots
 
 

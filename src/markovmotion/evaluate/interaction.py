@@ -204,6 +204,7 @@ def write_interaction_stimuli(
         float(model.fps),
         {
             "left_out_training_files": takes.report()["left_out_training_files"],
+            "left_out_other_kind": takes.other_kind,
             "left_out_other_skeleton": other_skeleton,
         },
     )

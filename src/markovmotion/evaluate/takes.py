@@ -33,6 +33,9 @@ class TestTakes:
 
     takes: list[Any]
     left_out: list[Any] = field(default_factory=list)
+    #: Files of takes left out for being of another kind (markers, skeletons) than the model
+    #: learnt, when the index holds both (:func:`markovmotion.evaluate.hmm.own_kind`).
+    other_kind: list[str] = field(default_factory=list)
 
     @staticmethod
     def _files(items: Sequence[Any]) -> list[str]:
@@ -43,11 +46,15 @@ class TestTakes:
         return out
 
     def report(self) -> dict[str, list[str]]:
-        """``test_files`` and ``left_out_training_files`` (INDEX.csv file names) for a JSON."""
-        return {
+        """``test_files`` and ``left_out_training_files`` (INDEX.csv file names) for a JSON,
+        and ``left_out_other_kind`` when some were."""
+        out = {
             "test_files": self._files(self.takes),
             "left_out_training_files": self._files(self.left_out),
         }
+        if self.other_kind:
+            out["left_out_other_kind"] = list(self.other_kind)
+        return out
 
 
 def trained_on(model: Model, entry: Entry) -> bool:
