@@ -71,3 +71,19 @@ def test_take_names_keep_every_take_when_stems_collide():
     assert names[:2] == ["handshake u1+u2", "wave u1+u2"]
     assert names[2:] == ["x/u3.c3d+x/u4.c3d", "y/u3.c3d+y/u4.c3d"]
     assert list(take_names(pairs[:1]).values()) == ["u1+u2"]
+
+
+def test_choosing_on_takes_of_one_pair_of_people_says_so_once(capsys):
+    """Inner folds on one pair of people's takes leave one take out, scoring each setting on
+    people it learnt from: said once on stderr; two pairs or more, or the outer folds, say
+    nothing."""
+    from markovmotion.evaluate.choose import _note_once, fold_groups
+
+    _note_once.cache_clear()
+    assert fold_groups(["p1", "p1"], ["a", "b"], choosing=True) == ["a", "b"]
+    assert fold_groups(["p1", "p1"], ["a", "b"], choosing=True) == ["a", "b"]
+    err = capsys.readouterr().err
+    assert err.count("chosen by leaving one take out") == 1 and "(p1)" in err
+    assert fold_groups(["p1", "p2"], ["a", "b"], choosing=True) == ["p1", "p2"]
+    assert fold_groups(["p3", "p3"], ["a", "b"]) == ["a", "b"]
+    assert capsys.readouterr().err == ""

@@ -514,3 +514,16 @@ def test_evaluate_on_a_mixed_index_keeps_the_models_own_kind(mocap, tmp_path, ca
     left: list[str] = []
     assert not list(evaluation.pairs_that_fit(dual, index, [(a, b)], left))
     assert left == [f"{a.file} (markers not found: R_HAND)", b.file]
+
+
+def test_choose_says_what_it_replaces_and_what_it_picked(tmp_path, capsys):
+    """An option that ``--choose`` also sets is said to be replaced; the pick's line says
+    "the only setting" for a grid of one, not "worst of 1"."""
+    from markovmotion.cli import main
+
+    main(["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
+          "--n-iter", "2", "--output", "regression", "--choose", "output=frames",
+          "--out", str(tmp_path / "m.npz")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "--output regression is replaced by --choose's output (frames)" in err
+    assert "chose output=frames" in err and "the only setting" in err and "worst" not in err

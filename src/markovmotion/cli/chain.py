@@ -14,6 +14,7 @@ from rich.table import Table
 
 from markovmotion.cli.options import (
     choose_option,
+    chosen_line,
     grid_of,
     kind_option,
     normalise_option,
@@ -220,12 +221,11 @@ def train(
             model.fit(takes)
     model.save(out, source=source, labels=labels if source == "mocap" else [], **extras)
     if "chosen" in extras:
-        inner = extras["chosen"]["inner_mm"]
         err_console.print(
-            f"chose {', '.join(f'{k}={v}' for k, v in extras['chosen']['settings'].items())} "
-            "by leaving one pair of people out: world + body-centred error of the multiple "
-            f"hypotheses {min(inner.values()):.1f} mm (worst of {len(inner)}: "
-            f"{max(inner.values()):.1f} mm)",
+            chosen_line(
+                extras["chosen"],
+                "world + body-centred error of the multiple hypotheses on the folds left out",
+            ),
             highlight=False,
         )
     ch = model.chain_

@@ -13,6 +13,7 @@ from markovmotion.cli.options import (
     check_person,
     choice,
     choose_option,
+    chosen_line,
     grid_of,
     guide_option,
     kind_option,
@@ -234,11 +235,8 @@ def train(
         )  # fmt: skip
     model.save(out, **extras)
     if "chosen" in extras:
-        inner = extras["chosen"]["inner_mm"]
         err_console.print(
-            f"chose {', '.join(f'{k}={v}' for k, v in extras['chosen']['settings'].items())} "
-            f"by leaving one pair of people out: windowed world error {min(inner.values()):.1f} mm "
-            f"(worst of {len(inner)}: {max(inner.values()):.1f} mm)",
+            chosen_line(extras["chosen"], "windowed world error on the folds left out"),
             highlight=False,
         )
     if model.contact_weight and model.contact is None:

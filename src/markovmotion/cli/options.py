@@ -292,9 +292,52 @@ def grid_of(family: str, choose: str | None) -> list[dict] | None:
 
     parse = importlib.import_module(f"markovmotion.evaluate.{family}").parse_grid
     try:
-        return parse(choose)
+        grid = parse(choose)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--choose") from None
+    _note_replaced(grid)
+    return grid
+
+
+#: ``--choose`` keys whose command-line option has another name.
+_OPTION_OF = {"n_states": "states", "n_state_prototypes": "prototypes",
+              "n_behaviour_prototypes": "behaviours"}  # fmt: skip
+
+
+def _note_replaced(grid: list[dict]) -> None:
+    """One note per option given on the command line that ``--choose`` also sets: the
+    grid's values replace it (``--output regression`` with ``output=frames,...``)."""
+    try:  # Typer >= 0.26 vendors its own click (as cli.main)
+        from typer._click.core import ParameterSource
+        from typer._click.globals import get_current_context
+    except ImportError:  # pragma: no cover - older Typer on the real click
+        from click import get_current_context
+        from click.core import ParameterSource
+
+    from markovmotion.progress import note
+
+    ctx = get_current_context(silent=True)
+    if ctx is None:
+        return
+    for key in dict.fromkeys(k for setting in grid for k in setting):
+        name = _OPTION_OF.get(key, key)
+        if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE:
+            values = ", ".join(dict.fromkeys(str(s[key]) for s in grid if key in s))
+            option = "--" + name.replace("_", "-")
+            note(f"{option} {ctx.params[name]} is replaced by --choose's {key} ({values})")
+
+
+def chosen_line(chosen: dict, error: str) -> str:
+    """The line saying what ``--choose`` picked (``chosen``: settings and ``inner_mm``) and
+    its inner ``error`` (what the folds measured), with the worst setting's beside it."""
+    inner = chosen["inner_mm"]
+    picked = ", ".join(f"{k}={v}" for k, v in chosen["settings"].items())
+    worst = (
+        f"worst of {len(inner)}: {max(inner.values()):.1f} mm"
+        if len(inner) > 1
+        else "the only setting"
+    )
+    return f"chose {picked}: {error} {min(inner.values()):.1f} mm ({worst})"
 
 
 def normalise_option(what: str) -> Any:

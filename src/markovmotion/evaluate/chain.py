@@ -597,7 +597,7 @@ def choose_settings(
     people out at a time on ``takes`` alone (a fold's training takes; one take at a time when
     they come from one pair): :func:`markovmotion.evaluate.choose.choose_settings`.
     Returns ``settings`` (the pick) and ``inner_mm`` (every setting's error)."""
-    groups = choose.fold_groups([t[2] for t in takes], [t[0] for t in takes])
+    groups = choose.fold_groups([t[2] for t in takes], [t[0] for t in takes], choosing=True)
 
     def fit(settings: Mapping, train: list[int]) -> VirtualPartner:
         copy = clone(model).set_params(**choose.model_params(settings))

@@ -15,11 +15,14 @@ the behaviour chain, ``chain train/crossval --choose``):
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import numpy as np
+
+from markovmotion.progress import note
 
 #: Which roles of each two-person take a model learns: as listed (A answered by B), or
 #: ``"both"`` (also with A and B swapped, :func:`both_roles`).
@@ -100,15 +103,30 @@ def model_params(settings: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in settings.items() if k != "roles"}
 
 
-def fold_groups(people: Sequence[str] | None, names: Sequence[str]) -> list[str]:
+def fold_groups(
+    people: Sequence[str] | None, names: Sequence[str], choosing: bool = False
+) -> list[str]:
     """Per take, what its leave-one-out fold leaves out: its pair of people (``people``,
     INDEX.csv's ``subject``) when the takes come from two or more, else the take itself
-    (``names``, which must then be unique)."""
+    (``names``, which must then be unique). ``choosing`` (the folds that choose settings):
+    takes of one pair of people say so once (:func:`~markovmotion.progress.note`), since each
+    setting is then scored on the people it learnt from, which favours settings that fit them."""
     if people is not None and len(set(people)) >= 2:
         return list(people)
     if len(set(names)) < len(names):
         raise ValueError("the takes' names must be unique (one pair of people: one take a fold)")
+    if choosing and people is not None and len(names) > 1:
+        _note_once(
+            f"the settings are chosen by leaving one take out: the takes they are chosen on "
+            f"are all of one pair of people ({people[0]}), so each setting is scored on people "
+            "it learnt from (a choice for new people needs two pairs or more to choose on)"
+        )
     return list(names)
+
+
+@functools.lru_cache(maxsize=16)
+def _note_once(message: str) -> None:
+    note(message)
 
 
 def choose_settings(

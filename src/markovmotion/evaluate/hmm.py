@@ -463,7 +463,7 @@ def choose_settings(
     with a few pairs of people an inner fold has little to score a setting on, and the same
     people's other role doubles it. Returns
     ``{"settings": pick, "inner_mm": {"param=value,...": error}}``."""
-    groups = choose.fold_groups(people, [t[0] for t in takes])
+    groups = choose.fold_groups(people, [t[0] for t in takes], choosing=True)
 
     def fit(settings: dict, train: list[int]) -> DualHMM:
         learn = choose.learnt([takes[i] for i in train], [groups[i] for i in train],
