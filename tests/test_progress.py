@@ -31,3 +31,28 @@ def test_video_tracking_reports_its_frames(monkeypatch, capsys):
     lines = [ln.split(",")[0] for ln in capsys.readouterr().err.splitlines()]
     assert [ln for ln in lines if ln.startswith("tracking")][-1] == "tracking: 3/3"
     assert {f"MediaPipe cam{k}: 3/3" for k in range(4)} <= set(lines)
+
+
+def test_the_librarys_log_warnings_are_notes_once_each_on_the_command_line(capsys):
+    """A warning logged once per model fitted (a cross-validation fits dozens) is one note
+    and a count at the end, on stderr; the logger is left as it was."""
+    import logging
+
+    from markovmotion.cli import _log_as_notes
+
+    log = logging.getLogger("markovmotion.models.hmm.gaussian")
+    with _log_as_notes():
+        for n in (3103, 3200, 3300):
+            log.warning("Fitting a model with %d free scalar parameters", n)
+        log.warning("another kind")
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "note: Fitting a model with 3103 free scalar parameters",
+        "note: another kind",
+        "note: 3 times in all (once per model fitted), the first: Fitting a model with 3103 "
+        "free scalar parameters",
+    ]
+    assert logging.getLogger("markovmotion").propagate
+    assert not any(
+        type(h).__name__ == "NoteOnce" for h in logging.getLogger("markovmotion").handlers
+    )

@@ -7,6 +7,7 @@ seconds instead; work shorter than that prints nothing.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Iterable, Iterator
 from typing import TypeVar
@@ -33,6 +34,32 @@ def note(message: str) -> None:
     """One line to stderr about a choice the library made for the user (takes left out,
     a kind chosen): where commands and the demo show it, off stdout's JSON."""
     err_console.print(f"[yellow]note:[/] {message}", highlight=False)
+
+
+class NoteOnce(logging.Handler):
+    """The library's log warnings as notes (:func:`note`), each kind once per command: a
+    cross-validation fits a model per fold and setting, and one line per fit ("Fitting a
+    model with 3103 free scalar parameters with only 3060 data points ...") buried the
+    results; the count of repeats is said at :meth:`close`."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.seen: dict[str, int] = {}
+        self.first: dict[str, str] = {}
+
+    def emit(self, record: logging.LogRecord) -> None:
+        kind = str(record.msg)
+        self.seen[kind] = self.seen.get(kind, 0) + 1
+        if self.seen[kind] == 1:
+            self.first[kind] = record.getMessage()
+            note(self.first[kind])
+
+    def close(self) -> None:
+        for kind, count in self.seen.items():
+            if count > 1:
+                note(f"{count} times in all (once per model fitted), the first: {self.first[kind]}")
+        self.seen.clear()
+        super().close()
 
 
 #: Seconds between the plain progress lines printed off a terminal.

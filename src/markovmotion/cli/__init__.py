@@ -6,14 +6,17 @@ stderr and exit with code 2; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import re
 import sys
+from collections.abc import Iterator
 
 import typer
 
 from markovmotion.errors import MarkovMotionError
-from markovmotion.progress import err_console
+from markovmotion.progress import NoteOnce, err_console
 
 app = typer.Typer(
     name="markovmotion",
@@ -90,14 +93,34 @@ def fail(message: str) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script."""
+    _register()
+    _GIVEN.clear()
+    _GIVEN.update(sys.argv[1:] if argv is None else argv)
+    with _log_as_notes():
+        _run(argv)
+
+
+@contextlib.contextmanager
+def _log_as_notes() -> Iterator[None]:
+    """The library's log warnings as notes, each kind once (:class:`~markovmotion.progress.NoteOnce`)."""
+    logger, handler = logging.getLogger("markovmotion"), NoteOnce()
+    logger.addHandler(handler)
+    propagate, logger.propagate = logger.propagate, False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+        handler.close()
+
+
+def _run(argv: list[str] | None) -> None:
+    """Run the command line on ``argv``; expected errors as one line and exit code 2."""
     try:  # Typer >= 0.26 vendors its own click
         from typer._click.exceptions import ClickException, UsageError
     except ImportError:  # pragma: no cover - older Typer on the real click
         from click.exceptions import ClickException, UsageError
 
-    _register()
-    _GIVEN.clear()
-    _GIVEN.update(sys.argv[1:] if argv is None else argv)
     try:
         code = app(args=argv, prog_name="markovmotion", standalone_mode=False)
     except SystemExit as exc:  # Typer exits even on success; return normally then
