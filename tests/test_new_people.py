@@ -527,3 +527,57 @@ def test_choose_says_what_it_replaces_and_what_it_picked(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--output regression is replaced by --choose's output (frames)" in err
     assert "chose output=frames" in err and "the only setting" in err and "worst" not in err
+
+
+def test_evaluate_says_up_front_what_is_wrong_with_a_test_index(mocap, tmp_path, capsys):
+    """Before any take is evaluated: a listed file that is not there (all of them named), an
+    index with none of the model's labels (its own named), a folder with no index (no
+    download hint for the user's own); a model file cut short says it may be."""
+    import csv
+
+    from markovmotion.cli import main
+
+    model = tmp_path / "m.npz"
+    main(["dualhmm", "train", "--labels", "wave", "--kind", "markers", "--states", "3",
+          "--n-iter", "1", "--out", str(model)])  # fmt: skip
+    capsys.readouterr()
+    rows = [r for r in csv.DictReader(open(mocap.root / "INDEX.csv")) if r["label"] == "handshake"]
+    rows = [r for r in rows if r["source"] == "buetepage"]
+
+    def index(folder, rows):
+        folder.mkdir()
+        (folder / "buetepage").symlink_to(mocap.root / "buetepage")
+        with open(folder / "INDEX.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        return folder
+
+    def error(*argv):
+        with pytest.raises(SystemExit) as stop:
+            main(["dualhmm", "evaluate", "--model", str(model), *argv])
+        err = capsys.readouterr().err
+        assert stop.value.code == 2 and len(err.strip().splitlines()) == 1, err
+        return err
+
+    shakes = index(tmp_path / "shakes", rows)
+    assert "labelled wave (the model's labels); its labels: handshake" in error(
+        "--test", str(shakes)
+    )
+    waves = [{**r, "label": "wave"} for r in rows]
+    lost = waves[-1]["file"]  # it and its partner's partner_file renamed, the pair kept
+    for r in waves:
+        for key in ("file", "partner_file"):
+            if r[key] == lost:
+                r[key] = "buetepage/shaking/nobody.c3d"
+    gone = index(tmp_path / "gone", waves)
+    assert "1 file(s) that are not there: buetepage/shaking/nobody.c3d" in error(
+        "--test", str(gone)
+    )
+    err = error("--test", str(tmp_path / "nowhere"))
+    assert "no INDEX.csv at" in err and "docs/data.md" in err
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(model.read_bytes()[:200])
+    with pytest.raises(SystemExit):
+        main(["dualhmm", "evaluate", "--model", str(cut)])
+    assert "cut short" in capsys.readouterr().err

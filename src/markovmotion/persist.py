@@ -116,7 +116,10 @@ def load_npz(
 def _read_members(path: str | os.PathLike[str], handle) -> dict[str, np.ndarray]:
     """The arrays of the zip archive open in ``handle``, sizes checked before decompressing."""
     if not zipfile.is_zipfile(handle):
-        raise ModelFormatError(path, "not a markovmotion model file (not an .npz archive)")
+        raise ModelFormatError(
+            path,
+            "not a markovmotion model file (not an .npz archive: another file, or one cut short)",
+        )
     cap = max_bytes()
     arrays: dict[str, np.ndarray] = {}
     try:

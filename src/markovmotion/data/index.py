@@ -81,6 +81,11 @@ def data_root(path: str | os.PathLike[str] | None = None) -> Path:
             f"{given[0]} is a file, not an {INDEX_NAME}: give the {INDEX_NAME} that lists it "
             "(or its folder)"
         )
+    if path is not None:  # the user's own index, or a download of the collection
+        raise DataNotFoundError(
+            f"no {INDEX_NAME} at {where} (an index of your own captures: docs/data.md gives its "
+            "columns; the public collection: 'markovmotion data fetch --dest DIR')"
+        )
     raise DataNotFoundError(
         f"no motion-capture {INDEX_NAME} found (looked in {where}); {HOW_TO_GET}"
     )

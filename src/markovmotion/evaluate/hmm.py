@@ -630,6 +630,13 @@ def evaluation_pairs(
         pairs = select_pairs(index, wanted, trials, held_out=True)
     else:
         pairs = index.pairs(label=wanted)
+        if not pairs and wanted:
+            there = sorted({a.label for a, _ in index.pairs()})
+            raise DataNotFoundError(
+                f"no two-person take of {index.root / INDEX_NAME} is labelled "
+                f"{', '.join(wanted)} (the model's labels); its labels: "
+                f"{', '.join(there) or 'none'}"
+            )
         held = getattr(model, "held_out_files_", None)
         if test is None and held:
             pairs = [p for p in pairs if p[0].file in held]

@@ -78,6 +78,12 @@ def test_takes(
     where = index.root / "INDEX.csv"
     if not candidates:
         raise DataNotFoundError(f"no {what} in {where} fits the model")
+    missing = [f for f in TestTakes._files(candidates) if not (index.root / f).is_file()]
+    if missing:  # said before any take is evaluated, not after minutes of them
+        raise DataNotFoundError(
+            f"{where} lists {len(missing)} file(s) that are not there: {', '.join(missing[:5])}"
+            + (" ..." if len(missing) > 5 else "")
+        )
     keep: list[T] = []
     left: list[T] = []
     for item in candidates:
