@@ -471,3 +471,24 @@ def test_evaluation_table_lists_partners_not_parameters(capsys):
     out = capsys.readouterr().out
     assert "mean_shape" in out and "multiple_hypotheses_ml *" in out and "584" in out
     assert "sigma" not in out and "resync" not in out
+
+
+def test_a_skeleton_is_matched_by_its_joint_names_not_their_count(pair_partner, mocap):
+    """A skeleton with as many joints under other names is refused, the joints named (it
+    was once answered by position in the list, exit 0); the same skeleton is observed."""
+    import dataclasses
+
+    from markovmotion.errors import SkeletonMismatchError
+
+    a, _ = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    a = a.trim(0, 30)
+    pair_partner.check_input(a)
+    learnt = pair_partner.shape_names
+    assert learnt and len(learnt) == pair_partner.shape_step.n_points_
+    renamed = [("Joint" + n if n in learnt[:2] else n) for n in a.skeleton.names]
+    other = dataclasses.replace(a, skeleton=dataclasses.replace(a.skeleton, names=tuple(renamed)))
+    with pytest.raises(SkeletonMismatchError, match=f"lacks the joints {learnt[0]}, {learnt[1]}"):
+        pair_partner.check_input(other)
+    with pytest.raises(SkeletonMismatchError, match="matched by name"):
+        pair_partner.respond(other)
+    assert pair_partner.person(a).points.shape[1] == len(learnt)

@@ -44,6 +44,7 @@ import numpy as np
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
 from markovmotion.features.markers import MarkerFeatures, fill_gaps
@@ -176,9 +177,19 @@ class TwoPeople:
 
 
 def shape_joints(skeleton: Skeleton, joints: Sequence[str] | None = None) -> list[int]:
-    """Indices of the joints that make a 3-D shape: ``joints``, else :data:`MAJOR_JOINTS`
-    when the skeleton has them, else all."""
+    """Indices of the joints that make a 3-D shape: ``joints`` (by name, in that order), else
+    :data:`MAJOR_JOINTS` when the skeleton has them, else all.
+
+    Raises:
+        SkeletonMismatchError: ``joints`` the skeleton lacks, named."""
     names = joints or (MAJOR_JOINTS if set(MAJOR_JOINTS) <= set(skeleton.names) else skeleton.names)
+    missing = [j for j in names if j not in skeleton.names]
+    if missing:
+        raise SkeletonMismatchError(
+            f"its skeleton lacks the joints {', '.join(missing[:8])}"
+            + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
+            + " (joints are matched by name)"
+        )
     return [skeleton.index(j) for j in names]
 
 

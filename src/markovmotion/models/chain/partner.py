@@ -332,12 +332,33 @@ class VirtualPartner(Model):
                     f"{where}: lacks the model's markers {', '.join(missing)}"
                 )
             return
-        joints = shape_joints(motion.skeleton)
+        try:
+            joints = shape_joints(motion.skeleton, self.shape_names)
+        except SkeletonMismatchError as exc:
+            raise SkeletonMismatchError(f"{where}: {exc}") from None
         if len(joints) != self.shape_step.n_points_ or self.shape_step.n_dims_ != 3:
             raise SkeletonMismatchError(
                 f"{where}: {len(joints)} shape joints, but the model was "
                 f"trained on {self.shape_step.n_points_} in {self.shape_step.n_dims_}-D"
             )
+
+    @property
+    def shape_names(self) -> list[str] | None:
+        """The names of the shape joints a skeleton model learnt, in its features' order (a
+        skeleton's joints are matched by these names, not by their count); None for markers
+        and for models fitted on prepared takes."""
+        skeletons = getattr(self, "skeletons_", None)
+        if self.uses_markers or not skeletons:
+            return None
+        learnt = skeletons[0]  # the shape joints alone: shape_joints gives their order
+        return [learnt.names[j] for j in shape_joints(learnt)]
+
+    def _seen_by(self, motion: Motion | Markers) -> list[str] | None:
+        """What :func:`~markovmotion.features.joint_shape.person_from_take` picks of
+        ``motion``: the model's markers, or a skeleton's shape joints by the model's names."""
+        if self.uses_markers:
+            return self.markers_
+        return self.shape_names if isinstance(motion, Motion) else None
 
     def partner_skeleton(self, motion: Motion | None = None, person: int = 0) -> Skeleton:
         """The skeleton the partner of ``person`` is written on: the partner's own shape joints
@@ -364,11 +385,11 @@ class VirtualPartner(Model):
     def person(self, take: Motion | Markers) -> Person:
         """One captured person as the model sees it (its shape joints or markers), at the
         take's own rate (:func:`~markovmotion.features.joint_shape.person_from_take`)."""
-        return person_from_take(take, self.markers_ if self.uses_markers else None)
+        return person_from_take(take, self._seen_by(take))
 
     def two_people(self, a: Motion | Markers, b: Motion | Markers) -> TwoPeople:
         """Both people of a take as the model sees them, at its rate ``fps_``."""
-        return TwoPeople.from_motions(a, b, self.fps_, self.markers_ if self.uses_markers else None)
+        return TwoPeople.from_motions(a, b, self.fps_, self._seen_by(a))
 
     def respond(
         self,
@@ -551,7 +572,7 @@ class ChainPartner:
         pos = frame.positions()
         ref = pos[:, frame.skeleton.body_root].copy()
         ref[:, 1] = 0.0
-        joints = shape_joints(frame.skeleton)
+        joints = shape_joints(frame.skeleton, self.model.shape_names)
         return Person(pos[:, joints], ref, self._height[1], frame.heading(pos))
 
     def _marker_person(self, pos: np.ndarray) -> Person:
