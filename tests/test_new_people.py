@@ -581,3 +581,26 @@ def test_evaluate_says_up_front_what_is_wrong_with_a_test_index(mocap, tmp_path,
     with pytest.raises(SystemExit):
         main(["dualhmm", "evaluate", "--model", str(cut)])
     assert "cut short" in capsys.readouterr().err
+
+
+def test_a_marker_never_seen_in_a_take_is_left_out_of_the_model_not_the_take(people, capsys):
+    """One marker occluded throughout one training take (common in real captures): the dual
+    HMM and the chain learn the others, say so once, and answer takes that have them;
+    filling a take's gaps names such a marker in one line (a MarkovMotionError)."""
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.features.markers import fill_gaps
+    from markovmotion.models.chain import VirtualPartner
+
+    pairs = [(a, b) for _, a, b in people[:3]]
+    a0, b0 = pairs[0]
+    hidden = a0.copy()
+    hidden.positions[:, a0.names.index("L_HAND")] = np.nan
+    pairs[0] = (hidden, b0)
+    with pytest.raises(MotionFormatError, match="L_HAND never seen"):
+        fill_gaps(hidden)
+    dual = DualHMM(n_states=3, n_iter=2, observation="pose").fit(pairs)
+    assert "L_HAND" not in dual.marker_names_b_ and len(dual.marker_names_b_) == 7
+    assert "left out the markers some take never sees: L_HAND" in capsys.readouterr().err
+    assert dual.respond(pairs[1][0]).n_frames > 0
+    chain = VirtualPartner(n_state_prototypes=6, n_behaviour_prototypes=5, n_epochs=1).fit(pairs)
+    assert "L_HAND" not in chain.markers_ and len(chain.markers_) == 7

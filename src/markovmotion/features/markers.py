@@ -50,10 +50,11 @@ import numpy as np
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
-from markovmotion.errors import SkeletonMismatchError
+from markovmotion.errors import MotionFormatError, SkeletonMismatchError
 from markovmotion.features.base import FeatureStep
 from markovmotion.features.body_motion import BodyMotion
 from markovmotion.features.body_points import body_point_index, find_points, normalise
+from markovmotion.progress import note
 from markovmotion.state import StateError, check_index, check_shape, is_fitted, register, require
 
 #: Most virtual markers :func:`virtual_markers` places.
@@ -379,13 +380,20 @@ def out_of_marker_frame(positions: np.ndarray, origin: np.ndarray, yaw: np.ndarr
 def fill_gaps(markers: Markers) -> Markers:
     """``markers`` with each unseen (NaN) sample filled by linear interpolation over time
     between the samples seen before and after it (held at either end): training takes
-    with occlusions. Raises ValueError naming a marker never seen in the take."""
+    with occlusions.
+
+    Raises:
+        MotionFormatError: a marker never seen in the take, named (a model's own markers
+            must be seen; training takes drop the others first, :func:`seen_in_every`)."""
     seen = markers.visible()
     if seen.all():
         return markers
     never = [markers.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
     if never:
-        raise ValueError(f"{markers.name or 'markers'}: marker {never[0]} is never seen")
+        raise MotionFormatError(
+            markers.name or "markers",
+            f"marker{'s' if len(never) > 1 else ''} {', '.join(never[:8])} never seen",
+        )
     out = markers.copy()
     t = np.arange(markers.n_frames)
     for m in np.flatnonzero(~seen.all(axis=0)):
@@ -393,6 +401,21 @@ def fill_gaps(markers: Markers) -> Markers:
         for c in range(3):
             out.positions[~ok, m, c] = np.interp(t[~ok], t[ok], markers.positions[ok, m, c])
     return out
+
+
+def seen_in_every(takes: Sequence[Markers]) -> list[Markers]:
+    """Training takes without the markers some take never sees (one occluded throughout a
+    capture, common in real labs), said in one note: a model learns the markers every take
+    shows, rather than losing a whole take, or stopping, for one marker of dozens."""
+    never: dict[str, list[str]] = {}
+    for t in takes:
+        for m in np.flatnonzero(~t.visible().any(axis=0)):
+            never.setdefault(t.names[m], []).append(t.name or "a take")
+    if not never:
+        return list(takes)
+    said = "; ".join(f"{n} (never seen in {', '.join(w[:3])})" for n, w in list(never.items())[:5])
+    note(f"left out the markers some take never sees: {said}")
+    return [t.select([n for n in t.names if n not in never]) for t in takes]
 
 
 @register

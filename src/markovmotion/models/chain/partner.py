@@ -39,7 +39,7 @@ from markovmotion.features.joint_shape import (
     person_from_take,
     shape_joints,
 )
-from markovmotion.features.markers import MarkerFeatures, named_body_points
+from markovmotion.features.markers import MarkerFeatures, named_body_points, seen_in_every
 from markovmotion.features.person import ShapeCentre
 from markovmotion.features.smoothing import TemporalSmoothing
 from markovmotion.models.base import Model, flatten
@@ -175,6 +175,9 @@ class VirtualPartner(Model):
                 )
             a, b = pairs[0]
             if kind is Markers:
+                seen = seen_in_every([m for pair in pairs for m in pair])
+                pairs = list(zip(seen[0::2], seen[1::2], strict=True))
+                a, b = pairs[0]
                 self.markers_ = list(a.names)
             else:
                 self.skeletons_ = [

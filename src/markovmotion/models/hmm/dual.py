@@ -87,6 +87,7 @@ from markovmotion.features.markers import (
     into_marker_frame,
     named_body_points,
     out_of_marker_frame,
+    seen_in_every,
     virtual_markers,
 )
 from markovmotion.features.person import RunningCentre, body_radius, on_average_body, size_scale
@@ -586,11 +587,11 @@ class DualHMM(Model):
     ) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """A's and B's features of marker takes (module docstring, "Markers"): A's markers
         about A's own ground frame, B's in A's; sets the pipelines and ``markers_b_``."""
-        a_list, b_list = [], []
-        for a, b in pairs:
-            a, b = self.as_markers(a), self.as_markers(b)
-            a_list.append(fill_gaps(self._rate(a)))
-            b_list.append(fill_gaps(self._rate(b)))
+        seen = seen_in_every(
+            [self._rate(self.as_markers(m)) for pair in pairs for m in pair]
+        )  # A and B of every take keep the same markers (both roles, the person's body)
+        a_list = [fill_gaps(m) for m in seen[0::2]]
+        b_list = [fill_gaps(m) for m in seen[1::2]]
         first = MarkerFeatures(motion=self.observation == "motion").fit(a_list)
         grounds = [first.place(first.select(a).positions) for a in a_list]
 

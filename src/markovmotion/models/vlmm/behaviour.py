@@ -51,7 +51,7 @@ from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.features import AugmentedConfiguration, ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.body_points import MARKER_POINTS, body_point_index
 from markovmotion.features.heading import RemoveHeading
-from markovmotion.features.markers import MarkerFeatures, fill_gaps
+from markovmotion.features.markers import MarkerFeatures, fill_gaps, seen_in_every
 from markovmotion.features.select import DropStaticColumns
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
@@ -79,7 +79,11 @@ def load_motions(
 
     Returns the motions and the entries left out for having another skeleton.
     """
-    motions = [_take(index.load_take(e)).resample(fps) for e in entries]
+    takes = [index.load_take(e) for e in entries]
+    markers = [i for i, t in enumerate(takes) if isinstance(t, Markers)]
+    for i, t in zip(markers, seen_in_every([takes[i] for i in markers]), strict=True):
+        takes[i] = t  # the markers some take never sees left out, said once
+    motions = [_take(t).resample(fps) for t in takes]
     best, left = largest_group(motions, [e.file for e in entries])
     return [motions[i] for i in best], [entries[i] for i in left]
 
