@@ -265,3 +265,16 @@ def test_an_animation_beyond_the_frame_limit_is_refused_before_any_work(tmp_path
         env={"MARKOVMOTION_MAX_ANIMATION_FRAMES": "10"},
     )
     check_clean(run, "o.gif", "15 frames", "MARKOVMOTION_MAX_ANIMATION_FRAMES")
+
+
+def test_a_capture_with_every_marker_occluded_is_one_line(tmp_path, capsys):
+    """A C3D whose markers are never seen: render says there is nothing to draw, exit 2
+    (it was a traceback from the camera's placement)."""
+    from markovmotion.io import write_c3d
+
+    path = tmp_path / "occluded.c3d"
+    write_c3d(Markers(("A", "B"), np.full((10, 2, 3), np.nan), 30.0, "occluded"), path)
+    with pytest.raises(SystemExit) as stop:
+        main(["render", str(path), "--out", str(tmp_path / "o.png")])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "nothing to draw" in err and len(err.strip().splitlines()) == 1

@@ -33,7 +33,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import GROUND, UP, Motion
-from markovmotion.errors import LimitError
+from markovmotion.errors import LimitError, MotionFormatError
 from markovmotion.features.body_points import point_bones
 from markovmotion.io.files import atomic_write
 from markovmotion.limits import MAX_ANIMATION_FRAMES, exceeded, max_animation_frames
@@ -134,7 +134,12 @@ def _tracks(items: Drawable | Sequence[Drawable], names: Sequence[str] | None) -
         raise ValueError("nothing to draw")
     if names is not None and len(names) != len(seq):
         raise ValueError(f"{len(names)} names for {len(seq)} motions")
-    return [_to_track(m, i, names[i] if names else None) for i, m in enumerate(seq)]
+    tracks = [_to_track(m, i, names[i] if names else None) for i, m in enumerate(seq)]
+    for m, t in zip(seq, tracks, strict=True):
+        if not np.isfinite(t.positions).any():  # every marker occluded throughout
+            where = getattr(m, "source", "") or getattr(m, "name", "") or "motion"
+            raise MotionFormatError(where, "no point is seen in any frame: nothing to draw")
+    return tracks
 
 
 # ------------------------------------------------------------------- camera
