@@ -129,3 +129,26 @@ def test_numpy_forward_kinematics_equals_the_compiled_loop(mocap):
     m.rotations[3, 2] = 0.0
     with pytest.raises(ValueError, match="zero norm"):
         m.positions(compiled=False)
+
+
+def test_the_legs_are_found_whatever_motion_of_the_skeleton_comes_first(mocap):
+    """A motion whose first frame has a leg at hip height (a generated walk did) does not
+    leave its skeleton remembered as legless: the legs are looked for in later frames too,
+    and a failure is not remembered."""
+    from markovmotion.core import motion as motion_module
+
+    walk = mocap.load_motion(mocap.query(label="normal")[0]).trim(0, 60)
+    legs = walk.hip_joints()
+    assert legs is not None
+    motion_module._HIPS.clear()
+    from scipy.spatial.transform import Rotation
+
+    odd = walk.copy()  # the first frame's right leg turned half a turn, up beside the trunk
+    turned = Rotation.from_euler("z", 180, degrees=True) * Rotation.from_quat(
+        odd.rotations[0, legs[1]]
+    )
+    odd.rotations[0, legs[1]] = turned.as_quat()
+    assert odd._find_hip_joints(0) is None  # the first frame cannot tell the legs
+    assert odd.hip_joints() == legs  # the middle frame can
+    motion_module._HIPS.clear()
+    assert walk.hip_joints() == legs

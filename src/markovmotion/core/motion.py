@@ -124,23 +124,32 @@ class Motion:
         """The (left, right) hip joints under the pelvis, if their names tell them apart.
 
         The legs are the two children of the pelvis whose subtrees reach lowest in
-        the first frame; left and right are told by the first character at which
+        the first frame (else the middle or the last: a generated walk once began with
+        a leg at hip height); left and right are told by the first character at which
         the two names differ being ``l``/``L`` against ``r``/``R``
         (``lfemur``/``rfemur``, ``UpperLeg_L``/``UpperLeg_R``). Found once per
-        skeleton (the first motion seen decides) and remembered.
+        skeleton and remembered; a skeleton whose legs were not found is looked at
+        again with the next motion (a failure is not remembered: the answer must not
+        depend on which motion came first).
         """
         sk = self.skeleton
         if sk not in _HIPS:
-            _HIPS[sk] = self._find_hip_joints()
+            for frame in dict.fromkeys((0, self.n_frames // 2, self.n_frames - 1)):
+                found = self._find_hip_joints(frame)
+                if found is not None:
+                    _HIPS[sk] = found
+                    break
+            else:
+                return None
         return _HIPS[sk]
 
-    def _find_hip_joints(self) -> tuple[int, int] | None:
+    def _find_hip_joints(self, frame: int = 0) -> tuple[int, int] | None:
         sk = self.skeleton
         pelvis = sk.body_root
         kids = sk.children(pelvis)
-        if len(kids) < 2:
+        if len(kids) < 2 or self.n_frames == 0:
             return None
-        height = self.positions_at(0)[:, 1]
+        height = self.positions_at(frame)[:, 1]
         lowest = {}
         for k in kids:
             sub = _subtree(sk, k)
@@ -344,7 +353,7 @@ def _quat_matrices(quats: np.ndarray) -> np.ndarray | None:
     return out.reshape(*quats.shape[:-1], 3, 3)
 
 
-_HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int] | None] = weakref.WeakKeyDictionary()
+_HIPS: weakref.WeakKeyDictionary[Skeleton, tuple[int, int]] = weakref.WeakKeyDictionary()
 
 
 def _off_pelvis(sk: Skeleton, j: int) -> int:

@@ -79,7 +79,13 @@ def foot_joints(motion: Motion) -> dict[str, tuple[int, int]]:
     """
     hips = motion.hip_joints()
     if hips is None:
-        raise MotionFormatError(motion.name or "motion", "cannot tell the left leg from the right")
+        sk = motion.skeleton
+        kids = ", ".join(sk.names[k] for k in sk.children(sk.body_root)) or "none"
+        raise MotionFormatError(
+            motion.name or "motion",
+            f"cannot tell the left leg from the right (the joints under the pelvis "
+            f"{sk.names[sk.body_root]}: {kids}; the two lowest must be named apart by L / R)",
+        )
     sk = motion.skeleton
     out = {}
     for side, hip in zip(SIDES, hips, strict=True):
