@@ -414,3 +414,14 @@ def test_evaluate_on_another_index_leaves_training_walks_out(mocap, small_model,
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "trained on" in err and "a.bvh.gz" in err
+
+
+def test_gait_steps_lists_the_steps_of_each_walk(capsys):
+    """``gait steps`` (README's command table): a row per walk with its steps, and the total."""
+    from markovmotion.cli import main
+
+    main(["gait", "steps", "--label", "normal"])
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("walk_normal_")]
+    assert rows and all(int(r.split(",")[2]) > 0 for r in rows)
+    assert f"steps in {len(rows)} walks" in out

@@ -359,6 +359,7 @@ def evaluate(
         print_table(_sweep_table(result["sweep"], result.get("average")))
 
 
+@app.command("steps")
 def steps_(
     data: list[Path] = typer.Option(None, help="INDEX.csv (or its folder) or walk files."),
     label: list[str] = typer.Option(None, help="Labels to list from an index (default all)."),
