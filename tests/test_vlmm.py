@@ -406,6 +406,13 @@ def test_cli_evaluate_test_index_leaves_out_training_takes_by_content(
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "trained on: a.bvh.gz, b.bvh.gz" in err
+    # an index of another skeleton alone: one line saying what differs
+    index = copied_index(tmp_path / "walks", [("walk.bvh.gz", walk)])
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "evaluate", "--model", str(model), "--test", index, "--json"])
+    err = capsys.readouterr().err.strip()
+    assert info.value.code == 2 and len(err.splitlines()) == 1
+    assert "(walk.bvh.gz: (27 joints, expected 57; joints differ: Chest" in err
 
 
 def test_markers_source_learns_13_points_and_writes_c3d_and_point_lights(tmp_path, mocap, capsys):

@@ -70,7 +70,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.splits import held_out_every
 from markovmotion.data.walks import DEFAULT_SUBSET, gait_entries
-from markovmotion.errors import DataNotFoundError, ModelFormatError
+from markovmotion.errors import DataNotFoundError, ModelFormatError, SkeletonMismatchError
 from markovmotion.evaluate.perceptual import efficiency
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
@@ -697,15 +697,21 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
     chosen = test_takes(_trained_on_any(models), index, rows, what=f"{'/'.join(styles)} walk")
     kept: list[Entry] = []
     motions: list[Motion] = []
+    why = ""
     for e in track(chosen.takes, "reading test walks"):
         motion = index.load_motion(e)
-        if skeleton.same_topology(motion.skeleton):
-            kept.append(e)
-            motions.append(motion)
+        try:
+            skeleton.check_compatible(motion.skeleton, "walk")
+        except SkeletonMismatchError as exc:
+            prefix = "the walk's skeleton does not match "
+            why = why or f"; {e.file}: {str(exc).removeprefix(prefix)}"
+            continue
+        kept.append(e)
+        motions.append(motion)
     if not kept:
         raise DataNotFoundError(
             f"no walk of {', '.join(styles)} in {index.root / 'INDEX.csv'} has the models' "
-            f"skeleton ({skeleton.n_joints} joints)"
+            f"skeleton ({skeleton.n_joints} joints{why})"
         )
     return TestTakes(kept, chosen.left_out), motions
 

@@ -331,9 +331,12 @@ def evaluate_model(
         else:
             other.append(entry)
     if not motions:
+        first = index.load_take(other[0])
         raise SkeletonMismatchError(
             f"no test take of {index.root / 'INDEX.csv'} has the model's skeleton: "
-            + ", ".join(e.file for e in other)
+            + ", ".join(e.file for e in other[:5])
+            + ("..." if len(other) > 5 else "")
+            + f" ({other[0].file}: {base.why_not(first)})"
         )
     takes = TestTakes(kept, takes.left_out)
     features = base.observe(motions)

@@ -313,6 +313,21 @@ class BehaviourModel(Model):
             return isinstance(take, Markers) and set(self.marker_names) <= set(take.names)
         return isinstance(take, Motion) and take.skeleton.same_topology(self.skeleton_)
 
+    def why_not(self, take: Motion | Markers) -> str:
+        """Why :meth:`fits` refuses ``take``, in a few words naming what differs."""
+        if self._from_markers():
+            if not isinstance(take, Markers):
+                return "a skeleton, and the model learnt markers"
+            missing = [n for n in self.marker_names if n not in take.names]
+            return f"markers not found: {', '.join(missing[:8])}"
+        if not isinstance(take, Motion):
+            return "markers, and the model learnt a skeleton"
+        try:
+            self.skeleton_.check_compatible(take.skeleton, "take")
+        except SkeletonMismatchError as exc:
+            return str(exc).removeprefix("the take's skeleton does not match ")
+        return "fits"
+
     @property
     def marker_names(self) -> tuple[str, ...]:
         """The markers a ``configuration="markers"`` model learns and writes: the 13 body
