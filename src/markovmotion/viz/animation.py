@@ -593,10 +593,11 @@ def _strip(
             for i, f in stage.populate(ax, panel, False, caption=c % cols == 0, legend=c == 0):
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
-            # bottom right: the top left holds the name caption, which a narrow panel overlaps
+            # top right, as the animation's clock: the top left holds the name caption, the
+            # bottom right the legend (which covered the first panel's time there)
             if not point_light:
                 ax.text(
-                    0.99, 0.015, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="bottom"
+                    0.99, 0.985, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="top"
                 )
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=DPI)
