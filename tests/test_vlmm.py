@@ -497,3 +497,21 @@ def test_markers_read_from_c3d_files_go_through_train_generate_predict_evaluate(
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "learnt markers" in err
+
+
+def test_a_markers_model_observes_any_skeleton_with_the_13_points(mocap):
+    """A ``configuration="markers"`` model learnt from CMU dances finds its 13 body points by
+    name on a Bandai walk's skeleton (another topology) and predicts it; a skeleton model
+    does not take it, and says which joints differ."""
+    dances = [mocap.load_motion(e).trim(0, 240) for e in mocap.query(label="indian_dance")[:2]]
+    walk = mocap.load_motion(mocap.query(source="bandai")[0]).trim(0, 120)
+    assert not walk.skeleton.same_topology(dances[0].skeleton)
+    model = BehaviourModel(n_prototypes=12, max_memory=2, fps=15.0, configuration="markers")
+    model.fit(dances)
+    assert model.fits(walk)
+    (features,) = model.observe([walk])
+    assert features.shape[0] == walk.resample(15.0).n_frames and np.isfinite(features).all()
+    future = model.predict(walk, seconds=0.5, rng=np.random.default_rng(0))
+    assert future.names == tuple(model.marker_names) and np.isfinite(future.positions).all()
+    rotations = BehaviourModel(n_prototypes=12, max_memory=2, fps=15.0).fit(dances)
+    assert not rotations.fits(walk) and "joints differ" in rotations.why_not(walk)

@@ -596,9 +596,7 @@ def _strip(
             # top right, as the animation's clock: the top left holds the name caption, the
             # bottom right the legend (which covered the first panel's time there)
             if not point_light:
-                ax.text(
-                    0.99, 0.985, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="top"
-                )
+                ax.text(0.99, 0.985, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="top")
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=DPI)
     return path

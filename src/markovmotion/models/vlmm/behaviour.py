@@ -245,8 +245,10 @@ class BehaviourModel(Model):
         elif self.configuration == "positions":
             first = [JointPositions(body_centred=True)]
         elif self.configuration == "markers":
-            points = body_point_index(skeleton, MARKER_POINTS, "the training skeleton")
-            first = [JointPositions(body_centred=True, joints=[skeleton.names[j] for j in points])]
+            body_point_index(skeleton, MARKER_POINTS, "the training skeleton")  # one line if not
+            # the 13 points found by name on each take's skeleton: any skeleton that has them
+            # is observed, as the dual HMM's (models saved before kept the training joints)
+            first = [JointPositions(body_centred=True, points=list(MARKER_POINTS))]
         else:
             raise ValueError(f"configuration must be one of {CONFIGURATIONS}")
         return FeaturePipeline([*first, DropStaticColumns(), AugmentedConfiguration(self.lam)])
@@ -311,7 +313,19 @@ class BehaviourModel(Model):
         learnt from markers files) markers holding every one the model learnt."""
         if self._from_markers():
             return isinstance(take, Markers) and set(self.marker_names) <= set(take.names)
+        if isinstance(take, Motion) and self._by_points():
+            try:
+                body_point_index(take.skeleton, MARKER_POINTS, take.name or "take")
+            except SkeletonMismatchError:
+                return False
+            return True
         return isinstance(take, Motion) and take.skeleton.same_topology(self.skeleton_)
+
+    def _by_points(self) -> bool:
+        """Whether the model finds its 13 body points by name on any skeleton (a markers
+        model learnt from a skeleton, fitted by this version)."""
+        steps = getattr(getattr(self, "pipeline_", None), "steps", None)
+        return bool(steps) and getattr(steps[0], "points", None) is not None
 
     def why_not(self, take: Motion | Markers) -> str:
         """Why :meth:`fits` refuses ``take``, in a few words naming what differs."""
@@ -323,6 +337,8 @@ class BehaviourModel(Model):
         if not isinstance(take, Motion):
             return "markers, and the model learnt a skeleton"
         try:
+            if self._by_points():
+                body_point_index(take.skeleton, MARKER_POINTS, "its skeleton")
             self.skeleton_.check_compatible(take.skeleton, "take")
         except SkeletonMismatchError as exc:
             return str(exc).removeprefix("the take's skeleton does not match ")
