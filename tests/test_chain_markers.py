@@ -506,3 +506,34 @@ def test_a_person_normalised_marker_chain_streams_what_respond_gives(handshakes,
     np.testing.assert_allclose(back.respond(a, n_hypotheses=10, rng=3).positions, whole.positions)
     with pytest.raises(ValueError, match="normalise"):
         VirtualPartner(**SMALL, normalise="everyone").fit(train)
+
+
+def test_shrink_blends_the_partner_with_the_mean_shape_whole_and_online(marker_partner, handshakes):
+    """``shrink``: 0 the paper's partner, 1 the mean shape's (the baseline partner), between a
+    convex blend of the two in shape space; the online partner streams respond's frames; a
+    value outside 0-1 is one ValueError."""
+    import copy
+
+    from markovmotion.features.joint_shape import person_from_take
+
+    _, _, _, a, _ = handshakes[-1]
+    a = a.trim(0, 60).resample(marker_partner.fps_)
+    real = person_from_take(a.select(marker_partner.markers_), marker_partner.markers_)
+    options = dict(n_hypotheses=10, rng=3)
+    paper = marker_partner.respond_shapes(real, 0, **options)
+    mean = marker_partner.mean_partner(real, np.zeros(real.n_frames, dtype=int))
+    full, half = copy.deepcopy(marker_partner), copy.deepcopy(marker_partner)
+    full.set_params(shrink=1.0)
+    half.set_params(shrink=0.5)
+    np.testing.assert_allclose(full.respond_shapes(real, 0, **options).partner.points,
+                               mean.points, atol=1e-9)  # fmt: skip
+    blended = half.respond_shapes(real, 0, **options)
+    np.testing.assert_allclose(blended.shapes, 0.5 * paper.shapes + 0.5 * half.mean_shape_)
+    whole = half.respond(a, **options)
+    size = marker_size(a.select(half.markers_).positions)
+    online = half.partner(size=size, **options)
+    out = [f for t in range(a.n_frames) if (f := online.step(a.trim(t, t + 1)))] + online.finish()
+    np.testing.assert_allclose(np.concatenate([f.positions for f in out]), whole.positions,
+                               atol=1e-6)  # fmt: skip
+    with pytest.raises(ValueError, match="shrink must be from 0 to 1"):
+        VirtualPartner(shrink=1.5).check_params()

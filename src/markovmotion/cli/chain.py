@@ -63,6 +63,12 @@ CHOOSE = choose_option(
 NORMALISE = normalise_option(
     "each person's shape relative to their own running mean, on the training people's mean shape"
 )
+SHRINK = ranged(
+    "weight",
+    0.0,
+    help="Pull the partner's shape this far toward the training people's mean shape (0: the "
+    "paper's; for people the model has never seen, docs/chain.md).",
+)
 RESPONSE = typer.Option(
     DEFAULT_RESPONSE,
     help="The response of multiple hypotheses reported as multiple_hypotheses: ml (the "
@@ -78,6 +84,7 @@ def _new_model(
     epochs: int,
     seed: int,
     normalise: str = "none",
+    shrink: float = 0.0,
 ):
     """An unfitted :class:`VirtualPartner` with the command line's settings."""
     from markovmotion.models.chain.partner import VirtualPartner
@@ -90,6 +97,7 @@ def _new_model(
         n_epochs=epochs,
         random_state=seed,
         normalise=normalise,
+        shrink=shrink,
     )
 
 
@@ -178,6 +186,7 @@ def train(
     kind: str = kind_option(),
     roles: str = roles_option(),
     normalise: str = NORMALISE,
+    shrink: float = SHRINK,
     choose: str = CHOOSE,
     hypotheses: int = ranged(
         "hypotheses", 200, min=2, help="--choose: hypotheses N of the multiple-hypothesis runs."
@@ -210,7 +219,7 @@ def train(
     takes = _training_takes(
         data, source, labels if len(labels) > 1 else labels[0], kind, test_trials, test_people
     )
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink)
     extras: dict = {}
     with err_console.status("learning prototypes and chain"):
         if source == "mocap":
@@ -424,6 +433,7 @@ def crossval(
     resync: float = RESYNC,
     roles: str = roles_option(),
     normalise: str = NORMALISE,
+    shrink: float = SHRINK,
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),
@@ -445,7 +455,7 @@ def crossval(
     from markovmotion.evaluate.chain import crossval_index
 
     _check_response(response)
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise)
+    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink)
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
     parts = [choose] if choose else []  # and the old flags, as the grid they stand for
     if choose_prototypes:

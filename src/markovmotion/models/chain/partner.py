@@ -99,6 +99,14 @@ class VirtualPartner(Model):
         interval_noise, random_state: passed to :class:`BehaviourChain`
             (``random_state`` also seeds the propagation unless a verb is given ``rng``).
         fps: the rate motion-capture pairs are resampled to for training (paper: 25).
+        normalise: ``"person"``: each person's shape on the training people's mean
+            (:data:`NORMALISE`).
+        shrink: how far the partner's shape is pulled toward the training people's mean
+            shape ``mean_shape_`` (the baseline partner), 0 to 1; 0, the default, is the
+            paper's. Our addition for people the model has never seen: the chosen
+            hypothesis is one training prototype, the mean averages them; a convex blend of
+            the two, in the model's normalised shape space before placing, keeps the
+            interaction's phases and loses much of a prototype's person (docs/chain.md).
 
     Learnt: ``pipeline_`` (TwoPeople -> state vectors), ``chain_``,
     ``mean_shape_`` (d,) the mean normalised combined shape (the baseline
@@ -123,6 +131,7 @@ class VirtualPartner(Model):
         random_state: int = 0,
         fps: float = DEFAULT_FPS,
         normalise: str = "none",
+        shrink: float = 0.0,
     ):
         self.window = window
         self.lam = lam
@@ -134,6 +143,7 @@ class VirtualPartner(Model):
         self.random_state = random_state
         self.fps = fps
         self.normalise = normalise
+        self.shrink = shrink
 
     def check_params(self) -> None:
         """Raise ValueError (one line, naming the parameter) for a hyper-parameter out of its
@@ -141,6 +151,8 @@ class VirtualPartner(Model):
         is learnt."""
         if self.normalise not in NORMALISE:
             raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
+        if not 0.0 <= self.shrink <= 1.0:
+            raise ValueError(f"shrink must be from 0 to 1, got {self.shrink!r}")
 
     def fit(
         self,
@@ -310,7 +322,13 @@ class VirtualPartner(Model):
         """
         shapes, matched, errors = self.propagator(person, **options).run(self.observe(real, person))
         roles = np.asarray(self.people(person))[matched]
+        shapes = self.toward_mean(shapes)
         return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
+
+    def toward_mean(self, shapes: np.ndarray) -> np.ndarray:
+        """Normalised combined shapes (T, d) pulled ``shrink`` of the way to ``mean_shape_``."""
+        s = float(getattr(self, "shrink", 0.0))
+        return shapes if s == 0.0 else (1.0 - s) * shapes + s * self.mean_shape_
 
     def check_input(self, motion: Motion | Markers) -> None:
         """Raise :class:`SkeletonMismatchError` unless this 3-D model can observe ``motion``:
@@ -611,7 +629,7 @@ class ChainPartner:
         r = self._propagator.step(self.model.scaled(np.mean(rows, axis=0)))
         real = self._people[t - (newest - len(self._people) + 1)]
         role = np.asarray(self.model.people(self.person))[[r.role]]
-        placed = self.model.place(r.shape[None], role, real)
+        placed = self.model.place(self.model.toward_mean(r.shape[None]), role, real)
         if self._markers is not None:
             return Markers(tuple(self._markers), placed.points, self.fps, "virtual partner")
         return fit_rotations(self._skeleton, placed.points, fps=self.fps)
