@@ -438,6 +438,9 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         assert drawn["blue"] > 50 and drawn["orange"] > 50
         assert colours_drawn(page, "#overlay")["blue"] > 50  # the landmarks over the frame
         assert int(data["framesA"]) == int(data["frames"])  # the man is found in every frame
+        # each camera frame is sent at most once (an answer once re-sent the last frame: 629
+        # sent of 154 camera frames, and the rate answered passed the camera's)
+        assert 0 < int(data["sent"]) <= int(data["cameraFrames"])
         assert float(data["fps"]) > 0 and float(data["latency"]) > 0
         assert float(page.text_content("#fps")) > 0 and float(page.text_content("#latency")) > 0
         page.screenshot(path=SHOTS / "camera-partner.png")

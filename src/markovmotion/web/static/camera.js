@@ -33,8 +33,13 @@ function stopped(message) {
   if (session) session.running = false;
 }
 
+// Sends the camera's newest frame, once: after an answer (a frame that came while the
+// frames in flight were full), or when a new camera frame comes; never the same frame twice
+// (an answer once re-sent the frame already sent, and the rate answered passed the camera's).
 function send() {
   if (!session || !session.running || session.pending.length >= IN_FLIGHT || !video.videoWidth) return;
+  if (session.frameId === session.sentId) return;
+  session.sentId = session.frameId;
   const t = performance.now();
   const scale = Math.min(1, MAX_SIDE / Math.max(video.videoWidth, video.videoHeight));
   grab.width = Math.round(video.videoWidth * scale);
@@ -53,9 +58,11 @@ function send() {
   }, "image/jpeg", 0.8);
 }
 
-function onCameraFrame() {
+function onCameraFrame(now, metadata) {
   if (!session || !session.running) return;
   session.seen += 1;
+  // the camera frame's own number where the browser gives it (requestVideoFrameCallback)
+  session.frameId = metadata && metadata.presentedFrames !== undefined ? metadata.presentedFrames : session.seen;
   send();
   if (video.requestVideoFrameCallback) video.requestVideoFrameCallback(onCameraFrame);
   else requestAnimationFrame(onCameraFrame);
@@ -106,6 +113,7 @@ function onMessage(event) {
   if (!msg) return;
   if (msg.type === "start") {
     session = { ...msg, running: true, pending: [], answers: [], latency: [], encode: [], tracks: [], seen: 0, sent: 0,
+      frameId: -1, sentId: -1,
       frames: 0, found: 0, b: 0, track: 0, partner: 0, fitted: false, fittedB: false };
     $("lag").textContent = String(msg.lag);
     $("status").textContent = `Tracking; the partner answers at ${msg.fps.toFixed(0)} fps, ${msg.lag} frames behind you.`;
