@@ -389,3 +389,21 @@ def test_observer_answers_and_the_results_page_shows_rates_and_comments(study, s
     assert page.locator(f"#clip-{drawn[0].id} .comment").all_text_contents() == [COMMENT]
     assert page.locator(".comment").count() == 1
     page.screenshot(path=SHOTS / "interaction-results.png", full_page=True)
+
+
+def test_a_partner_of_markers_is_refused_in_one_line(capsys, tmp_path, mocap):
+    """The observer study's clips are skeletons as point lights: a marker partner (the
+    README's handshake model) is one line, exit 2, nothing written (it was a traceback)."""
+    from markovmotion.models.hmm import DualHMM
+
+    takes = [mocap.load_pair(a, b) for a, b in mocap.pairs("handshake", kind="markers")[:2]]
+    model = tmp_path / "shake.npz"
+    DualHMM(n_states=3, n_iter=1).fit([(a.trim(0, 60), b.trim(0, 60)) for a, b in takes]).save(
+        model
+    )
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluation", "stimuli", "--study", "interaction", "--model", str(model),
+              "--out", str(tmp_path / "clips")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and "\n" not in err and "a partner of markers" in err
+    assert not (tmp_path / "clips").exists()

@@ -156,6 +156,7 @@ def write_interaction_stimuli(
 
     Raises:
         ModelFormatError: not a dual-HMM model file.
+        MarkovMotionError: a partner of markers (clips are skeletons).
         DataNotFoundError: no take fits, or all are training takes or of another skeleton.
     """
     from markovmotion.evaluate.hmm import evaluation_pairs, pairs_that_fit
@@ -165,6 +166,11 @@ def write_interaction_stimuli(
     if root.exists() and not root.is_dir():
         raise MarkovMotionError(f"{root}: not a folder to write the stimuli into")
     model = DualHMM.load(model_path)
+    if model.uses_markers:  # clips are skeletons (BVH) drawn as the 13 points of each body
+        raise MarkovMotionError(
+            f"{model_path}: a partner of markers; the observer study's clips are skeletons "
+            "drawn as point lights: train the partner on skeleton takes (--kind skeleton)"
+        )
     index, takes = evaluation_pairs(model, test)
     made: list[tuple[str, str, Any, Any, Any]] = []
     other_skeleton: list[str] = []
