@@ -407,7 +407,11 @@ def test_online_partner_answers_frame_by_frame_as_respond(pair_partner, mocap):
     assert streamed.n_frames == whole.n_frames == a25.n_frames
     np.testing.assert_allclose(streamed.positions(), whole.positions(), atol=1e-6)
     with pytest.raises(SkeletonMismatchError):
-        partner.step(Motion.from_rotations(make_skeleton(), np.tile([0.0, 0, 0, 1], (1, 5, 1))))
+        partner.step(
+            Motion.from_rotations(make_skeleton(), np.tile([0.0, 0, 0, 1], (1, 5, 1)), fps=25.0)
+        )
+    with pytest.raises(ValueError, match="resample A to the partner's rate"):
+        partner.step(a.trim(0, 1))  # A at its own 60 fps: was answered in slow motion
 
 
 def _copy_index(root, mocap, trials: dict[str, str]) -> None:

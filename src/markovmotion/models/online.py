@@ -52,6 +52,19 @@ class OnlinePartner(Protocol):
     def finish(self) -> list[Motion]: ...
 
 
+def check_rate(frame: Motion | Markers, fps: float) -> None:
+    """Raise ValueError (one line) when a frame of A comes at another rate than the
+    partner's ``fps``: frames are taken one per tick of the partner's clock, so a 60 fps
+    take streamed into a 30 fps partner was answered in slow motion, without a word.
+    The caller resamples A first (``motion.resample(partner.fps)``), as ``respond
+    --realtime``, the live pages and ``respond --video`` do."""
+    if abs(float(frame.fps) - fps) > 1e-3 * fps:
+        raise ValueError(
+            f"A's frame is at {float(frame.fps):g} fps and the partner answers at {fps:g}: "
+            "resample A to the partner's rate first (motion.resample(partner.fps))"
+        )
+
+
 @dataclass
 class Replay:
     """What a real-time replay gave: B, per-frame processing times and dropped frames.
@@ -97,7 +110,10 @@ def concatenate(
 
 
 def run(partner: OnlinePartner, motion: Motion) -> Motion:
-    """B for the whole of ``motion`` through ``partner`` as fast as possible (no clock)."""
+    """B for the whole of ``motion`` through ``partner`` as fast as possible (no clock),
+    ``motion`` first resampled to the partner's rate (as ``respond`` does)."""
+    if abs(float(motion.fps) - partner.fps) > 1e-3 * partner.fps:
+        motion = motion.resample(partner.fps)
     out = [f for t in range(motion.n_frames) if (f := partner.step(motion.trim(t, t + 1)))]
     out.extend(partner.finish())
     return concatenate(out, partner.fps)

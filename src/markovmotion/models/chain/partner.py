@@ -52,6 +52,7 @@ from markovmotion.models.chain.condensation import (
     Propagator,
     SingleHypothesis,
 )
+from markovmotion.models.online import check_rate
 from markovmotion.state import (
     StateError,
     check_positive,
@@ -555,9 +556,11 @@ class ChainPartner:
         return self._skeleton
 
     def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
-        """One frame of A in (None: missing); B's frame for ``lag`` frames ago out."""
+        """One frame of A in (None: missing); B's frame for ``lag`` frames ago out. A frame at
+        another rate than the partner's is a ValueError (:func:`check_rate`)."""
         if frame is None:
             return self.skip()
+        check_rate(frame, self.fps)
         kind = frame.names if isinstance(frame, Markers) else frame.skeleton
         if kind is not self._checked:
             self.model.check_input(frame)

@@ -32,6 +32,7 @@ from markovmotion.features.person import OnlineCentre, OnlineSizeScale, RunningC
 from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
+from markovmotion.models.online import check_rate
 from markovmotion.progress import err_console
 
 if TYPE_CHECKING:
@@ -253,7 +254,10 @@ class Partner:
 
     def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
         """One frame of A (a one-frame Motion, or for a model on markers one-frame Markers
-        or a Motion to place virtual markers on) in; B's frame of ``lag`` frames ago out."""
+        or a Motion to place virtual markers on) in; B's frame of ``lag`` frames ago out.
+        A frame at another rate than the partner's is a ValueError (:func:`check_rate`)."""
+        if frame is not None:
+            check_rate(frame, self.fps)
         if frame is not None and self.model.uses_markers:
             kind = frame.names if isinstance(frame, Markers) else id(frame.skeleton)
             if kind != self._checked:
