@@ -381,7 +381,13 @@ class _Stage:
         return self.tracks[panel.tracks[0]].name if len(panel.tracks) == 1 else ""
 
     def populate(
-        self, ax, panel: _Panel, animated: bool, caption: bool = True, legend: bool = True
+        self,
+        ax,
+        panel: _Panel,
+        animated: bool,
+        caption: bool = True,
+        legend: bool = True,
+        legend_at: str = "lower right",
     ) -> list[tuple[int, _Actor]]:
         """Floor and per-track artists of ``panel`` on ``ax``, optionally with names."""
         light = self.point_light
@@ -405,7 +411,7 @@ class _Stage:
         if legend and len(panel.tracks) > 1 and not light:
             ax.legend(
                 handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
-                loc="lower right",
+                loc=legend_at,
                 fontsize=9,
                 framealpha=0.85,
                 edgecolor="none",
@@ -590,13 +596,17 @@ def _strip(
     for r, panel in enumerate(stage.panels):
         for c, t in enumerate(times):
             ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
-            for i, f in stage.populate(ax, panel, False, caption=c % cols == 0, legend=c == 0):
+            for i, f in stage.populate(
+                ax, panel, False, caption=c % cols == 0, legend=c == 0, legend_at="upper right"
+            ):
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
-            # top right, as the animation's clock: the top left holds the name caption, the
-            # bottom right the legend (which covered the first panel's time there)
+            # bottom right: the top left holds the name caption, which a narrow panel overlaps
+            # (the legend goes top right in a strip: at the bottom it covered the first time)
             if not point_light:
-                ax.text(0.99, 0.985, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="top")
+                ax.text(
+                    0.99, 0.015, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="bottom"
+                )
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=DPI)
     return path
