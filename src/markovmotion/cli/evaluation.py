@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
@@ -209,7 +210,9 @@ def _print_gait(store, rep, console: Console) -> None:
         for style, row in zip(c.rows, c.percent, strict=True):
             t.add_row(LABELS.get(style, style), *(_pct(v) for v in row))
         print_table(t, console)
-    t = Table(title=f"Resemblance (Fig. 8): mean score {rep.resemblance_score:.2f} of 4")
+    score = rep.resemblance_score
+    shown = f"{score:.2f}" if np.isfinite(score) else "- (no answers yet)"
+    t = Table(title=f"Resemblance (Fig. 8): mean score {shown} of 4")
     t.add_column("level")
     t.add_column("answers", justify="right")
     for level in range(len(RESEMBLANCE) - 1, -1, -1):

@@ -30,7 +30,9 @@ def render(
     out: Path = typer.Option(..., help="Folder for camK.mp4, camK_background.png, cameras.json."),
     views: int = ranged("count", 3, min=1, max=4, help="Cameras around the capture volume."),
     seconds: float = ranged("seconds", None, help="Only this much of the take."),
-    start: float = ranged("seconds", None, help="Start this far into the take (s)."),
+    start: float = ranged(
+        "time_constant", None, help="Start this far into the take (s; 0: its start)."
+    ),
     fps: float = ranged("fps", None, help="Frame rate of the video (default: the take's)."),
     people: str = typer.Option(
         "a", callback=choice(("a", "both")), help="a: person A alone (B masked); both."

@@ -139,8 +139,8 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
     """Run the demo ``steps`` (default :data:`STEPS`) on the data in ``data``, writing to ``out``."""
     console = Console(soft_wrap=True)  # a log file keeps whole lines
     out = Path(out)
+    index = MocapIndex.load(data)  # no data: one line, and no empty output folder left
     out.mkdir(parents=True, exist_ok=True)
-    index = MocapIndex.load(data)
     console.print(f"[bold]markovmotion demo[/]: data {index.root}, outputs in {out}")
     table = Table(title=f"written to {out}", show_lines=False)
     table.add_column("step")
