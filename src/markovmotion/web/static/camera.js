@@ -61,8 +61,9 @@ function send() {
 function onCameraFrame(now, metadata) {
   if (!session || !session.running) return;
   session.seen += 1;
-  // the camera frame's own number where the browser gives it (requestVideoFrameCallback)
-  session.frameId = metadata && metadata.presentedFrames !== undefined ? metadata.presentedFrames : session.seen;
+  // the camera frame's own number where the browser gives it (requestVideoFrameCallback),
+  // else the video's time, which moves only when a new frame is shown
+  session.frameId = metadata && metadata.presentedFrames !== undefined ? metadata.presentedFrames : video.currentTime;
   send();
   if (video.requestVideoFrameCallback) video.requestVideoFrameCallback(onCameraFrame);
   else requestAnimationFrame(onCameraFrame);
