@@ -416,6 +416,29 @@ def test_evaluate_on_another_index_leaves_training_walks_out(mocap, small_model,
     assert "trained on" in err and "a.bvh.gz" in err
 
 
+def test_evaluate_on_walks_of_another_skeleton_says_what_differs(
+    mocap, small_model, tmp_path, capsys
+):
+    """Normal walks on another skeleton only (CMU's, written as BVH): one line naming the
+    joint counts and joints that differ, exit 2."""
+    from markovmotion.io import write_motion
+
+    model = tmp_path / "avg.npz"
+    small_model.save(model)
+    (tmp_path / "other").mkdir()
+    walk = mocap.load_motion(mocap.find("cmu/asfamc/02/02_01.amc.gz"))
+    write_motion(walk, tmp_path / "other" / "cmu_walk.bvh")
+    (tmp_path / "other" / "INDEX.csv").write_text(
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+        f"cmu_walk.bvh,mine,,,walk,normal,,{walk.fps:g},{walk.n_frames},a CMU walk\n"
+    )
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "evaluate", "--model", str(model), "--test", str(tmp_path / "other")])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1
+    assert "cmu_walk.bvh: (" in err and "joints differ" in err
+
+
 def test_gait_steps_lists_the_steps_of_each_walk(capsys):
     """``gait steps`` (README's command table): a row per walk with its steps, and the total."""
     from markovmotion.cli import main
