@@ -614,3 +614,16 @@ def test_whom_notes_say_when_the_person_followed_may_not_be_the_one_meant():
     assert whom_notes({**named, "from_person_m": FAR_FROM_RAY_M - 0.1}, named=True) == []
     lines = whom_notes({**near, "views_of_someone_else": 3})
     assert len(lines) == 1 and lines[0].startswith("note: 3 camera frames")
+
+
+def test_every_track_method_gives_the_reference_errors_under_reference(real_video, capsys):
+    """``track --json --reference``: the particle filter, triangulate and monocular all give
+    ``reference.mean_mm`` (the last two also flat, as before)."""
+    _need_mediapipe()
+    ref = str(real_video / "reference_mediapipe_triangulated_mm.csv")
+    base = ["track", "--video", str(real_video), "--max-frames", "3", "--reference", ref, "--json"]
+    for extra in (["--particles", "10", "--layers", "2"], ["--method", "triangulate"],
+                  ["--method", "monocular"]):  # fmt: skip
+        main([*base, *extra])
+        s = json.loads(capsys.readouterr().out)
+        assert s["reference"]["mean_mm"] > 0, extra

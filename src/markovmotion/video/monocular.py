@@ -607,5 +607,7 @@ def track_monocular_video(
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
-        summary.update(reference_errors(tr.points, reference))
+        errors = reference_errors(tr.points, reference)
+        # flat, as before, and under "reference" as the particle filter's summary has them
+        summary.update(errors, reference=errors)
     return tr, summary

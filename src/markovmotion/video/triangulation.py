@@ -955,7 +955,9 @@ def track_triangulated_video(
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
-        summary.update(reference_errors(tr.points, reference))
+        errors = reference_errors(tr.points, reference)
+        # flat, as before, and under "reference" as the particle filter's summary has them
+        summary.update(errors, reference=errors)
     return tr, summary
 
 
