@@ -216,3 +216,23 @@ def test_no_help_text_loses_square_brackets():
         if getattr(param, "help", None) and tag.search(param.help)
     ]
     assert not found, found
+
+
+def test_label_and_labels_are_both_spellings_everywhere():
+    """``--label`` and ``--labels`` are taken by every command that selects labels (a new user
+    wrote both), and a repeated or comma-separated list is one list."""
+    import typer
+
+    from markovmotion.cli import _register, app
+    from markovmotion.cli.options import split_labels
+
+    _register()  # the subcommands are attached when the command line first runs
+    root = typer.main.get_command(app)
+    for group, command in (("dualhmm", "train"), ("dualhmm", "evaluate"), ("dualhmm", "crossval"),
+                           ("chain", "train"), ("chain", "evaluate"), ("chain", "crossval"),
+                           ("vlmm", "train"), ("vlmm", "evaluate")):  # fmt: skip
+        cmd = root.commands[group].commands[command]
+        names = {o for p in cmd.params for o in getattr(p, "opts", ())}
+        assert {"--label", "--labels"} <= names, (group, command)
+    assert split_labels(["a,b", "c"]) == ["a", "b", "c"]
+    assert split_labels(None) is None and split_labels([" , "]) is None

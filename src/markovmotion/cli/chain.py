@@ -20,6 +20,7 @@ from markovmotion.cli.options import (
     normalise_option,
     ranged,
     roles_option,
+    split_labels,
 )
 from markovmotion.cli.tables import print_json, print_table
 from markovmotion.data import MocapIndex
@@ -372,7 +373,10 @@ def evaluate(
     ),
     label: list[str] = typer.Option(
         None,
-        help="Mocap: labels of the two-person takes (repeat; default: the model's training labels).",
+        "--label",
+        "--labels",
+        help="Mocap: labels of the two-person takes (repeat, or comma-separated; default: the "
+        "model's training labels).",
     ),
     seed: int = ranged("seed", 0, help="Random seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON on stdout."),
@@ -382,6 +386,7 @@ def evaluate(
     With --test, the two-person takes of that INDEX.csv that fit the model, minus those it
     trained on (by content); without, the collection's held-out takes.
     """
+    label = split_labels(label)
     from markovmotion.evaluate.chain import evaluate_model
     from markovmotion.models.chain.partner import VirtualPartner
 
@@ -420,7 +425,10 @@ def evaluate(
 def crossval(
     data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
     labels: str = typer.Option(
-        None, help="Comma-separated labels of the two-person takes (default: every interaction)."
+        None,
+        "--labels",
+        "--label",
+        help="Comma-separated labels of the two-person takes (default: every interaction).",
     ),
     prototypes: int = PROTOTYPES,
     behaviours: int = BEHAVIOURS,

@@ -34,7 +34,9 @@ app = typer.Typer(
 
 
 DATA = typer.Option(None, help="Folder with INDEX.csv (default: see README).")
-LABELS = typer.Option(None, help="Comma-separated labels (default: every interaction).")
+LABELS = typer.Option(
+    None, "--labels", "--label", help="Comma-separated labels (default: every interaction)."
+)
 STATES = ranged("states", 32, help="Hidden states N.")
 # The choices of DualHMM's MODES and OBSERVATIONS (not imported: the models load lazily)
 MODE = typer.Option(

@@ -348,3 +348,10 @@ def normalise_option(what: str) -> Any:
         callback=choice(("none", "person")),
         help=f"'person': {what}, for people the model has never seen; 'none': the paper's.",
     )
+
+
+def split_labels(values: list[str] | None) -> list[str] | None:
+    """Labels given as ``--label a --label b`` or ``--labels a,b`` (every command takes both
+    spellings, as a new user wrote them): one list, None when none were given."""
+    out = [v.strip() for value in values or [] for v in value.split(",") if v.strip()]
+    return out or None

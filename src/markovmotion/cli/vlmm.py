@@ -8,7 +8,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from markovmotion.cli.options import choice, kind_option, ranged
+from markovmotion.cli.options import choice, kind_option, ranged, split_labels
 from markovmotion.cli.tables import print_json, print_table
 from markovmotion.core.markers import Markers
 from markovmotion.data import MocapIndex
@@ -92,7 +92,12 @@ def train(
     out: Path = typer.Option(..., help="Model file to write (.npz)."),
     data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
     category: str = typer.Option("exercise", help="Category of the training takes."),
-    label: list[str] = typer.Option(None, help="Only these labels (repeatable; default all)."),
+    label: list[str] = typer.Option(
+        None,
+        "--label",
+        "--labels",
+        help="Only these labels (repeat, or comma-separated; default all).",
+    ),
     prototypes: int = ranged("states", 100, min=2, help="Number of prototypes K."),
     max_memory: int = typer.Option(5, min=0, help="Maximum memory length N of the VLMM."),
     epsilon: float = typer.Option(1e-4, min=0.0, help="KL threshold (eq. 5)."),
@@ -132,6 +137,7 @@ def train(
     kind: str = kind_option(),
 ) -> None:
     """Learn prototypes and a VLMM (optionally the structured model) from motion capture."""
+    label = split_labels(label)
     from markovmotion.models.vlmm.behaviour import BehaviourModel, fit_index
 
     check_model_output(out)
@@ -310,7 +316,12 @@ def evaluate(
         None, help="INDEX.csv (or its folder) holding the test takes (default: see README)."
     ),
     category: str = typer.Option(None, help="Test on this category instead of the held-out takes."),
-    label: list[str] = typer.Option(None, help="Test on these labels instead (repeatable)."),
+    label: list[str] = typer.Option(
+        None,
+        "--label",
+        "--labels",
+        help="Test on these labels instead (repeat, or comma-separated).",
+    ),
     samples: int = ranged("count", 50, min=1, help="Stochastic predictions per frame."),
     horizon: float = ranged("horizon", 3.0, min=0.1, help="Longest horizon in seconds."),
     stride: int = typer.Option(1, min=1, help="Predict from every stride-th frame (1: all)."),
@@ -336,6 +347,7 @@ def evaluate(
     and skeleton, leaving out (and listing) the takes it trained on, whatever
     their names; without, on the takes the model held out in training.
     """
+    label = split_labels(label)
     from markovmotion.evaluate.vlmm import evaluate_model
     from markovmotion.models.vlmm.structured import load_behaviour
     from markovmotion.viz.plots import check_figure_output
