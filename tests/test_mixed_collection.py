@@ -219,3 +219,28 @@ def test_data_list_shows_each_takes_kind(capsys, mocap):
         kind, count = describe_take(e.path)
         assert kind == e.kind
         assert f"{kind}, {count} {'points' if kind == 'markers' else 'joints'}" in row
+
+
+def test_a_file_listed_in_an_index_above_it_is_read_as_that_index_says(mocap, tmp_path, capsys):
+    """A user's own collection (an INDEX.csv in a folder above the file, not the default
+    collection): ``info`` and the readers take its frame rate, as for the collection's files;
+    a broken index above a file is passed over (the file read as it is)."""
+    import shutil
+
+    from markovmotion.cli import main
+    from markovmotion.data.index import read_listed_motion
+
+    walk = mocap.query(source="bandai")[0]
+    (tmp_path / "own" / "takes").mkdir(parents=True)
+    shutil.copyfile(walk.path, tmp_path / "own" / "takes" / "w.bvh.gz")
+    (tmp_path / "own" / "INDEX.csv").write_text(
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+        f"takes/w.bvh.gz,mine,,,walk,active,,15,{walk.frames},listed at half its rate\n"
+    )
+    assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == 15.0
+    main(["info", str(tmp_path / "own" / "takes" / "w.bvh.gz")])
+    assert "15 fps" in capsys.readouterr().out
+    (tmp_path / "own" / "INDEX.csv").write_text("not,an,index\n")
+    assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == pytest.approx(
+        30.0, rel=1e-4
+    )

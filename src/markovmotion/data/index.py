@@ -16,7 +16,7 @@ from pathlib import Path
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
-from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionFormatError
 from markovmotion.io import read_c3d, read_motion
 from markovmotion.io.files import base_suffix, read_text
 from markovmotion.limits import MAX_FRAMES, check_rate, exceeded, max_frames
@@ -273,14 +273,30 @@ class MocapIndex:
         return ma.trim(0, n), mb.trim(0, n)
 
 
+#: How many folders above a file :func:`listed_entry` looks in for an INDEX.csv listing it.
+INDEX_LEVELS = 4
+
+
 def listed_entry(path: str | os.PathLike[str]) -> Entry | None:
-    """The collection's entry for a file given by path, or None if it is not listed
-    (or no collection is found)."""
+    """The entry for a file given by path: in the collection (``--data``'s default, or
+    ``$MARKOVMOTION_DATA``), else in an INDEX.csv of a folder above the file (a user's own
+    collection, up to :data:`INDEX_LEVELS` folders up, links resolved); None if none lists it.
+    An index that cannot be read is passed over: the file is then read as it is."""
     try:
-        index = MocapIndex.load()
-        return index.find(Path(path).resolve().relative_to(index.root).as_posix())
-    except (DataNotFoundError, ValueError, OSError, RuntimeError):  # a link loop: the reader says
+        file = Path(path).resolve()
+    except (OSError, RuntimeError):  # a link loop: the reader says
         return None
+    roots: list[Path | None] = [None]
+    roots += [f for f in list(file.parents)[:INDEX_LEVELS] if (f / INDEX_NAME).is_file()]
+    for root in roots:
+        try:
+            index = MocapIndex.load(root)
+            entry = index.find(file.relative_to(index.root.resolve()).as_posix())
+        except (MarkovMotionError, ValueError, OSError, RuntimeError, KeyError):
+            continue
+        if entry is not None:
+            return entry
+    return None
 
 
 def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motion:
