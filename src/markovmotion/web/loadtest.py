@@ -208,6 +208,20 @@ def simulate_live(url: str, path: str, n: int = 20, seconds: float = 30.0) -> Li
         )
 
     start = time.monotonic()
-    asyncio.run(run())
+    _run_async(run())
     out.seconds = time.monotonic() - start
     return out
+
+
+def _run_async(coroutine) -> None:
+    """``asyncio.run``, in a thread of its own when this thread already runs an event loop (a
+    notebook, or Playwright's sync API), where ``asyncio.run`` refuses to start."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:  # no loop running here: the usual case
+        asyncio.run(coroutine)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, coroutine).result()
