@@ -583,7 +583,7 @@ def test_two_server_processes_share_the_sessions_and_store_every_answer(site, du
     options = AppOptions(site / "lib", db, admin_token=ADMIN, partner=dual)
     with running_workers(options, workers=2) as url:
         evaluators = simulate_evaluators(url, n=10, seconds=3.0)
-        live = _in_thread(simulate_live, url, "salsa_a.bvh", n=6, seconds=1.5)
+        live = simulate_live(url, "salsa_a.bvh", n=6, seconds=1.5)
         assert fetch(f"{url}/api/motions")[0] == 200
     # two writers on one SQLite file: every accepted answer is there once
     assert not evaluators.errors and evaluators.answers > 10

@@ -103,17 +103,19 @@ class Skeleton:
     def same_topology(self, other: Skeleton) -> bool:
         return self.names == other.names and np.array_equal(self.parents, other.parents)
 
+    def difference(self, other: Skeleton) -> str | None:
+        """What tells ``other`` from this skeleton, in a few words (``(27 joints, expected 57;
+        joints differ: Chest, ...)``), or None when it has the same joints in the same tree."""
+        if self.same_topology(other):
+            return None
+        missing = sorted(set(self.names) ^ set(other.names))
+        detail = f"joints differ: {', '.join(missing[:5])}" if missing else "joint order differs"
+        return f"({other.n_joints} joints, expected {self.n_joints}; {detail})"
+
     def check_compatible(self, other: Skeleton, what: str = "motion") -> None:
         """Raise :class:`SkeletonMismatchError` unless ``other`` has the same joints."""
-        if not self.same_topology(other):
-            missing = sorted(set(self.names) ^ set(other.names))
-            detail = (
-                f"joints differ: {', '.join(missing[:5])}" if missing else "joint order differs"
-            )
-            raise SkeletonMismatchError(
-                f"the {what}'s skeleton does not match ({other.n_joints} joints, expected "
-                f"{self.n_joints}; {detail})"
-            )
+        if (differs := self.difference(other)) is not None:
+            raise SkeletonMismatchError(f"the {what}'s skeleton does not match {differs}")
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready description (saved in model headers)."""

@@ -70,7 +70,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.splits import held_out_every
 from markovmotion.data.walks import DEFAULT_SUBSET, gait_entries
-from markovmotion.errors import DataNotFoundError, ModelFormatError, SkeletonMismatchError
+from markovmotion.errors import DataNotFoundError, ModelFormatError
 from markovmotion.evaluate.perceptual import efficiency
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
@@ -700,11 +700,8 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
     why = ""
     for e in track(chosen.takes, "reading test walks"):
         motion = index.load_motion(e)
-        try:
-            skeleton.check_compatible(motion.skeleton, "walk")
-        except SkeletonMismatchError as exc:
-            prefix = "the walk's skeleton does not match "
-            why = why or f"; {e.file}: {str(exc).removeprefix(prefix)}"
+        if (differs := skeleton.difference(motion.skeleton)) is not None:
+            why = why or f"; {e.file}: {differs}"
             continue
         kept.append(e)
         motions.append(motion)

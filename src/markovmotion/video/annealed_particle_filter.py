@@ -931,25 +931,13 @@ def track_video(
     sizes: dict = {}
     if sides or guide or size_from_views:  # MediaPipe once over every camera, for every use
         from markovmotion.video.sides import SideCheck
-        from markovmotion.video.triangulation import (
-            Guide,
-            ViewLandmarks,
-            consistent_views,
-            look_again,
-            person_ray,
-            someone_else_count,
-            triangulate_views,
-            whom,
-        )
+        from markovmotion.video.triangulation import Guide, person_views, triangulate_views, whom
 
         # views of someone else dropped and left and right made consistent first
         # (triangulation.consistent_views): a camera behind the person, whose MediaPipe
         # mirrors the body, is put right by the others
-        aim = person_ray(mv.cameras, person, mv.fps) if person is not None else None
-        views = ViewLandmarks.from_videos(mv.videos, mv.cameras, max_frames)
-        views, kept = look_again(views, mv.videos, mv.fps, aim=aim)
-        agreed = consistent_views(kept, left_right)
-        someone_else = someone_else_count(views, kept)
+        one = person_views(mv.videos, mv.cameras, mv.fps, max_frames, person, left_right)
+        agreed = one.agreed
         check = SideCheck.from_landmarks(agreed) if sides else None
         points = triangulate_views(agreed) if guide or size_from_views else None
         if size_from_views:
@@ -964,7 +952,7 @@ def track_video(
             body = segment_body(body, sizes)
         if guide:
             guided = Guide.from_views(agreed, points)
-            followed = whom(points.points, mv.cameras, aim)
+            followed = whom(points.points, mv.cameras, one.aim)
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
@@ -974,7 +962,7 @@ def track_video(
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())
-        result.guide_someone_else = someone_else
+        result.guide_someone_else = one.someone_else
         result.guide_whom = followed
     if size_from_views:
         result.body_size, result.body = sizes, body

@@ -60,6 +60,11 @@ def _lengths(points: np.ndarray) -> np.ndarray:
     )
 
 
+def _standing(body: BodyModel) -> np.ndarray:
+    """(1, 19, 3) the body model's template standing, its root at its standing height."""
+    return body.joint_positions(body.standing(np.array([0.0, body.height, 0.0])))
+
+
 def body_size_from_points(body: BodyModel, points: np.ndarray) -> tuple[float, float, float]:
     """(scale, legs, arms) of the person whose body points (F, 19, 3) are given, relative to
     the body model's template (see the module docstring); frames with NaN are left out.
@@ -69,7 +74,7 @@ def body_size_from_points(body: BodyModel, points: np.ndarray) -> tuple[float, f
     """
     person = _lengths(points)
     person = np.nanmedian(person[np.isfinite(person).all(axis=1)], axis=0)
-    template = _lengths(body.joint_positions(body.standing(np.array([0.0, body.height, 0.0]))))[0]
+    template = _lengths(_standing(body))[0]
     if not np.isfinite(person).all():
         raise ValueError("no frame with every body point to measure the person's size")
     leg, arm = person[1] / template[1], person[2] / template[2]
@@ -136,7 +141,7 @@ def segment_sizes_from_points(
     Raises:
         ValueError: no segment measured within :data:`SIZE_RANGE`.
     """
-    template = body.joint_positions(body.standing(np.array([0.0, body.height, 0.0])))
+    template = _standing(body)
     out, left_out = {}, []
     for segment in SEGMENTS:
         key = "-".join(segment)
@@ -188,10 +193,6 @@ def segment_body(body: BodyModel, sizes: dict[str, float]) -> BodyModel:
     sized = dataclasses.replace(body, skeleton=skeleton)
 
     def leg(m: BodyModel) -> float:  # hip to ankle, standing
-        return float(
-            _span(m.joint_positions(m.standing(np.array([0.0, m.height, 0.0]))), ("hip", "ankle"))[
-                0
-            ]
-        )
+        return float(_span(_standing(m), ("hip", "ankle"))[0])
 
     return dataclasses.replace(sized, height=body.height * leg(sized) / leg(body))

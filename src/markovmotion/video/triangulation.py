@@ -752,6 +752,46 @@ def consistent_views(views: ViewLandmarks, left_right: str = "views") -> ViewLan
     return views
 
 
+@dataclass
+class PersonViews:
+    """MediaPipe in every camera, narrowed to one person (:func:`person_views`)."""
+
+    #: MediaPipe's landmarks, with the views looked at again on crops (:func:`look_again`).
+    found: ViewLandmarks
+    #: Those of the person followed, left and right made consistent (:func:`consistent_views`).
+    agreed: ViewLandmarks
+    #: Where the person named with ``--person`` was looked for (None: where the cameras aim).
+    aim: Aim | None
+    #: (view, frame) pairs of someone else, left out (:func:`someone_else_count`).
+    someone_else: int
+    #: One line when a camera's video ended before the others'.
+    notes: list[str]
+
+
+def person_views(
+    videos: Sequence[str | os.PathLike[str]],
+    cameras: Sequence[CalibratedCamera],
+    fps: float,
+    max_frames: int | None = None,
+    person: str | None = None,
+    left_right: str = "views",
+) -> PersonViews:
+    """MediaPipe over every camera's video, narrowed to one person (the one at the pixel
+    ``person`` names, :func:`person_ray`, else the one the views agree on near where the
+    cameras aim: :func:`look_again`), left and right made consistent: what
+    ``--method triangulate`` and the particle filter's guide both start from."""
+    aim = person_ray(cameras, person, fps) if person is not None else None  # before MediaPipe
+    detected = ViewLandmarks.from_videos(videos, cameras, max_frames)
+    found, kept = look_again(detected, videos, fps, aim=aim)
+    return PersonViews(
+        found,
+        consistent_views(kept, left_right),
+        aim,
+        someone_else_count(found, kept),
+        detected.notes,
+    )
+
+
 def check_left_right(left_right: str) -> None:
     """Raise ValueError (one line) unless ``left_right`` is one of :data:`LEFT_RIGHT`."""
     if left_right not in LEFT_RIGHT:
@@ -928,10 +968,8 @@ def track_triangulated_video(
     if len(cams) < 2:
         raise MotionFormatError(where, "--method triangulate needs at least 2 cameras")
     fps = float(doc["fps"])
-    aim = person_ray(cams, person, fps) if person is not None else None  # before MediaPipe
-    detected = ViewLandmarks.from_videos(videos, cams, max_frames)
-    found, kept = look_again(detected, videos, fps, aim=aim)
-    lm = consistent_views(kept, left_right)
+    one = person_views(videos, cams, fps, max_frames, person, left_right)
+    lm = one.agreed
     tri = triangulate_views(lm)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
@@ -945,13 +983,13 @@ def track_triangulated_video(
         "frames_placed": int(tr.placed.sum()),
         "fps": round(n / max(seconds, 1e-9), 2),
         "video_fps": tr.fps,
-        "views_of_someone_else": someone_else_count(found, kept),
-        **whom(tr.points, cams, aim),
+        "views_of_someone_else": one.someone_else,
+        **whom(tr.points, cams, one.aim),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
         "left_right": left_right,
-        "notes": detected.notes,
+        "notes": one.notes,
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,13 +79,19 @@ def load_motions(
 
     Returns the motions and the entries left out for having another skeleton.
     """
-    takes = [index.load_take(e) for e in entries]
-    markers = [i for i, t in enumerate(takes) if isinstance(t, Markers)]
-    for i, t in zip(markers, seen_in_every([takes[i] for i in markers]), strict=True):
-        takes[i] = t  # the markers some take never sees left out, said once
-    motions = [_take(t).resample(fps) for t in takes]
+    motions = [_take(t).resample(fps) for t in _seen(index.load_take(e) for e in entries)]
     best, left = largest_group(motions, [e.file for e in entries])
     return [motions[i] for i in best], [entries[i] for i in left]
+
+
+def _seen(takes: Iterable[Motion | Markers]) -> list[Motion | Markers]:
+    """The takes, markers without those some take never sees (:func:`seen_in_every`, said
+    once); skeletons as they are."""
+    takes = list(takes)
+    markers = [i for i, t in enumerate(takes) if isinstance(t, Markers)]
+    for i, t in zip(markers, seen_in_every([takes[i] for i in markers]), strict=True):
+        takes[i] = t
+    return takes
 
 
 def _take(take: Motion | Markers) -> Motion | Markers:
@@ -267,7 +273,7 @@ class BehaviourModel(Model):
             self.skeleton_ = None
         else:
             self.record_training(motions)
-            motions = [_take(m).resample(self.fps) for m in motions]
+            motions = [_take(m).resample(self.fps) for m in _seen(motions)]
             self._check_takes(motions)
             self.skeleton_ = None if isinstance(motions[0], Markers) else motions[0].skeleton
         self.pipeline_ = self._make_pipeline(self.skeleton_)
@@ -336,13 +342,12 @@ class BehaviourModel(Model):
             return f"markers not found: {', '.join(missing[:8])}"
         if not isinstance(take, Motion):
             return "markers, and the model learnt a skeleton"
-        try:
-            if self._by_points():
+        if self._by_points():
+            try:
                 body_point_index(take.skeleton, MARKER_POINTS, "its skeleton")
-            self.skeleton_.check_compatible(take.skeleton, "take")
-        except SkeletonMismatchError as exc:
-            return str(exc).removeprefix("the take's skeleton does not match ")
-        return "fits"
+            except SkeletonMismatchError as exc:
+                return str(exc)
+        return self.skeleton_.difference(take.skeleton) or "fits"
 
     @property
     def marker_names(self) -> tuple[str, ...]:
