@@ -9,7 +9,7 @@ page) at 30 frames/s with the same rule (a frame is dropped while ``--inflight``
 answer): the server's own rate without the browser's share of the two cores.
 
     python3 benchmarks/camera_page.py [--seconds 20] [--inflight 2 3] [--graphs 1 2]
-        [--client page|socket]
+        [--client page|socket] [--load N]
 
 Needs MediaPipe (``scripts/install-camera``) and Chromium (``scripts/install-test-browser``).
 The partner is a dual HMM on two salsa takes (body points), trained here (about 20 s).
@@ -22,6 +22,7 @@ import argparse
 import functools
 import json
 import math
+import multiprocessing
 import os
 import tempfile
 import time
@@ -44,7 +45,19 @@ def main() -> None:
     ap.add_argument("--inflight", type=int, nargs="+", default=[2, 3], help="frames in flight")
     ap.add_argument("--graphs", type=int, nargs="+", default=[1, 2], help="MediaPipe graphs")
     ap.add_argument("--client", choices=["page", "socket"], default="page")
+    ap.add_argument(
+        "--load", type=int, default=0, help="busy-loop processes run meanwhile (other jobs)"
+    )
     args = ap.parse_args()
+    from web_load import cpu_load  # this folder's: the same busy loops as the load test
+
+    with cpu_load(args.load):
+        _BUSY.update(p.pid for p in multiprocessing.active_children())
+        run(args)
+
+
+def run(args: argparse.Namespace) -> None:
+    """Every setting of ``args``, one after another, each printed as it ends."""
     from playwright.sync_api import sync_playwright
 
     root = data_root().parent / "video" / "pose2sim_balancing"
@@ -140,9 +153,13 @@ def measure_socket(
     )
 
 
+#: The ``--load`` busy loops: under this process, but not the browser's CPU.
+_BUSY: set[int] = set()
+
+
 def _cpu() -> tuple[float, float]:
-    """CPU seconds (user + system) of this process and of all the processes under it (read
-    from /proc: Linux)."""
+    """CPU seconds (user + system) of this process and of all the processes under it but
+    the ``--load`` busy loops (read from /proc: Linux)."""
     tick = os.sysconf("SC_CLK_TCK")
     parent, used = {}, {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
@@ -158,7 +175,7 @@ def _cpu() -> tuple[float, float]:
     below, todo = 0.0, [me]
     while todo:
         pid = todo.pop()
-        kids = [c for c, pp in parent.items() if pp == pid]
+        kids = [c for c, pp in parent.items() if pp == pid and c not in _BUSY]
         below += sum(used[c] for c in kids)
         todo += kids
     return used.get(me, 0.0), below

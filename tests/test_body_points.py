@@ -65,6 +65,8 @@ def test_missing_points_named_in_one_error():
     with pytest.raises(SkeletonMismatchError, match=r"mine: .*left_wrist.*right_elbow") as err:
         body_point_index(sk, MARKER_POINTS, what="mine")
     assert "\n" not in str(err.value)
+    assert err.value.reason.startswith("cannot find these body points")  # without "mine: "
+    assert "left_wrist" in err.value.reason
     with pytest.raises(KeyError, match="nose"):
         body_point_index(sk, ("nose",))
 

@@ -240,6 +240,11 @@ def test_a_file_listed_in_an_index_above_it_is_read_as_that_index_says(mocap, tm
     assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == 15.0
     main(["info", str(tmp_path / "own" / "takes" / "w.bvh.gz")])
     assert "15 fps" in capsys.readouterr().out
+    (tmp_path / "own" / "INDEX.csv").write_text(  # an edited index is read again
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+        f"takes/w.bvh.gz,mine,,,walk,active,,12.5,{walk.frames},listed at another rate\n"
+    )
+    assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == 12.5
     (tmp_path / "own" / "INDEX.csv").write_text("not,an,index\n")
     assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == pytest.approx(
         30.0, rel=1e-4

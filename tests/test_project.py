@@ -136,3 +136,64 @@ def test_every_numba_function_is_cached() -> None:
                     missing.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
     assert seen > 10  # the scan finds the compiled recursions
     assert not missing, "numba functions without cache=True: " + ", ".join(missing)
+
+
+def _documented_commands() -> list[tuple[str, list[str]]]:
+    """Every ``markovmotion ...`` command line of the README's and docs/' shell blocks, as
+    (file, arguments): continuation lines joined, what follows ``&&``, ``|``, ``;`` or a
+    redirection dropped, ``[optional parts]`` and ``...`` left out, ``$VARIABLES`` kept as
+    words (a value is a value to the parser)."""
+    import shlex
+
+    out = []
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        text = doc.read_text()
+        for lang, block in re.findall(r"^\s*```(\w*)\n(.*?)^\s*```", text, re.S | re.M):
+            if lang not in ("", "bash", "sh", "console", "shell"):
+                continue
+            for line in re.sub(r"\\\n\s*", " ", block).splitlines():
+                found = re.search(r"(?:^|[;&|(]\s*|\$ )markovmotion\s+(.*)", line.strip())
+                if not found or line.strip().startswith("#"):
+                    continue
+                words = re.split(r"\s(?:&&|\|\||\||;|>|2>)\s", found.group(1))[0]
+                words = re.sub(r"\[[^\]]*\]", "", words)
+                args = [w for w in shlex.split(words, comments=True) if w != "..."]
+                out.append((f"{doc.relative_to(ROOT)}: markovmotion {words.strip()}", args))
+    return out
+
+
+def test_every_documented_command_parses() -> None:
+    """The commands the README and docs/ show name commands and options that exist, with
+    values of the right types and choices: the parser alone, nothing run (an option renamed
+    in the code and not in the docs fails here)."""
+    from typer.main import get_command
+
+    from markovmotion.cli import _register, app
+
+    _register()
+
+    def parse(command, args: list[str], parent=None, name: str = "markovmotion") -> None:
+        ctx = command.make_context(name, list(args), parent=parent)
+        if hasattr(command, "resolve_command"):  # a group: its subcommand in turn
+            rest = [*getattr(ctx, "_protected_args", []), *ctx.args]
+            if rest:
+                sub_name, sub, rest = command.resolve_command(ctx, rest)
+                parse(sub, rest, ctx, sub_name)
+
+    root = get_command(app)
+    commands = _documented_commands()
+    assert len(commands) >= 50, f"only {len(commands)} documented commands found"
+    wrong = []
+    for where, args in commands:
+        try:
+            parse(root, args)
+        except Exception as exc:  # typer's own click: its errors have format_message
+            if type(exc).__name__ == "Exit":  # --help and the like
+                continue
+            message = exc.format_message() if hasattr(exc, "format_message") else repr(exc)
+            wrong.append(f"{where}\n    {message}")
+    assert not wrong, "\n".join(wrong)
+    bad = [["dualhmm", "train", "--no-such-option"], ["dualhmm", "tran"]]
+    for args in bad:  # the check itself can fail
+        with pytest.raises(Exception, match="No such"):
+            parse(root, args)

@@ -272,6 +272,12 @@ def test_both_studies_from_one_folder(study, mocap, tmp_path):
         assert json.loads(fetch(url + "/api/studies")[1]) == {"studies": ["gait", "interaction"]}
         gait = post_json(url + "/api/evaluation")[1]["token"]  # the default, as before
         inter = post_json(url + "/api/evaluation?study=interaction")[1]["token"]
+        by_body = post_json(url + "/api/evaluation", {"study": "interaction"})[1]["token"]
+        assert json.loads(fetch(f"{url}/api/evaluation/{by_body}")[1])["tests"][0]["name"] == (
+            INTERACTION
+        )  # a JSON body is read, not ignored
+        assert post_json(url + "/api/evaluation?study=gait", {"study": "interaction"})[0] == 422
+        assert post_json(url + "/api/evaluation", {"study": "gait", "x": 1})[0] == 422
         g = json.loads(fetch(f"{url}/api/evaluation/{gait}")[1])
         i = json.loads(fetch(f"{url}/api/evaluation/{inter}")[1])
         assert [t["name"] for t in g["tests"]] == ["naturalness", "recognition", "resemblance"]
@@ -288,7 +294,7 @@ def test_both_studies_from_one_folder(study, mocap, tmp_path):
             post_json(f"{url}/api/evaluation/{gait}/{INTERACTION}/0", {"answer": label})[0] == 422
         )
         r = json.loads(fetch(f"{url}/api/results?token={ADMIN}")[1])
-    assert r["studies"] == ["gait", "interaction"] and r["registered"] == 2
+    assert r["studies"] == ["gait", "interaction"] and r["registered"] == 3  # one by body
     assert r["evaluators"] == 1 and r["answers"]["naturalness"] == 1
     assert r["interaction"]["observers"] == 1 and r["interaction"]["answers"] == 1
 

@@ -38,7 +38,21 @@ class DataNotFoundError(MarkovMotionError):
 
 
 class SkeletonMismatchError(MarkovMotionError):
-    """Two motions, or a motion and a model, do not share a skeleton."""
+    """Two motions, or a motion and a model, do not share a skeleton.
+
+    ``reason`` is what differs, without where (``markers not found: R_HAND``): a message
+    that wraps another mismatch keeps the innermost one's, so a listing of left-out takes
+    can say why beside each file without reading the message's text.
+    """
+
+    def __init__(self, message: str, reason: str | None = None):
+        super().__init__(message)
+        self.reason = reason or message
+
+
+class MarkersNotFoundError(SkeletonMismatchError, ValueError):
+    """Markers a model or a step needs are not among the take's (named in ``reason``).
+    Also a :class:`ValueError`, as it was before it had a class of its own."""
 
 
 class LimitError(MarkovMotionError, ValueError):

@@ -8,6 +8,7 @@ Root resolution order: an explicit path, then ``$MARKOVMOTION_DATA``, then
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import os
 from collections.abc import Iterable
@@ -290,13 +291,25 @@ def listed_entry(path: str | os.PathLike[str]) -> Entry | None:
     roots += [f for f in list(file.parents)[:INDEX_LEVELS] if (f / INDEX_NAME).is_file()]
     for root in roots:
         try:
-            index = MocapIndex.load(root)
+            index = _index_read(data_root(root))
             entry = index.find(file.relative_to(index.root.resolve()).as_posix())
         except (MarkovMotionError, ValueError, OSError, RuntimeError, KeyError):
             continue
         if entry is not None:
             return entry
     return None
+
+
+def _index_read(root: Path) -> MocapIndex:
+    """``root``'s index, parsed again only when its INDEX.csv changed (size or time): a
+    command that reads many files by path looks each one up."""
+    stat = (root / INDEX_NAME).stat()
+    return _index_at(root, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _index_at(root: Path, mtime_ns: int, size: int) -> MocapIndex:
+    return MocapIndex.load(root)
 
 
 def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -> Motion:

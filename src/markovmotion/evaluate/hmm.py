@@ -34,7 +34,6 @@ the model's own held-out takes) and :func:`crossval_index`.
 from __future__ import annotations
 
 import os
-import re
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -669,20 +668,9 @@ def pairs_that_fit(
         try:
             model.check_input(a, ea.path)
         except SkeletonMismatchError as exc:
-            other_skeleton += [f"{ea.file} ({_why(exc, ea)})", eb.file]
+            other_skeleton += [f"{ea.file} ({exc.reason})", eb.file]
             continue
         yield ea, eb, a, b
-
-
-def _why(exc: Exception, entry: Entry) -> str:
-    """The innermost reason of a mismatch (``markers not found: R_HAND``), the take's file
-    left out: the message's last parenthesis, else the whole message."""
-    text = str(exc)
-    inner = re.search(r"\(([^()]*)\)\s*$", text)
-    reason = inner.group(1) if inner else text
-    for where in (str(entry.path), entry.file, entry.path.name):
-        reason = reason.removeprefix(f"{where}: ")
-    return reason
 
 
 def evaluate_model(

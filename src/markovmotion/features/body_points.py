@@ -175,9 +175,8 @@ def body_point_index(
         (missing.append(p) if j is None else found.append(j))
     if missing:
         detail = "; ".join(f"{p} (looked for {', '.join(SYNONYMS[p][:4])} ...)" for p in missing)
-        raise SkeletonMismatchError(
-            f"{what}: cannot find these body points among its joints: {detail}"
-        )
+        reason = f"cannot find these body points among its joints: {detail}"
+        raise SkeletonMismatchError(f"{what}: {reason}", reason)
     out = np.array(found, dtype=np.intp)
     known[points] = out
     return out

@@ -50,7 +50,7 @@ import numpy as np
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
-from markovmotion.errors import MotionFormatError, SkeletonMismatchError
+from markovmotion.errors import MarkersNotFoundError, MotionFormatError, SkeletonMismatchError
 from markovmotion.features.base import FeatureStep
 from markovmotion.features.body_motion import BodyMotion
 from markovmotion.features.body_points import body_point_index, find_points, normalise
@@ -473,13 +473,16 @@ class MarkerFeatures(FeatureStep):
         return 2 * m + 3 if self.motion else m
 
     def select(self, markers: Markers) -> Markers:
-        """``markers``' markers of ``names_``, in that order (ValueError naming those lacking)."""
+        """``markers``' markers of ``names_``, in that order (:class:`MarkersNotFoundError`,
+        a ValueError, naming those lacking)."""
         if list(markers.names) == self.names_:
             return markers
         try:
             return markers.select(self.names_)
         except KeyError as exc:
-            raise ValueError(f"{markers.name or 'markers'}: {exc.args[0]}") from None
+            raise MarkersNotFoundError(
+                f"{markers.name or 'markers'}: {exc.args[0]}", reason=exc.args[0]
+            ) from None
 
     def place(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where a person stands and faces per frame, from their markers (F, M, 3) (in

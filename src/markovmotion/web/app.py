@@ -76,6 +76,16 @@ class Answer(BaseModel):
     comment: str = Field("", max_length=MAX_COMMENT)
 
 
+Study = Literal["gait", "interaction"]
+
+
+class StudyChoice(BaseModel):
+    """``POST /api/evaluation``'s optional JSON body: the study, as the query's ``study``."""
+
+    model_config = {"extra": "forbid"}
+    study: Study | None = None
+
+
 Position = Annotated[int, PathParam(ge=0, le=1_000_000)]
 """An item's position in a test (bounded: SQLite integers are 64-bit)."""
 
@@ -318,8 +328,13 @@ def create_app(
         return {"studies": offered}
 
     @app.post("/api/evaluation")
-    def new_evaluator(study: Literal["gait", "interaction"] = "gait") -> dict:
+    def new_evaluator(study: Study | None = None, body: StudyChoice | None = None) -> dict:
+        """A new evaluator's token; the study from the query or a JSON body (gait if neither)."""
         s = need_store()
+        chosen = body.study if body is not None else None
+        if chosen is not None and study is not None and chosen != study:
+            raise HTTPException(422, f"study {study!r} in the query but {chosen!r} in the body")
+        study = chosen or study or "gait"
         if study not in offered:
             raise HTTPException(404, f"no {study} study on this server")
         return {"token": s.create_evaluator(study=study)}

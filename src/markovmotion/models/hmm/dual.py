@@ -856,7 +856,7 @@ class DualHMM(Model):
         except SkeletonMismatchError as exc:
             where = source or motion.name or "input motion"
             raise SkeletonMismatchError(
-                f"{where}: person A's skeleton does not fit the model ({exc})"
+                f"{where}: person A's skeleton does not fit the model ({exc})", exc.reason
             ) from None
 
     def _check_markers(self, x: Motion | Markers, source: str | os.PathLike[str] | None) -> None:
@@ -869,7 +869,8 @@ class DualHMM(Model):
             self.pipeline_a_.steps[0].select(self.as_markers(x))
         except (ValueError, SkeletonMismatchError) as exc:
             raise SkeletonMismatchError(
-                f"{where}: person A's markers do not fit the model ({exc})"
+                f"{where}: person A's markers do not fit the model ({exc})",
+                getattr(exc, "reason", str(exc)),
             ) from None
 
     def input_markers(self, x: Motion | Markers) -> Markers:
