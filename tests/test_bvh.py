@@ -114,3 +114,44 @@ def test_huge_values_that_overflow_in_mm(tmp_path):
     path.write_text(_valid_text().replace("OFFSET 0 0 0", "OFFSET 1e308 0 0", 1))
     with pytest.raises(MotionFormatError, match="too large"):
         read_motion(path)
+
+
+@pytest.mark.parametrize("unit", ["m", "inch", "mm"])
+def test_a_body_in_another_unit_is_named_and_read_in_it_by_auto(
+    mocap, tmp_path, unit, caplog, monkeypatch
+):
+    """A CMU take written in metres, inches or mm (Blender writes metres): read as cm (the
+    default) it is not a person's size and a warning names the unit that makes it one;
+    ``auto``, given or from the environment, reads it in that unit, the same motion."""
+    from markovmotion.io.bvh import UNIT_ENV, read_bvh, read_bvh_skeleton, rest_span, write_bvh
+
+    take = next(e for e in mocap.query(source="cmu") if e.file.endswith(".bvh.gz"))
+    motion = read_bvh(take.path, length_unit="cm")
+    path = tmp_path / f"in_{unit}.bvh"
+    write_bvh(motion, path, length_unit=unit)
+    monkeypatch.delenv(UNIT_ENV, raising=False)
+    with caplog.at_level("WARNING", logger="markovmotion"):
+        as_cm = read_bvh(path)
+    assert f"in {unit} it spans" in caplog.text and f"{UNIT_ENV}={unit}" in caplog.text
+    assert not 700 <= rest_span(as_cm.skeleton) <= 2600
+    for auto in (read_bvh(path, length_unit="auto"), read_bvh(path, length_unit=unit)):
+        assert np.allclose(auto.positions(), motion.positions(), atol=1e-3)
+    monkeypatch.setenv(UNIT_ENV, "auto")
+    assert np.allclose(read_bvh(path).positions(), motion.positions(), atol=1e-3)
+    assert np.allclose(read_bvh_skeleton(path).offsets, motion.skeleton.offsets, atol=1e-3)
+    monkeypatch.setenv(UNIT_ENV, "furlong")
+    with pytest.raises(ValueError, match=f"{UNIT_ENV}='furlong' is not a length unit"):
+        read_bvh(path)
+
+
+def test_no_take_of_the_collection_and_no_small_tree_is_taken_for_another_unit(mocap):
+    """Every BVH take of the collection is a person's size in cm (so the default and
+    ``auto`` read it alike); a tree of a few joints is not judged at all."""
+    from markovmotion.core.skeleton import Skeleton
+    from markovmotion.io.bvh import likely_unit, read_bvh_skeleton
+
+    takes = [e for e in mocap.entries if e.file.endswith((".bvh", ".bvh.gz"))]
+    assert takes
+    assert [e.file for e in takes if likely_unit(read_bvh_skeleton(e.path, "cm"), "cm")] == []
+    toy = Skeleton(("a", "b", "c"), [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, 1, 0]], [()] * 3)
+    assert likely_unit(toy, "cm") is None  # 2 mm, or 2 m in metres: not a body either way

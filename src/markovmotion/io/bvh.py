@@ -3,7 +3,12 @@
 Units: BVH carries no unit. ``length_unit`` names the file's (``"cm"`` by
 default, the unit of both the CMU conversion and the Bandai Namco data;
 ``"mm"``, ``"m"`` and ``"inch"`` are accepted) and lengths are multiplied into
-millimetres on reading and divided back on writing.
+millimetres on reading and divided back on writing. Blender and some other tools write
+metres, some American pipelines inches: a body skeleton (at least :data:`BODY_JOINTS`
+joints) whose rest pose is not a person's size in the unit read (:data:`BODY_SPAN_MM`) but
+is in another gets a logged warning naming that unit; ``length_unit="auto"`` (or the
+environment's ``MARKOVMOTION_BVH_UNIT``, for the command line: a unit or ``auto``) reads
+such a file in that unit instead.
 
 Rotation channels are intrinsic Euler angles in degrees applied in the order
 they are listed (``Zrotation Xrotation Yrotation`` is R = Rz Rx Ry), which is
@@ -19,6 +24,8 @@ array (see ``benchmarks/io_bench.py``).
 from __future__ import annotations
 
 import io
+import logging
+import math
 import os
 from collections import defaultdict, deque
 
@@ -27,7 +34,7 @@ import numpy as np
 from markovmotion.core.motion import Motion
 from markovmotion.core.rotations import euler_to_quat
 from markovmotion.core.skeleton import POSITION_CHANNELS, VALID_CHANNELS, Skeleton
-from markovmotion.errors import MotionFormatError
+from markovmotion.errors import LimitError, MotionFormatError
 from markovmotion.io.files import atomic_write, is_gzip, open_regular, read_text
 from markovmotion.limits import (
     MAX_CHANNELS,
@@ -43,6 +50,15 @@ from markovmotion.limits import (
 )
 
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "inch": 25.4}
+#: The environment's BVH length unit (a key of :data:`UNIT_TO_MM` or ``auto``), when none is given.
+UNIT_ENV = "MARKOVMOTION_BVH_UNIT"
+#: A person's rest pose spans this much (mm, its largest extent): a child of about a metre
+#: to a tall adult with the arms out. Wider than any take of the collection (about 1,500-1,900).
+BODY_SPAN_MM = (700.0, 2600.0)
+#: Fewer joints are not taken for a whole body (a hand, a tool, a test's small tree).
+BODY_JOINTS = 15
+
+log = logging.getLogger(__name__)
 
 
 def _unit_scale(length_unit: str) -> float:
@@ -50,8 +66,75 @@ def _unit_scale(length_unit: str) -> float:
         return UNIT_TO_MM[length_unit]
     except KeyError:
         raise ValueError(
-            f"unknown length unit {length_unit!r}; use one of {list(UNIT_TO_MM)}"
+            f"unknown length unit {length_unit!r}; use one of {[*UNIT_TO_MM, 'auto']}"
         ) from None
+
+
+def _given_unit(length_unit: str | None) -> str:
+    """``length_unit``, else the environment's (:data:`UNIT_ENV`), else ``cm``; checked."""
+    if length_unit:
+        if length_unit != "auto":
+            _unit_scale(length_unit)
+        return length_unit
+    unit = os.environ.get(UNIT_ENV, "").strip() or "cm"
+    if unit != "auto" and unit not in UNIT_TO_MM:
+        raise LimitError(
+            f"{UNIT_ENV}={unit!r} is not a length unit; use one of {[*UNIT_TO_MM, 'auto']}"
+        )
+    return unit
+
+
+def rest_span(skeleton: Skeleton) -> float:
+    """The largest extent (mm) of the body in ``skeleton``'s rest pose (its offsets, no
+    rotation): the pelvis (:attr:`Skeleton.body_root`) and the joints below it, not a static
+    joint above it that may stand metres away (Bandai's ``joint_Root``)."""
+    pos = np.zeros_like(skeleton.offsets)
+    body = np.zeros(skeleton.n_joints, dtype=bool)
+    body[skeleton.body_root] = True
+    for j in range(skeleton.body_root + 1, skeleton.n_joints):
+        parent = skeleton.parents[j]
+        pos[j] = pos[parent] + skeleton.offsets[j]
+        body[j] = body[parent]
+    pos = pos[body]
+    return float((pos.max(axis=0) - pos.min(axis=0)).max())
+
+
+def likely_unit(skeleton: Skeleton, length_unit: str) -> str | None:
+    """The unit in which a body ``skeleton``, read in ``length_unit``, would be a person's
+    size (:data:`BODY_SPAN_MM`) when it is not in ``length_unit``; None when it is, when it
+    is no whole body (fewer than :data:`BODY_JOINTS` joints), or when no unit makes it one.
+    Of several, the one nearest a 1.7 m person (on a log scale)."""
+    low, high = BODY_SPAN_MM
+    span = rest_span(skeleton)
+    if skeleton.n_joints < BODY_JOINTS or not np.isfinite(span) or low <= span <= high:
+        return None
+    raw = span / UNIT_TO_MM[length_unit]
+    fits = [u for u, mm in UNIT_TO_MM.items() if low <= raw * mm <= high]
+    return min(fits, key=lambda u: abs(math.log(raw * UNIT_TO_MM[u] / 1700.0)), default=None)
+
+
+def _in_unit(skeleton: Skeleton, length_unit: str, where: str) -> tuple[Skeleton, str]:
+    """``skeleton`` (read in ``length_unit``, or in cm for ``auto``) and the unit it is in:
+    for ``auto`` the :func:`likely_unit` when there is one (the skeleton rescaled); for a unit
+    given, that one, with a logged warning when another would make a person of it."""
+    read_in = "cm" if length_unit == "auto" else length_unit
+    better = likely_unit(skeleton, read_in)
+    if better is None:
+        return skeleton, read_in
+    factor = UNIT_TO_MM[better] / UNIT_TO_MM[read_in]
+    if length_unit == "auto":
+        scaled = Skeleton(
+            skeleton.names, skeleton.parents, skeleton.offsets * factor, skeleton.channels,
+            skeleton.end_site,
+        )  # fmt: skip
+        return scaled, better
+    span = rest_span(skeleton)
+    log.warning(
+        "%s: its skeleton spans %.0f mm read in %s, not a person's size; in %s it spans %.0f "
+        "mm: if the file is in %s, set %s=%s (or auto), or read it with length_unit=%r",
+        where, span, read_in, better, span * factor, better, UNIT_ENV, better, better,
+    )  # fmt: skip
+    return skeleton, read_in
 
 
 class _Tokens:
@@ -389,7 +472,7 @@ def _channels_to_motion(
 def read_bvh(
     path: str | os.PathLike[str],
     fps: float | None = None,
-    length_unit: str = "cm",
+    length_unit: str | None = None,
     bad_frames: str = "error",
 ) -> Motion:
     """Read a BVH file (``.bvh`` or ``.bvh.gz``) into a :class:`Motion`.
@@ -398,7 +481,8 @@ def read_bvh(
         path: the file.
         fps: the true frame rate, overriding the header's ``Frame Time`` (some
             files, such as the CMU salsa conversions, carry a wrong one).
-        length_unit: the file's length unit (see module docstring).
+        length_unit: the file's length unit, or ``"auto"`` (see module docstring); None:
+            the environment's ``MARKOVMOTION_BVH_UNIT``, else ``"cm"``.
         bad_frames: ``"error"`` (a frame line with NaN, infinite or missing
             values is an error) or ``"missing"`` (such frames are kept with NaN
             rotations; :func:`read_bvh_stream` also returns which they are).
@@ -414,7 +498,7 @@ def read_bvh(
 HEADER_BYTES = 1 << 20
 
 
-def read_bvh_skeleton(path: str | os.PathLike[str], length_unit: str = "cm") -> Skeleton:
+def read_bvh_skeleton(path: str | os.PathLike[str], length_unit: str | None = None) -> Skeleton:
     """The skeleton of a BVH file from its HIERARCHY alone, without reading the frames (the
     first :data:`HEADER_BYTES` of the file, decompressed if ``.gz``): what ``data list``
     shows of every take.
@@ -435,16 +519,20 @@ def read_bvh_skeleton(path: str | os.PathLike[str], length_unit: str = "cm") -> 
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
     if motion_at is None:
         raise MotionFormatError(path, f"no MOTION line in its first {HEADER_BYTES} bytes")
+    unit = _given_unit(length_unit)
     try:
-        return _parse_hierarchy(_Tokens(str(path), lines[:motion_at]), _unit_scale(length_unit))
+        skeleton = _parse_hierarchy(
+            _Tokens(str(path), lines[:motion_at]), _unit_scale("cm" if unit == "auto" else unit)
+        )
     except ValueError as exc:  # the Skeleton's own checks
         raise MotionFormatError(path, str(exc)) from None
+    return _in_unit(skeleton, unit, os.path.basename(str(path)))[0]
 
 
 def read_bvh_stream(
     path: str | os.PathLike[str],
     fps: float | None = None,
-    length_unit: str = "cm",
+    length_unit: str | None = None,
     bad_frames: str = "missing",
 ) -> tuple[Motion, np.ndarray]:
     """``(motion, broken)``: a BVH read as a recorded stream, ``broken`` (F,) marking the
@@ -456,7 +544,7 @@ def read_bvh_stream(
         raise ValueError(f"bad_frames must be 'error' or 'missing', got {bad_frames!r}")
     if fps is not None:
         fps = check_rate(fps, "fps")
-    scale = _unit_scale(length_unit)
+    unit = _given_unit(length_unit)
     text = read_text(path)
     line_cap = max_frames() + 10 * max_joints() + 1000
     if text.count("\n") > line_cap:
@@ -475,9 +563,11 @@ def read_bvh_stream(
     if tok.peek() is None:
         raise MotionFormatError(path, "missing HIERARCHY before MOTION", motion_at + 1)
     try:
-        skeleton = _parse_hierarchy(tok, scale)
+        skeleton = _parse_hierarchy(tok, _unit_scale("cm" if unit == "auto" else unit))
     except ValueError as exc:  # the Skeleton's own checks
         raise MotionFormatError(path, str(exc)) from None
+    skeleton, unit = _in_unit(skeleton, unit, os.path.basename(str(path)))
+    scale = _unit_scale(unit)
     values, frame_time, broken = _parse_motion_block(
         str(path), lines[motion_at + 1 :], motion_at + 2, skeleton.n_channels, bad_frames
     )
@@ -490,7 +580,7 @@ def read_bvh_stream(
             and np.isfinite(quats).all()
         )
     if not usable:
-        raise MotionFormatError(path, f"values too large to convert from {length_unit} to mm")
+        raise MotionFormatError(path, f"values too large to convert from {unit} to mm")
     if fps is None:
         try:
             fps = check_rate(1.0 / frame_time)
