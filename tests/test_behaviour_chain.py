@@ -406,12 +406,19 @@ def test_online_partner_answers_frame_by_frame_as_respond(pair_partner, mocap):
     streamed = concatenate([f for f in out if f is not None] + partner.finish(), 25.0)
     assert streamed.n_frames == whole.n_frames == a25.n_frames
     np.testing.assert_allclose(streamed.positions(), whole.positions(), atol=1e-6)
+    with pytest.raises(ValueError, match="stream is finished"):  # went on answering before
+        partner.step(a25.trim(0, 1))
+    partner = pair_partner.partner(n_hypotheses=20)
     with pytest.raises(SkeletonMismatchError):
         partner.step(
             Motion.from_rotations(make_skeleton(), np.tile([0.0, 0, 0, 1], (1, 5, 1)), fps=25.0)
         )
     with pytest.raises(ValueError, match="resample A to the partner's rate"):
         partner.step(a.trim(0, 1))  # A at its own 60 fps: was answered in slow motion
+    with pytest.raises(ValueError, match="step takes one frame of A, got 5"):
+        partner.step(a25.trim(0, 5))  # was taken, and crashed near the end
+    with pytest.raises(TypeError, match="not ndarray"):
+        partner.step(a25.positions()[:1])
 
 
 def _copy_index(root, mocap, trials: dict[str, str]) -> None:

@@ -10,6 +10,7 @@ stores hyper-parameters only. A fifth family adds one entry to ``FAMILIES``.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -312,3 +313,56 @@ def test_the_models_components_before_fit_raise_not_fitted(call):
 
     with pytest.raises(NotFittedError, match="is not fitted"):
         call()
+
+
+def _first_motion(fam: Family, data: dict) -> Motion:
+    takes = data[fam.data]
+    return takes[0][0] if fam.data == "pairs" else takes[0]
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_wrong_arguments_are_one_line_alike_in_every_family(fam, fitted, data):
+    """A new user's trial met "'Motion' object is not iterable", "'int' object has no
+    attribute 'choice'" and NumPy's broadcasting errors from deep inside, each family its
+    own: every verb's arguments are now checked alike (``models.base.check_arguments``)."""
+    model, motion = fitted[fam.name], _first_motion(fam, data)
+    name = type(model).__name__
+    takes = data[fam.data]
+    with pytest.raises(TypeError, match=rf"{name}.fit takes a list of"):
+        fam.make().fit(takes[0])  # one take (or one pair) where a list is meant
+    if fam.data == "pairs":
+        a, b = takes[0]
+        with pytest.raises(ValueError, match="differ in length"):  # the chain cut it silently
+            fam.make().fit([(a, b.trim(0, b.n_frames // 2))])
+    for verb in ("respond", "predict"):
+        if verb in model.VERBS:
+            method = getattr(model, verb)
+            if verb == "predict":
+                method = functools.partial(method, seconds=0.5)
+            with pytest.raises(TypeError, match=rf"{name}.{verb} takes a Motion"):
+                method(motion.positions())
+            with pytest.raises(ValueError, match="has no frame"):
+                method(motion.trim(0, 0))
+            broken = motion.trim(0, 40)
+            broken.rotations[10:13] = np.nan
+            if type(model).TAKES_MISSING:
+                assert np.isfinite(method(broken).positions()).all()
+            else:  # "Probabilities contain NaN", "zero norm quaternions" before
+                with pytest.raises(ValueError, match=r"3 frames \(first 10, last 12\)"):
+                    method(broken)
+    if "score" in model.VERBS and not type(model).SCORES_ONE:
+        one = takes[0]  # one motion where a list is meant: a list of one
+        assert model.score(one) == model.score([one])
+    if "generate" in model.VERBS:  # an integer rng is a seed, as random_state is
+        seeded = fam.verbs["generate"]
+        out = seeded(model, takes)
+        again = (
+            model.generate(2.0, rng=0) if fam.name != "gait" else model.generate(n_steps=3, rng=0)
+        )
+        assert isinstance(out, Motion) and isinstance(again, Motion)
+        if fam.name != "gait":
+            with pytest.raises(ValueError, match="seconds must be a non-negative number"):
+                model.generate(seconds=-1.0)
+    if "predict" in model.VERBS:
+        with pytest.raises(ValueError, match="seconds must be a positive number"):
+            model.predict(motion, seconds=0)

@@ -10,9 +10,13 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import (
     DataNotFoundError,
+    LimitError,
+    MarkersNotFoundError,
     MarkovMotionError,
     ModelFormatError,
     MotionFormatError,
+    SkeletonMismatchError,
+    TooLittleDataError,
 )
 from markovmotion.io import read_motion, write_motion
 
@@ -20,11 +24,15 @@ __version__ = "0.1.0"
 
 __all__ = [
     "DataNotFoundError",
+    "LimitError",
+    "MarkersNotFoundError",
     "MarkovMotionError",
     "ModelFormatError",
     "Motion",
     "MotionFormatError",
     "Skeleton",
+    "SkeletonMismatchError",
+    "TooLittleDataError",
     "__version__",
     "read_motion",
     "write_motion",

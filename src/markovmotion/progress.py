@@ -40,7 +40,8 @@ class NoteOnce(logging.Handler):
     """The library's log warnings as notes (:func:`note`), each kind once per command: a
     cross-validation fits a model per fold and setting, and one line per fit ("Fitting a
     model with 3103 free scalar parameters with only 3060 data points ...") buried the
-    results; the count of repeats is said at :meth:`close`."""
+    results; the count of repeats is said at :meth:`close`. A kind is the message before
+    its arguments (``"frame %d of A is missing"`` is one kind whatever the frame)."""
 
     def __init__(self) -> None:
         super().__init__(logging.WARNING)
@@ -57,7 +58,7 @@ class NoteOnce(logging.Handler):
     def close(self) -> None:
         for kind, count in self.seen.items():
             if count > 1:
-                note(f"{count} times in all (once per model fitted), the first: {self.first[kind]}")
+                note(f"{count} times in all, the first: {self.first[kind]}")
         self.seen.clear()
         super().close()
 

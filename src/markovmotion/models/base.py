@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import math
 import os
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, ClassVar
@@ -81,6 +82,15 @@ class Model(BaseEstimator):
 
     KIND: ClassVar[str] = ""
     VERBS: ClassVar[tuple[str, ...]] = ()
+    #: Whether ``score`` takes one motion (the dual HMM: log P(A)) rather than a list of
+    #: them (one motion given to a list's ``score`` is taken as a list of one).
+    SCORES_ONE: ClassVar[bool] = False
+    #: Whether ``respond``/``predict`` take a Motion whose frames hold NaN (missing) and
+    #: answer them; the others refuse one in one line, naming the frames (markers' gaps
+    #: are filled by every model that reads markers).
+    TAKES_MISSING: ClassVar[bool] = False
+    #: Whether ``fit`` learns from two-person takes, (A, B) pairs (else from takes).
+    FITS_PAIRS: ClassVar[bool] = False
     #: Header entries of :meth:`save` that are not extras (everything else is one).
     _RESERVED: ClassVar[frozenset[str]] = frozenset(
         {"format", "format_version", "library_version", "kind", "model"}
@@ -97,10 +107,18 @@ class Model(BaseEstimator):
         unknown = set(cls.VERBS) - set(ALL_VERBS)
         if unknown:
             raise TypeError(f"{cls.__name__}.VERBS names unknown verbs {sorted(unknown)}")
-        for verb in cls.VERBS:
+        for verb in (*cls.VERBS, *FITTED_FIRST):
             method = cls.__dict__.get(verb)
             if callable(method):
                 setattr(cls, verb, _fitted_first(method))
+        if callable(fit := cls.__dict__.get("fit")):
+            cls.fit = _takes_checked(fit)
+
+    @property
+    def takes_arrays(self) -> bool:
+        """Whether ``predict``/``respond`` take arrays of features rather than motions (the
+        VLMM's contour models)."""
+        return False
 
     # ------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str], **extras: Any) -> None:
@@ -116,7 +134,7 @@ class Model(BaseEstimator):
         if clash:
             raise ValueError(f"header entries {sorted(clash)} are reserved")
         if not hasattr(self, "train_files_"):
-            raise ValueError(f"{type(self).__name__} is not fitted: nothing to save")
+            raise NotFittedError(f"This {type(self).__name__} is not fitted: nothing to save")
         arrays: dict[str, np.ndarray] = {}
         header = {"model": estimator_state(self, "model", arrays), **extras}
         save_npz(path, self.KIND, header, arrays)
@@ -164,7 +182,8 @@ class Model(BaseEstimator):
 
 
 def _fitted_first(method: Callable[..., Any]) -> Callable[..., Any]:
-    """``method`` raising scikit-learn's NotFittedError while the model has learnt nothing."""
+    """``method`` raising scikit-learn's NotFittedError while the model has learnt nothing,
+    its arguments checked first (:func:`check_arguments`)."""
 
     @functools.wraps(method)
     def verb(self: Model, *args: Any, **kwargs: Any) -> Any:
@@ -173,9 +192,130 @@ def _fitted_first(method: Callable[..., Any]) -> Callable[..., Any]:
                 f"This {type(self).__name__} is not fitted yet: call fit (or load a model "
                 f"file) before {method.__name__}"
             )
+        args, kwargs = check_arguments(self, method.__name__, args, kwargs)
         return method(self, *args, **kwargs)
 
     return verb
+
+
+def finite_frames(motion: Motion | Markers) -> np.ndarray:
+    """(F,) whether each frame's rotations and translations (markers: positions) are all
+    finite numbers."""
+    if isinstance(motion, Markers):
+        return np.isfinite(motion.positions).all(axis=(1, 2))
+    if motion.n_frames == 1:  # online: one frame, one sum (NaN or inf if any value is)
+        return np.array([math.isfinite(motion.rotations.sum() + motion.translations.sum())])
+    return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
+        axis=(1, 2)
+    )
+
+
+def check_motion(motion: object, where: str, missing: bool = True) -> None:
+    """Raise (one line, naming ``where``) unless ``motion`` is a Motion or Markers with
+    frames (TypeError, ValueError); with ``missing`` False, also unless every frame of a
+    Motion is finite (ValueError naming the frames that are not; markers go unseen now and
+    then, and every model that reads them fills their gaps)."""
+    if not isinstance(motion, (Motion, Markers)):
+        raise TypeError(f"{where} takes a Motion (or Markers), not {type(motion).__name__}")
+    if motion.n_frames == 0:
+        raise ValueError(f"{where}: {motion.name or 'the motion'} has no frame")
+    if not missing and isinstance(motion, Motion):
+        bad = np.flatnonzero(~finite_frames(motion))
+        if len(bad):
+            raise ValueError(
+                f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "
+                f"{len(bad)} frames (first {bad[0]}, last {bad[-1]}); this model answers "
+                "whole frames only: cut or fill them first"
+            )
+
+
+def check_arguments(
+    model: Model, verb: str, args: tuple, kwargs: dict[str, Any]
+) -> tuple[tuple, dict[str, Any]]:
+    """A verb's arguments checked alike in every family, so a wrong one is one line, not an
+    error from deep inside: the motion of ``respond`` and ``predict`` (:func:`check_motion`;
+    frames holding NaN unless the class :attr:`~Model.TAKES_MISSING`); ``score``'s one motion
+    (:attr:`~Model.SCORES_ONE`) or list of them, one motion given for a list taken as a list
+    of one; ``seconds`` finite and positive (``generate``: or 0); an integer ``rng`` is a
+    seed (``np.random.default_rng``), as ``random_state`` is. The arguments, so changed."""
+    where = f"{type(model).__name__}.{verb}"
+    first = args[0] if args else None
+    arrays = model.takes_arrays and isinstance(first, np.ndarray)
+    if verb in ("respond", "predict") and args and not arrays:
+        check_motion(first, where, missing=type(model).TAKES_MISSING)
+    elif verb == "score" and args:
+        if type(model).SCORES_ONE:
+            check_motion(first, where)
+        elif isinstance(first, (Motion, Markers)):
+            args = ([first], *args[1:])
+        elif not isinstance(first, Sequence) or isinstance(first, str):
+            raise TypeError(f"{where} takes a list of Motions, not {type(first).__name__}")
+    seconds = kwargs.get("seconds")
+    if seconds is not None:
+        low_ok = verb == "generate"
+        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds)) or not (
+            seconds > 0 or (low_ok and seconds == 0)
+        ):
+            raise ValueError(
+                f"{where}: seconds must be a {'non-negative' if low_ok else 'positive'} "
+                f"number, got {seconds!r}"
+            )
+    rng = kwargs.get("rng")
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        kwargs = {**kwargs, "rng": np.random.default_rng(int(rng))}
+    return args, kwargs
+
+
+#: Methods besides the verbs that need a fitted model (the gait model's style adaptation).
+FITTED_FIRST = ("adapt",)
+
+
+def _takes_checked(fit: Callable[..., Any]) -> Callable[..., Any]:
+    """``fit`` refusing in one line a lone take (or a lone pair) where a list of them is
+    meant, which failed deep inside with "'Motion' object is not iterable"."""
+
+    @functools.wraps(fit)
+    def checked(self: Model, *args: Any, **kwargs: Any) -> Any:
+        if args:
+            check_takes(args[0], f"{type(self).__name__}.fit", type(self).FITS_PAIRS)
+        return fit(self, *args, **kwargs)
+
+    return checked
+
+
+def check_takes(takes: object, where: str, pairs: bool) -> None:
+    """Raise TypeError (one line) when ``takes`` is one take or one (A, B) pair rather than
+    a list of them; with ``pairs``, when a pair of Motions (or Markers) differs in length
+    (ValueError: A and B are recorded together, frame for frame)."""
+    one = (Motion, Markers)
+    if isinstance(takes, one):
+        raise TypeError(
+            f"{where} takes a list of {'(A, B) pairs' if pairs else 'takes'}: give [take]"
+        )
+    if (
+        pairs
+        and isinstance(takes, tuple)
+        and len(takes) == 2
+        and all(isinstance(m, one) for m in takes)
+    ):
+        raise TypeError(f"{where} takes a list of (A, B) pairs: give [(a, b)]")
+    if not pairs or not isinstance(takes, Sequence):
+        return
+    for i, pair in enumerate(takes):
+        if isinstance(pair, one):
+            raise TypeError(f"{where}: take {i} is one motion, not an (A, B) pair")
+        if (
+            isinstance(pair, (tuple, list))
+            and len(pair) == 2
+            and all(isinstance(m, one) for m in pair)
+        ):
+            a, b = pair
+            if a.n_frames != b.n_frames:
+                raise ValueError(
+                    f"{where}: take {i}, {a.name or 'A'} ({a.n_frames} frames) and "
+                    f"{b.name or 'B'} ({b.n_frames}), differ in length: a pair is recorded "
+                    "together, frame for frame"
+                )
 
 
 def file_record(motion: Motion | Markers) -> dict[str, str]:

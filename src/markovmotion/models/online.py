@@ -11,7 +11,8 @@ with person B's frame for ``lag`` frames ago:
   for ``lag`` frames ago comes out as from ``step``;
 - ``drop()``: a frame the caller dropped and will not show B's answer for (a
   live session behind its clock): ``skip()`` at the least cost, nothing returned;
-- ``finish()``: B's frames still owed at the end of the stream;
+- ``finish()``: B's frames still owed at the end of the stream, which ends it (a later
+  call is a ValueError, :data:`FINISHED`: a new stream is a new ``model.partner()``);
 - ``lag`` (frames), ``fps`` (the partner's rate; A is resampled to it),
   ``skeleton`` (B's skeleton).
 
@@ -52,12 +53,30 @@ class OnlinePartner(Protocol):
     def finish(self) -> list[Motion]: ...
 
 
-def check_rate(frame: Motion | Markers, fps: float) -> None:
-    """Raise ValueError (one line) when a frame of A comes at another rate than the
-    partner's ``fps``: frames are taken one per tick of the partner's clock, so a 60 fps
-    take streamed into a 30 fps partner was answered in slow motion, without a word.
-    The caller resamples A first (``motion.resample(partner.fps)``), as ``respond
-    --realtime``, the live pages and ``respond --video`` do."""
+#: What a partner says when stepped after :meth:`OnlinePartner.finish` (a ValueError).
+FINISHED = (
+    "the partner's stream is finished (finish() was called): start another with model.partner()"
+)
+
+
+def check_frame(frame: object, fps: float) -> None:
+    """Raise ValueError (one line) unless ``frame`` is one frame of A (a one-frame Motion
+    or Markers) at the partner's ``fps`` (TypeError for anything else). Frames are taken one
+    per tick of the partner's clock: a 60 fps take streamed into a 30 fps partner was
+    answered in slow motion, and a five-frame Motion as one frame answered wrongly, both
+    without a word. The caller resamples A first (``motion.resample(partner.fps)``), as
+    ``respond --realtime``, the live pages and ``respond --video`` do, and gives a whole take
+    to ``respond`` or :func:`run`."""
+    if not isinstance(frame, (Motion, Markers)):
+        raise TypeError(
+            f"a frame of A is a one-frame Motion or Markers (or None when missing), not "
+            f"{type(frame).__name__}"
+        )
+    if frame.n_frames != 1:
+        raise ValueError(
+            f"step takes one frame of A, got {frame.n_frames}: give motion.trim(t, t + 1), "
+            "or the whole take to respond (models.online.run)"
+        )
     if abs(float(frame.fps) - fps) > 1e-3 * fps:
         raise ValueError(
             f"A's frame is at {float(frame.fps):g} fps and the partner answers at {fps:g}: "

@@ -52,7 +52,7 @@ from markovmotion.models.chain.condensation import (
     Propagator,
     SingleHypothesis,
 )
-from markovmotion.models.online import check_rate
+from markovmotion.models.online import FINISHED, check_frame
 from markovmotion.state import (
     StateError,
     check_positive,
@@ -119,6 +119,7 @@ class VirtualPartner(Model):
 
     KIND = "behaviour-chain"
     VERBS = ("respond", "partner")
+    FITS_PAIRS = True
 
     def __init__(
         self,
@@ -262,8 +263,11 @@ class VirtualPartner(Model):
 
     @staticmethod
     def people(person: int | None) -> tuple[int, ...]:
-        """The halves of the model the real person may be: ``person``, or either if None."""
-        return (0, 1) if person is None else (person,)
+        """The halves of the model the real person may be: ``person``, or either if None
+        (ValueError for anything but 0, 1 or None)."""
+        if person not in (None, 0, 1) or isinstance(person, bool):
+            raise ValueError(f"person must be 0 (A), 1 (B) or None (either), got {person!r}")
+        return (0, 1) if person is None else (int(person),)
 
     def roles(self, person: int | None) -> list[slice]:
         """Columns of C the real person may match: its own half, or either (eq. 18) if None."""
@@ -428,6 +432,7 @@ class VirtualPartner(Model):
         the partner's markers (``markers_``, mm). ``options``: those of
         :meth:`propagator` (``n_hypotheses``, ``sigma``, ``response``, ``resync``).
         """
+        self.people(person)  # checked before any work
         self.check_input(motion)
         motion = (self.as_markers(motion) if self.uses_markers else motion).resample(self.fps_)
         resp = self.respond_shapes(self.person(motion), person, rng=rng, **options)
@@ -549,6 +554,7 @@ class ChainPartner:
         self._checked = None
         self._height: tuple[Skeleton, np.ndarray] | None = None
         self._frames_in = 0
+        self._finished = False
 
     @property
     def skeleton(self) -> Skeleton | None:
@@ -557,10 +563,13 @@ class ChainPartner:
 
     def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
         """One frame of A in (None: missing); B's frame for ``lag`` frames ago out. A frame at
-        another rate than the partner's is a ValueError (:func:`check_rate`)."""
+        another rate than the partner's, not one frame, or after :meth:`finish`: a ValueError
+        (:func:`check_frame`)."""
+        if self._finished:
+            raise ValueError(FINISHED)
         if frame is None:
             return self.skip()
-        check_rate(frame, self.fps)
+        check_frame(frame, self.fps)
         kind = frame.names if isinstance(frame, Markers) else frame.skeleton
         if kind is not self._checked:
             self.model.check_input(frame)
@@ -617,7 +626,12 @@ class ChainPartner:
         self.skip()
 
     def finish(self) -> list[Motion | Markers]:
-        """B's frames still owed at the end of the stream (the window's edge repeats A's last)."""
+        """B's frames still owed at the end of the stream (the window's edge repeats A's
+        last); the stream ends (a later :meth:`step`, :meth:`skip` or :meth:`drop` is a
+        ValueError)."""
+        if self._finished:
+            raise ValueError(FINISHED)
+        self._finished = True
         n = self._frames_in
         return [self._answer(t, n - 1) for t in range(max(n - self.lag, 0), n)]
 

@@ -326,7 +326,15 @@ class GaitSynthesizer(Model):
         self.gv_var_ = np.maximum(spread, np.maximum(0.01 * self.gv_mean_**2, 1e-12))
 
     def walk_set(self, motions: Sequence[Motion], units: Sequence[str] | None = None) -> WalkSet:
-        """Walks prepared with this model's pipeline."""
+        """Walks prepared with this model's pipeline.
+
+        Raises:
+            SkeletonMismatchError: a walk on another skeleton than the model's, named with
+                what differs (it failed deep in the features before).
+        """
+        skeleton = self.pipeline_.steps[-1].skeleton_
+        for m in motions:
+            skeleton.check_compatible(m.skeleton, f"walk {m.name or ''}".strip())
         return walk_set(motions, self.pipeline_, units)
 
     # ------------------------------------------------------------ synthesis

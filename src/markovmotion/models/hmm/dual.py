@@ -91,10 +91,10 @@ from markovmotion.features.markers import (
     virtual_markers,
 )
 from markovmotion.features.person import RunningCentre, body_radius, on_average_body, size_scale
-from markovmotion.models.base import Model, flatten
+from markovmotion.models.base import Model, finite_frames, flatten
 from markovmotion.models.hmm.contact import HandContact, contact_shifts, right_hand
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
-from markovmotion.models.hmm.partner import Partner, finite_frames
+from markovmotion.models.hmm.partner import Partner
 from markovmotion.models.hmm.trellis import (
     TRELLISES,
     Trellis,
@@ -319,6 +319,9 @@ class DualHMM(Model):
 
     KIND = "dual_hmm"
     VERBS = ("respond", "score", "partner")
+    SCORES_ONE = True  # log P(A) of one motion of A
+    FITS_PAIRS = True
+    TAKES_MISSING = True  # a frame holding NaN is a missing observation
 
     def __init__(
         self,

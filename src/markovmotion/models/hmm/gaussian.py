@@ -47,6 +47,7 @@ from markovmotion.algorithms.gaussian import (
 from markovmotion.algorithms.hmm_recursions import forward_backward, viterbi
 from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.core.frames import check_frames
+from markovmotion.errors import TooLittleDataError
 from markovmotion.state import StateError, check_count, register, require
 
 _log = logging.getLogger(__name__)
@@ -634,7 +635,7 @@ class GaussianHMM(BaseHMM):
         labels = None
         if need["m"]:
             if len(x) < self.n_components:
-                raise ValueError(f"{len(x)} frames cannot train {self.n_components} states")
+                raise TooLittleDataError(f"{len(x)} frames cannot train {self.n_components} states")
             km = KMeans(self.n_components, n_init=2, random_state=rng.randint(2**31 - 1)).fit(x)
             labels = km.labels_
             self.means_ = km.cluster_centers_.copy()

@@ -13,6 +13,7 @@ takes the model as an argument (this module does not import the model's).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -29,26 +30,16 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
 from markovmotion.features.markers import Lift, MarkerFeatures
 from markovmotion.features.person import OnlineCentre, OnlineSizeScale, RunningCentre, body_radius
+from markovmotion.models.base import finite_frames
 from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
-from markovmotion.models.online import check_rate
-from markovmotion.progress import err_console
+from markovmotion.models.online import FINISHED, check_frame
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
-
-
-def finite_frames(motion: Motion | Markers) -> np.ndarray:
-    """(F,) whether each frame's rotations and translations (markers: positions) are all
-    finite numbers."""
-    if isinstance(motion, Markers):
-        return np.isfinite(motion.positions).all(axis=(1, 2))
-    if motion.n_frames == 1:  # online: one frame, one sum (NaN or inf if any value is)
-        return np.array([math.isfinite(motion.rotations.sum() + motion.translations.sum())])
-    return np.isfinite(motion.rotations).all(axis=(1, 2)) & np.isfinite(motion.translations).all(
-        axis=(1, 2)
-    )
 
 
 @dataclass(frozen=True)
@@ -119,6 +110,8 @@ class Partner:
         self._history: deque = deque(maxlen=keep)  # B's training frames shown
         self._generated: deque = deque(maxlen=keep)  # output="regression": B's markers shown
         self._frames_in = 0
+        self._missed = 0  # frames of A missing or NaN (the first logged)
+        self._finished = False
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton, once checked against the model's
         self._lift: Lift | None = None  # a skeleton's points lifted to the model's markers
@@ -255,9 +248,13 @@ class Partner:
     def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
         """One frame of A (a one-frame Motion, or for a model on markers one-frame Markers
         or a Motion to place virtual markers on) in; B's frame of ``lag`` frames ago out.
-        A frame at another rate than the partner's is a ValueError (:func:`check_rate`)."""
+        Not one frame, or at another rate than the partner's, or after :meth:`finish`: a
+        ValueError (:func:`check_frame`). A missing frame (None, or NaN) is skipped, with a
+        logged warning (once per stream)."""
+        if self._finished:
+            raise ValueError(FINISHED)
         if frame is not None:
-            check_rate(frame, self.fps)
+            check_frame(frame, self.fps)
         if frame is not None and self.model.uses_markers:
             kind = frame.names if isinstance(frame, Markers) else id(frame.skeleton)
             if kind != self._checked:
@@ -269,10 +266,9 @@ class Partner:
                 self._lift = self._lift or self.model.lift()
                 frame, self._lifted = self._lift.step(frame)
         if frame is None or not finite_frames(frame)[0]:
-            err_console.print(
-                f"[yellow]warning:[/] frame {self._frames_in} of A is missing or holds NaN: skipped",
-                highlight=False,
-            )
+            if not self._missed:
+                log.warning("frame %d of A is missing or holds NaN: skipped", self._frames_in)
+            self._missed += 1
             return self.skip()
         if isinstance(frame, Markers):
             pos = frame.positions
@@ -366,6 +362,8 @@ class Partner:
 
     def skip(self) -> Motion | Markers | None:
         """A frame the caller could not deliver (dropped): no observation, no warning."""
+        if self._finished:
+            raise ValueError(FINISHED)
         return self._motion(self.step_features(None, self._place))
 
     def drop(self) -> None:
@@ -374,6 +372,8 @@ class Partner:
         ``lag`` frames ago is not decided (no trellis, no placement), and the next B frame
         shown follows on from the last one shown. A decoder step, a tenth of a partner step,
         so a session that has fallen behind catches up at once."""
+        if self._finished:
+            raise ValueError(FINISHED)
         self._add_place(self._place)
         if self._advance(self._unseen, None):
             self._shown_count += 1
@@ -381,7 +381,11 @@ class Partner:
                 self._moves.step(np.full(3, np.nan))
 
     def finish(self) -> list[Motion | Markers]:
-        """B's frames still owed at the end of the stream."""
+        """B's frames still owed at the end of the stream; the stream ends (a later
+        :meth:`step`, :meth:`skip` or :meth:`drop` is a ValueError)."""
+        if self._finished:
+            raise ValueError(FINISHED)
+        self._finished = True
         return [self._motion(shown) for shown in self.finish_frames()]
 
     def _place_of(self, frame: int) -> tuple[np.ndarray, float]:

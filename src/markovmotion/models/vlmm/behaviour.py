@@ -208,6 +208,11 @@ class BehaviourModel(Model):
     KIND = "vlmm"
     VERBS = ("generate", "predict", "score")
 
+    @property
+    def takes_arrays(self) -> bool:
+        """Contour models predict from contour arrays (:meth:`Model.takes_arrays`)."""
+        return self.is_contour
+
     def __init__(
         self,
         n_prototypes: int = 100,

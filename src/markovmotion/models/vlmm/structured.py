@@ -137,6 +137,11 @@ class StructuredBehaviourModel(Model):
     KIND = "structured_vlmm"
     VERBS = ("generate", "predict", "score")
 
+    @property
+    def takes_arrays(self) -> bool:
+        """Contour models predict from contour arrays (:meth:`Model.takes_arrays`)."""
+        return bool(getattr(getattr(self, "prototype_model_", None), "is_contour", False))
+
     def __init__(
         self,
         prototype_model: BehaviourModel | None = None,
