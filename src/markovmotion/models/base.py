@@ -32,7 +32,7 @@ import hashlib
 import math
 import os
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -140,7 +140,7 @@ class Model(BaseEstimator):
         save_npz(path, self.KIND, header, arrays)
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> Model:
+    def load(cls, path: str | os.PathLike[str]) -> Self:
         """The model in ``path``, of this class (or any kind when called on :class:`Model`).
 
         Raises:
