@@ -4,6 +4,7 @@ line what it left out (:mod:`markovmotion.data.kinds`)."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -249,3 +250,54 @@ def test_a_file_listed_in_an_index_above_it_is_read_as_that_index_says(mocap, tm
     assert read_listed_motion(tmp_path / "own" / "takes" / "w.bvh.gz").fps == pytest.approx(
         30.0, rel=1e-4
     )
+
+
+def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, capsys):
+    """``data check`` reads every take whole and names, per row: a file not found, a
+    truncated file, frames other than listed, a partner not listed or not naming this take
+    back, a row listed twice (errors, exit 1); a pair of two lengths, two-person takes
+    without subject (notes). The collection itself has none (exit 0)."""
+    import gzip
+    import shutil
+
+    from markovmotion.cli import main
+
+    main(["data", "check", "--json"])
+    assert json.loads(capsys.readouterr().out)["findings"] == []
+
+    pair = next(p for p in mocap.pairs("handshake", kind="markers"))
+    walk = mocap.query(source="bandai")[0]
+    own = tmp_path / "own"
+    own.mkdir()
+    for e in (*pair, walk):
+        shutil.copyfile(e.path, own / Path(e.file).name)
+    a, b, w = (Path(e.file).name for e in (*pair, walk))
+    text = gzip.decompress((own / w).read_bytes()).decode().splitlines(keepends=True)
+    (own / "cut.bvh").write_text("".join(text[:-5]))  # five frames short of its header
+    header = "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+    rows = [
+        f"{a},mine,,1,interaction,handshake,{b},30,{pair[0].frames},",
+        f"{b},mine,,1,interaction,handshake,gone.c3d,30,{pair[1].frames + 1},",
+        f"{w},mine,,,style_walk,active,,30,{walk.frames},",
+        f"{w},mine,,,style_walk,active,,30,{walk.frames},",
+        f"cut.bvh,mine,,,style_walk,active,,30,{walk.frames},",
+        "nowhere.bvh,mine,,,walk,normal,,30,10,",
+    ]
+    (own / "INDEX.csv").write_text(header + "\n".join(rows) + "\n")
+    with pytest.raises(SystemExit) as exit_:
+        main(["data", "check", "--data", str(own), "--json"])
+    assert exit_.value.code == 1
+    report = json.loads(capsys.readouterr().out)
+    found = {(f["file"], f["level"], f["problem"].split(":")[0]) for f in report["findings"]}
+    assert (w, "error", "listed 2 times") in found
+    assert ("nowhere.bvh", "error", "file not found") in found
+    assert ("cut.bvh", "error", "unreadable") in found
+    assert (
+        b,
+        "error",
+        f"{pair[1].frames} frames in the file, {pair[1].frames + 1} listed",
+    ) in found
+    assert (b, "error", "partner_file gone.c3d is not listed") in found
+    assert (a, "error", f"its partner {b} names gone.c3d back") in found
+    assert (a, "note", "no subject") in found
+    assert report["errors"] == sum(f["level"] == "error" for f in report["findings"]) == 6

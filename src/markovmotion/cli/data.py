@@ -1,4 +1,5 @@
-"""``data list`` and ``data fetch``: what motion capture is available, and getting it."""
+"""``data list``, ``data check`` and ``data fetch``: what motion capture is available, whether
+an INDEX.csv holds together, and getting it."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ from markovmotion.data.fetch import BANDAI_BASE_URL, CMU_BASE_URL, INTERACTION_S
 from markovmotion.data.kinds import KINDS
 from markovmotion.progress import err_console
 
-app = typer.Typer(help="The motion-capture collection: list it, fetch it.", no_args_is_help=True)
+app = typer.Typer(
+    help="The motion-capture collection: list it, check it, fetch it.", no_args_is_help=True
+)
 
 
 @app.command("list")
@@ -49,6 +52,39 @@ def list_(
             e.file, e.source, e.subject, e.category, e.label, shape, f"{e.fps:g}", str(e.frames)
         )
     print_table(table)
+
+
+@app.command("check")
+def check_(
+    data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
+    json_out: bool = typer.Option(False, "--json", help="Print the findings as JSON."),
+) -> None:
+    """Check an INDEX.csv against its files: every take read whole, its frames as listed,
+    two-person takes paired both ways with as many frames, people named (exit 1 on an error)."""
+    from markovmotion.cli.tables import print_json
+    from markovmotion.data.check import check_index
+
+    index = MocapIndex.load(data)
+    found = check_index(index)
+    errors = sum(f.level == "error" for f in found)
+    if json_out:
+        print_json({"index": str(index.root / "INDEX.csv"), "takes": len(index),
+                    "errors": errors, "findings": [f.to_dict() for f in found]})  # fmt: skip
+    else:
+        if found:
+            table = Table(title=f"{len(found)} findings in {index.root / 'INDEX.csv'}")
+            for col in ("file", "level", "problem"):
+                table.add_column(col)
+            for f in found:
+                table.add_row(f.file, f.level, f.problem)
+            print_table(table)
+        notes = len(found) - errors
+        err_console.print(
+            f"{index.root / 'INDEX.csv'}: {len(index)} takes, {errors} errors, {notes} notes"
+            + ("" if found else ": every take read whole, frames as listed, pairs paired")
+        )
+    if errors:
+        raise typer.Exit(1)
 
 
 def _subject_numbers(value: str) -> list[int]:

@@ -1,0 +1,119 @@
+"""An INDEX.csv checked against its files: ``markovmotion data check``.
+
+Every command trusts the index: its frame rate (a file's header may be wrong, CMU's salsa
+conversions are), its pairs of people (``partner_file``), its people (``subject``, what a
+leave-one-pair-out cross-validation groups by). A user's own collection is checked here
+before a long training finds a wrong row: every file is read whole (a truncated file fails
+here, not in the tenth fold), and
+
+* its frame count is compared with ``frames`` (the file's own count, CMU's reference frame
+  included; 0 or empty: not checked);
+* a two-person take's ``partner_file`` must be listed, name this take back, and hold as many
+  frames (a pair is cut to the shorter when loaded: said as a note);
+* a two-person take without ``subject`` cannot be held out by people (a note: cross-validation
+  then leaves one take out at a time);
+* a file listed twice is an error.
+
+Our own, not a schema library's: the checks are about the files, not the CSV's types, which
+:meth:`~markovmotion.data.index.MocapIndex.load` already refuses with the line.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import asdict, dataclass
+
+from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.errors import MarkovMotionError
+from markovmotion.io import base_suffix, read_motion
+from markovmotion.io.c3d import read_c3d
+from markovmotion.progress import track
+
+#: How bad a finding is: an ``error`` stops a command that reads the take, a ``note`` does not.
+LEVELS = ("error", "note")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One thing found wrong with a row of INDEX.csv (``file``), ``level`` of :data:`LEVELS`."""
+
+    file: str
+    level: str
+    problem: str
+
+    def to_dict(self) -> dict[str, str]:
+        return asdict(self)
+
+
+def file_frames(entry: Entry) -> int:
+    """The number of frames in ``entry``'s file, read whole (CMU's reference frame counted).
+
+    Raises:
+        MarkovMotionError: the file cannot be read (named, with the problem).
+    """
+    if base_suffix(entry.file) == ".c3d":
+        return read_c3d(entry.path).n_frames
+    return read_motion(entry.path, fps=entry.fps).n_frames
+
+
+def check_index(index: MocapIndex) -> list[Finding]:
+    """What is wrong with ``index`` and its files (module docstring), in the index's order."""
+    found: list[Finding] = []
+    listed = {e.file: e for e in index.entries}
+    for file, count in Counter(e.file for e in index.entries).items():
+        if count > 1:
+            found.append(Finding(file, "error", f"listed {count} times"))
+    frames: dict[str, int] = {}
+    for e in track(index.entries, "reading every take"):
+        if not e.path.is_file():
+            found.append(Finding(e.file, "error", "file not found"))
+            continue
+        try:
+            frames[e.file] = n = file_frames(e)
+        except MarkovMotionError as exc:
+            found.append(Finding(e.file, "error", f"unreadable: {exc}"))
+            continue
+        if e.frames and n != e.frames:
+            found.append(Finding(e.file, "error", f"{n} frames in the file, {e.frames} listed"))
+    for e in index.entries:
+        found += _pair_findings(e, listed, frames)
+    return found
+
+
+def _pair_findings(e: Entry, listed: dict[str, Entry], frames: dict[str, int]) -> list[Finding]:
+    """What is wrong with ``e`` as one person of a two-person take."""
+    if not e.partner_file:
+        if e.category == "interaction":
+            return [Finding(e.file, "error", "a two-person take without partner_file")]
+        return []
+    other = listed.get(e.partner_file)
+    if other is None:
+        return [Finding(e.file, "error", f"partner_file {e.partner_file} is not listed")]
+    out = []
+    if other.partner_file != e.file:
+        out.append(
+            Finding(
+                e.file,
+                "error",
+                f"its partner {other.file} names {other.partner_file or 'no partner'} back",
+            )
+        )
+    mine, theirs = frames.get(e.file), frames.get(other.file)
+    if mine is not None and theirs is not None and mine != theirs and e.file < other.file:
+        out.append(
+            Finding(
+                e.file,
+                "note",
+                f"{mine} frames, its partner {other.file} {theirs}: the pair is cut to the shorter",
+            )
+        )
+    if not e.subject:
+        out.append(
+            Finding(
+                e.file,
+                "note",
+                "no subject: cross-validation cannot hold these people out (it leaves one "
+                "take out at a time)",
+            )
+        )
+    return out
