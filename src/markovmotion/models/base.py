@@ -18,11 +18,14 @@ scikit-learn's conventions (``sklearn/base.py``), turned into a model file:
   ``respond`` (a whole partner motion for a whole input motion), ``score``
   (log-likelihood), and ``partner()`` for the online protocol of
   :mod:`markovmotion.models.online`. ``VERBS`` lists those a class offers;
-  each raises scikit-learn's ``NotFittedError`` before ``fit``.
+  each raises scikit-learn's ``NotFittedError`` before ``fit``;
+- the arguments of ``fit`` and of every verb are checked alike in every family
+  (:func:`check_takes`, :func:`check_arguments`), so a wrong one is one line
+  naming the model and the verb.
 
 Randomness: ``random_state`` at construction, ``rng`` (a
-:class:`numpy.random.Generator`) at call time, and ``stochastic=`` where a
-verb can either draw or take the most likely choice.
+:class:`numpy.random.Generator`, or an integer seed) at call time, and
+``stochastic=`` where a verb can either draw or take the most likely choice.
 """
 
 from __future__ import annotations
@@ -49,6 +52,8 @@ KINDS: dict[str, type[Model]] = {}
 
 #: The verbs of the contract, in the order the docs list them.
 ALL_VERBS = ("generate", "predict", "respond", "score", "partner")
+#: Methods besides the verbs that need a fitted model (the gait model's style adaptation).
+FITTED_FIRST = ("adapt",)
 
 
 class Component(BaseEstimator):
@@ -266,10 +271,6 @@ def check_arguments(
     return args, kwargs
 
 
-#: Methods besides the verbs that need a fitted model (the gait model's style adaptation).
-FITTED_FIRST = ("adapt",)
-
-
 def _takes_checked(fit: Callable[..., Any]) -> Callable[..., Any]:
     """``fit`` refusing in one line a lone take (or a lone pair) where a list of them is
     meant, which failed deep inside with "'Motion' object is not iterable"."""
@@ -312,9 +313,9 @@ def check_takes(takes: object, where: str, pairs: bool) -> None:
             a, b = pair
             if a.n_frames != b.n_frames:
                 raise ValueError(
-                    f"{where}: take {i}, {a.name or 'A'} ({a.n_frames} frames) and "
-                    f"{b.name or 'B'} ({b.n_frames}), differ in length: a pair is recorded "
-                    "together, frame for frame"
+                    f"{where}: take {i}: A ({a.name or 'unnamed'}, {a.n_frames} frames) and B "
+                    f"({b.name or 'unnamed'}, {b.n_frames}) differ in length: a pair is "
+                    "recorded together, frame for frame (trim both to the same frames)"
                 )
 
 
