@@ -503,3 +503,15 @@ def test_a_skeleton_is_matched_by_its_joint_names_not_their_count(pair_partner, 
     with pytest.raises(SkeletonMismatchError, match="matched by name"):
         pair_partner.respond(other)
     assert pair_partner.person(a).points.shape[1] == len(learnt)
+
+
+def test_a_response_holds_its_own_shape_not_the_frames_hypotheses():
+    """A response's shape was a row of the frame's (hypotheses, d) array, which it kept
+    alive: a 100,000-frame take at 200 hypotheses held every frame's (8 GB for 42,000
+    frames at 25 fps, a new user's trial); now each response holds its own d numbers."""
+    from markovmotion.models.chain.condensation import Response
+
+    hypotheses = np.arange(200 * 119, dtype=float).reshape(200, 119)
+    r = Response(hypotheses[17], 0, 0.5)
+    assert r.shape.base is None and r.shape.nbytes == 119 * 8
+    np.testing.assert_array_equal(r.shape, hypotheses[17])

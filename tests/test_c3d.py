@@ -123,3 +123,21 @@ def test_markers_validate_shapes():
         Markers(("a",), np.zeros((3, 2, 3)), 100.0)
     with pytest.raises(ValueError):
         Markers(("a",), np.full((3, 1, 3), np.inf), 100.0)
+
+
+def test_a_capture_longer_than_a_uint16_reads_back_and_the_value_limit_holds(tmp_path, monkeypatch):
+    """The header's counts are NumPy uint16: 70,000 frames overflowed ("Python integer out
+    of bounds for uint16"), and below 65,536 frames x points x 3 wrapped round and passed the
+    value limit (60,000 x 200 x 3 read as 20,736). The project's own writer and reader."""
+    from markovmotion.io.c3d import write_c3d as write_markers
+
+    n = 70_000
+    pos = np.zeros((n, 2, 3))
+    pos[:, :, 0] = np.arange(n)[:, None] % 1000
+    write_markers(Markers(("A", "B"), pos, 30.0, "long"), tmp_path / "long.c3d")
+    back = read_c3d(tmp_path / "long.c3d")
+    assert back.n_frames == n
+    np.testing.assert_allclose(back.positions[-1, :, 0], pos[-1, :, 0], atol=0.1)
+    monkeypatch.setenv("MARKOVMOTION_MAX_VALUES", str(n * 2 * 3 - 1))
+    with pytest.raises(MotionFormatError, match="70000 frames x 2 points"):
+        read_c3d(tmp_path / "long.c3d")

@@ -101,7 +101,10 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
             raise MotionFormatError(path, f"the file is {exceeded(MAX_BYTES)}")
         try:
             reader = c3d.Reader(handle)
-            n_points, rate, expected = reader.point_used, reader.point_rate, reader.frame_count
+            # Python numbers: the header's are NumPy uint16, whose products wrap (60,000
+            # frames x 200 points passed the limit) or raise (a file of 100,000 frames)
+            n_points, expected = int(reader.point_used), int(reader.frame_count)
+            rate = float(reader.point_rate)
             if n_points > max_channels():
                 raise MotionFormatError(path, f"{exceeded(MAX_CHANNELS, f'{n_points} points')}")
             if expected > max_frames() or expected * max(n_points, 1) * 3 > max_values():

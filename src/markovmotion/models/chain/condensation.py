@@ -91,6 +91,11 @@ class Response:
     role: int
     error: float
 
+    def __post_init__(self) -> None:
+        # its own copy: a row of the frame's (hypotheses, d) array kept that whole array alive,
+        # and a long take's responses held every frame's hypotheses (8 GB for 42,000 frames)
+        self.shape = np.array(self.shape, dtype=float)
+
 
 class Propagator:
     """Common part of both propagation schemes: chain, roles, online ``step`` and batch ``run``.
