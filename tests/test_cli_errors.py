@@ -236,3 +236,34 @@ def test_label_and_labels_are_both_spellings_everywhere():
         assert {"--label", "--labels"} <= names, (group, command)
     assert split_labels(["a,b", "c"]) == ["a", "b", "c"]
     assert split_labels(None) is None and split_labels([" , "]) is None
+
+
+@pytest.mark.parametrize(
+    "raised, code, line",
+    [
+        (KeyboardInterrupt(), 130, "interrupted"),
+        ("numba", 130, "interrupted"),  # a Numba kernel wraps the Ctrl-C in a SystemError
+        (MemoryError("Unable to allocate 21.8 GiB for an array"), 2, "out of memory: Unable"),
+    ],
+)
+def test_ctrl_c_and_out_of_memory_are_one_line(monkeypatch, capsys, raised, code, line):
+    """Ctrl-C stops with one line and exit 130 (it was silent; inside a Numba kernel a
+    79-line traceback and exit 1); running out of memory is one line, exit 2 (a traceback)."""
+    import markovmotion.cli.motion as motion_cli
+
+    def boom(*args, **kwargs):
+        if raised != "numba":
+            raise raised
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("CPUDispatcher(...) returned a result with an exception set")
+
+    monkeypatch.setattr(motion_cli, "read_listed_motion", boom)
+    with pytest.raises(SystemExit) as exit_:
+        main(["info", "x.bvh"])
+    assert exit_.value.code == code
+    err = capsys.readouterr().err
+    assert [ln for ln in err.splitlines() if ln.strip()][-1].startswith(
+        ("interrupted", "error: out of memory")
+    ) and line in err and "Traceback" not in err

@@ -114,6 +114,24 @@ def _log_as_notes() -> Iterator[None]:
         handler.close()
 
 
+def _interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` stands for the user's Ctrl-C: a KeyboardInterrupt itself, or an error
+    raised while one was being handled (click's Abort, Numba's SystemError)."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted() -> None:
+    """Ctrl-C: one line, exit code 130 (128 + SIGINT), as shells do."""
+    err_console.print("interrupted", highlight=False)
+    raise SystemExit(130)
+
+
 def _run(argv: list[str] | None) -> None:
     """Run the command line on ``argv``; expected errors as one line and exit code 2."""
     try:  # Typer >= 0.26 vendors its own click
@@ -131,14 +149,24 @@ def _run(argv: list[str] | None) -> None:
         fail(f"{where}: {exc.format_message()} (see {where} --help)")
     except ClickException as exc:
         fail(exc.format_message())
-    except typer.Abort:
+    except typer.Abort as exc:
+        if _interrupt(exc):
+            _interrupted()
         raise SystemExit(1) from None
     except MarkovMotionError as exc:
         fail(str(exc))
     except KeyboardInterrupt:
-        raise SystemExit(130) from None
+        _interrupted()
+    except MemoryError as exc:  # NumPy's names the array it could not allocate
+        fail(f"out of memory: {exc or 'an allocation failed'} (a shorter take, or fewer at once)")
+    except SystemError as exc:  # a Numba kernel interrupted wraps the KeyboardInterrupt
+        if not _interrupt(exc):
+            raise
+        _interrupted()
     except OSError as exc:
         fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "))
     else:
+        if code == 130:  # Typer turns a KeyboardInterrupt into this exit code, silently
+            _interrupted()
         if isinstance(code, int) and not isinstance(code, bool) and code != 0:
             raise SystemExit(code)
