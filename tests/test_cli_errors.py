@@ -257,13 +257,17 @@ def test_ctrl_c_and_out_of_memory_are_one_line(monkeypatch, capsys, raised, code
         try:
             raise KeyboardInterrupt
         except KeyboardInterrupt:
-            raise SystemError("CPUDispatcher(...) returned a result with an exception set")
+            raise SystemError("CPUDispatcher(...) returned a result with an exception set")  # noqa: B904 (as Numba does)
 
     monkeypatch.setattr(motion_cli, "read_listed_motion", boom)
     with pytest.raises(SystemExit) as exit_:
         main(["info", "x.bvh"])
     assert exit_.value.code == code
     err = capsys.readouterr().err
-    assert [ln for ln in err.splitlines() if ln.strip()][-1].startswith(
-        ("interrupted", "error: out of memory")
-    ) and line in err and "Traceback" not in err
+    assert (
+        [ln for ln in err.splitlines() if ln.strip()][-1].startswith(
+            ("interrupted", "error: out of memory")
+        )
+        and line in err
+        and "Traceback" not in err
+    )
