@@ -265,6 +265,11 @@ def test_an_animation_beyond_the_frame_limit_is_refused_before_any_work(tmp_path
         env={"MARKOVMOTION_MAX_ANIMATION_FRAMES": "10"},
     )
     check_clean(run, "o.gif", "15 frames", "MARKOVMOTION_MAX_ANIMATION_FRAMES")
+    # a strip draws a few frames whatever the take's length: not refused
+    strip = tmp_path / "o.png"
+    run = run_cli(["render", str(take), "--out", str(strip), "--data-fps", "1e-2"], timeout=60)
+    assert run.code == 0, run.stderr
+    assert strip.stat().st_size > 0
 
 
 def test_a_capture_with_every_marker_occluded_is_one_line(tmp_path, capsys):

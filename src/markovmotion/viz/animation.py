@@ -429,10 +429,11 @@ class _Stage:
 
 # ---------------------------------------------------------------- rendering
 def _sample_times(
-    tracks: list[_Track], fps: float, max_seconds: float | None, path: Path
+    tracks: list[_Track], fps: float, max_seconds: float | None, path: Path, animated: bool = True
 ) -> np.ndarray:
     """The animation's frame times, refused (:class:`LimitError` naming ``path``) before any
-    work when there would be more than ``MARKOVMOTION_MAX_ANIMATION_FRAMES`` of them."""
+    work when there would be more than ``MARKOVMOTION_MAX_ANIMATION_FRAMES`` of them (an
+    animation; a strip, not ``animated``, draws a few of them whatever their number)."""
     if fps <= 0:
         raise ValueError(f"frame rate must be positive, got {fps}")
     end = max(t.last_time for t in tracks)
@@ -441,7 +442,7 @@ def _sample_times(
         if max_seconds <= 0:
             raise ValueError(f"max_seconds must be positive, got {max_seconds}")
         n = min(n, max(1, round(max_seconds * fps)))
-    if n > max_animation_frames():
+    if animated and n > max_animation_frames():
         found = f"{n} frames: {(n - 1) / fps:.6g} s at {fps:g} fps"
         raise LimitError(f"{path}: {exceeded(MAX_ANIMATION_FRAMES, found)}")
     return np.arange(n) / fps
@@ -540,7 +541,7 @@ def render(
     path = Path(path)
     suffix = check_output(path)
     tracks = _tracks(items, names)
-    times = _sample_times(tracks, fps, max_seconds, path)
+    times = _sample_times(tracks, fps, max_seconds, path, animated=suffix != ".png")
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
