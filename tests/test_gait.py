@@ -448,3 +448,33 @@ def test_gait_steps_lists_the_steps_of_each_walk(capsys):
     rows = [line for line in out.splitlines() if line.startswith("walk_normal_")]
     assert rows and all(int(r.split(",")[2]) > 0 for r in rows)
     assert f"steps in {len(rows)} walks" in out
+
+
+def test_a_long_walk_is_scored_in_runs_of_steps_in_linear_memory(
+    small_model, normal_walks, monkeypatch
+):
+    """A walk's chain grows with its steps, so scoring it whole costs frames x steps: a
+    100,000-frame walk asked for 22 GB (a traceback). Past ``MARKOVMOTION_MAX_VALUES`` cells
+    it is scored in runs of steps cut at its heel strikes: a walk of ordinary length is one
+    run (the score unchanged), a cut one scores within a few per cent of the whole, and
+    every run is within the limit."""
+    from markovmotion.algorithms.hsmm_recursions import check_chain
+    from markovmotion.errors import LimitError
+    from markovmotion.models.gait.synthesizer import step_chunks
+
+    walk = normal_walks[3]
+    bounds = small_model.walk_set([walk]).boundaries[0]
+    n_states = small_model.hsmm_.n_states
+    assert step_chunks(bounds, n_states) == [(0, len(bounds) - 1)]
+    whole = small_model.score([walk])
+    cells = 60 * 30 * n_states  # about 6 steps a run
+    monkeypatch.setenv("MARKOVMOTION_MAX_VALUES", str(cells))
+    runs = step_chunks(bounds, n_states)
+    assert len(runs) > 1 and runs[0][0] == 0 and runs[-1][1] == len(bounds) - 1
+    assert all(a[1] == b[0] for a, b in zip(runs, runs[1:], strict=False))
+    for start, stop in runs:
+        check_chain(int(bounds[stop] - bounds[start]), (stop - start) * n_states)
+    cut = small_model.score([walk])
+    assert np.isfinite(cut) and abs(cut - whole) < 0.05 * abs(whole)
+    with pytest.raises(LimitError, match="chain states"):
+        small_model.hsmm_.score(small_model.walk_set([walk]).obs, [np.zeros(40, int)])

@@ -12,6 +12,9 @@ import numba
 import numpy as np
 from scipy.special import logsumexp
 
+from markovmotion.errors import LimitError
+from markovmotion.limits import MAX_VALUES, exceeded, max_values
+
 
 def duration_log_pmf(means: np.ndarray, variances: np.ndarray, max_duration: int) -> np.ndarray:
     """(Q, max_duration) log P(d) for d = 1..max_duration: Gaussians discretised and normalised."""
@@ -89,6 +92,20 @@ def _forward_backward(log_b, log_dur):  # pragma: no cover - numba
     return log_like, gamma, dur_post
 
 
+def check_chain(n_frames: int, n_states: int) -> None:
+    """Raise :class:`LimitError` (one line) when a chain of ``n_states`` over ``n_frames``
+    would need more than ``MARKOVMOTION_MAX_VALUES`` cells: a walk's chain grows with its
+    steps, so its arrays grow with the square of its length (a 100,000-frame walk of 5,858
+    steps asked for 22 GB and died in NumPy), checked before anything is allocated."""
+    cells = (n_frames + 1) * (n_states + 1)
+    if cells > max_values():
+        found = f"{n_frames} frames x {n_states} chain states"
+        raise LimitError(
+            f"{exceeded(MAX_VALUES, found)}: an explicit-duration chain costs frames x states; "
+            "cut the sequence (a walk into walks of fewer steps)"
+        )
+
+
 def forward_backward(
     log_b: np.ndarray, log_dur: np.ndarray
 ) -> tuple[float, np.ndarray, np.ndarray]:
@@ -108,10 +125,14 @@ def forward_backward(
         dur_post (N, Dmax) the posterior of each state's duration. A sequence
         the chain cannot produce (T < N or T > N Dmax) has log P(O) = -inf
         and zero posteriors.
+
+    Raises:
+        LimitError: more than ``MARKOVMOTION_MAX_VALUES`` cells (:func:`check_chain`).
     """
     log_b = np.ascontiguousarray(log_b, dtype=float)
     log_dur = np.ascontiguousarray(log_dur, dtype=float)
     if log_dur.shape[0] != log_b.shape[1]:
         raise ValueError("log_b and log_dur disagree on the number of states")
+    check_chain(*log_b.shape)
     ll, gamma, dur_post = _forward_backward(log_b, log_dur)
     return float(ll), gamma, dur_post

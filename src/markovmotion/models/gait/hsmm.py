@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from markovmotion.algorithms.gaussian import log_gaussian_diag
-from markovmotion.algorithms.hsmm_recursions import duration_log_pmf, forward_backward
+from markovmotion.algorithms.hsmm_recursions import check_chain, duration_log_pmf, forward_backward
 from markovmotion.algorithms.parallel import map_sequences
 from markovmotion.core.frames import check_frames
 from markovmotion.models.base import Component
@@ -310,6 +310,7 @@ class HSMM(Component):
         (adaptation scores them through feature transforms).
         """
         out, dur = self.chain(contexts)
+        check_chain(len(x), len(out))  # before (T, N) output densities are gathered
         if log_out is None:
             log_out = log_gaussian_diag(x, self.means_, self.variances_)
         log_d = duration_log_pmf(self.dur_means_, self.dur_variances_, self.max_duration_)[dur]

@@ -38,6 +38,7 @@ from markovmotion.features.gait import (
     step_positions,
 )
 from markovmotion.features.reference_pose import ReferencePose
+from markovmotion.limits import max_values
 from markovmotion.models.base import Model
 from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
 from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
@@ -110,6 +111,28 @@ class WalkSet:
     def gv(self) -> np.ndarray:
         """(walks, D) global variance of the static features of each walk (eq. 14)."""
         return np.array([global_variance(x[:, : x.shape[1] // 3]) for x in self.obs])
+
+
+def step_chunks(boundaries: np.ndarray, n_states: int) -> list[tuple[int, int]]:
+    """Runs of consecutive steps ``[start, stop)`` of a walk with these step ``boundaries``
+    (n + 1,), each small enough to score as one chain (frames x states within
+    ``MARKOVMOTION_MAX_VALUES``, :func:`~markovmotion.algorithms.hsmm_recursions.check_chain`).
+    A walk of ordinary length is one run, scored exactly; a long one (a 10,000-frame walk is
+    2,900 chain states: its arrays grow with the square of its length) is cut at heel strikes,
+    its steps' boundaries there taken as detected."""
+    cap = max_values()
+    n = len(boundaries) - 1
+    out, start = [], 0
+    while start < n:
+        stop = start + 1
+        while stop < n and (
+            (boundaries[stop + 1] - boundaries[start] + 1) * ((stop + 1 - start) * n_states + 1)
+            <= cap
+        ):
+            stop += 1
+        out.append((start, stop))
+        start = stop
+    return out
 
 
 def walk_set(
@@ -404,4 +427,9 @@ class GaitSynthesizer(Model):
         model of its context (side and position in the walk).
         """
         data = self.walk_set(motions)
-        return float(self.hsmm_.score(data.obs, data.contexts) / sum(len(x) for x in data.obs))
+        total = 0.0
+        for x, contexts, bounds in zip(data.obs, data.contexts, data.boundaries, strict=True):
+            for start, stop in step_chunks(bounds, self.hsmm_.n_states):
+                frames = slice(bounds[start], bounds[stop])
+                total += self.hsmm_.posteriors(x[frames], contexts[start:stop])[0]
+        return float(total / sum(len(x) for x in data.obs))
