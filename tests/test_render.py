@@ -265,6 +265,13 @@ def test_an_animation_beyond_the_frame_limit_is_refused_before_any_work(tmp_path
         env={"MARKOVMOTION_MAX_ANIMATION_FRAMES": "10"},
     )
     check_clean(run, "o.gif", "15 frames", "MARKOVMOTION_MAX_ANIMATION_FRAMES")
+    # a GIF is held whole in memory until written: its own, lower limit, naming .mp4
+    run = run_cli(
+        ["render", str(take), "--out", str(out), "--data-fps", "1e-2", "--max-seconds", "1"],
+        env={"MARKOVMOTION_MAX_GIF_FRAMES": "10"},
+    )
+    check_clean(run, "o.gif", "15 frames", "MARKOVMOTION_MAX_GIF_FRAMES")
+    assert ".mp4" in run.stderr and not out.exists()
     # a strip draws a few frames whatever the take's length: not refused
     strip = tmp_path / "o.png"
     run = run_cli(["render", str(take), "--out", str(strip), "--data-fps", "1e-2"], timeout=60)

@@ -74,6 +74,9 @@ MAX_VALUES = Limit("MARKOVMOTION_MAX_VALUES", 20_000_000, "values of one motion"
 MAX_ANIMATION_FRAMES = Limit(
     "MARKOVMOTION_MAX_ANIMATION_FRAMES", 54_000, "frames of one rendered animation"
 )
+#: Two minutes at ``render``'s default 15 fps: Pillow holds every frame of a GIF until it is
+#: written (about 0.5 MB a frame at the default size), where an MP4 is streamed.
+MAX_GIF_FRAMES = Limit("MARKOVMOTION_MAX_GIF_FRAMES", 1_800, "frames of one GIF")
 
 ALL = (
     MAX_BYTES,
@@ -84,6 +87,7 @@ ALL = (
     MIN_FPS,
     MAX_VALUES,
     MAX_ANIMATION_FRAMES,
+    MAX_GIF_FRAMES,
 )
 
 
@@ -117,6 +121,10 @@ def max_values() -> int:
 
 def max_animation_frames() -> int:
     return int(MAX_ANIMATION_FRAMES)
+
+
+def max_gif_frames() -> int:
+    return int(MAX_GIF_FRAMES)
 
 
 def megabytes(n: float) -> str:

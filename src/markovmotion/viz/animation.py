@@ -36,7 +36,13 @@ from markovmotion.core.motion import GROUND, UP, Motion
 from markovmotion.errors import LimitError, MotionFormatError
 from markovmotion.features.body_points import point_bones
 from markovmotion.io.files import atomic_write
-from markovmotion.limits import MAX_ANIMATION_FRAMES, exceeded, max_animation_frames
+from markovmotion.limits import (
+    MAX_ANIMATION_FRAMES,
+    MAX_GIF_FRAMES,
+    exceeded,
+    max_animation_frames,
+    max_gif_frames,
+)
 from markovmotion.progress import track
 from markovmotion.viz.plots import check_suffix
 from markovmotion.viz.video import write_mp4
@@ -433,7 +439,8 @@ def _sample_times(
 ) -> np.ndarray:
     """The animation's frame times, refused (:class:`LimitError` naming ``path``) before any
     work when there would be more than ``MARKOVMOTION_MAX_ANIMATION_FRAMES`` of them (an
-    animation; a strip, not ``animated``, draws a few of them whatever their number)."""
+    animation; a strip, not ``animated``, draws a few of them whatever their number), or a
+    GIF of more than ``MARKOVMOTION_MAX_GIF_FRAMES``."""
     if fps <= 0:
         raise ValueError(f"frame rate must be positive, got {fps}")
     end = max(t.last_time for t in tracks)
@@ -442,9 +449,14 @@ def _sample_times(
         if max_seconds <= 0:
             raise ValueError(f"max_seconds must be positive, got {max_seconds}")
         n = min(n, max(1, round(max_seconds * fps)))
+    found = f"{n} frames: {(n - 1) / fps:.6g} s at {fps:g} fps"
     if animated and n > max_animation_frames():
-        found = f"{n} frames: {(n - 1) / fps:.6g} s at {fps:g} fps"
         raise LimitError(f"{path}: {exceeded(MAX_ANIMATION_FRAMES, found)}")
+    if path.suffix.lower() == ".gif" and n > max_gif_frames():
+        raise LimitError(
+            f"{path}: {exceeded(MAX_GIF_FRAMES, found)}: a GIF is held whole in memory until "
+            "written; give .mp4 (streamed) or a shorter --max-seconds"
+        )
     return np.arange(n) / fps
 
 
