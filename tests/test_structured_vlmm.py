@@ -106,6 +106,12 @@ def test_prediction_uses_the_key_history(structured):
     assert deep.at(1.5) < shallow.at(1.5)
     pred = structured.predict(test.trim(0, 100), 1.0)
     assert pred.n_frames == 130
+    # predict matches templates at the last frame alone, as every frame's matching gives it
+    every = structured.prepare(feats[0])
+    some = structured.prepare(feats[0], [len(feats[0]) - 1, 5])
+    assert set(some) == {len(feats[0]) - 1, 5}
+    for t, (rest, state, key) in some.items():
+        assert np.array_equal(rest, every[t][0]) and (state, key) == every[t][1:]
 
 
 def test_structured_save_load_round_trip(structured, tmp_path):

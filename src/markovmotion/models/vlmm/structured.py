@@ -352,13 +352,16 @@ class StructuredBehaviourModel(Model):
         return base.to_motion(configs[: int(round(seconds * self.fps)) + 1])
 
     # ------------------------------------------------------------- prediction
-    def prepare(self, features: np.ndarray) -> list[tuple[np.ndarray, int, int]]:
+    def prepare(
+        self, features: np.ndarray, frames: Sequence[int] | None = None
+    ) -> list[tuple[np.ndarray, int, int]] | dict[int, tuple[np.ndarray, int, int]]:
         """Per frame: the template continuation found by Bayesian template matching (§4.4).
 
-        Returns, for every frame, ``(remaining prototypes, next key state,
-        next key)``: the rest of the best template after the matched position
-        tau, the key automaton's state once that template's end key is
-        reached, and that key.
+        Returns, for every frame (a list), or for ``frames`` alone (a dict by frame: what
+        :meth:`predict` needs of a long observation, its last frame; matching every frame
+        of a 100,000-frame take took 150 s), ``(remaining prototypes, next key state, next
+        key)``: the rest of the best template after the matched position tau, the key
+        automaton's state once that template's end key is reached, and that key.
         """
         base = self.prototype_model_
         tokens, starts = collapse_repeats(nearest_prototype(features, base.prototypes_))
@@ -367,9 +370,9 @@ class StructuredBehaviourModel(Model):
         key_index[self.keys_] = np.arange(len(self.keys_))
         key_states = self.vlmm_.recognise(key_index[tokens[at]])
         protos = base.prototypes_
-        out = []
+        out = {}
         cache: dict[tuple[int, int], tuple[np.ndarray, int, int]] = {}
-        for t in range(len(features)):
+        for t in range(len(features)) if frames is None else (int(f) for f in frames):
             r = int(np.searchsorted(starts, t, side="right") - 1)
             k = int(np.searchsorted(at, r, side="right") - 1)
             lo = at[k] if k >= 0 else 0
@@ -377,8 +380,8 @@ class StructuredBehaviourModel(Model):
                 state = int(key_states[k]) if k >= 0 else 0
                 last = int(key_index[tokens[at[k]]]) if k >= 0 else -1
                 cache[(lo, r)] = self._match(protos[tokens[lo : r + 1]], last, state)
-            out.append(cache[(lo, r)])
-        return out
+            out[t] = cache[(lo, r)]
+        return list(out.values()) if frames is None else out
 
     def _match(self, observed: np.ndarray, last: int, state: int) -> tuple[np.ndarray, int, int]:
         """Best template for prototypes ``observed`` since key ``last`` (eqs. 12-14)."""
@@ -402,7 +405,7 @@ class StructuredBehaviourModel(Model):
     def predict_configurations(
         self,
         features: np.ndarray,
-        prepared: list[tuple[np.ndarray, int, int]],
+        prepared: list[tuple[np.ndarray, int, int]] | dict[int, tuple[np.ndarray, int, int]],
         frames: np.ndarray,
         horizon: int,
         n_samples: int,
@@ -443,7 +446,8 @@ class StructuredBehaviourModel(Model):
         horizon = int(round(seconds * self.fps))
         last = np.array([len(feats) - 1])
         rng = call_rng(rng, stochastic, self.random_state)
-        pred = self.predict_configurations(feats, self.prepare(feats), last, horizon, 1, rng)
+        prepared = self.prepare(feats, last)
+        pred = self.predict_configurations(feats, prepared, last, horizon, 1, rng)
         return base.to_motion(np.vstack([feats[:, : base.n_dims], pred[0, 0]]))
 
     # ------------------------------------------------- shared with the base
