@@ -35,6 +35,7 @@ from markovmotion.defaults import (  # the command line's defaults, defined ther
     RESPONSES,
 )
 from markovmotion.models.chain.behaviour_chain import BehaviourChain, Hypotheses
+from markovmotion.progress import track
 
 
 def shape_errors(
@@ -132,7 +133,8 @@ class Propagator:
     def run(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Responses to a whole sequence (T, k): shape vectors (T, d), roles (T,) and errors (T,)."""
         self.reset()
-        out = [self.step(o) for o in np.asarray(observations, dtype=float)]
+        frames = np.asarray(observations, dtype=float)
+        out = [self.step(o) for o in track(frames, "answering A's frames")]
         return (
             np.array([r.shape for r in out]),
             np.array([r.role for r in out]),

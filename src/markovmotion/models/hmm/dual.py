@@ -103,6 +103,7 @@ from markovmotion.models.hmm.trellis import (
     smooth_place,
     successors,
 )
+from markovmotion.progress import track
 from markovmotion.state import (
     StateError,
     check_count,
@@ -1007,9 +1008,8 @@ class DualHMM(Model):
             rot = trellis.blend(idx, self.blend_window // 2)
         else:
             partner = self.partner()
-            chosen = [
-                partner.step_log_frameprob(row, x) for row, x in zip(log_b, seen, strict=True)
-            ]
+            frames = track(zip(log_b, seen, strict=True), "answering A's frames", len(log_b))
+            chosen = [partner.step_log_frameprob(row, x) for row, x in frames]
             chosen = [c for c in chosen if c is not None] + partner.finish_frames()
             idx = np.array([c[0] for c in chosen], dtype=int)
             root = np.array([c[1] for c in chosen])
