@@ -232,3 +232,18 @@ def test_a_video_stretched_to_another_width_is_said(real_video, tmp_path, capsys
     assert err.count("note:") == 1 and "cam0.mp4 is 272x480" in err and "1096x1920" in err
     assert got[0].K[0, 0] == pytest.approx(truth[0].K[0, 0] * 1088 / 1096, rel=1e-3)
     assert got[0].K[1, 1] == pytest.approx(truth[0].K[1, 1], rel=1e-3)
+
+
+def test_a_lone_video_the_camera_file_does_not_name_is_said_to_be_the_first(capsys):
+    """A user's ``--video myclip.mp4 --cameras cameras.json`` of four cameras was tracked
+    through the first camera's calibration without a word (510 mm at confidence 0.95 for
+    cam1's footage): now a note names the camera taken."""
+    from markovmotion.data.index import data_root
+    from markovmotion.video.cameras import camera_of_video, load_cameras
+
+    cams, _ = load_cameras(data_root().parent / "video" / "pose2sim_balancing")
+    assert camera_of_video(cams, "somewhere/cam2.mp4") == 2
+    assert capsys.readouterr().err == ""
+    assert camera_of_video(cams, "myclip.mp4") == 0
+    err = capsys.readouterr().err
+    assert "myclip.mp4 is not a video the camera file names" in err and "cam0.mp4" in err

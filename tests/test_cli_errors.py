@@ -271,3 +271,15 @@ def test_ctrl_c_and_out_of_memory_are_one_line(monkeypatch, capsys, raised, code
         and line in err
         and "Traceback" not in err
     )
+
+
+def test_square_brackets_in_a_message_are_shown(tmp_path, capsys):
+    """Rich read ``[int_cam01_img]`` (a Pose2Sim section, a file name) as a style and dropped
+    it from errors and notes: ``fish.toml:  is a fisheye camera``."""
+    from markovmotion.progress import note
+
+    with pytest.raises(SystemExit):
+        main(["info", str(tmp_path / "[int_cam01_img].bvh")])
+    assert "[int_cam01_img].bvh" in capsys.readouterr().err
+    note("section [int_cam01_img] kept")
+    assert "section [int_cam01_img] kept" in capsys.readouterr().err

@@ -13,6 +13,7 @@ from collections.abc import Iterable, Iterator
 from typing import TypeVar
 
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -33,7 +34,7 @@ err_console = Console(stderr=True, soft_wrap=True)
 def note(message: str) -> None:
     """One line to stderr about a choice the library made for the user (takes left out,
     a kind chosen): where commands and the demo show it, off stdout's JSON."""
-    err_console.print(f"[yellow]note:[/] {message}", highlight=False)
+    err_console.print(f"[yellow]note:[/] {escape(message)}", highlight=False)
 
 
 class NoteOnce(logging.Handler):

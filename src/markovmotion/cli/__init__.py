@@ -14,6 +14,7 @@ import sys
 from collections.abc import Iterator
 
 import typer
+from rich.markup import escape
 
 from markovmotion.errors import MarkovMotionError
 from markovmotion.progress import NoteOnce, err_console
@@ -87,7 +88,7 @@ def relative_paths(message: str) -> str:
 def fail(message: str) -> None:
     """Print one error line (absolute paths made relative) and exit with code 2."""
     message = relative_paths(message)
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise SystemExit(2)
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from markovmotion.errors import MotionFormatError
 from markovmotion.io import MOTION_SUFFIXES
 from markovmotion.io.files import atomic_write, base_suffix
+from markovmotion.progress import note
 
 CAMERAS_FILE = "cameras.json"
 MAX_CAMERAS = 4
@@ -255,9 +256,18 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
 
 
 def camera_of_video(cameras: list[CalibratedCamera], video: str | os.PathLike[str]) -> int:
-    """Which camera a lone video file is: the one naming it, else the first."""
+    """Which camera a lone video file is: the one naming it, else the first (said in a note
+    when there are several: a video of another camera tracked through the first's
+    calibration is far off at full confidence)."""
     name = Path(video).name
-    return next((k for k, c in enumerate(cameras) if Path(c.video).name == name), 0)
+    found = next((k for k, c in enumerate(cameras) if Path(c.video).name == name), None)
+    if found is None and len(cameras) > 1:
+        note(
+            f"{name} is not a video the camera file names ({', '.join(Path(c.video).name for c in cameras)}): "
+            f"taken as the first camera's, {Path(cameras[0].video).name}; name it so in the "
+            "camera file if it is another camera's"
+        )
+    return 0 if found is None else found
 
 
 def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], dict]:
