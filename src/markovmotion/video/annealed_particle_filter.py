@@ -76,6 +76,10 @@ if TYPE_CHECKING:
 
 #: Foreground threshold on the largest channel difference to the background (grey levels).
 FG_LOW, FG_HIGH = 30.0, 60.0
+#: A frame whose foreground covers less than this share of every view holds no one: its
+#: pose is a guess (confidence 0), and a video of such frames alone has no person. A person
+#: covers 3-10 % of the real 272x480 views.
+EMPTY_COVER = 0.002
 #: Foreground pixels sampled per view for the coverage cost.
 COVER_SAMPLES = 80
 EDGE_WEIGHT = 0.5
@@ -160,6 +164,8 @@ class ViewFeatures:
     n_samples: np.ndarray
     centroids: list[np.ndarray | None] = field(default_factory=list)
     heights: list[float] = field(default_factory=list)
+    #: (V,) the share of each view's pixels in the foreground (None: not measured).
+    coverage: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.samples = np.array(self.samples, dtype=float)
@@ -187,6 +193,7 @@ def view_features(
     samples = np.zeros((v, COVER_SAMPLES, 2))
     n_samples = np.zeros(v, np.intp)
     centroids, heights = [], []
+    coverage = np.zeros(v)
     for k, (frame, bg) in enumerate(zip(frames, backgrounds, strict=True)):
         channels = cv2.split(cv2.absdiff(frame, bg))  # the largest channel difference
         diff = channels[0]
@@ -211,6 +218,7 @@ def view_features(
         found = cv2.findNonZero((f > 0.5).view(np.uint8))  # x, y in row order (np.nonzero's)
         if found is not None:
             found = found.reshape(-1, 2)
+            coverage[k] = len(found) / (fh * fw)
             xs, ys = found[:, 0], found[:, 1]
             pick = rng.choice(len(xs), min(COVER_SAMPLES, len(xs)), replace=False)
             samples[k, : len(pick)] = found[pick]
@@ -220,7 +228,7 @@ def view_features(
         else:
             centroids.append(None)
             heights.append(0.0)
-    return ViewFeatures(fg, edge, samples, n_samples, centroids, heights)
+    return ViewFeatures(fg, edge, samples, n_samples, centroids, heights, coverage)
 
 
 # ----------------------------------------------------------------------------- the weighting function
@@ -876,22 +884,35 @@ def track_features(
     features: Iterator[ViewFeatures] | Sequence[ViewFeatures],
     apf: AnnealedParticleFilter,
     total: int | None = None,
+    source: str | os.PathLike[str] = "video",
 ) -> TrackResult:
     """Run the filter over every frame's features, with a progress bar (of ``total``
     frames, if known); the wall time includes making them."""
-    states, conf = [], []
+    states, conf, empty = [], [], []
     t0, c0 = time.perf_counter(), time.process_time()
     for feats in track(features, "tracking", total):
         x, best = apf.step(feats)
         states.append(x)
-        conf.append(1.0 - best)
+        empty.append(feats.coverage is not None and feats.coverage.max() < EMPTY_COVER)
+        conf.append(0.0 if empty[-1] else 1.0 - best)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     if not states:
-        raise MotionFormatError("video", "no frames in this video")
-    return TrackResult(
+        raise MotionFormatError(source, "no frames in this video")
+    if all(empty):
+        raise MotionFormatError(
+            source, "no person found in this video (no foreground in any view of any frame)"
+        )
+    result = TrackResult(
         np.array(states), np.array(conf), apf.fps, seconds, len(apf.cameras), apf.recoveries, cpu,
         flips=apf.flips, flipped=apf.flipped,
     )  # fmt: skip
+    if n := sum(empty):
+        first = empty.index(True)
+        result.video_notes.append(
+            f"note: no one in any view in {n} frames (the first: frame {first}; foreground under "
+            f"{100 * EMPTY_COVER:g} % of every view): their poses are guesses, confidence 0"
+        )
+    return result
 
 
 def track_video(
@@ -957,8 +978,10 @@ def track_video(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
     )  # fmt: skip
-    result = track_features(mv.features(seed), apf, expected_frames(mv.videos, max_frames))
-    result.background_notes, result.video_notes = mv.background_notes, mv.video_notes
+    total = expected_frames(mv.videos, max_frames)
+    result = track_features(mv.features(seed), apf, total, mv.source)
+    result.background_notes = mv.background_notes
+    result.video_notes = [*mv.video_notes, *result.video_notes]
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())

@@ -974,6 +974,8 @@ def track_triangulated_video(
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
+    if not np.isfinite(tr.points).all(axis=2).any():  # as --method monocular says
+        raise MotionFormatError(where, "no person found in this video (no frame placed)")
     n = len(tr.points)
     seen = (lm.visibility >= MIN_VISIBILITY).sum()
     summary = {
@@ -1033,8 +1035,8 @@ def whom_notes(summary: dict, named: bool = False) -> list[str]:
     lines = []
     if count := summary.get("views_of_someone_else", 0):
         lines.append(
-            f"note: {count} camera frames showed someone else than the person tracked "
-            "(MediaPipe finds one person per image); they were left out"
+            f"note: {count} camera frames showed no one or someone else than the person "
+            "tracked (MediaPipe finds one person per image); they were left out"
         )
     if named:
         away = summary.get("from_person_m")
