@@ -651,10 +651,10 @@ def test_a_video_with_no_one_in_it_says_so(tmp_path, capsys):
         write_mp4([plate] * 4, tmp_path / cam["video"], doc["fps"])
         shutil.copyfile(real / cam["background"], tmp_path / cam["background"])
     (tmp_path / "cameras.json").write_text(json.dumps(doc))
-    for method in ("apf", "triangulate"):
+    for method, out in (("apf", "x.bvh"), ("triangulate", "x.c3d")):
         with pytest.raises(SystemExit) as exit_:
             main(["track", "--video", str(tmp_path), "--method", method, "--particles", "50",
-                  "--layers", "2", "--out", str(tmp_path / "x.bvh")])  # fmt: skip
+                  "--layers", "2", "--out", str(tmp_path / out)])  # fmt: skip
         assert exit_.value.code == 2, method
-        assert "no person found in this video" in capsys.readouterr().err
-    assert not (tmp_path / "x.bvh").exists()
+        assert "no person found in this video" in capsys.readouterr().err, method
+        assert not (tmp_path / out).exists()
