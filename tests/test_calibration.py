@@ -247,3 +247,28 @@ def test_a_lone_video_the_camera_file_does_not_name_is_said_to_be_the_first(caps
     assert camera_of_video(cams, "myclip.mp4") == 0
     err = capsys.readouterr().err
     assert "myclip.mp4 is not a video the camera file names" in err and "cam0.mp4" in err
+
+
+def test_a_video_at_another_rate_than_the_camera_file_is_said(tmp_path, capsys):
+    """The camera file's fps is the one used; a video whose own header says another rate
+    (re-encoded at 30 fps under a file saying 60) was tracked at the wrong speed, and paired
+    with a reference frame by frame, without a word: now a note names both rates."""
+    import json
+    import shutil
+
+    from markovmotion.data.index import data_root
+    from markovmotion.video.cameras import load_cameras
+
+    real = data_root().parent / "video" / "pose2sim_balancing"
+    doc = json.loads((real / "cameras.json").read_text())
+    doc["cameras"] = doc["cameras"][:1]
+    shutil.copyfile(real / doc["cameras"][0]["video"], tmp_path / doc["cameras"][0]["video"])
+    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    load_cameras(tmp_path)
+    assert capsys.readouterr().err == ""  # 60 and 60
+    doc["fps"] = 30.0
+    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    load_cameras(tmp_path)
+    assert "cam0.mp4 is 60 fps by its own header, the camera file says 30" in (
+        capsys.readouterr().err
+    )

@@ -314,7 +314,27 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist))
         valid_camera(path, where, out[-1])
     doc["fps"] = float(fps)
+    _check_rates(path.parent, out, doc["fps"])
     return out, doc
+
+
+def _check_rates(folder: Path, cameras: list[CalibratedCamera], fps: float) -> None:
+    """A note for each camera's video (beside the camera file) whose own frame rate is not the
+    camera file's ``fps``, which is the one used: a video re-encoded at 30 fps under a file
+    saying 60 was tracked at twice its speed, and paired with a reference frame by frame,
+    without a word."""
+    for c in cameras:
+        video = folder / c.video if c.video else None
+        if video is None or not video.is_file():
+            continue
+        cap = cv2.VideoCapture(str(video))
+        own = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
+        cap.release()
+        if own > 0 and abs(own - fps) > 0.01 * fps:
+            note(
+                f"{video.name} is {own:g} fps by its own header, the camera file says {fps:g}: "
+                "the camera file's rate is used (set its fps if the video's is right)"
+            )
 
 
 def camera_videos(
