@@ -272,3 +272,21 @@ def test_a_video_at_another_rate_than_the_camera_file_is_said(tmp_path, capsys):
     assert "cam0.mp4 is 60 fps by its own header, the camera file says 30" in (
         capsys.readouterr().err
     )
+
+
+def test_a_wrong_unit_or_up_axis_is_said(real_video, tmp_path, capsys):
+    """A Pose2Sim file (metres, Z up) read with ``--units mm`` put the cameras 7 mm apart, and
+    with ``--up y`` laid the person on their side; both tracked at confidence 0.93 without a
+    word (a new user's trial). Now each gets a note; the right reading gets none."""
+    from markovmotion.cli import main
+
+    truth, _ = load_cameras(real_video)
+    calib = tmp_path / "Calib.toml"
+    calib.write_text(_toml(truth))
+    videos = [str(v) for v in _videos(real_video, tmp_path)]
+    for extra, says in (([], None), (["--units", "mm"], "at most 7 mm from one another"),
+                        (["--up", "y"], "below the floor")):  # fmt: skip
+        main(["video", "cameras", str(calib), *videos, "--out", str(tmp_path / "c.json"),
+              "--force", *extra])  # fmt: skip
+        err = capsys.readouterr().err
+        assert ("note:" not in err) if says is None else (says in err), (extra, err)
