@@ -70,8 +70,10 @@ def check_index(index: MocapIndex) -> list[Finding]:
             continue
         try:
             frames[e.file] = n = file_frames(e)
-        except MarkovMotionError as exc:
-            found.append(Finding(e.file, "error", f"unreadable: {exc}"))
+        except MarkovMotionError as exc:  # the problem and line: the row names the file
+            line = getattr(exc, "line", None)
+            what = getattr(exc, "problem", str(exc)) + (f" (line {line})" if line else "")
+            found.append(Finding(e.file, "error", f"unreadable: {what}"))
             continue
         if e.frames and n != e.frames:
             found.append(Finding(e.file, "error", f"{n} frames in the file, {e.frames} listed"))
