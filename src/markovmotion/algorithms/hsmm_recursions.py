@@ -92,13 +92,17 @@ def _forward_backward(log_b, log_dur):  # pragma: no cover - numba
     return log_like, gamma, dur_post
 
 
+def chain_cells(n_frames: int, n_states: int) -> int:
+    """The cells of each of an explicit-duration pass's arrays (frames + 1) x (states + 1)."""
+    return (n_frames + 1) * (n_states + 1)
+
+
 def check_chain(n_frames: int, n_states: int) -> None:
     """Raise :class:`LimitError` (one line) when a chain of ``n_states`` over ``n_frames``
     would need more than ``MARKOVMOTION_MAX_VALUES`` cells: a walk's chain grows with its
     steps, so its arrays grow with the square of its length (a 100,000-frame walk of 5,858
     steps asked for 22 GB and died in NumPy), checked before anything is allocated."""
-    cells = (n_frames + 1) * (n_states + 1)
-    if cells > max_values():
+    if chain_cells(n_frames, n_states) > max_values():
         found = f"{n_frames} frames x {n_states} chain states"
         raise LimitError(
             f"{exceeded(MAX_VALUES, found)}: an explicit-duration chain costs frames x states; "

@@ -28,6 +28,7 @@ import logging
 import math
 import os
 from collections import defaultdict, deque
+from dataclasses import replace
 
 import numpy as np
 
@@ -123,11 +124,7 @@ def _in_unit(skeleton: Skeleton, length_unit: str, where: str) -> tuple[Skeleton
         return skeleton, read_in
     factor = UNIT_TO_MM[better] / UNIT_TO_MM[read_in]
     if length_unit == "auto":
-        scaled = Skeleton(
-            skeleton.names, skeleton.parents, skeleton.offsets * factor, skeleton.channels,
-            skeleton.end_site,
-        )  # fmt: skip
-        return scaled, better
+        return replace(skeleton, offsets=skeleton.offsets * factor), better
     span = rest_span(skeleton)
     log.warning(
         "%s: its skeleton spans %.0f mm read in %s, not a person's size; in %s it spans %.0f "

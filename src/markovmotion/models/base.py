@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import inspect
 import math
 import os
 from collections.abc import Callable, Iterable, Sequence
@@ -273,12 +274,16 @@ def check_arguments(
 
 def _takes_checked(fit: Callable[..., Any]) -> Callable[..., Any]:
     """``fit`` refusing in one line a lone take (or a lone pair) where a list of them is
-    meant, which failed deep inside with "'Motion' object is not iterable"."""
+    meant, which failed deep inside with "'Motion' object is not iterable", and a pair of
+    two lengths (:func:`check_takes`, the one place every family's pairs are checked)."""
+
+    first = list(inspect.signature(fit).parameters)[1]  # after self: the takes
 
     @functools.wraps(fit)
     def checked(self: Model, *args: Any, **kwargs: Any) -> Any:
-        if args:
-            check_takes(args[0], f"{type(self).__name__}.fit", type(self).FITS_PAIRS)
+        takes = args[0] if args else kwargs.get(first)
+        if takes is not None:
+            check_takes(takes, f"{type(self).__name__}.fit", type(self).FITS_PAIRS)
         return fit(self, *args, **kwargs)
 
     return checked

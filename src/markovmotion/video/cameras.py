@@ -22,6 +22,7 @@ file and the field.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -318,6 +319,20 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
     return out, doc
 
 
+#: (video, camera file rate) pairs already said to disagree, in this process.
+_RATES_SAID: set[tuple[Path, float]] = set()
+
+
+@functools.lru_cache(maxsize=64)
+def _header_rate(video: str, mtime_ns: int) -> float:
+    """A video file's own frame rate from its header (0 when unknown), read once per file
+    version."""
+    cap = cv2.VideoCapture(video)
+    own = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
+    cap.release()
+    return float(own)
+
+
 def _check_rates(folder: Path, cameras: list[CalibratedCamera], fps: float) -> None:
     """A note for each camera's video (beside the camera file) whose own frame rate is not the
     camera file's ``fps``, which is the one used: a video re-encoded at 30 fps under a file
@@ -327,10 +342,9 @@ def _check_rates(folder: Path, cameras: list[CalibratedCamera], fps: float) -> N
         video = folder / c.video if c.video else None
         if video is None or not video.is_file():
             continue
-        cap = cv2.VideoCapture(str(video))
-        own = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
-        cap.release()
-        if own > 0 and abs(own - fps) > 0.01 * fps:
+        own = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
+        if own > 0 and abs(own - fps) > 0.01 * fps and (video, fps) not in _RATES_SAID:
+            _RATES_SAID.add((video, fps))  # a command loads its camera file more than once
             note(
                 f"{video.name} is {own:g} fps by its own header, the camera file says {fps:g}: "
                 "the camera file's rate is used (set its fps if the video's is right)"

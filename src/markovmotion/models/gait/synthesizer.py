@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from markovmotion.algorithms.hsmm_recursions import chain_cells
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
 from markovmotion.errors import DataNotFoundError, MotionFormatError
@@ -126,7 +127,9 @@ def step_chunks(boundaries: np.ndarray, n_states: int) -> list[tuple[int, int]]:
     while start < n:
         stop = start + 1
         while stop < n and (
-            (boundaries[stop + 1] - boundaries[start] + 1) * ((stop + 1 - start) * n_states + 1)
+            chain_cells(
+                int(boundaries[stop + 1] - boundaries[start]), (stop + 1 - start) * n_states
+            )
             <= cap
         ):
             stop += 1

@@ -465,9 +465,6 @@ class DualHMM(Model):
             check_count("markers", self.markers, 1)
         elif not isinstance(pairs[0][0], Markers):
             _check_one_skeleton_b(pairs, labels)
-        for a, b in pairs:
-            if a.n_frames != b.n_frames:
-                raise ValueError(f"{a.name} and {b.name} differ in length")
         for k in (
             *_LEARNT,
             *_LEARNT_MARKERS,
