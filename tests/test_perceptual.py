@@ -361,3 +361,29 @@ def test_report_command_on_a_missing_database(tmp_path, capsys):
         main(["evaluation", "report", str(tmp_path / "nothing.sqlite")])
     assert exc.value.code == 2
     assert "no such evaluation database" in capsys.readouterr().err
+
+
+def test_wal_mode_is_retried_while_the_database_is_locked():
+    """Two server workers opening a new database together: the change of journal mode can
+    fail at once with "database is locked" (SQLite's busy handler is not asked), which
+    stopped a worker once in CI; it is tried again, and another error is not."""
+    import sqlite3
+
+    from markovmotion.evaluate.store import write_ahead
+
+    class Locked:
+        def __init__(self, fails: int, message: str = "database is locked"):
+            self.fails, self.message, self.calls = fails, message, 0
+
+        def execute(self, sql: str):
+            self.calls += 1
+            if self.calls <= self.fails:
+                raise sqlite3.OperationalError(self.message)
+
+    con = Locked(3)
+    write_ahead(con)  # type: ignore[arg-type]
+    assert con.calls == 4
+    with pytest.raises(sqlite3.OperationalError, match="disk I/O"):
+        write_ahead(Locked(1, "disk I/O error"))  # type: ignore[arg-type]
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        write_ahead(Locked(10**6), seconds=0.2)  # type: ignore[arg-type]

@@ -148,6 +148,22 @@ def draw_clips(token: str, clips: list[Clip], rng: np.random.Generator) -> list[
 ALL_TESTS = (*TESTS, INTERACTION)
 
 
+def write_ahead(con: sqlite3.Connection, seconds: float = 30.0) -> None:
+    """Put ``con``'s database in WAL mode, trying again while it is locked: a change of
+    journal mode can fail at once with "database is locked" rather than wait in SQLite's
+    busy handler, and two server workers opening a new database together met that once in
+    CI (``serve --workers 2``)."""
+    deadline = time.monotonic() + seconds
+    while True:
+        try:
+            con.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
 class EvaluationStore:
     """The evaluation database: evaluators, their drawn items and their answers.
 
@@ -168,7 +184,7 @@ class EvaluationStore:
         # of sleeping in SQLite's busy handler (its back-off reaches 100 ms)
         self._write = threading.Lock()
         con = self._con()
-        con.execute("PRAGMA journal_mode=WAL")
+        write_ahead(con)
         con.executescript(SCHEMA)
         if stimuli:
             with self._transaction() as c:
