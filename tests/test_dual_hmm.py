@@ -340,6 +340,45 @@ def test_partner_is_an_online_partner_that_any_replay_takes(model, capsys):
         fresh.step(a.positions()[:1])
 
 
+class _StoppedAt:
+    """A partner whose ``step`` is interrupted (Ctrl-C) at its ``at``-th frame."""
+
+    def __init__(self, partner, at):
+        self.partner, self.at, self.count = partner, at, 0
+
+    def __getattr__(self, name):
+        return getattr(self.partner, name)
+
+    def step(self, frame):
+        self.count += 1
+        if self.count == self.at:
+            raise KeyboardInterrupt
+        return self.partner.step(frame)
+
+
+def test_an_interrupted_replay_keeps_what_was_answered(model, tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a real-time replay: B so far is kept (the partner's look-ahead flushed),
+    ``respond --realtime`` writes it, says so and exits as interrupted (130); it kept nothing."""
+    a, _, _ = synthetic_pair(40, 5)
+    played = replay(lambda: _StoppedAt(model.partner(), 25), a)
+    assert played.interrupted and played.streamed == 24
+    assert played.motion.n_frames == 24  # the lag's frames come out of finish()
+    if played.dropped == 0:  # in real time, as the whole offline answer to those frames
+        offline = model.respond(a.trim(0, 24), "windowed").positions()
+        np.testing.assert_allclose(played.motion.positions(), offline, atol=1e-6)
+    write_motion(a, tmp_path / "a.bvh")
+    model.save(tmp_path / "m.npz")
+    own = DualHMM.partner
+    monkeypatch.setattr(DualHMM, "partner", lambda self, *w: _StoppedAt(own(self, *w), 25))
+    out = tmp_path / "b.bvh"
+    with pytest.raises(SystemExit) as stopped:
+        main(["dualhmm", "respond", "--model", str(tmp_path / "m.npz"), "--input",
+              str(tmp_path / "a.bvh"), "--out", str(out), "--realtime"])  # fmt: skip
+    assert stopped.value.code == 130
+    assert "interrupted after 24 of 40 frames" in capsys.readouterr().err
+    assert out.is_file()
+
+
 def test_model_files_of_another_version_or_kind_are_refused(model, tmp_path, monkeypatch):
     monkeypatch.setattr(persist, "FORMAT_VERSION", 99)
     model.save(tmp_path / "future.npz")

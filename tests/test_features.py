@@ -21,6 +21,7 @@ from markovmotion.features import (
     delta_matrix,
 )
 from markovmotion.features.body_motion import BodyMotion, ground_frame, ground_travel
+from markovmotion.features.smoothing import despike
 from markovmotion.persist import FORMAT_VERSION, load_npz, save_npz
 
 
@@ -93,6 +94,37 @@ def test_smoothing_is_a_centred_moving_average():
     x = np.arange(10.0)[:, None] ** 2
     y = TemporalSmoothing(window=3).transform([x])[0]
     np.testing.assert_allclose(y[4], (9 + 16 + 25) / 3)
+
+
+def test_despike_takes_out_a_glitch_and_leaves_real_motion_alone():
+    """A Hampel filter: a wrist that leaves its path by 400 mm for two frames (60 fps) is put
+    back within 40 mm (the window's median of a turning path); a point moving as fast as a hand can (2 m/s, turning) and one unseen
+    in some frames are left as they are."""
+    fps = 60.0
+    t = np.arange(120) / fps
+    path = np.stack([400 * np.cos(5 * t), 300 * np.sin(5 * t), 100 * t], axis=1)  # 2 m/s
+    points = np.stack([path, path + 200.0], axis=1)  # (F, 2, 3)
+    points[40:42, 0] += [400.0, 0.0, 0.0]
+    points[70:75, 1] = np.nan
+    out, spiked = despike(points, fps)
+    assert spiked.sum() == 2 and spiked[40:42, 0].all()
+    assert np.linalg.norm(out[40:42, 0] - path[40:42], axis=-1).max() < 40.0
+    untouched = ~spiked
+    untouched[70:75, 1] = False
+    np.testing.assert_array_equal(out[untouched], points[untouched])
+    assert np.isnan(out[70:75, 1]).all()
+    assert despike(points[:2], fps)[1].sum() == 0  # too short to judge
+
+
+def test_despike_leaves_real_motion_capture_alone():
+    """The threshold is what real people do: on a captured take (the collection's first
+    skeleton take) it replaces next to nothing."""
+    from markovmotion.data.index import MocapIndex
+
+    entry = next(e for e in MocapIndex.load() if e.kind == "skeleton")
+    motion = entry.read()
+    _, spiked = despike(motion.positions()[:, :20], motion.fps)
+    assert spiked.mean() < 1e-3
 
 
 def test_pipeline_saves_and_loads_without_pickle(tmp_path):

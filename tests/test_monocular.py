@@ -146,6 +146,30 @@ def test_kabsch_recovers_a_rigid_motion():
     assert np.allclose(kabsch_align(moving, fixed), fixed, atol=1e-6)
 
 
+def test_reference_errors_count_every_joint_known_in_both(tmp_path):
+    """A joint unknown in one frame leaves only that joint out, not the frame; a frame with
+    no joint known is counted as missing; the mean is over the joint-frames compared."""
+    from markovmotion.features.body_points import BODY_POINTS
+    from markovmotion.video.monocular import REFERENCE_JOINTS, reference_errors
+
+    ref = np.arange(4 * 12 * 3, dtype=float).reshape(4, 12, 3)
+    cols = [f"{j}_{a}" for j in REFERENCE_JOINTS for a in "xyz"]
+    lines = ["frame," + ",".join(cols)]
+    lines += [f"{f}," + ",".join(f"{v:g}" for v in ref[f].ravel()) for f in range(4)]
+    path = tmp_path / "ref.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    points = np.zeros((4, len(BODY_POINTS), 3))
+    idx = [BODY_POINTS.index(j) for j in REFERENCE_JOINTS]
+    points[:, idx] = ref + [0.0, 0.0, 10.0]  # 10 mm off everywhere
+    points[1, idx[0]] = np.nan  # one joint unknown
+    points[3] = np.nan  # nothing known
+    errors = reference_errors(points, path)
+    assert errors["frames_compared"] == 3 and errors["frames_missing"] == 1
+    assert errors["joints_missing"] == 1
+    assert errors["mean_mm"] == pytest.approx(10.0)
+    assert errors["aligned_mean_mm"] == pytest.approx(0.0, abs=1e-6)
+
+
 def test_monocular_track_of_real_video(real_video, tmp_path, capfd):
     """One real camera (cam0 of the 4-view balancing trial), all 100 frames: within 130 mm of
     the triangulated reference after per-frame rigid alignment; the 13 markers written;

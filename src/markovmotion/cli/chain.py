@@ -21,6 +21,7 @@ from markovmotion.cli.options import (
     ranged,
     roles_option,
     split_labels,
+    stopped,
 )
 from markovmotion.cli.tables import print_json, print_table
 from markovmotion.data import MocapIndex
@@ -309,10 +310,12 @@ def respond(
 
             result = replay(lambda: partner_model.partner(person, **options), motion)
             err_console.print(
-                f"streamed {motion.n_frames} frames at {motion.fps:g} fps: {result.summary()}",
+                f"streamed {result.streamed} frames at {motion.fps:g} fps: {result.summary()}",
                 highlight=False,
             )
             write_motion(result.motion, out)
+            if result.interrupted:
+                stopped(result, motion.n_frames, out)
         elif suffix == ".bvh":
             write_motion(partner_model.respond(motion, person, **options), out)
         else:

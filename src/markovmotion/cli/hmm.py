@@ -21,6 +21,7 @@ from markovmotion.cli.options import (
     person_option,
     ranged,
     roles_option,
+    stopped,
 )
 from markovmotion.cli.tables import print_json
 from markovmotion.data.index import read_listed_motion
@@ -388,8 +389,8 @@ def respond(
         played = replay(lambda: dual.partner(window), motion)
         b = played.motion
         console.print(
-            f"streamed {motion.n_frames} frames at {motion.fps:g} fps: {played.summary()}; "
-            f"skipped (NaN/missing) {int(broken.sum())}",
+            f"streamed {played.streamed} frames at {motion.fps:g} fps: {played.summary()}; "
+            f"skipped (NaN/missing) {int(broken[: played.streamed].sum())}",
             highlight=False,
         )
     else:
@@ -403,6 +404,8 @@ def respond(
         b = dual.respond(motion, "standard" if standard else "windowed")
     (write_c3d if as_c3d else write_motion)(b, out)
     console.print(f"wrote {out} ({b.n_frames} frames at {b.fps:g} fps)")
+    if realtime and played.interrupted:
+        stopped(played, motion.n_frames, out)
     if animation is not None:
         shown = motion.copy()
         if hasattr(shown, "rotations"):
@@ -433,7 +436,15 @@ def _respond_video(
     if not video.is_file():
         camera_videos(where, cams)  # a missing video: fail before the work
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
-    guided, note = resolve_guide(guide, doc) if method == "apf" and not realtime else (False, None)
+    guided, note = False, None
+    if method == "apf" and not realtime:
+        lone = video.is_file() and video.suffix.lower() != ".json"
+        try:
+            guided, note = resolve_guide(guide, doc, 1 if lone else len(cams))
+        except ValueError as exc:
+            raise typer.BadParameter(
+                str(exc).removeprefix("guide "), param_hint="--guide"
+            ) from None
     check_person(person, cams if not video.is_file() else cams[:1], guided)
     if note:
         err_console.print(note, highlight=False)

@@ -355,3 +355,17 @@ def split_labels(values: list[str] | None) -> list[str] | None:
     spellings, as a new user wrote them): one list, None when none were given."""
     out = [v.strip() for value in values or [] for v in value.split(",") if v.strip()]
     return out or None
+
+
+def stopped(played: Any, total: int, out: Any) -> None:
+    """Ctrl-C during ``respond --realtime`` (``played``: the :class:`~markovmotion.models.online.Replay`):
+    what was kept is said, and the exit code is an interrupt's (130), the partner's frames
+    so far having been written to ``out``."""
+    from markovmotion.progress import err_console
+
+    err_console.print(
+        f"interrupted after {played.streamed} of {total} frames of A: wrote the partner's "
+        f"{played.motion.n_frames} frames so far to {out}",
+        highlight=False,
+    )
+    raise SystemExit(130)

@@ -177,9 +177,16 @@ def track(
         cams, doc = load_cameras(where)
         if not video.is_file():
             camera_videos(where, cams)
-        guided, note = resolve_guide(guide, doc) if method == "apf" else (False, None)
     if video.is_file() and video.suffix.lower() != ".json":  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
+    if method == "apf":
+        n_views = min(len(cams), views or len(cams))
+        try:
+            guided, note = resolve_guide(guide, doc, n_views)
+        except ValueError as exc:
+            raise typer.BadParameter(
+                str(exc).removeprefix("guide "), param_hint="--guide"
+            ) from None
     check_person(person, cams[:views] if views else cams, method == "triangulate" or guided)
     reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)

@@ -94,12 +94,16 @@ class Replay:
         dropped: frames skipped because processing fell behind (a frame is
             dropped when its successor is already due before it could start).
         lag: the partner's lag in frames.
+        streamed: frames of A streamed (all of them, unless interrupted).
+        interrupted: the replay was stopped by Ctrl-C; ``motion`` is B so far.
     """
 
     motion: Motion
     times_ms: np.ndarray
     dropped: int
     lag: int
+    streamed: int = 0
+    interrupted: bool = False
 
     def summary(self) -> str:
         """One line: latency median and p99, dropped frames, lag."""
@@ -149,21 +153,33 @@ def replay(make_partner: Callable[[], OnlinePartner], motion: Motion) -> Replay:
     make_partner().step(motion.trim(0, 1))
     partner = make_partner()
     period = 1.0 / motion.fps
-    out, times, dropped = [], [], 0
+    out, times, dropped, streamed = [], [], 0, 0
     start = time.perf_counter()
-    for t in range(motion.n_frames):
-        now = time.perf_counter()
-        due = start + t * period
-        if now < due:
-            time.sleep(due - now)
-        tick = time.perf_counter()
-        if tick > due + period:
-            dropped += 1
-            frame = partner.skip()
-        else:
-            frame = partner.step(motion.trim(t, t + 1))
-            times.append((time.perf_counter() - tick) * 1e3)
-        if frame is not None:
-            out.append(frame)
+    try:
+        for t in range(motion.n_frames):
+            now = time.perf_counter()
+            due = start + t * period
+            if now < due:
+                time.sleep(due - now)
+            tick = time.perf_counter()
+            if tick > due + period:
+                dropped += 1
+                frame = partner.skip()
+            else:
+                frame = partner.step(motion.trim(t, t + 1))
+                times.append((time.perf_counter() - tick) * 1e3)
+            streamed = t + 1
+            if frame is not None:
+                out.append(frame)
+    except KeyboardInterrupt:  # Ctrl-C on a long stream: B so far is kept (the caller says so)
+        out.extend(partner.finish())
+        if not out:
+            raise
+        return Replay(
+            concatenate(out, partner.fps), np.array(times), dropped, int(partner.lag),
+            streamed, interrupted=True,
+        )  # fmt: skip
     out.extend(partner.finish())
-    return Replay(concatenate(out, partner.fps), np.array(times), dropped, int(partner.lag))
+    return Replay(
+        concatenate(out, partner.fps), np.array(times), dropped, int(partner.lag), streamed
+    )

@@ -960,7 +960,9 @@ def track_video(
         one = person_views(mv.videos, mv.cameras, mv.fps, max_frames, person, left_right)
         agreed = one.agreed
         check = SideCheck.from_landmarks(agreed) if sides else None
-        points = triangulate_views(agreed) if guide or size_from_views else None
+        # glitches out (Triangulated.despiked): a restart or a segment's size from a
+        # landmark on the wrong arm for a frame or two is a pose no body took
+        points = triangulate_views(agreed).despiked(mv.fps)[0] if guide or size_from_views else None
         if size_from_views:
             from markovmotion.video.body_size import segment_body, segment_sizes_from_points
 

@@ -544,15 +544,20 @@ def reference_errors(
 ) -> dict:
     """Mean error (mm) of (F, P, 3) tracked ``points`` (named ``joints``) against a reference
     CSV (:func:`read_reference`): over its 12 joints, per joint, with and without each frame's
-    rigid alignment; frames without a tracked body are left out and counted."""
+    rigid alignment (on the joints known in both). Every joint known in both counts, also in
+    a frame where another is unknown (a triangulation from two views misses single joints:
+    leaving out the whole frame dropped 13 of 40); frames with none are counted as
+    ``frames_missing``, unknown joints of the others as ``joints_missing``."""
     frames, ref = read_reference(reference)
     keep = frames < len(points)
     frames, ref = frames[keep], ref[keep]
     idx = [list(joints).index(j) for j in REFERENCE_JOINTS]
     mine = points[frames][:, idx]
-    ok = np.isfinite(mine).all(axis=(1, 2))
-    raw = np.linalg.norm(mine[ok] - ref[ok], axis=-1)
-    aligned = np.linalg.norm(kabsch_align(mine[ok], ref[ok]) - ref[ok], axis=-1)
+    known = np.isfinite(mine).all(axis=2)  # (F, 12)
+    ok = known.any(axis=1)
+    mine = np.where(known[..., None], mine, np.nan)[ok]
+    raw = np.linalg.norm(mine - ref[ok], axis=-1)  # NaN where either is unknown
+    aligned = np.linalg.norm(kabsch_align(mine, ref[ok]) - ref[ok], axis=-1)
 
     def table(err: np.ndarray) -> dict:
         return {
@@ -562,6 +567,7 @@ def reference_errors(
     return {
         "frames_compared": int(ok.sum()),
         "frames_missing": int((~ok).sum()),
+        "joints_missing": int((~known[ok]).sum()),
         "mean_mm": round(float(np.nanmean(raw)), 1),
         "aligned_mean_mm": round(float(np.nanmean(aligned)), 1),
         "per_joint_mm": table(raw),

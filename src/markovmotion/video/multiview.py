@@ -300,25 +300,40 @@ def tracking_errors(tracked: Motion, truth: Motion) -> dict:
 GUIDES = ("auto", "none", "mediapipe")
 
 
-def resolve_guide(guide: str, doc: dict) -> tuple[bool, str | None]:
-    """Whether MediaPipe guides the particle filter, for ``--guide`` and a camera file's
-    document ``doc``; and a note to print when ``auto`` cannot guide real video.
+def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | None]:
+    """Whether MediaPipe guides the particle filter, for ``--guide``, a camera file's
+    document ``doc`` and the number of ``views`` tracked; and a note to print when ``auto``
+    cannot guide real video.
 
     ``auto`` guides real people's video: on the real 4-view video the guide takes the error
     from 144-245 mm (images alone, by seed and background) to 111-114 mm, at its native
     1088x1920 from 221.7 to 111.3 mm (docs/video.md). It leaves ``video render``'s video alone
     (:func:`~markovmotion.video.cameras.is_rendered`): its people are capsules, which MediaPipe
     misreads (a held-out pull 57.3 mm unguided, 154.1 guided). Without MediaPipe installed it
-    tracks by the images and says so."""
+    tracks by the images and says so. The guide is MediaPipe's landmarks triangulated, so one
+    view gives it nothing: ``auto`` then says so, ``mediapipe`` is refused.
+
+    Raises:
+        ValueError: an unknown ``guide``, or ``mediapipe`` for one view."""
     from markovmotion.video.cameras import is_rendered
     from markovmotion.video.monocular import mediapipe_installed
 
     if guide not in GUIDES:
         raise ValueError(f"guide must be one of {', '.join(GUIDES)}, got {guide!r}")
+    if guide == "mediapipe" and views < 2:
+        raise ValueError(
+            "guide mediapipe triangulates MediaPipe's landmarks, which needs at least 2 views; "
+            "for one camera, --method monocular"
+        )
     if guide != "auto":
         return guide == "mediapipe", None
     if is_rendered(doc):
         return False, None
+    if views < 2:
+        return False, (
+            "note: one view: MediaPipe's guide triangulates, so the particle filter follows the "
+            "image alone (for one camera, --method monocular)"
+        )
     if not mediapipe_installed():
         return False, (
             "note: MediaPipe is not installed (scripts/install-camera), so the particle filter "

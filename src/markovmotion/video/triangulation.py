@@ -41,7 +41,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -811,6 +811,16 @@ class Triangulated:
     def __post_init__(self) -> None:
         self.points = landmarks_to_body_points(self.landmarks)
 
+    def despiked(self, fps: float) -> tuple[Triangulated, int]:
+        """These landmarks with their glitches (a landmark that leaves its path for a frame or
+        two) replaced by their path's median (:func:`~markovmotion.features.smoothing.despike`),
+        the views that gave a glitch no longer counted as used; and how many were replaced."""
+        from markovmotion.features.smoothing import despike
+
+        landmarks, spiked = despike(self.landmarks, fps)
+        used = self.used & ~spiked[None]
+        return replace(self, landmarks=landmarks, used=used), int(spiked.sum())
+
 
 def triangulate_views(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY) -> Triangulated:
     """Every frame's landmarks triangulated from the views that see them
@@ -970,7 +980,7 @@ def track_triangulated_video(
     fps = float(doc["fps"])
     one = person_views(videos, cams, fps, max_frames, person, left_right)
     lm = one.agreed
-    tri = triangulate_views(lm)
+    tri, spikes = triangulate_views(lm).despiked(fps)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
@@ -988,6 +998,7 @@ def track_triangulated_video(
         "views_of_someone_else": one.someone_else,
         **whom(tr.points, cams, one.aim),
         "landmark_views_dropped": int(seen - tri.used.sum()),
+        "landmarks_despiked": spikes,
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
         "left_right": left_right,
