@@ -191,6 +191,11 @@ def test_constructor_stores_hyperparameters_only(fam):
     assert type(model).KIND in KINDS and KINDS[type(model).KIND] is type(model)
     twin = clone(model)
     assert twin.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+    # one default seed in every family: the same call gives the same answer (gait's was None)
+    model = type(model)()
+    seeds = {k: v for k, v in model.get_params(deep=True).items() if k.endswith("random_state")}
+    assert set(seeds.values()) <= {0}, seeds
+    assert seeds or fam.name == "structured_vlmm"  # its default prototype model's seed is 0
 
 
 @pytest.mark.parametrize(

@@ -215,7 +215,7 @@ class GaitSynthesizer(Model):
         var_floor: float = 0.01,
         dur_var_floor: float = DUR_VAR_FLOOR,
         wat: str = "none",
-        random_state: int | None = None,
+        random_state: int | None = 0,
     ):
         self.n_states = n_states
         self.n_iter = n_iter
@@ -384,7 +384,8 @@ class GaitSynthesizer(Model):
         State durations are the most likely ones at ``speed``, or, if
         ``stochastic``, drawn from the duration densities
         (:meth:`HSMM.durations`) with ``rng`` (default: a generator seeded
-        with ``random_state``), so that walks differ.
+        with ``random_state``, 0 as in every family, so that the same call gives the same
+        walk; give each walk its own ``rng`` for walks that differ).
         """
         if n_steps < 1:
             raise ValueError("a walk needs at least one step")
