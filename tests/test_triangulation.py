@@ -223,6 +223,7 @@ def test_triangulated_track_of_real_video(real_video, tmp_path, capsys):
     # a landmark put on the other arm for a frame or two is taken out (Triangulated.despiked):
     # before, the right wrist left for frames 83-84 by 635-691 mm
     assert s["landmarks_despiked"] > 0
+    assert not any("this camera's video" in n for n in s["notes"])  # every view agrees
     from markovmotion.io import read_c3d
 
     steps = np.linalg.norm(np.diff(read_c3d(out).positions, axis=0), axis=-1)
@@ -341,6 +342,25 @@ def test_a_view_of_another_size_is_one_line(real_video, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert "camera cam1 is 272x480" in err and "240x480" in err, err
         assert len(err.splitlines()) == 1
+
+
+def test_videos_given_for_the_wrong_cameras_are_named(real_video, tmp_path, capsys):
+    """Two cameras' videos swapped (as a calibration naming its cameras by serial number
+    invites): the triangulation says which views the others disagree with, and which video
+    each was given; it had said only that 'camera frames showed no one or someone else'."""
+    _need_mediapipe()
+    doc = json.loads((real_video / "cameras.json").read_text(encoding="utf-8"))
+    one, two = doc["cameras"][1], doc["cameras"][2]
+    one["video"], two["video"] = two["video"], one["video"]
+    for k in range(4):
+        (tmp_path / f"cam{k}.mp4").symlink_to(real_video / f"cam{k}.mp4")
+    (tmp_path / "cameras.json").write_text(json.dumps(doc), encoding="utf-8")
+    main(["track", "--video", str(tmp_path), "--method", "triangulate", "--max-frames", "30",
+          "--json"])  # fmt: skip
+    notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if "this camera's" in n]
+    assert len(notes) == 2
+    assert notes[0].startswith("note: cam1:") and "is cam2.mp4 this camera's video" in notes[0]
+    assert notes[1].startswith("note: cam2:") and "is cam1.mp4 this camera's video" in notes[1]
 
 
 def test_the_guided_filter_says_whom_it_followed(real_video, capsys):

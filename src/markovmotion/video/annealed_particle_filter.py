@@ -952,7 +952,13 @@ def track_video(
     sizes: dict = {}
     if sides or guide or size_from_views:  # MediaPipe once over every camera, for every use
         from markovmotion.video.sides import SideCheck
-        from markovmotion.video.triangulation import Guide, person_views, triangulate_views, whom
+        from markovmotion.video.triangulation import (
+            Guide,
+            lone_views,
+            person_views,
+            triangulate_views,
+            whom,
+        )
 
         # views of someone else dropped and left and right made consistent first
         # (triangulation.consistent_views): a camera behind the person, whose MediaPipe
@@ -976,6 +982,8 @@ def track_video(
         if guide:
             guided = Guide.from_views(agreed, points)
             followed = whom(points.points, mv.cameras, one.aim)
+        if points is not None:
+            mv.video_notes.extend(lone_views(one.found, points))
     apf = AnnealedParticleFilter(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
