@@ -484,3 +484,31 @@ def test_the_partner_has_a_frame_for_every_video_frame():
     np.testing.assert_allclose(b.positions[99], b.positions[98])
     same = at_video_rate(Markers(["P", "Q"], pos, 30.0, "B"), 30.0, 50)
     np.testing.assert_array_equal(same.positions, pos)
+
+
+def test_respond_live_to_a_video_with_no_one_says_so(dual_model, tmp_path, capsys):
+    """``respond --video --realtime`` on the empty scene (each camera's plate as a video):
+    one line, as the whole video's tracking says it, and no composite of a partner answering
+    no one (it tracked 3 of 40 frames and wrote one, exit 0)."""
+    import json
+    import shutil
+
+    import cv2
+
+    from markovmotion.data.index import data_root
+    from markovmotion.viz.video import write_mp4
+
+    real = data_root().parent / "video" / "pose2sim_balancing"
+    doc = json.loads((real / "cameras.json").read_text())
+    for cam in doc["cameras"]:
+        plate = cv2.cvtColor(cv2.imread(str(real / cam["background"])), cv2.COLOR_BGR2RGB)
+        write_mp4([plate] * 6, tmp_path / cam["video"], doc["fps"])
+        shutil.copyfile(real / cam["background"], tmp_path / cam["background"])
+    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    out = tmp_path / "composite.mp4"
+    with pytest.raises(SystemExit) as exit_:
+        main(["dualhmm", "respond", "--model", str(dual_model), "--video", str(tmp_path),
+              "--out", str(out), "--realtime", "--particles", "20", "--layers", "2"])  # fmt: skip
+    assert exit_.value.code == 2
+    assert "no person found in this video" in capsys.readouterr().err
+    assert not out.exists()

@@ -880,6 +880,12 @@ def open_video(
     )  # fmt: skip
 
 
+def no_one(feats: ViewFeatures) -> bool:
+    """No view of this frame shows foreground over :data:`EMPTY_COVER` of its pixels: no one
+    in view, whatever pose the filter gives."""
+    return feats.coverage is not None and bool(feats.coverage.max() < EMPTY_COVER)
+
+
 def track_features(
     features: Iterator[ViewFeatures] | Sequence[ViewFeatures],
     apf: AnnealedParticleFilter,
@@ -893,7 +899,7 @@ def track_features(
     for feats in track(features, "tracking", total):
         x, best = apf.step(feats)
         states.append(x)
-        empty.append(feats.coverage is not None and feats.coverage.max() < EMPTY_COVER)
+        empty.append(no_one(feats))
         conf.append(0.0 if empty[-1] else 1.0 - best)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     if not states:

@@ -23,7 +23,11 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError, SkeletonMismatchError
 from markovmotion.features.body_points import BODY_POINTS, body_points
-from markovmotion.video.annealed_particle_filter import AnnealedParticleFilter, open_video
+from markovmotion.video.annealed_particle_filter import (
+    AnnealedParticleFilter,
+    no_one,
+    open_video,
+)
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel, marker_shape
 from markovmotion.video.cameras import (
     CalibratedCamera,
@@ -230,7 +234,9 @@ def _respond_live(
     if first is None:
         raise MotionFormatError(mv.source, "no frames in this video")
     # before the clock starts: the tracker's initial search and the partner's first step
-    x, _ = apf.step(mv.features_of(first, 0))
+    feats = mv.features_of(first, 0)
+    x, _ = apf.step(feats)
+    empty = [no_one(feats)]  # per tracked frame, as track_features has it
     dual.partner().step(body.motion(x[None], partner.fps))  # loads compiled kernels
     states.append(x)
     if (b := partner.step(body.motion(x[None], partner.fps))) is not None:
@@ -249,7 +255,9 @@ def _respond_live(
             states.append(None)
             b = partner.skip() if seen else None
         else:
-            x, _ = apf.step(mv.features_of(frames, i), gap)
+            feats = mv.features_of(frames, i)
+            x, _ = apf.step(feats, gap)
+            empty.append(no_one(feats))
             gap = 1
             states.append(x)
             b = partner.step(body.motion(x[None], partner.fps)) if seen else None
@@ -259,6 +267,16 @@ def _respond_live(
     b_frames.extend(partner.finish())
     if not states or all(s is None for s in states):
         raise MotionFormatError(mv.source, "no frames tracked")
+    if all(empty):  # as the whole video's tracking says it (it had answered no one)
+        raise MotionFormatError(
+            mv.source, "no person found in this video (no foreground in any view of any "
+            f"frame tracked, {len(empty)} of {len(states)})",
+        )  # fmt: skip
+    if n := sum(empty):
+        mv.video_notes.append(
+            f"note: no one in any view in {n} of the {len(empty)} frames tracked: their poses "
+            "are guesses, and the partner answered them"
+        )
     filled = _fill_forward(states)
     a = body.motion(filled, mv.fps)
     b = at_video_rate(concatenate(b_frames, partner.fps), mv.fps, len(states))
