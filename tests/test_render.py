@@ -171,6 +171,44 @@ def test_long_title_shrinks_to_fit_a_narrow_figure():
     fig, _ = _figure(1, 1, 0.7, "a title far too long for one narrow panel of one person", 5.0)
     fig.canvas.draw()
     assert fig.texts[0].get_window_extent().width <= fig.bbox.width
+    # the demo's caption of numbers goes onto lines of its own, still readable: it had been
+    # shrunk to about 5 pt in a 396-pixel GIF
+    caption = (
+        "new people (pair3, never seen): windowed 149 mm, mean pose 197; body-centred 113 vs 111 mm"
+    )
+    fig, _ = _figure(1, 1, 0.62, caption, 4.5)
+    fig.canvas.draw()
+    text = fig.texts[0]
+    assert text.get_window_extent().width <= fig.bbox.width
+    assert text.get_fontsize() >= 10 and "\n" in text.get_text()
+    assert "body-centred" in text.get_text()  # not broken at its hyphen
+
+
+def test_an_upper_body_of_markers_stands_on_a_floor_below_its_shoulders():
+    """A depth sensor's 8 upper-body points: drawn joined as a person (the shoulders joined),
+    over a floor a standing adult's shoulder height below the shoulders, not at an idle
+    hand; the 13 markers of the VLMM paper get a trunk and a head joined to it."""
+    from markovmotion.features.body_points import MARKER_POINTS, figure_bones
+    from markovmotion.viz.animation import SHOULDER_HEIGHT
+
+    names = ("TORSO", "HEAD", "R_SHOULDER", "L_SHOULDER", "R_ELBOW", "L_ELBOW", "R_HAND", "L_HAND")
+    rest = np.array([[0, 1100, 0], [0, 1650, 0], [-180, 1400, 0], [180, 1400, 0],
+                     [-200, 1100, 0], [200, 1100, 0], [-200, 850, 0], [200, 850, 0.0]])  # fmt: skip
+    upper = Markers(names, np.repeat(rest[None], 10, axis=0), 30.0, "upper body")
+    stage = _Stage.build(_tracks(upper, None), side_by_side=False, end=upper.duration)
+    assert stage.ground == pytest.approx(1400.0 - SHOULDER_HEIGHT)
+    drawn = {frozenset((names[a], names[b])) for a, b in stage.tracks[0].bones}
+    assert frozenset(("R_SHOULDER", "L_SHOULDER")) in drawn
+    # a whole body of markers stands on its own lowest point, as before
+    whole = make_motion(n_frames=10)
+    stage = _Stage.build(_tracks(whole, None), side_by_side=False, end=whole.duration)
+    assert stage.ground == pytest.approx(np.nanmin(whole.positions()[..., 1]))
+    lines = {
+        frozenset((MARKER_POINTS[a], MARKER_POINTS[b])) for a, b in figure_bones(MARKER_POINTS)
+    }
+    for pair in (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"),
+                 ("left_shoulder", "left_hip"), ("head", "right_shoulder")):  # fmt: skip
+        assert frozenset(pair) in lines
 
 
 def test_render_command(mocap, tmp_path):

@@ -132,6 +132,37 @@ def point_bones(names: Sequence[str]) -> np.ndarray:
     return np.array(rows, dtype=int).reshape(-1, 2)
 
 
+def figure_bones(names: Sequence[str]) -> np.ndarray:
+    """(B, 2) index pairs into ``names`` of the lines a stick figure of a marker set is drawn
+    with: :func:`point_bones` (a tree), and the lines across it that make a marker set look
+    like a person: across the shoulders and across the hips; where the trunk has no point
+    of its own (the VLMM paper's 13 markers), each shoulder down to its hip and the head to
+    both shoulders (its chain found nothing to hang from). Drawing only: the tree is what
+    models and the web page's parents use."""
+    found = find_points(names)
+    rows = [tuple(r) for r in point_bones(names).tolist()]
+    joined = {frozenset(r) for r in rows}
+
+    def join(a: str, b: str) -> None:
+        if a in found and b in found and frozenset((found[a], found[b])) not in joined:
+            rows.append((found[a], found[b]))
+            joined.add(frozenset((found[a], found[b])))
+
+    join("right_shoulder", "left_shoulder")
+    join("right_hip", "left_hip")
+    if not any(p in found for p in ("pelvis", "spine", "chest", "neck")):
+        for side in ("left", "right"):
+            join(f"{side}_hip", f"{side}_shoulder")
+            join("head", f"{side}_shoulder")
+    return np.array(rows, dtype=int).reshape(-1, 2)
+
+
+#: Points of the legs: a marker set with none of them shows no feet to stand on.
+LEG_POINTS: tuple[str, ...] = tuple(
+    f"{s}_{p}" for s in ("left", "right") for p in ("hip", "knee", "ankle", "toe")
+)
+
+
 #: The VLMM paper's 13 markers (§2.1.2): head, shoulders, elbows, wrists, hips, knees, ankles.
 MARKER_POINTS: tuple[str, ...] = (
     "head",

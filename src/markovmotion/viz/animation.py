@@ -21,6 +21,7 @@ each frame (about ten times faster).
 from __future__ import annotations
 
 import os
+import textwrap
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +35,7 @@ from matplotlib.lines import Line2D
 
 from markovmotion.core.motion import GROUND, UP, Motion
 from markovmotion.errors import LimitError, MotionFormatError
-from markovmotion.features.body_points import point_bones
+from markovmotion.features.body_points import LEG_POINTS, figure_bones, find_points
 from markovmotion.io.files import atomic_write
 from markovmotion.limits import (
     MAX_ANIMATION_FRAMES,
@@ -68,6 +69,7 @@ TRAVEL_MM = 250.0  # horizontal spread (std) above which a clip "travels"
 DPI = 100
 PANEL_HEIGHT = 4.5  # inches
 TITLE_BAND = 0.45  # inches
+CHAR_EM = 0.55  # a title's mean character width (em), to know when to wrap it
 MAX_WIDTH = 19.2  # inches
 MAX_HEIGHT = 10.8
 STACK_ASPECT = 1.6
@@ -98,6 +100,9 @@ class _Track:
     fps: float
     bones: np.ndarray  # (B, 2); for markers, those joining body points (may be empty)
     facing: np.ndarray | None  # (F, 3) horizontal unit vectors
+    #: The floor's height under a body with no legs (an upper-body marker set), else None:
+    #: the floor is then its lowest point (:func:`_floor_of`).
+    floor: float | None = None
 
     @property
     def last_time(self) -> float:
@@ -112,7 +117,7 @@ class _Track:
         """The frames shown up to ``time`` (the camera is fitted to those)."""
         n = int(self.frame_at(np.array([time]))[0]) + 1
         facing = None if self.facing is None else self.facing[:n]
-        return _Track(self.name, self.positions[:n], self.fps, self.bones, facing)
+        return _Track(self.name, self.positions[:n], self.fps, self.bones, facing, self.floor)
 
 
 def _to_track(item: Any, number: int, name: str | None) -> _Track:
@@ -130,8 +135,31 @@ def _to_track(item: Any, number: int, name: str | None) -> _Track:
     positions = getattr(item, "positions", None)
     if isinstance(positions, np.ndarray) and positions.ndim == 3 and hasattr(item, "fps"):
         names = getattr(item, "names", ())  # marker names that are body points: a stick figure
-        return _Track(label, positions.astype(float), float(item.fps), point_bones(names), None)
+        pos = positions.astype(float)
+        return _Track(label, pos, float(item.fps), figure_bones(names), None, _floor_of(pos, names))
     raise TypeError(f"cannot draw {type(item).__name__}: expected a Motion or marker positions")
+
+
+#: How far below the shoulders the floor is drawn under a body of markers without legs (mm):
+#: a standing adult's shoulder height (about 0.82 of a 1.75 m stature).
+SHOULDER_HEIGHT = 1430.0
+
+
+def _floor_of(positions: np.ndarray, names: Sequence[str]) -> float | None:
+    """The floor under a marker set that names shoulders but no leg points (a depth sensor's
+    upper body): :data:`SHOULDER_HEIGHT` below the shoulders' median height. Its lowest
+    point would put an idle hand on the floor. None for any other set (the floor is then
+    its lowest point)."""
+    found = find_points(names)
+    if any(p in found for p in LEG_POINTS):
+        return None
+    shoulders = [found[p] for p in ("left_shoulder", "right_shoulder") if p in found]
+    if not shoulders:
+        return None
+    heights = positions[:, shoulders, 1]
+    if not np.isfinite(heights).any():
+        return None
+    return float(np.nanmedian(heights)) - SHOULDER_HEIGHT
 
 
 def _tracks(items: Drawable | Sequence[Drawable], names: Sequence[str] | None) -> list[_Track]:
@@ -257,8 +285,10 @@ def _panels(
         screen = np.vstack([cam.project(pts), cam.project(floor)])
         smin, smax = screen.min(0), screen.max(0)
         centre, half = (smin + smax) / 2, (smax - smin) * 0.54 + 50.0
-        centre[1] += 0.07 * (smax[1] - smin[1])  # room for the captions at the top
-        half[1] += 0.07 * (smax[1] - smin[1])
+        # room for the captions at the top and, with several people, the names at the bottom
+        below = 0.12 if len(group) > 1 else 0.0
+        centre[1] += (0.14 - below) / 2 * (smax[1] - smin[1])
+        half[1] += (0.14 + below) / 2 * (smax[1] - smin[1])
         panels.append(_Panel(group, cam.project(np.array(lines)), step, centre, half))
     # every panel gets the same window size, so that all are at one scale
     half = np.max([p.half for p in panels], axis=0)
@@ -283,7 +313,16 @@ def _figure(
     Panels are ``height`` inches high unless the figure would exceed
     ``MAX_WIDTH`` or ``max_height``, in which case all shrink alike.
     """
-    band = TITLE_BAND if title else 0.0
+    size, band = 13.0, TITLE_BAND if title else 0.0
+    if title:  # a title wider than the figure goes onto lines of its own, at 11 pt, not 5
+        width = min(height, MAX_WIDTH / n_cols / aspect, (max_height - band) / n_rows)
+        fits = int(0.96 * width * aspect * n_cols * 72 / (CHAR_EM * size))
+        if len(title) > fits:
+            size = 11.0
+            title = "\n".join(
+                textwrap.wrap(title, max(12, int(fits * 13.0 / size)), break_on_hyphens=False)
+            )
+            band = TITLE_BAND * (1 + 0.55 * title.count("\n"))
     panel_h = min(height, MAX_WIDTH / n_cols / aspect, (max_height - band) / n_rows)
     width = panel_h * aspect * n_cols
     fig_h = panel_h * n_rows + band
@@ -306,7 +345,7 @@ def _figure(
             title,
             ha="center",
             va="center",
-            fontsize=13,
+            fontsize=size,
             color="0.6" if background == POINT_LIGHT_BACKGROUND else "black",
         )
         renderer = fig.canvas.get_renderer()
@@ -372,8 +411,9 @@ class _Stage:
     ) -> _Stage:
         """The stage of ``tracks`` from time 0 to ``end`` seconds."""
         tracks = [t.until(end) for t in tracks]
-        heights = np.concatenate([t.positions[..., 1].ravel() for t in tracks])
-        ground = float(np.nanmin(heights))
+        ground = float(
+            min(t.floor if t.floor is not None else np.nanmin(t.positions[..., 1]) for t in tracks)
+        )
         cam = _camera(tracks)
         groups = [[i] for i in range(len(tracks))] if side_by_side else [list(range(len(tracks)))]
         return cls(tracks, _panels(tracks, groups, cam, ground), cam, ground, point_light)
@@ -393,7 +433,7 @@ class _Stage:
         animated: bool,
         caption: bool = True,
         legend: bool = True,
-        legend_at: str = "lower right",
+        legend_at: str = "lower center",
     ) -> list[tuple[int, _Actor]]:
         """Floor and per-track artists of ``panel`` on ``ax``, optionally with names."""
         light = self.point_light
@@ -415,12 +455,15 @@ class _Stage:
             f.shadow.set_visible(False)
             f.bones.set_visible(False)
         if legend and len(panel.tracks) > 1 and not light:
-            ax.legend(
+            ax.legend(  # in a row below the people (room left by _panels), not over them
                 handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
                 loc=legend_at,
-                fontsize=9,
+                ncol=len(figs),
+                fontsize=8,
                 framealpha=0.85,
                 edgecolor="none",
+                handlelength=1.2,
+                columnspacing=1.0,
             )
         return figs
 
