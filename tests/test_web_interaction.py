@@ -113,6 +113,17 @@ def test_stimuli_are_a_real_and_a_generated_clip_of_every_test_take(study, mocap
     assert all(n.startswith("interaction_") or n == INTERACTION_MANIFEST for n in names)
     for c in s.clips:  # --videos: each clip also as a point-light MP4
         assert (root / "stimuli" / f"{c.id}.mp4").stat().st_size > 1000
+    # the real and generated versions of a take share one view: a clip's frame size told
+    # them apart (762 against 812 pixels)
+    import imageio_ffmpeg
+
+    for take in takes:
+        sizes = {
+            imageio_ffmpeg.read_frames(str(root / "stimuli" / f"{c.id}.mp4")).__next__()["size"]
+            for c in s.clips
+            if c.take == take
+        }
+        assert len(sizes) == 1, (take, sizes)
 
 
 def test_point_light_strip_is_white_dots_on_black(study, tmp_path):

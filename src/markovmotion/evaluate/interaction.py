@@ -187,21 +187,19 @@ def write_interaction_stimuli(
     root.mkdir(parents=True, exist_ok=True)
     clips: list[Clip] = []
     for i, (take, label, a, b, generated) in enumerate(made):
+        if videos:
+            from markovmotion.viz import render
+            from markovmotion.viz.point_light import point_lights
+
+            # both versions of a take in one view: same camera, same frame size
+            shown = [point_lights([a, b]), point_lights([a, generated])]
         for k, (kind, person_b) in enumerate((("real", b), ("generated", generated))):
             cid = f"interaction_{order[2 * i + k] + 1:03d}"
             write_motion(a, root / f"{cid}_a.bvh")
             write_motion(person_b, root / f"{cid}_b.bvh")
             clips.append(Clip(cid, f"{cid}_a.bvh", f"{cid}_b.bvh", label, kind, take))
             if videos:
-                from markovmotion.viz import render
-                from markovmotion.viz.point_light import point_lights
-
-                render(
-                    point_lights([a, person_b]),
-                    root / f"{cid}.mp4",
-                    fps=model.fps,
-                    point_light=True,
-                )
+                render(shown[k], root / f"{cid}.mp4", fps=model.fps, point_light=True, framed=shown)
     clips.sort(key=lambda c: c.id)
     stimuli = InteractionStimuli(
         labels,

@@ -407,16 +407,31 @@ class _Stage:
 
     @classmethod
     def build(
-        cls, tracks: list[_Track], side_by_side: bool, end: float, point_light: bool = False
+        cls,
+        tracks: list[_Track],
+        side_by_side: bool,
+        end: float,
+        point_light: bool = False,
+        framed: list[_Track] | None = None,
     ) -> _Stage:
-        """The stage of ``tracks`` from time 0 to ``end`` seconds."""
+        """The stage of ``tracks`` from time 0 to ``end`` seconds; ``framed``: the tracks the
+        view is made for (the camera is theirs; floor and window hold them and ``tracks``),
+        not drawn: clips given the same ``framed`` share one view."""
         tracks = [t.until(end) for t in tracks]
+        held = [t.until(end) for t in framed or ()]
+        everyone = tracks + held  # floor and window: lowest and widest, whatever the order
         ground = float(
-            min(t.floor if t.floor is not None else np.nanmin(t.positions[..., 1]) for t in tracks)
+            min(
+                t.floor if t.floor is not None else np.nanmin(t.positions[..., 1]) for t in everyone
+            )
         )
-        cam = _camera(tracks)
-        groups = [[i] for i in range(len(tracks))] if side_by_side else [list(range(len(tracks)))]
-        return cls(tracks, _panels(tracks, groups, cam, ground), cam, ground, point_light)
+        cam = _camera(held or tracks)  # the same for every clip given the same framed
+        if side_by_side:
+            return cls(tracks, _panels(tracks, [[i] for i in range(len(tracks))], cam, ground),
+                       cam, ground, point_light)  # fmt: skip
+        (panel,) = _panels(everyone, [list(range(len(everyone)))], cam, ground)
+        panel.tracks = list(range(len(tracks)))
+        return cls(tracks, [panel], cam, ground, point_light)
 
     @property
     def aspect(self) -> float:
@@ -574,6 +589,7 @@ def render(
     names: Sequence[str] | None = None,
     strip_frames: int = 6,
     point_light: bool = False,
+    framed: Drawable | Sequence[Drawable] | None = None,
 ) -> Path:
     """Animate motions (or marker clouds) to ``path``: ``.gif``, ``.mp4`` or a ``.png`` strip.
 
@@ -590,6 +606,10 @@ def render(
         names: one label per item (default: each item's ``name``).
         point_light: Johansson's display: white points on black, no bones, floor, names or
             clock (give marker clouds, e.g. :func:`markovmotion.viz.point_light.point_lights`).
+        framed: motions the view also holds, not drawn (animations, one scene): several
+            clips rendered with the same ``framed`` share one camera and one frame size, as
+            the real and generated versions of a take in an observer study must (a clip's
+            size had told them apart).
 
     Returns the path written (atomically).
     """
@@ -600,7 +620,8 @@ def render(
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
-    stage = _Stage.build(tracks, side_by_side, times[-1], point_light)
+    extra = _tracks(framed, None) if framed is not None else None
+    stage = _Stage.build(tracks, side_by_side, times[-1], point_light, extra)
     frames = _frames(stage, times, title, f"rendering {path.name}")
     (_write_gif if suffix == ".gif" else write_mp4)(frames, path, fps)
     return path
