@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import make_motion
 from scipy.spatial.transform import Rotation
 
 from markovmotion.algorithms.kinematics import fit_rotations, rotvec_positions
@@ -363,6 +364,21 @@ def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
               "--out", str(tmp_path / "w.bvh")])  # fmt: skip
     assert info.value.code == 2
     assert f"{walk}: the input's skeleton does not match" in capsys.readouterr().err
+
+
+def test_the_plot_says_what_was_evaluated():
+    """The E_T plot's frame count is at the model's rate (it gave a 120 fps take's frames,
+    4 times those evaluated at 30), one curve asked for under two names shows both, and the
+    legend reads as words."""
+    from markovmotion.evaluate.vlmm import VlmmEvaluation, curve_label
+
+    take = make_motion(n_frames=121, fps=120.0)  # 1 s
+    curve = HorizonCurve("vlmm", 30.0, np.ones(3), np.zeros(3), np.ones(3))
+    run = VlmmEvaluation({"vlmm": curve, "vlmm_N5": curve}, None, [take], 0.1, 5, 1)
+    assert run.n_frames == 31
+    assert curve_label("vlmm = vlmm_N5") == "VLMM (the model) = VLMM, memory 5"
+    assert curve_label("first_order").startswith("first-order Markov")
+    assert curve_label("zero_velocity").startswith("zero velocity")
 
 
 def copied_index(folder, rows) -> str:

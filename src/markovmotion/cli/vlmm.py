@@ -448,8 +448,12 @@ def _evaluate_contours(
     seconds = [s for s in (0.5, 1.0, 2.0, 3.0) if s <= horizon + 1e-9]
     unit = "pixels" if space == "pixels" else "configuration space"
     if plot:
+        every = f", every {stride}th frame" if stride > 1 else ""
         plot_horizon_curves(
-            list(curves.values()), plot, ylabel=f"E_T ({unit})", title="contour VLMM"
+            list(curves.values()),
+            plot,
+            ylabel=f"E_T ({unit})",
+            title=f"contour VLMM on {len(entries)} held-out takes ({samples} samples{every})",
         )
         err_console.print(f"wrote {plot}")
     if as_json:

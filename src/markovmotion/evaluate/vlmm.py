@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -184,20 +184,49 @@ def plot_horizon_curves(
     title: str = "",
     ylabel: str = "mean joint error E_T (mm)",
 ) -> None:
-    """E_T against horizon in seconds, error bars mean +- MAD (paper Figs. 4 and 10), as a PNG."""
+    """E_T against horizon in seconds, error bars mean +- MAD (paper Figs. 4 and 10), as a PNG;
+    each curve labelled by :func:`curve_label` of its name."""
     fig, ax = new_figure(7.0, 4.5)
     for k, c in enumerate(curves):
         t = np.arange(1, len(c.mean) + 1) / c.fps
         every = max(1, len(t) // 15)
         ax.errorbar(
-            t, c.mean, yerr=c.mad, errorevery=(k % every, every), capsize=2, label=c.name, lw=1.4
-        )
+            t, c.mean, yerr=c.mad, errorevery=(k % every, every), capsize=2,
+            label=curve_label(c.name), lw=1.4,
+        )  # fmt: skip
     ax.set_xlabel("prediction horizon T (s)")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title or "Prediction error against horizon (mean ± MAD)")
+    ax.set_ylabel(ylabel.replace("E_T", "$E_T$"))  # the paper's subscript, not an underscore
+    title = title.replace("E_T", "$E_T$")
+    ax.set_title(
+        f"{title}\n(mean, bars ± mean absolute deviation)"
+        if title
+        else "Prediction error against horizon (mean, bars ± mean absolute deviation)",
+        fontsize=10,
+    )
     ax.grid(alpha=0.3)
     ax.legend()
     save_figure(fig, path)
+
+
+#: Readable names of the predictors in a plot's legend (the JSON keeps the short ones).
+CURVE_LABELS: dict[str, str] = {
+    "first_order": "first-order Markov (same prototypes)",
+    "zero_velocity": "zero velocity (hold the last pose)",
+    "vlmm": "VLMM (the model)",
+    "structured": "structured VLMM",
+}
+
+
+def curve_label(name: str) -> str:
+    """A predictor's name as a legend shows it (``vlmm_N5``: "VLMM, memory 5"; several names
+    of one curve joined by " = ")."""
+    parts = []
+    for n in name.split(" = "):
+        if n.startswith("vlmm_N") and n[6:].isdigit():
+            parts.append(f"VLMM, memory {n[6:]}")
+        else:
+            parts.append(CURVE_LABELS.get(n, n.replace("_", " ")))
+    return " = ".join(parts)
 
 
 # ------------------------------------------------------------------ the experiment
@@ -227,8 +256,12 @@ class VlmmEvaluation:
 
     @property
     def n_frames(self) -> int:
-        """Frames of the test takes at the model's frame rate."""
-        return sum(m.n_frames for m in self.motions)
+        """Frames of the test takes at the model's frame rate (the takes are kept at their
+        own: 120 fps takes counted 5,441 frames where 1,361 were evaluated at 30)."""
+        fps = next(iter(self.curves.values())).fps if self.curves else None
+        if fps is None:
+            return sum(m.n_frames for m in self.motions)
+        return sum(int(np.floor((m.n_frames - 1) * fps / m.fps + 1e-9)) + 1 for m in self.motions)
 
     def result(self) -> dict[str, Any]:
         """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm (or
@@ -248,11 +281,20 @@ class VlmmEvaluation:
 
     def plot(self, path: str | os.PathLike[str]) -> None:
         """E_T curves (paper Fig. 4) as a PNG."""
-        unique = list({id(c): c for c in self.curves.values()}.values())
+        names: dict[int, list[str]] = {}  # a model asked for under two names: one curve
+        for name, c in self.curves.items():
+            names.setdefault(id(c), []).append(name)
+        unique = [
+            replace(c, name=" = ".join(names[id(c)]))
+            for c in {id(c): c for c in self.curves.values()}.values()
+        ]
+        fps = unique[0].fps if unique else 0.0
+        every = f", every {self.stride}th frame" if self.stride > 1 else ""
         plot_horizon_curves(
             unique,
             path,
-            f"E_T on {len(self.motions)} test takes ({self.n_frames} frames)",
+            f"E_T on {len(self.motions)} test takes ({self.n_frames} frames at {fps:g} fps"
+            f"{every}; {self.samples} samples each)",
             "mean joint error E_T (mm)" if self.space == "mm" else "E_T, configuration (eq. 9)",
         )
 
