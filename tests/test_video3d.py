@@ -512,3 +512,29 @@ def test_respond_live_to_a_video_with_no_one_says_so(dual_model, tmp_path, capsy
     assert exit_.value.code == 2
     assert "no person found in this video" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_partner_outside_the_cameras_image_is_said_and_the_best_camera_named():
+    """B standing beside one camera's field (the demo's 320x240 video cut B at its left edge
+    in 53 of 60 frames): a note names the share of frames and the camera that shows B whole;
+    B in view gives none."""
+    from markovmotion.core.markers import Markers
+    from markovmotion.video.composite import framing_notes, shown_share
+
+    cams = ring_of_cameras(np.zeros(3), 3000.0, views=2, size=(320, 240))
+    rest = np.array([[0, 1100, 0], [0, 1650, 0], [-180, 1400, 0], [180, 1400, 0.0]])
+    names = ("TORSO", "HEAD", "R_SHOULDER", "L_SHOULDER")
+    inside = Markers(names, np.repeat(rest[None], 20, axis=0), 30.0, "b")
+    assert all(shown_share(c, inside.positions) == 1.0 for c in cams)
+    assert framing_notes(cams, 0, inside) == []
+    # moved far to the side of camera 0's view (along its image's horizontal axis)
+    right = cams[0].R[0]  # camera 0's x axis in the world
+    away = inside.positions + 2500.0 * right
+    away[:5] = inside.positions[:5]  # in view for a quarter of the frames
+    beside = Markers(names, away, 30.0, "b")
+    share0, share1 = shown_share(cams[0], away), shown_share(cams[1], away)
+    assert share0 == pytest.approx(0.25)
+    (note,) = framing_notes(cams, 0, beside)
+    assert "outside camera 0" in note and "75%" in note
+    if share1 > share0:
+        assert "--view 1" in note

@@ -459,6 +459,8 @@ def _respond_video(
         summary = respond_monocular(
             model, video, out, cameras, view, max_frames, "standard" if standard else "windowed"
         )
+        for line in summary["notes"]:
+            err_console.print(line, highlight=False)
         err_console.print(
             f"tracked A over {summary['frames']} frames in camera {summary['view']} alone "
             f"({summary['frames_placed']} placed, {summary['fps']:.2f} frames/s), partner "

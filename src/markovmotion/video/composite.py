@@ -79,13 +79,60 @@ def composite_frames(
         yield canvas.over(frame, only=1)
 
 
+#: A frame shows B when at least this share of B's points project inside the image (in
+#: front of the camera); a camera that shows B in fewer than :data:`SHOWN_FRAMES` of the
+#: frames gets a note naming the camera that shows B most (:func:`framing_notes`).
+SHOWN_POINTS = 0.75
+SHOWN_FRAMES = 0.9
+
+
+def shown_share(camera: CalibratedCamera, points: np.ndarray) -> float:
+    """The share of frames (F, P, 3) in which ``camera`` sees at least :data:`SHOWN_POINTS`
+    of the points inside its image, in front of it (frames with no known point left out)."""
+    pts = np.asarray(points, dtype=float)
+    known = np.isfinite(pts).all(axis=-1)
+    cam = np.where(known[..., None], pts, 0.0) @ camera.R.T + camera.t
+    uv, _ = camera.project(np.where(known[..., None], pts, 0.0))
+    inside = (
+        known & (cam[..., 2] > 0)
+        & (uv[..., 0] >= 0) & (uv[..., 0] < camera.width)
+        & (uv[..., 1] >= 0) & (uv[..., 1] < camera.height)
+    )  # fmt: skip
+    frames = known.any(axis=1)
+    if not frames.any():
+        return 1.0
+    share = inside.sum(axis=1)[frames] / known.sum(axis=1)[frames]
+    return float(np.mean(share >= SHOWN_POINTS))
+
+
+def framing_notes(cameras: list[CalibratedCamera], view: int, b: Motion | Markers) -> list[str]:
+    """A note when camera ``view`` leaves B (the generated partner) out of its image in more
+    than a tenth of the frames, naming the camera that shows B most: a partner standing
+    where a partner would can be beside the camera's field (the demo's 320x240 video cut B
+    at the left edge in 53 of 60 frames), and the composite then shows no answer."""
+    points = partner_body(b)[0]
+    shares = [shown_share(c, points) for c in cameras]
+    if shares[view] >= SHOWN_FRAMES:
+        return []
+    best = int(np.argmax(shares))
+    better = (
+        f"; camera {best} ({cameras[best].name}) shows B whole in {shares[best]:.0%}: --view {best}"
+        if best != view and shares[best] > shares[view]
+        else ""
+    )
+    return [
+        f"note: the partner is partly outside camera {view} ({cameras[view].name})'s image in "
+        f"{1 - shares[view]:.0%} of the frames{better}"
+    ]
+
+
 def respond_in_video(
     model: str | os.PathLike[str],
     video: str | os.PathLike[str],
     out: str | os.PathLike[str],
     body: BodyModel,
     cameras: str | os.PathLike[str] | None = None,
-    view: int = 0,
+    view: int | None = 0,
     particles: int = 200,
     layers: int = 10,
     max_frames: int | None = None,
@@ -96,7 +143,8 @@ def respond_in_video(
 ) -> dict:
     """Track A in ``video`` (a folder with ``cameras.json`` or one camera's video file with
     ``cameras``), generate B with the dual HMM ``model``, write the composite of camera ``view``
-    to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
+    (None: the camera that shows A and B whole in the most frames, :func:`shown_share`; not
+    live) to ``out`` (``.mp4``, or a folder of PNG frames). Returns a summary. ``live``: frame by
     frame at the video's rate, through the online partner (:func:`_respond_live`).
     ``guide``: MediaPipe guides the tracking of A (:func:`track_take`; not live), following
     the ``person`` at a pixel (``CAMERA:U,V``) if several are in view. A camera without an
@@ -104,6 +152,8 @@ def respond_in_video(
     if live and guide:
         raise ValueError("the MediaPipe guide runs over the whole video: not live")
     if live:
+        if view is None:
+            raise ValueError("live, the camera to draw into is given (view)")
         return _respond_live(model, video, out, body, cameras, view, particles, layers, max_frames)
     dual = _load_partner_model(model)
     where = camera_file(video, cameras)
@@ -111,7 +161,7 @@ def respond_in_video(
     single = Path(video).is_file()
     if single:  # one camera's video: that camera
         view = camera_of_video(cams, video)
-    if not 0 <= view < len(cams):
+    if view is not None and not 0 <= view < len(cams):
         raise MotionFormatError(where, f"no camera {view}: the file has {len(cams)}")
     start = time.perf_counter()
     a, result, summary = track_take(
@@ -124,9 +174,13 @@ def respond_in_video(
 
         summary["notes"] = summary["notes"] + whom_notes(summary, named=person is not None)
     b = _respond(dual, a, method)
+    if view is None:  # the camera that shows both people whole most often
+        both = np.concatenate([body_points(a), partner_body(b)[0][: a.n_frames]], axis=1)
+        view = int(np.argmax([shown_share(c, both) for c in cams]))
     video_path = Path(video) if single else camera_videos(where, cams)[view]
     frames = read_frames(video_path, cams[view])
     written = write_video(composite_frames(frames, cams[view], body_points(a), b), out, result.fps)
+    summary["notes"] = summary["notes"] + framing_notes(cams, view, b)
     summary.update(
         {
             "tracking_seconds": round(tracked, 2),
@@ -178,6 +232,7 @@ def respond_monocular(
     )
     n = len(tr.points)
     return {
+        "notes": framing_notes(cams, view, b),
         "method": "monocular",
         "frames": n,
         "frames_placed": int(tr.placed.sum()),
@@ -297,7 +352,7 @@ def _respond_live(
         "out": str(written),
         "view": view,
         "background": mv.background_notes,
-        "notes": mv.video_notes,
+        "notes": mv.video_notes + framing_notes(mv.cameras, view, b),
     }
 
 

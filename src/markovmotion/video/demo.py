@@ -72,13 +72,16 @@ def video_partner(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         video = Path(tmp) / "video"
         render_multiview(test[0].path, video, views=3, seconds=SECONDS, fps=30.0)
         body = training_body_model(index.root)
-        summary = respond_in_video(model_file, video, composite, body)
+        summary = respond_in_video(model_file, video, composite, body, view=None)
     console.print(
         f"video: handshake {test[0].name} rendered by 3 cameras ({SECONDS:g} s), A tracked at "
         f"{summary['fps']:g} frames/s, B from a dual HMM that never saw the take "
-        f"({', '.join(model.labels_)}) composited into camera 0",
+        f"({', '.join(model.labels_)}) composited into camera {summary['view']} (the one that "
+        "shows both people most)",
         highlight=False,
     )
+    for line in summary["notes"]:
+        console.print(line, highlight=False)
     return [composite]
 
 
