@@ -328,3 +328,29 @@ def test_a_capture_with_every_marker_occluded_is_one_line(tmp_path, capsys):
         main(["render", str(path), "--out", str(tmp_path / "o.png")])
     err = capsys.readouterr().err
     assert stop.value.code == 2 and "nothing to draw" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_finished_motion_and_a_cut_clip_are_said(tmp_path, monkeypatch):
+    """Of two motions, the one that is over holds its last pose faded and the clock says
+    when it ended (a 2.9 s walk stood still until 't = 9.07 s' beside a longer one); a clip
+    cut by max_seconds says so in its title (the demo showed 10 s of a 35.7 s take)."""
+    import matplotlib.text
+
+    from markovmotion.viz import animation
+
+    said, titles = [], []
+    own_set_text, own_figure = matplotlib.text.Text.set_text, animation._figure
+    monkeypatch.setattr(
+        matplotlib.text.Text,
+        "set_text",
+        lambda self, s: (said.append(str(s)), own_set_text(self, s))[1],
+    )
+    monkeypatch.setattr(
+        animation, "_figure", lambda *a, **k: (titles.append(a[3]), own_figure(*a, **k))[1]
+    )
+    short, long = make_motion(n_frames=31), make_motion(n_frames=91, seed=1)  # 1 s, 3 s at 30
+    short.name, long.name = "short", "long"
+    render([short, long], tmp_path / "two.gif", fps=10.0, max_seconds=2.0, title="two")
+    assert titles[-1] == "two (first 2 s of 3.0 s)"
+    assert any("short ended at 1.0 s" in s for s in said)
+    assert not any("long ended" in s for s in said)

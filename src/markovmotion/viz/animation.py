@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 import textwrap
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -169,6 +169,8 @@ def _tracks(items: Drawable | Sequence[Drawable], names: Sequence[str] | None) -
     if names is not None and len(names) != len(seq):
         raise ValueError(f"{len(names)} names for {len(seq)} motions")
     tracks = [_to_track(m, i, names[i] if names else None) for i, m in enumerate(seq)]
+    if len(tracks) == 1 and not (names or getattr(seq[0], "name", "")):
+        tracks[0] = replace(tracks[0], name="")  # one unnamed motion: no "person 1" caption
     for m, t in zip(seq, tracks, strict=True):
         if not np.isfinite(t.positions).any():  # every marker occluded throughout
             where = getattr(m, "source", "") or getattr(m, "name", "") or "motion"
@@ -473,7 +475,7 @@ class _Stage:
             ax.legend(  # in a row below the people (room left by _panels), not over them
                 handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
                 loc=legend_at,
-                ncol=len(figs),
+                ncol=len(figs) if legend_at == "lower center" else 1,
                 fontsize=8,
                 framealpha=0.85,
                 edgecolor="none",
@@ -539,13 +541,21 @@ def _frames(stage: _Stage, times: np.ndarray, title: str | None, label: str) -> 
     for k in track(range(len(times)), label):
         canvas.restore_region(background)
         for ax, figs, clock, poses in drawn:
+            ended = []  # a motion that is over holds its last pose, faded, and says when it ended
             for i, f in figs:
+                over = times[k] > stage.tracks[i].last_time + 1e-9
+                if over:
+                    ended.append(
+                        f"{stage.tracks[i].name} ended at {stage.tracks[i].last_time:.1f} s"
+                    )
+                for artist in (f.shadow, f.bones, f.joints):
+                    artist.set_alpha(0.3 if over else None)
                 f.set_pose(poses[i][0][k], poses[i][1][k], stage.tracks[i].bones)
                 ax.draw_artist(f.shadow)
             for _, f in sorted(figs, key=lambda e: poses[e[0]][2][k]):  # far to near
                 ax.draw_artist(f.bones)
                 ax.draw_artist(f.joints)
-            clock.set_text(f"t = {times[k]:.2f} s")
+            clock.set_text("\n".join([f"t = {times[k]:.2f} s", *ended]))
             ax.draw_artist(clock)
         yield np.array(canvas.buffer_rgba())
 
@@ -617,6 +627,9 @@ def render(
     suffix = check_output(path)
     tracks = _tracks(items, names)
     times = _sample_times(tracks, fps, max_seconds, path, animated=suffix != ".png")
+    end = max(t.last_time for t in tracks)
+    if title and times[-1] < end - 1.0 / fps:  # cut by max_seconds: say so
+        title = f"{title} (first {times[-1]:.0f} s of {end:.1f} s)"
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
@@ -678,12 +691,19 @@ def _strip(
             ):
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
+                if t > stage.tracks[i].last_time + 1e-9:  # over: its last pose, faded
+                    for artist in (f.shadow, f.bones, f.joints):
+                        artist.set_alpha(0.3)
+            over = [
+                stage.tracks[i].name for i in panel.tracks if t > stage.tracks[i].last_time + 1e-9
+            ]
             # bottom right: the top left holds the name caption, which a narrow panel overlaps
             # (the legend goes top right in a strip: at the bottom it covered the first time)
             if not point_light:
                 ax.text(
-                    0.99, 0.015, f"t = {t:.2f} s", transform=ax.transAxes, ha="right", va="bottom"
-                )
+                    0.99, 0.015, "\n".join([*(f"{n} ended" for n in over), f"t = {t:.2f} s"]),
+                    transform=ax.transAxes, ha="right", va="bottom",
+                )  # fmt: skip
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=DPI)
     return path
