@@ -38,8 +38,14 @@ def nested(takes: list, grid: list[dict], model: DualHMM, method: str) -> None:
         print(r.name, "pick", r.chosen["settings"], r.chosen["inner_mm"],
               "standard", round(r.errors["standard"].mean(), 1),
               "windowed", round(r.errors["windowed"].mean(), 1), flush=True)  # fmt: skip
-    std, win = (np.concatenate([r.errors[k] for r in results]) for k in ("standard", "windowed"))
-    print(f"nested overall: standard {std.mean():.1f} windowed {win.mean():.1f}")
+    std, win, mean = (
+        np.concatenate([r.errors[k] for r in results])
+        for k in ("standard", "windowed", "mean_pose")
+    )
+    print(
+        f"nested overall: standard {std.mean():.1f} windowed {win.mean():.1f}, "
+        f"beside the mean pose {mean.mean():.1f}"
+    )
 
 
 def main() -> None:
