@@ -40,6 +40,7 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from markovmotion.data import MocapIndex
+from markovmotion.data.kinds import largest_group
 from markovmotion.data.walks import gait_entries
 from markovmotion.features import PCA, FeaturePipeline, JointPositions
 from markovmotion.models.gait.synthesizer import GaitSynthesizer
@@ -54,6 +55,10 @@ def hmm_runner(index: MocapIndex, iters: int, copies: int):
     """The Gaussian HMM's data (described) and its fit: ``n_jobs`` -> log-likelihood history."""
     entries = [e for e in index.query(source="cmu") if e.file.startswith("cmu/bvh")]
     motions = [index.load_motion(e).resample(FPS) for e in track(entries, "CMU BVH takes")]
+    # one skeleton: the collection's CMU BVH takes come on two (cgspeed's 57 joints, and the
+    # 38 of the CMU 18/19 interaction takes), which one pipeline cannot read together
+    keep, _ = largest_group(motions, [e.file for e in entries])
+    motions = [motions[i] for i in keep]
     xs = FeaturePipeline([JointPositions(), PCA(0.95)]).fit_transform(motions)
     xs = xs * copies
     x, lengths = np.vstack(xs), [len(s) for s in xs]

@@ -57,7 +57,7 @@ def main() -> None:
     )
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--body-model", choices=BODY_MODELS, default="collection")
+    ap.add_argument("--body-model", choices=BODY_MODELS, default="interaction")
     ap.add_argument("--backgrounds", nargs="+", choices=("plates", "learnt"),
                     default=["plates", "learnt"])  # fmt: skip
     ap.add_argument("--no-triangulate", action="store_true", help="skip MediaPipe triangulated")

@@ -1,13 +1,14 @@
 """Is the real video's reference right? It and MediaPipe triangulated here, drawn over every view.
 
-    python3 benchmarks/reference_overlay.py [--video DIR] [--frames 40 58 65] [--out FILE]
+    python3 benchmarks/reference_overlay.py [--video DIR] [--frames 50 58 81] [--out FILE]
 
 The reference of ``pose2sim_balancing`` (``reference_mediapipe_triangulated_mm.csv``) is
 MediaPipe triangulated from the full-resolution views; ``track --method triangulate`` does the
 same from the 272x480 videos. Prints, per frame, the mean distance between the two over the 12
 joints (after no alignment), and draws both (reference red, ours green; left limbs thick) over
-the four views at ``--frames`` (one row each) into ``--out`` (default
-``docs/img/reference_check.jpg``): where they disagree, the picture says which follows the man.
+the four views at ``--frames`` (one row each) into ``--out`` (default ``reference_check.jpg``
+here; docs/video.md's figure is ``--out docs/img/reference_check.jpg`` with the default
+frames): where they disagree, the picture says which follows the man.
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ def main() -> None:
     ap.add_argument(
         "--video", type=Path, default=data_root().parent / "video" / "pose2sim_balancing"
     )
-    ap.add_argument("--frames", type=int, nargs="+", default=[40, 58, 65])
-    ap.add_argument("--out", type=Path, default=Path("docs/img/reference_check.jpg"))
+    ap.add_argument("--frames", type=int, nargs="+", default=[50, 58, 81])
+    ap.add_argument("--out", type=Path, default=Path("reference_check.jpg"))
     args = ap.parse_args()
     frames, ref = read_reference(args.video / "reference_mediapipe_triangulated_mm.csv")
     track, _ = track_triangulated_video(args.video)

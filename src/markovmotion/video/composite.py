@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
@@ -247,6 +248,16 @@ def respond_monocular(
 
 
 def _respond_live(
+    model, video, out, body: BodyModel, cameras, view: int, particles: int, layers: int,
+    max_frames: int | None,
+) -> dict:  # fmt: skip
+    """:func:`_track_live` with BLAS on one thread, as the whole video's tracking
+    (:func:`~markovmotion.video.annealed_particle_filter.track_features`)."""
+    with threadpool_limits(1, user_api="blas"):
+        return _track_live(model, video, out, body, cameras, view, particles, layers, max_frames)
+
+
+def _track_live(
     model, video, out, body: BodyModel, cameras, view: int, particles: int, layers: int,
     max_frames: int | None,
 ) -> dict:  # fmt: skip
