@@ -5,7 +5,9 @@
    each ``step`` (propagation, likelihoods, resampling, response) with 200
    hypotheses (weighted-mean, ML and MAP responses) and with a single hypothesis;
    and the whole online partner (``model.partner().step``: A's frame in, shape
-   vector, 200 hypotheses, B's frame out by inverse kinematics).
+   vector, 200 hypotheses, B's frame out by inverse kinematics), beside the peer of every
+   partner table, Gaussian mixture regression of B's shape on A's (the ``gmr`` package, 32
+   components, one frame at a time), with the ratio.
 2. Tracking one 640x480 frame: background subtraction, blobs, outlines and
    B-spline fits of two people, on frames rendered from a salsa take.
 
@@ -45,6 +47,20 @@ def timed_steps(step, observations: np.ndarray) -> np.ndarray:
         step(obs)
         out[t] = 1000 * (time.perf_counter() - start)
     return out
+
+
+def gmr_steps(joint: np.ndarray, observations: np.ndarray, components: int = 32) -> np.ndarray:
+    """Milliseconds per frame of Gaussian mixture regression (the ``gmr`` package) of B's
+    features on A's, fitted on ``joint`` rows [A, B] by scikit-learn's EM, as the partner
+    tables' GMR baseline (``evaluate.hmm.Baselines``)."""
+    from gmr import GMM
+    from sklearn.mixture import GaussianMixture
+
+    fit = GaussianMixture(components, reg_covar=1e-3 * joint.var(0).mean(), random_state=0)
+    fit.fit(joint)
+    gmm = GMM(components, fit.weights_, fit.means_, fit.covariances_)
+    given = np.arange(observations.shape[1])
+    return timed_steps(lambda x: gmm.predict(given, x[None]), observations)
 
 
 def row(table: Table, name: str, ms: np.ndarray) -> None:
@@ -93,10 +109,22 @@ def main() -> None:
     a = index.load_pair(*test[0])[0].resample(model.fps_).trim(0, args.frames)
     partner = model.partner(n_hypotheses=200)
     frames_a = [a.trim(t, t + 1) for t in range(a.n_frames)]
-    row(
-        table,
-        "online partner, 200 hypotheses (frame in, frame out)",
-        timed_steps(partner.step, frames_a),
+    chain_ms = timed_steps(partner.step, frames_a)
+    row(table, "online partner, 200 hypotheses (frame in, frame out)", chain_ms)
+    # the peer: Gaussian mixture regression of B's shape on A's (the gmr package, the
+    # baseline of every partner table), one frame at a time on the same take
+    joint = np.vstack(
+        [
+            np.hstack([model.observe(t.person(0)), model.observe(t.person(1))])
+            for t in mocap_takes(index, train)
+        ]
+    )
+    gmr_ms = gmr_steps(joint, observations)
+    row(table, "peer: GMR of B's shape on A's, 32 components (gmr)", gmr_ms)
+    print(
+        f"the online partner is {np.median(gmr_ms) / np.median(chain_ms):.1f}x as fast as GMR per "
+        "frame (median; the partner also propagates 200 hypotheses and poses B by inverse "
+        "kinematics)"
     )
 
     people = [take.person(0), take.person(1)]
