@@ -238,7 +238,8 @@ def generate(
         contour_strip(
             routines,
             out,
-            titles=[f"N = {behaviour.max_memory}", "N = 1"],
+            titles=[f"routine at memory N = {behaviour.max_memory}", "routine at memory N = 1"],
+            fps=behaviour.fps,
         )
         err_console.print(
             f"wrote {out}: {len(routines[0])} frames at {behaviour.fps:g} fps, "

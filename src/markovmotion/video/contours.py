@@ -207,11 +207,15 @@ def contour_strip(
     cell: int = 96,
     titles: Sequence[str] = (),
     box: tuple[float, float, float, float] = (0.15, 0.15, 0.85, 0.85),
+    fps: float | None = None,
+    heading: str = "",
 ) -> Path:
     """A PNG of filled contours (paper Fig. 9): one row per sequence of configurations
     (F, 2n), every ``step``-th frame of the first ``frames * step``, the closed
     B-spline sampled (:func:`evaluate_closed_bspline`) and filled, the part ``box``
-    (x0, y0, x1, y1) of the unit square filling each cell; written atomically."""
+    (x0, y0, x1, y1) of the unit square filling each cell; with ``fps``, each cell's time
+    under it and the spacing in the ``heading`` line above the rows (a strip without them
+    did not say which seconds of a routine it shows); written atomically."""
     lo, span = np.asarray(box[:2]), np.asarray(box[2:]) - np.asarray(box[:2])
     rows = []
     for configs in sequences:
@@ -220,11 +224,19 @@ def contour_strip(
             ctrl = np.asarray(configs[t], dtype=float).reshape(-1, 2)
             curve = (evaluate_closed_bspline(ctrl, 256) - lo) / span * cell + [k * cell, 0]
             cv2.fillPoly(row, [np.round(curve * 4).astype(np.int32)], 0, cv2.LINE_AA, shift=2)
+            if fps:
+                cv2.putText(row, f"{t / fps:.1f} s", (k * cell + 4, cell - 5),
+                            cv2.FONT_HERSHEY_SIMPLEX, 0.35, 110, 1, cv2.LINE_AA)  # fmt: skip
         rows.append(row)
+    if fps and not heading:
+        heading = f"every {step}th frame ({step / fps:.2g} s apart) of the first {frames * step / fps:.3g} s"
+    head_h = 20 if heading else 0
     label_h = 18 if titles else 0
-    img = np.full((len(rows) * (cell + label_h), cell * frames), 255, np.uint8)
+    img = np.full((head_h + len(rows) * (cell + label_h), cell * frames), 255, np.uint8)
+    if heading:
+        cv2.putText(img, heading, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, 0, 1, cv2.LINE_AA)
     for i, row in enumerate(rows):
-        y = i * (cell + label_h)
+        y = head_h + i * (cell + label_h)
         if i < len(titles):
             cv2.putText(img, titles[i], (4, y + 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, 0, 1)
         img[y + label_h : y + label_h + cell] = row

@@ -161,8 +161,15 @@ def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         frames=STRIP_FRAMES,
         step=STRIP_STEP,
         titles=[
-            *(f"structured model, key memory N = {n}" for n in (1, 4)),
-            *(f"prototype VLMM, memory N = {n}" for n in (1, 4)),
+            *(
+                f"structured model, key memory N = {n} ({s:.0%} of its runs of 4 seen in training)"
+                for n, s in zip((1, 4), seen, strict=True)
+            ),
+            *(
+                f"prototype VLMM, memory N = {n} ({s:.0%} of its runs of 4 seen in training)"
+                for n, s in zip((1, 4), seen_vlmm, strict=True)
+            ),
         ],
+        fps=model.fps,
     )
     return [path]
