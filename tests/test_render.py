@@ -354,3 +354,21 @@ def test_a_finished_motion_and_a_cut_clip_are_said(tmp_path, monkeypatch):
     assert titles[-1] == "two (first 2 s of 3.0 s)"
     assert any("short ended at 1.0 s" in s for s in said)
     assert not any("long ended" in s for s in said)
+
+
+def test_a_prediction_is_drawn_from_where_it_starts(tmp_path, monkeypatch):
+    """``render_continuation``: the observed frames (the last seconds of them), then the
+    prediction as a figure of its own that appears where the observation ended."""
+    from markovmotion.viz import animation
+
+    drawn = {}
+    monkeypatch.setattr(animation, "render", lambda items, path, **k: drawn.update(items=items))
+    motion = make_motion(n_frames=90)  # 3 s at 30 fps, the last 1 s "predicted"
+    animation.render_continuation(motion, 60, tmp_path / "p.gif", seconds_before=1.0)
+    observed, predicted = drawn["items"]
+    assert observed.n_frames == 30 and predicted.n_frames == 60  # from frame 30 on
+    pos = predicted.positions()
+    assert np.isnan(pos[:29]).all() and np.isfinite(pos[29:]).all()
+    np.testing.assert_allclose(pos[29:], motion.positions()[59:])
+    with pytest.raises(ValueError, match="first frame"):
+        animation.render_continuation(motion, 0, tmp_path / "p.gif")

@@ -346,7 +346,8 @@ def test_cli_train_generate_predict_evaluate(tmp_path, mocap, capsys):
     assert (tmp_path / "g.bvh").is_file()
     take = mocap.find("cmu/bvh/indian_14.bvh.gz").path
     main(["vlmm", "predict", "--model", str(model), "--input", str(take), "--horizon", "1",
-          "--out", str(tmp_path / "p.bvh")])  # fmt: skip
+          "--out", str(tmp_path / "p.bvh"), "--animation", str(tmp_path / "p.png")])  # fmt: skip
+    assert (tmp_path / "p.png").stat().st_size > 1000  # observed, then predicted in red
     capsys.readouterr()
     main(["vlmm", "evaluate", "--model", str(model), "--test", str(mocap.root), "--samples", "3",
           "--stride", "40", "--json", "--plot", str(tmp_path / "et.png")])  # fmt: skip

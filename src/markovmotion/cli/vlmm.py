@@ -270,11 +270,19 @@ def predict(
     ),
     stochastic: bool = typer.Option(False, "--stochastic/--ml", help="Sample the prediction."),
     seed: int = ranged("seed", 0, help="Seed of a stochastic prediction."),
+    animation: Path = typer.Option(
+        None,
+        help="Also draw it (.gif, .mp4 or a .png strip): the last 5 s observed, then the "
+        "prediction in a colour of its own.",
+    ),
 ) -> None:
     """Recognise the observed motion's state and predict how it continues (§3.2.2, §4.4)."""
     from markovmotion.models.vlmm.structured import load_behaviour
+    from markovmotion.viz.animation import check_output
 
     _check_output(None, out)
+    if animation is not None:
+        check_output(animation)
     behaviour = load_behaviour(model)
     if _is_contour(behaviour):
         raise typer.BadParameter(
@@ -308,6 +316,13 @@ def predict(
         f"wrote {out}: {observed} observed frames then {result.n_frames - observed} predicted, "
         f"at {result.fps:g} fps"
     )
+    if animation is not None:
+        from markovmotion.viz.animation import render_continuation
+
+        render_continuation(
+            result, observed, animation, title=f"{input.name}: {horizon:g} s predicted"
+        )
+        err_console.print(f"wrote {animation}")
 
 
 @app.command()

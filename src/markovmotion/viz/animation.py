@@ -211,7 +211,9 @@ def _centre_track(t: _Track) -> np.ndarray:
 def _camera(tracks: list[_Track]) -> _Camera:
     """The view of the module docstring, from all frames of all tracks."""
     facings = [t.facing for t in tracks if t.facing is not None]
-    mean_facing = np.mean(np.vstack(facings), axis=0)[GROUND] if facings else np.zeros(2)
+    facing = np.vstack(facings) if facings else np.zeros((0, 3))
+    facing = facing[np.isfinite(facing).all(axis=1)]  # frames of a figure not yet shown: NaN
+    mean_facing = facing.mean(axis=0)[GROUND] if len(facing) else np.zeros(2)
     centres = [c[np.isfinite(c).all(axis=1)] for c in map(_centre_track, tracks)]
     centred = np.vstack([c - c.mean(axis=0) for c in centres if len(c)])
     axis = mean_facing / np.linalg.norm(mean_facing) if np.linalg.norm(mean_facing) > 0.3 else None
@@ -638,6 +640,32 @@ def render(
     frames = _frames(stage, times, title, f"rendering {path.name}")
     (_write_gif if suffix == ".gif" else write_mp4)(frames, path, fps)
     return path
+
+
+def render_continuation(
+    motion: Drawable,
+    start: int,
+    path: str | os.PathLike[str],
+    seconds_before: float = 5.0,
+    title: str | None = None,
+) -> Path:
+    """A prediction drawn as one: the last ``seconds_before`` of what was observed (frames
+    before ``start``), then the continuation from frame ``start`` on in a colour of its own,
+    the observed figure left faded where it ended (``vlmm predict --animation``; the BVH of
+    observed and predicted frames together does not say where the prediction starts)."""
+    if not 0 < start <= motion.n_frames:
+        raise ValueError(f"the prediction's first frame must be in 1..{motion.n_frames}")
+    first = max(0, start - int(round(seconds_before * motion.fps)))
+    clip = motion.trim(first, motion.n_frames)
+    k = start - first
+    observed, predicted = clip.trim(0, k), clip.copy()
+    # the predicted figure appears where the observation ends: its frames before are unseen
+    if isinstance(predicted, Motion):
+        predicted.rotations[: k - 1] = np.nan
+        predicted.translations[: k - 1] = np.nan  # the root's place too
+    else:
+        predicted.positions[: k - 1] = np.nan
+    return render([observed, predicted], path, title=title, names=["observed", "predicted"])
 
 
 def render_frames(
