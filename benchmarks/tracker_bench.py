@@ -154,6 +154,13 @@ def main() -> None:
             f"{r['fps_cpu']:.2f}",
         )
     Console().print(table)
+    named = {r["name"]: r for r in rows}
+    apf, pf = named.get("apf"), next((r for n, r in named.items() if n.startswith("pf")), None)
+    if apf and pf:  # the paper's peer: a plain particle filter of as many evaluations
+        Console().print(
+            f"APF against {pf['name']}: MPJPE {pf['mpjpe_mm'] / apf['mpjpe_mm']:.2f}x lower, "
+            f"frames/s {apf['fps'] / pf['fps']:.2f}x"
+        )
     Console().print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
 
 
