@@ -138,3 +138,24 @@ def assert_seen_streams_as_stepped(model, a) -> None:
         assert (one is None) == (other is None)
         if one is not None:
             np.testing.assert_allclose(other.positions, one.positions, atol=1e-9)
+
+
+def empty_scene(folder: Path, frames: int) -> Path:
+    """The real 4-view video's empty-scene plates as a video of ``frames`` frames per camera,
+    with its cameras.json and plates, in ``folder``: a capture with no one in view."""
+    import json
+    import shutil
+
+    import cv2
+
+    from markovmotion.data.index import data_root
+    from markovmotion.viz.video import write_mp4
+
+    real = data_root().parent / "video" / "pose2sim_balancing"
+    doc = json.loads((real / "cameras.json").read_text())
+    for cam in doc["cameras"]:
+        plate = cv2.cvtColor(cv2.imread(str(real / cam["background"])), cv2.COLOR_BGR2RGB)
+        write_mp4([plate] * frames, folder / cam["video"], doc["fps"])
+        shutil.copyfile(real / cam["background"], folder / cam["background"])
+    (folder / "cameras.json").write_text(json.dumps(doc))
+    return folder

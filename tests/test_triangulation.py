@@ -670,22 +670,11 @@ def test_a_video_with_no_one_in_it_says_so(tmp_path, capsys):
     trial); both now stop in one line, as ``--method monocular`` did. (With the person gone
     from some frames only, those frames get confidence 0 and a note: 15 of 40 frames of the
     trial's clip, checked by hand.)"""
-    import json
-    import shutil
-
-    import cv2
+    from conftest import empty_scene
 
     from markovmotion.cli import main
-    from markovmotion.data.index import data_root
-    from markovmotion.viz.video import write_mp4
 
-    real = data_root().parent / "video" / "pose2sim_balancing"
-    doc = json.loads((real / "cameras.json").read_text())
-    for cam in doc["cameras"]:
-        plate = cv2.cvtColor(cv2.imread(str(real / cam["background"])), cv2.COLOR_BGR2RGB)
-        write_mp4([plate] * 4, tmp_path / cam["video"], doc["fps"])
-        shutil.copyfile(real / cam["background"], tmp_path / cam["background"])
-    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    empty_scene(tmp_path, 4)
     for method, out in (("apf", "x.bvh"), ("triangulate", "x.c3d")):
         with pytest.raises(SystemExit) as exit_:
             main(["track", "--video", str(tmp_path), "--method", method, "--particles", "50",

@@ -490,21 +490,9 @@ def test_respond_live_to_a_video_with_no_one_says_so(dual_model, tmp_path, capsy
     """``respond --video --realtime`` on the empty scene (each camera's plate as a video):
     one line, as the whole video's tracking says it, and no composite of a partner answering
     no one (it tracked 3 of 40 frames and wrote one, exit 0)."""
-    import json
-    import shutil
+    from conftest import empty_scene
 
-    import cv2
-
-    from markovmotion.data.index import data_root
-    from markovmotion.viz.video import write_mp4
-
-    real = data_root().parent / "video" / "pose2sim_balancing"
-    doc = json.loads((real / "cameras.json").read_text())
-    for cam in doc["cameras"]:
-        plate = cv2.cvtColor(cv2.imread(str(real / cam["background"])), cv2.COLOR_BGR2RGB)
-        write_mp4([plate] * 6, tmp_path / cam["video"], doc["fps"])
-        shutil.copyfile(real / cam["background"], tmp_path / cam["background"])
-    (tmp_path / "cameras.json").write_text(json.dumps(doc))
+    empty_scene(tmp_path, 6)
     out = tmp_path / "composite.mp4"
     with pytest.raises(SystemExit) as exit_:
         main(["dualhmm", "respond", "--model", str(dual_model), "--video", str(tmp_path),
