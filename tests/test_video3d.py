@@ -526,3 +526,16 @@ def test_a_partner_outside_the_cameras_image_is_said_and_the_best_camera_named()
     assert "outside camera 0" in note and "75%" in note
     if share1 > share0:
         assert "--view 1" in note
+
+
+def test_a_composite_says_which_figure_is_the_virtual_partner():
+    """Every composite frame carries a caption naming B and its model (it said nothing of who
+    is real and who is generated); without one, a frame passes unchanged."""
+    from markovmotion.video.composite import partner_caption, with_caption
+
+    frame = np.full((240, 320, 3), 200, np.uint8)
+    np.testing.assert_array_equal(with_caption(frame, ""), frame)
+    shown = with_caption(frame, partner_caption("models/shake.npz"))
+    assert partner_caption("models/shake.npz") == "red: virtual partner (shake.npz)"
+    changed = np.abs(shown.astype(int) - frame).max(axis=2) > 0
+    assert changed[:20, :150].mean() > 0.5 and not changed[40:].any()  # top left only

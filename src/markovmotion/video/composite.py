@@ -17,6 +17,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -59,9 +60,11 @@ def composite_frames(
     camera: CalibratedCamera,
     a_points: np.ndarray,
     b: Motion | Markers | np.ndarray,
+    caption: str = "",
 ) -> Iterator[np.ndarray]:
     """``frames`` with B (a Motion, Markers or body points, :func:`partner_body`) drawn shaded
-    where it is in front of A's model (A's body points (F, 19, 3) on :data:`BODY_SHAPE`).
+    where it is in front of A's model (A's body points (F, 19, 3) on :data:`BODY_SHAPE`),
+    and ``caption`` (say, which model B is) in the top left corner of every frame.
 
     Stops with A's tracked frames; frames beyond B's motion pass through unchanged.
     """
@@ -71,13 +74,33 @@ def composite_frames(
         if t >= len(a_points):
             return
         if t >= len(b_points) or not np.isfinite(b_points[t]).all():
-            yield frame
+            yield with_caption(frame, caption)
             continue
         canvas = DepthCanvas(camera.width, camera.height)
         if np.isfinite(a_points[t]).all():  # A not found in this frame: B hides nothing of A
             canvas.body(a_points[t], camera, BODY_SHAPE, hidden, 0)
         canvas.body(b_points[t], camera, shape, colours, 1)
-        yield canvas.over(frame, only=1)
+        yield with_caption(canvas.over(frame, only=1), caption)
+
+
+def partner_caption(model: str | os.PathLike[str]) -> str:
+    """What a composite says of its people: B, drawn in red, is the model's answer."""
+    return f"red: virtual partner ({Path(model).name})"
+
+
+def with_caption(frame: np.ndarray, caption: str) -> np.ndarray:
+    """``frame`` (RGB) with ``caption`` in white on a dark band at its top left, sized to the
+    frame's width (a composite did not say which figure is the virtual partner)."""
+    if not caption:
+        return frame
+    out = np.ascontiguousarray(frame).copy()
+    scale = max(0.3, out.shape[1] / 900)
+    (w, h), base = cv2.getTextSize(caption, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    w = min(w, out.shape[1] - 4)
+    out[: h + base + 6, : w + 8] = (out[: h + base + 6, : w + 8] * 0.35).astype(out.dtype)
+    cv2.putText(out, caption, (4, h + 3), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1,
+                cv2.LINE_AA)  # fmt: skip
+    return out
 
 
 #: A frame shows B when at least this share of B's points project inside the image (in
@@ -180,7 +203,8 @@ def respond_in_video(
         view = int(np.argmax([shown_share(c, both) for c in cams]))
     video_path = Path(video) if single else camera_videos(where, cams)[view]
     frames = read_frames(video_path, cams[view])
-    written = write_video(composite_frames(frames, cams[view], body_points(a), b), out, result.fps)
+    shown = composite_frames(frames, cams[view], body_points(a), b, partner_caption(model))
+    written = write_video(shown, out, result.fps)
     summary["notes"] = summary["notes"] + framing_notes(cams, view, b)
     summary.update(
         {
@@ -229,7 +253,11 @@ def respond_monocular(
     a = points_motion(tr.points, tr.fps, path.name)
     b = _respond(dual, a, method)
     written = write_video(
-        composite_frames(read_frames(path, cams[view]), cams[view], tr.points, b), out, tr.fps
+        composite_frames(
+            read_frames(path, cams[view]), cams[view], tr.points, b, partner_caption(model)
+        ),
+        out,
+        tr.fps,
     )
     n = len(tr.points)
     return {
@@ -348,7 +376,9 @@ def _track_live(
     b = at_video_rate(concatenate(b_frames, partner.fps), mv.fps, len(states))
     frames = read_frames(mv.videos[view], mv.cameras[view])  # decoded again: none kept
     written = write_video(
-        composite_frames(frames, mv.cameras[view], body_points(a), b), out, mv.fps
+        composite_frames(frames, mv.cameras[view], body_points(a), b, partner_caption(model)),
+        out,
+        mv.fps,
     )
     ms = np.array(times or [0.0]) * 1e3
     return {
