@@ -372,3 +372,24 @@ def test_a_prediction_is_drawn_from_where_it_starts(tmp_path, monkeypatch):
     np.testing.assert_allclose(pos[29:], motion.positions()[59:])
     with pytest.raises(ValueError, match="first frame"):
         animation.render_continuation(motion, 0, tmp_path / "p.gif")
+
+
+def test_a_strip_of_a_walk_follows_the_walker(real):
+    """A walk across the room: each cell of a strip is a window on the walker at that time
+    (each person was about 70 pixels tall in a window holding the whole 10 m), at one
+    scale; a motion on the spot keeps the one window."""
+    from markovmotion.viz.animation import _follow_window
+
+    walk = real["bandai_bvh"]
+    stage = _Stage.build(_tracks(walk, None), side_by_side=False, end=walk.duration)
+    times = np.linspace(0, walk.duration, 6)
+    half = _follow_window(stage, times)
+    assert half is not None and half[0] < stage.panels[0].half[0] / 2
+    for t in times:  # the walker inside that window wherever the cell is centred
+        screen, floor, _ = stage.pose(0, np.array([t]))
+        pts = np.vstack([screen[0], floor[0]])
+        assert np.all(pts.max(0) - pts.min(0) <= 2 * half)
+    still = make_motion(n_frames=60)
+    still.translations[:, 0] = still.translations[0, 0]  # on the spot
+    stage = _Stage.build(_tracks(still, None), side_by_side=False, end=still.duration)
+    assert _follow_window(stage, np.linspace(0, still.duration, 6)) is None

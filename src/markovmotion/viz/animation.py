@@ -694,6 +694,31 @@ def _background(stage: _Stage) -> str:
     return POINT_LIGHT_BACKGROUND if stage.point_light else "white"
 
 
+#: A strip's cells follow the people when the clip's window is wider than this many times
+#: the window one frame of them needs (a walk across a room: :func:`_follow_window`).
+FOLLOW_RATIO = 2.0
+
+
+def _follow_window(stage: _Stage, times: np.ndarray) -> np.ndarray | None:
+    """The half size (2,) of a window that holds every panel's people (and shadows) in any
+    one of ``times``, when the panels' windows are :data:`FOLLOW_RATIO` times wider than it
+    (the people travel: a 10 m walk left each person about 70 pixels tall); else None."""
+    half = np.zeros(2)
+    for panel in stage.panels:
+        for t in times:
+            pts = np.vstack(
+                [np.vstack(stage.pose(i, np.array([t]))[:2]).reshape(-1, 2) for i in panel.tracks]
+            )
+            pts = pts[np.isfinite(pts).all(axis=1)]
+            if len(pts):
+                half = np.maximum(half, (pts.max(0) - pts.min(0)) * 0.54 + 50.0)
+    if not half.all() or stage.panels[0].half[0] < FOLLOW_RATIO * half[0]:
+        return None
+    half[1] *= 1.14  # room for the captions at the top
+    ratio = np.clip(half[0] / half[1], 0.75, MAX_ASPECT)
+    return np.maximum(half, [half[1] * ratio, half[0] / ratio])
+
+
 def _strip(
     tracks: list[_Track],
     times: np.ndarray,
@@ -703,22 +728,31 @@ def _strip(
     point_light: bool = False,
 ) -> Path:
     stage = _Stage.build(tracks, side_by_side, times.max(), point_light)
+    follow = _follow_window(stage, times)
+    aspect = stage.aspect if follow is None else float(follow[0] / follow[1])
     height = PANEL_HEIGHT * 0.6
-    most = int(np.clip(MAX_WIDTH // (height * stage.aspect), 1, len(times)))
+    most = int(np.clip(MAX_WIDTH // (height * aspect), 1, len(times)))
     wraps = -(-len(times) // most)
     cols = -(-len(times) // wraps)  # rows as full as possible
     n_panels = len(stage.panels)
-    fig, axes = _figure(
-        wraps * n_panels, cols, stage.aspect, title, height, np.inf, _background(stage)
-    )
+    fig, axes = _figure(wraps * n_panels, cols, aspect, title, height, np.inf, _background(stage))
     for r, panel in enumerate(stage.panels):
         for c, t in enumerate(times):
             ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
+            shown = []
             for i, f in stage.populate(
                 ax, panel, False, caption=c % cols == 0, legend=c == 0, legend_at="upper right"
             ):
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
+                shown += [screen[0], floor[0]]
+            if follow is not None:  # this cell's window on the people at this time
+                pts = np.vstack(shown)
+                pts = pts[np.isfinite(pts).all(axis=1)]
+                mid = (pts.min(0) + pts.max(0)) / 2 if len(pts) else panel.centre
+                mid[1] += 0.07 * follow[1]  # room for the captions, as _panels leaves
+                ax.set_xlim(mid[0] - follow[0], mid[0] + follow[0])
+                ax.set_ylim(mid[1] - follow[1], mid[1] + follow[1])
                 if t > stage.tracks[i].last_time + 1e-9:  # over: its last pose, faded
                     for artist in (f.shadow, f.bones, f.joints):
                         artist.set_alpha(0.3)
