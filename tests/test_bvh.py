@@ -43,6 +43,19 @@ def test_round_trip_real_files(mocap, tmp_path):
         np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
 
 
+def test_frames_converted_in_runs_give_the_same_motion(mocap, monkeypatch):
+    """Euler angles are converted to quaternions in runs of frames (bounded memory: reading
+    took 9-12 times a file's size); the runs' seams change nothing."""
+    import markovmotion.io.bvh as bvh
+
+    path = mocap.find("cmu/bvh/salsa_01.bvh.gz").path
+    whole = read_motion(path)
+    monkeypatch.setattr(bvh, "CONVERT_FRAMES", 7)
+    in_runs = read_motion(path)
+    np.testing.assert_array_equal(in_runs.rotations, whole.rotations)
+    np.testing.assert_array_equal(in_runs.translations, whole.translations)
+
+
 def test_header_fps_overridden_by_index(mocap):
     entry = mocap.query(label="salsa")[0]
     assert read_motion(entry.path).fps == pytest.approx(120, rel=1e-4)  # the header is wrong

@@ -449,6 +449,10 @@ def _channel_layout(
     return positions, rotations
 
 
+#: Frames converted from Euler angles at a time (:func:`_channels_to_motion`).
+CONVERT_FRAMES = 8192
+
+
 def _channels_to_motion(
     sk: Skeleton, values: np.ndarray, scale: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -460,9 +464,14 @@ def _channels_to_motion(
     positions, rotations = _channel_layout(sk)
     for col, j, axis in positions:
         trans[:, j, axis] = values[:, col] * scale
-    for order, joints, cols in rotations:
-        angles = values[:, cols].reshape(f, len(joints), len(order))
-        quats[:, joints] = euler_to_quat(order, angles)
+    # in runs of frames: the conversion's temporaries (half angles, one quaternion per axis,
+    # their products) are several times the quaternions' size; over 100,000 frames at once
+    # they made reading take 9-12 times the file's size in memory
+    for s in range(0, f, CONVERT_FRAMES):
+        e = min(f, s + CONVERT_FRAMES)
+        for order, joints, cols in rotations:
+            angles = values[s:e, cols].reshape(e - s, len(joints), len(order))
+            quats[s:e, joints] = euler_to_quat(order, angles)
     return quats, trans
 
 
