@@ -114,6 +114,14 @@ def test_despike_takes_out_a_glitch_and_leaves_real_motion_alone():
     np.testing.assert_array_equal(out[untouched], points[untouched])
     assert np.isnan(out[70:75, 1]).all()
     assert despike(points[:2], fps)[1].sum() == 0  # too short to judge
+    # a good point beside a glitch at a clip's edge or a gap is not judged against the mean
+    # of itself and the glitch (25 fps: a window of 3)
+    still = np.zeros((12, 1, 3))
+    still[1, 0, 0] = still[7, 0, 0] = 500.0
+    still[5] = np.nan
+    out, spiked = despike(still, 25.0)
+    assert spiked[:, 0].tolist() == [i in (1, 7) for i in range(12)]
+    assert np.abs(out[[0, 2, 3, 4, 6, 8], 0]).max() == 0.0
 
 
 def test_despike_leaves_real_motion_capture_alone():

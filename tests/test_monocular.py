@@ -165,9 +165,16 @@ def test_reference_errors_count_every_joint_known_in_both(tmp_path):
     points[3] = np.nan  # nothing known
     errors = reference_errors(points, path)
     assert errors["frames_compared"] == 3 and errors["frames_missing"] == 1
-    assert errors["joints_missing"] == 1
+    assert errors["joints_missing"] == 1 and errors["frames_aligned"] == 3
     assert errors["mean_mm"] == pytest.approx(10.0)
     assert errors["aligned_mean_mm"] == pytest.approx(0.0, abs=1e-6)
+    # frames of 2 known joints count in the mean, not in the aligned one (no alignment on
+    # 2 points: it had given NaN, which is not JSON)
+    few = np.full_like(points, np.nan)
+    few[:, idx[:2]] = points[:, idx[:2]]
+    errors = reference_errors(few, path)
+    assert errors["mean_mm"] == pytest.approx(10.0) and errors["frames_aligned"] == 0
+    assert errors["aligned_mean_mm"] is None
 
 
 def test_monocular_track_of_real_video(real_video, tmp_path, capfd):

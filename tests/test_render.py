@@ -351,9 +351,17 @@ def test_a_finished_motion_and_a_cut_clip_are_said(tmp_path, monkeypatch):
     short, long = make_motion(n_frames=31), make_motion(n_frames=91, seed=1)  # 1 s, 3 s at 30
     short.name, long.name = "short", "long"
     render([short, long], tmp_path / "two.gif", fps=10.0, max_seconds=2.0, title="two")
-    assert titles[-1] == "two (first 2 s of 3.0 s)"
+    assert titles[-1] == "two (first 1.9 s of 3 s)"
     assert any("short ended at 1.0 s" in s for s in said)
     assert not any("long ended" in s for s in said)
+    # cut to the frames shown, a motion still playing is not over (the cut end of a take at
+    # 30.00003 fps fell just before the last time shown)
+    said.clear()
+    render([short, long], tmp_path / "two.png", strip_frames=4)  # cells at 0, 1, 2, 3 s
+    ended = [s for s in said if "ended" in s]
+    assert len(ended) == 2 and all(s.startswith("short ended") for s in ended)
+    cut = _tracks(long, None)[0].until(1.0)
+    assert not cut.over(1.0) and cut.over(3.1) and cut.end_time == pytest.approx(3.0)
 
 
 def test_a_prediction_is_drawn_from_where_it_starts(tmp_path, monkeypatch):

@@ -363,6 +363,21 @@ def test_videos_given_for_the_wrong_cameras_are_named(real_video, tmp_path, caps
     assert notes[1].startswith("note: cam2:") and "is cam1.mp4 this camera's video" in notes[1]
 
 
+def test_a_camera_that_alone_sees_the_person_for_a_while_is_not_named():
+    """A person out of one camera's field for part of a take (an ordinary take) leaves the
+    other camera's landmarks untriangulable there, which says nothing of that camera: no
+    note (it had asked whether cam0.mp4 was cam0's video)."""
+    from markovmotion.video.triangulation import ViewLandmarks, lone_views, triangulate_views
+
+    rng = np.random.default_rng(0)
+    cams = ring_of_cameras(np.array([0.0, 900.0, 0.0]), 3500.0, 2, (272, 480))
+    truth = rng.uniform([-300, 100, -300], [300, 1700, 300], (60, 33, 3))
+    visibility = np.ones((2, 60, 33))
+    visibility[1, 24:] = 0.0  # out of camera 1's field after 24 frames
+    views = ViewLandmarks(cams, np.stack([c.project(truth)[0] for c in cams]), visibility)
+    assert lone_views(views, triangulate_views(views)) == []
+
+
 def test_the_guided_filter_says_whom_it_followed(real_video, capsys):
     """The guided particle filter's summary says whom MediaPipe followed, as the
     triangulation's does; a pixel with no one at it is said on stderr, with --json too."""

@@ -377,6 +377,9 @@ def test_the_plot_says_what_was_evaluated():
     curve = HorizonCurve("vlmm", 30.0, np.ones(3), np.zeros(3), np.ones(3))
     run = VlmmEvaluation({"vlmm": curve, "vlmm_N5": curve}, None, [take], 0.1, 5, 1)
     assert run.n_frames == 31
+    near = make_motion(n_frames=146, fps=30.00003)  # kept as it is by resample, as evaluated
+    run = VlmmEvaluation({"vlmm": curve}, None, [near], 0.1, 5, 1)
+    assert run.n_frames == 146
     assert curve_label("vlmm = vlmm_N5") == "VLMM (the model) = VLMM, memory 5"
     assert curve_label("first_order").startswith("first-order Markov")
     assert curve_label("zero_velocity").startswith("zero velocity")

@@ -282,7 +282,7 @@ def track(
     else:
         err = f", MPJPE {summary['mpjpe_mm']:.1f} mm" if "mpjpe_mm" in summary else ""
         if "reference" in summary:
-            err += f", {summary['reference']['mean_mm']:.1f} mm from the reference"
+            err += f", {_mm(summary['reference']['mean_mm'])} mm from the reference"
         err_console.print(
             f"tracked {summary['frames']} frames in {_views(summary['views'])}"
             f"{' guided by MediaPipe' if guided else ''} at {summary['fps']:.2f} frames/s{err}; "
@@ -295,6 +295,11 @@ def track(
             ),
             highlight=False,
         )
+
+
+def _mm(value: float | None) -> str:
+    """A reference error as printed: "-" where no joint could be compared (None)."""
+    return "-" if value is None else f"{value:.1f}"
 
 
 def _left_right_for(method: str, guide: str | None, left_right: str | None) -> str | None:
@@ -371,8 +376,8 @@ def _track_landmarks(
         print_json(summary)
     else:
         err = (
-            f", {summary['aligned_mean_mm']:.1f} mm after rigid alignment "
-            f"({summary['mean_mm']:.1f} mm without)"
+            f", {_mm(summary['aligned_mean_mm'])} mm after rigid alignment "
+            f"({_mm(summary['mean_mm'])} mm without)"
             if "aligned_mean_mm" in summary
             else ""
         )

@@ -464,7 +464,9 @@ def _evaluate_contours(
     seconds = [s for s in (0.5, 1.0, 2.0, 3.0) if s <= horizon + 1e-9]
     unit = "pixels" if space == "pixels" else "configuration space"
     if plot:
-        every = f", every {stride}th frame" if stride > 1 else ""
+        from markovmotion.viz.plots import ordinal
+
+        every = f", every {ordinal(stride)} frame" if stride > 1 else ""
         plot_horizon_curves(
             list(curves.values()),
             plot,

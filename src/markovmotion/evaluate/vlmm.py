@@ -35,7 +35,7 @@ from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.models.vlmm.behaviour import BehaviourModel
 from markovmotion.models.vlmm.structured import StructuredBehaviourModel
 from markovmotion.progress import progress_bar
-from markovmotion.viz.plots import new_figure, save_figure
+from markovmotion.viz.plots import new_figure, ordinal, save_figure
 
 #: Horizons reported by ``vlmm evaluate`` (seconds).
 REPORT_SECONDS = (0.5, 1.0, 2.0, 3.0)
@@ -261,7 +261,12 @@ class VlmmEvaluation:
         fps = next(iter(self.curves.values())).fps if self.curves else None
         if fps is None:
             return sum(m.n_frames for m in self.motions)
-        return sum(int(np.floor((m.n_frames - 1) * fps / m.fps + 1e-9)) + 1 for m in self.motions)
+        return sum(
+            m.n_frames  # as Motion.resample: a take at the model's rate is kept as it is
+            if np.isclose(m.fps, fps)
+            else int(np.floor((m.n_frames - 1) * fps / m.fps + 1e-9)) + 1
+            for m in self.motions
+        )
 
     def result(self) -> dict[str, Any]:
         """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm (or
@@ -289,7 +294,7 @@ class VlmmEvaluation:
             for c in {id(c): c for c in self.curves.values()}.values()
         ]
         fps = unique[0].fps if unique else 0.0
-        every = f", every {self.stride}th frame" if self.stride > 1 else ""
+        every = f", every {ordinal(self.stride)} frame" if self.stride > 1 else ""
         plot_horizon_curves(
             unique,
             path,

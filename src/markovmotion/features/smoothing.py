@@ -76,7 +76,11 @@ def despike(
         with warnings.catch_warnings():  # a window with the point unseen throughout
             warnings.simplefilter("ignore", RuntimeWarning)
             median = np.nanmedian(windows, axis=-1)
-        far = np.linalg.norm(pts[s:e] - median, axis=-1) > threshold_mm  # NaN: False
+        # judged only where the window holds a majority the point is not part of: with two
+        # samples (a clip's edge, beside a gap) the median is their mean, half a glitch from
+        # the good one, which was then replaced
+        enough = np.isfinite(windows).all(axis=-2).sum(axis=-1) >= max(3, k + 2)
+        far = enough & (np.linalg.norm(pts[s:e] - median, axis=-1) > threshold_mm)  # NaN: False
         out[s:e][far] = median[far]
         spiked[s:e] = far
     return out, spiked

@@ -94,7 +94,7 @@ def with_caption(frame: np.ndarray, caption: str) -> np.ndarray:
     if not caption:
         return frame
     out = np.ascontiguousarray(frame).copy()
-    scale = max(0.3, out.shape[1] / 900)
+    scale = min(0.6, max(0.3, out.shape[1] / 900))  # legible, and small on a large frame
     (w, h), base = cv2.getTextSize(caption, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
     w = min(w, out.shape[1] - 4)
     out[: h + base + 6, : w + 8] = (out[: h + base + 6, : w + 8] * 0.35).astype(out.dtype)

@@ -55,6 +55,7 @@ from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.dataset import FPS, tracked
 from markovmotion.video.render import empty_frames, render_frames, side_camera, write_video
 from markovmotion.video.tracker import SilhouetteTrack, track_video
+from markovmotion.viz.plots import ordinal
 
 #: Where the head reference point sits in the unit square (x, y; y down).
 HEAD_AT = (0.5, 0.35)
@@ -229,7 +230,9 @@ def contour_strip(
                             cv2.FONT_HERSHEY_SIMPLEX, 0.35, 110, 1, cv2.LINE_AA)  # fmt: skip
         rows.append(row)
     if fps and not heading:
-        heading = f"every {step}th frame ({step / fps:.2g} s apart) of the first {frames * step / fps:.3g} s"
+        span = min(frames * step, max(len(c) for c in sequences)) / fps
+        which = "every frame" if step == 1 else f"every {ordinal(step)} frame"
+        heading = f"{which} ({step / fps:.2g} s apart) of the first {span:.3g} s"
     head_h = 20 if heading else 0
     label_h = 18 if titles else 0
     img = np.full((head_h + len(rows) * (cell + label_h), cell * frames), 255, np.uint8)

@@ -500,6 +500,10 @@ REFERENCE_JOINTS: tuple[str, ...] = tuple(
 )
 
 
+#: Joints a frame needs known for the rigidly aligned error (:func:`reference_errors`).
+ALIGNED_JOINTS = 4
+
+
 def read_reference(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """Frames (F,) and (F, 12, 3) positions (mm) of :data:`REFERENCE_JOINTS` from a CSV with
     columns ``frame`` and ``<joint>_x``, ``_y``, ``_z`` (empty or NaN where unknown)."""
@@ -557,19 +561,25 @@ def reference_errors(
     ok = known.any(axis=1)
     mine = np.where(known[..., None], mine, np.nan)[ok]
     raw = np.linalg.norm(mine - ref[ok], axis=-1)  # NaN where either is unknown
+    # a rigid alignment needs points to align by: frames with fewer than ALIGNED_JOINTS known
+    # are left out of the aligned errors (counted as frames_aligned), not fitted exactly
     aligned = np.linalg.norm(kabsch_align(mine, ref[ok]) - ref[ok], axis=-1)
+    aligned[known[ok].sum(axis=1) < ALIGNED_JOINTS] = np.nan
+
+    def mean(err: np.ndarray) -> float | None:  # None, not NaN, where nothing is known (JSON)
+        finite = err[np.isfinite(err)]
+        return round(float(finite.mean()), 1) if len(finite) else None
 
     def table(err: np.ndarray) -> dict:
-        return {
-            j: round(float(np.nanmean(e)), 1) for j, e in zip(REFERENCE_JOINTS, err.T, strict=True)
-        }
+        return {j: mean(e) for j, e in zip(REFERENCE_JOINTS, err.T, strict=True)}
 
     return {
         "frames_compared": int(ok.sum()),
         "frames_missing": int((~ok).sum()),
         "joints_missing": int((~known[ok]).sum()),
-        "mean_mm": round(float(np.nanmean(raw)), 1),
-        "aligned_mean_mm": round(float(np.nanmean(aligned)), 1),
+        "frames_aligned": int(np.isfinite(aligned).any(axis=1).sum()),
+        "mean_mm": mean(raw),
+        "aligned_mean_mm": mean(aligned),
         "per_joint_mm": table(raw),
         "aligned_per_joint_mm": table(aligned),
     }

@@ -712,12 +712,15 @@ def lone_views(found: ViewLandmarks, tri: Triangulated) -> list[str]:
     wrong looks so: on the real video with two videos swapped, the only word had been that
     186 camera frames showed "no one or someone else"."""
     seen = found.visibility >= MIN_VISIBILITY  # (V, F, 33)
-    kept = tri.used & seen
-    share = kept.sum(axis=(1, 2)) / np.maximum(seen.sum(axis=(1, 2)), 1)
+    # a landmark counts where another view saw it too: one no other camera sees (the person
+    # out of their fields) can never be triangulated, and says nothing of this camera
+    shared = np.stack([seen[v] & np.delete(seen, v, axis=0).any(axis=0) for v in range(len(seen))])
+    kept = tri.used & shared
+    share = kept.sum(axis=(1, 2)) / np.maximum(shared.sum(axis=(1, 2)), 1)
     notes = []
     for v, cam in enumerate(found.cameras):
         others = np.delete(share, v)
-        if seen[v].sum() < 100 or not len(others) or others.max() < AGREEING_VIEWS:
+        if shared[v].sum() < 100 or not len(others) or others.max() < AGREEING_VIEWS:
             continue
         if share[v] < LONE_VIEW:
             video = Path(cam.video).name or "its video"

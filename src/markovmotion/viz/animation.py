@@ -70,6 +70,7 @@ DPI = 100
 PANEL_HEIGHT = 4.5  # inches
 TITLE_BAND = 0.45  # inches
 CHAR_EM = 0.55  # a title's mean character width (em), to know when to wrap it
+SHADOW_ALPHA = 0.35
 MAX_WIDTH = 19.2  # inches
 MAX_HEIGHT = 10.8
 STACK_ASPECT = 1.6
@@ -103,10 +104,22 @@ class _Track:
     #: The floor's height under a body with no legs (an upper-body marker set), else None:
     #: the floor is then its lowest point (:func:`_floor_of`).
     floor: float | None = None
+    #: When the whole motion ends (s), also once cut to the frames shown (:meth:`until`).
+    ends: float | None = None
 
     @property
     def last_time(self) -> float:
         return (len(self.positions) - 1) / self.fps
+
+    @property
+    def end_time(self) -> float:
+        """When the whole motion ends (s), also once cut to the frames shown."""
+        return self.ends if self.ends is not None else self.last_time
+
+    def over(self, time: float) -> bool:
+        """The whole motion has ended by ``time`` (half a frame's grace: a take at 30.00003
+        fps cut at 2 s is not over at 1.9333 s)."""
+        return time > self.end_time + 0.5 / self.fps
 
     def frame_at(self, times: np.ndarray) -> np.ndarray:
         """Index of the frame shown at each time (the last one once the clip is over)."""
@@ -117,7 +130,9 @@ class _Track:
         """The frames shown up to ``time`` (the camera is fitted to those)."""
         n = int(self.frame_at(np.array([time]))[0]) + 1
         facing = None if self.facing is None else self.facing[:n]
-        return _Track(self.name, self.positions[:n], self.fps, self.bones, facing, self.floor)
+        return _Track(
+            self.name, self.positions[:n], self.fps, self.bones, facing, self.floor, self.end_time
+        )
 
 
 def _to_track(item: Any, number: int, name: str | None) -> _Track:
@@ -376,7 +391,9 @@ class _Actor:
     """Per-track artists (bones, joints, shadow) that move from frame to frame."""
 
     def __init__(self, ax, colour: str, has_bones: bool, animated: bool, label: str):
-        self.shadow = Line2D([], [], color="0.6", lw=3.0, alpha=0.35, solid_capstyle="round")
+        self.shadow = Line2D(
+            [], [], color="0.6", lw=3.0, alpha=SHADOW_ALPHA, solid_capstyle="round"
+        )
         self.bones = Line2D([], [], color=colour, lw=2.4, solid_capstyle="round", label=label)
         self.joints = Line2D(
             [], [], color=colour, ls="none", marker="o", ms=3.2 if has_bones else 4.5, label=label
@@ -384,6 +401,12 @@ class _Actor:
         for a in (self.shadow, self.bones, self.joints):
             a.set_animated(animated)
             ax.add_line(a)
+
+    def fade(self, faded: bool) -> None:
+        """Draw faded (a motion that is over) or as made (the shadow keeps its own alpha)."""
+        self.shadow.set_alpha(0.3 * SHADOW_ALPHA if faded else SHADOW_ALPHA)
+        for artist in (self.bones, self.joints):
+            artist.set_alpha(0.3 if faded else None)
 
     def set_pose(self, screen: np.ndarray, floor: np.ndarray, bones: np.ndarray) -> None:
         if len(bones):
@@ -545,13 +568,12 @@ def _frames(stage: _Stage, times: np.ndarray, title: str | None, label: str) -> 
         for ax, figs, clock, poses in drawn:
             ended = []  # a motion that is over holds its last pose, faded, and says when it ended
             for i, f in figs:
-                over = times[k] > stage.tracks[i].last_time + 1e-9
+                over = stage.tracks[i].over(times[k])
                 if over:
                     ended.append(
-                        f"{stage.tracks[i].name} ended at {stage.tracks[i].last_time:.1f} s"
+                        f"{stage.tracks[i].name} ended at {stage.tracks[i].end_time:.1f} s"
                     )
-                for artist in (f.shadow, f.bones, f.joints):
-                    artist.set_alpha(0.3 if over else None)
+                f.fade(over)
                 f.set_pose(poses[i][0][k], poses[i][1][k], stage.tracks[i].bones)
                 ax.draw_artist(f.shadow)
             for _, f in sorted(figs, key=lambda e: poses[e[0]][2][k]):  # far to near
@@ -631,7 +653,7 @@ def render(
     times = _sample_times(tracks, fps, max_seconds, path, animated=suffix != ".png")
     end = max(t.last_time for t in tracks)
     if title and times[-1] < end - 1.0 / fps:  # cut by max_seconds: say so
-        title = f"{title} (first {times[-1]:.0f} s of {end:.1f} s)"
+        title = f"{title} (first {times[-1]:.3g} s of {end:.3g} s)"
     if suffix == ".png":
         picks = np.unique(np.rint(np.linspace(0, times[-1], strip_frames) * tracks[0].fps))
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
@@ -745,20 +767,16 @@ def _strip(
             ):
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
+                f.fade(stage.tracks[i].over(t))  # over: its last pose, faded
                 shown += [screen[0], floor[0]]
             if follow is not None:  # this cell's window on the people at this time
                 pts = np.vstack(shown)
                 pts = pts[np.isfinite(pts).all(axis=1)]
-                mid = (pts.min(0) + pts.max(0)) / 2 if len(pts) else panel.centre
+                mid = (pts.min(0) + pts.max(0)) / 2 if len(pts) else panel.centre.copy()
                 mid[1] += 0.07 * follow[1]  # room for the captions, as _panels leaves
                 ax.set_xlim(mid[0] - follow[0], mid[0] + follow[0])
                 ax.set_ylim(mid[1] - follow[1], mid[1] + follow[1])
-                if t > stage.tracks[i].last_time + 1e-9:  # over: its last pose, faded
-                    for artist in (f.shadow, f.bones, f.joints):
-                        artist.set_alpha(0.3)
-            over = [
-                stage.tracks[i].name for i in panel.tracks if t > stage.tracks[i].last_time + 1e-9
-            ]
+            over = [stage.tracks[i].name for i in panel.tracks if stage.tracks[i].over(t)]
             # bottom right: the top left holds the name caption, which a narrow panel overlaps
             # (the legend goes top right in a strip: at the bottom it covered the first time)
             if not point_light:

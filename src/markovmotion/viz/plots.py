@@ -17,6 +17,12 @@ from markovmotion.io.files import atomic_write
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 
 
+def ordinal(n: int) -> str:
+    """2nd, 3rd, 11th, 12th, 21st ... (figure captions: "every 2nd frame")."""
+    tail = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{tail}"
+
+
 def new_figure(width: float = 6.4, height: float = 4.2) -> tuple[Figure, Axes]:
     """A figure (not managed by pyplot) and its single axes."""
     fig = Figure(figsize=(width, height), dpi=100, layout="constrained")
