@@ -500,6 +500,8 @@ class _Stage:
             ax.legend(  # in a row below the people (room left by _panels), not over them
                 handles=[f.bones if len(self.tracks[i].bones) else f.joints for i, f in figs],
                 loc=legend_at,
+                # above the grid's label in the bottom left corner
+                bbox_to_anchor=(0.5, 0.035) if legend_at == "lower center" else None,
                 ncol=len(figs) if legend_at == "lower center" else 1,
                 fontsize=8,
                 framealpha=0.85,
