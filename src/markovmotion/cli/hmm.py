@@ -15,6 +15,7 @@ from markovmotion.cli.options import (
     choose_option,
     chosen_line,
     grid_of,
+    guide_for,
     guide_option,
     kind_option,
     normalise_option,
@@ -423,7 +424,7 @@ def _respond_video(
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
     from markovmotion.video.composite import respond_in_video, respond_monocular
-    from markovmotion.video.multiview import default_body_model, resolve_guide
+    from markovmotion.video.multiview import default_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
@@ -439,12 +440,7 @@ def _respond_video(
     guided, note = False, None
     if method == "apf" and not realtime:
         lone = video.is_file() and video.suffix.lower() != ".json"
-        try:
-            guided, note = resolve_guide(guide, doc, 1 if lone else len(cams))
-        except ValueError as exc:
-            raise typer.BadParameter(
-                str(exc).removeprefix("guide "), param_hint="--guide"
-            ) from None
+        guided, note = guide_for(guide, doc, 1 if lone else len(cams))
     check_person(person, cams if not video.is_file() else cams[:1], guided)
     if note:
         err_console.print(note, highlight=False)

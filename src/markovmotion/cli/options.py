@@ -237,6 +237,17 @@ def person_option() -> Any:
     )
 
 
+def guide_for(guide: str, doc: dict, views: int) -> tuple[bool, str | None]:
+    """``--guide`` resolved for a camera file's document and the views tracked
+    (:func:`markovmotion.video.multiview.resolve_guide`), a refusal as the option's error."""
+    from markovmotion.video.multiview import resolve_guide
+
+    try:
+        return resolve_guide(guide, doc, views)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc).removeprefix("guide "), param_hint="--guide") from None
+
+
 def check_person(person: str | None, cameras: Sequence, usable: bool) -> None:
     """``--person``, given, must name a pixel of one of the ``cameras`` tracked (two or more)
     and be ``usable`` (MediaPipe in several views: triangulate, or the particle filter's

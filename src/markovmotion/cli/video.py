@@ -11,6 +11,7 @@ from markovmotion.cli.options import (
     body_model_option,
     check_person,
     choice,
+    guide_for,
     guide_option,
     person_option,
     ranged,
@@ -171,7 +172,6 @@ def track(
     guided, note, cams = False, None, []
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-        from markovmotion.video.multiview import resolve_guide
 
         where = camera_file(video, cameras)
         cams, doc = load_cameras(where)
@@ -180,13 +180,7 @@ def track(
     if video.is_file() and video.suffix.lower() != ".json":  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
     if method == "apf":
-        n_views = min(len(cams), views or len(cams))
-        try:
-            guided, note = resolve_guide(guide, doc, n_views)
-        except ValueError as exc:
-            raise typer.BadParameter(
-                str(exc).removeprefix("guide "), param_hint="--guide"
-            ) from None
+        guided, note = guide_for(guide, doc, min(len(cams), views or len(cams)))
     check_person(person, cams[:views] if views else cams, method == "triangulate" or guided)
     reads = "mediapipe" if guided else "sides" if sides else "none"
     left_right = _left_right_for(method, reads, left_right)

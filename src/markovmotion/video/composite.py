@@ -115,10 +115,11 @@ def shown_share(camera: CalibratedCamera, points: np.ndarray) -> float:
     of the points inside its image, in front of it (frames with no known point left out)."""
     pts = np.asarray(points, dtype=float)
     known = np.isfinite(pts).all(axis=-1)
-    cam = np.where(known[..., None], pts, 0.0) @ camera.R.T + camera.t
-    uv, _ = camera.project(np.where(known[..., None], pts, 0.0))
+    pts = np.where(known[..., None], pts, 0.0)
+    uv, _ = camera.project(pts)
+    depth = pts @ camera.R[2] + camera.t[2]  # project's depth is clamped: behind is not told
     inside = (
-        known & (cam[..., 2] > 0)
+        known & (depth > 0)
         & (uv[..., 0] >= 0) & (uv[..., 0] < camera.width)
         & (uv[..., 1] >= 0) & (uv[..., 1] < camera.height)
     )  # fmt: skip

@@ -714,7 +714,7 @@ def lone_views(found: ViewLandmarks, tri: Triangulated) -> list[str]:
     seen = found.visibility >= MIN_VISIBILITY  # (V, F, 33)
     # a landmark counts where another view saw it too: one no other camera sees (the person
     # out of their fields) can never be triangulated, and says nothing of this camera
-    shared = np.stack([seen[v] & np.delete(seen, v, axis=0).any(axis=0) for v in range(len(seen))])
+    shared = seen & (seen.sum(axis=0) > seen)  # another view saw it as well
     kept = tri.used & shared
     share = kept.sum(axis=(1, 2)) / np.maximum(shared.sum(axis=(1, 2)), 1)
     notes = []
