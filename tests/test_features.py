@@ -21,7 +21,7 @@ from markovmotion.features import (
     delta_matrix,
 )
 from markovmotion.features.body_motion import BodyMotion, ground_frame, ground_travel
-from markovmotion.features.smoothing import despike
+from markovmotion.features.smoothing import despike, smooth_gaps
 from markovmotion.persist import FORMAT_VERSION, load_npz, save_npz
 
 
@@ -122,6 +122,29 @@ def test_despike_takes_out_a_glitch_and_leaves_real_motion_alone():
     out, spiked = despike(still, 25.0)
     assert spiked[:, 0].tolist() == [i in (1, 7) for i in range(12)]
     assert np.abs(out[[0, 2, 3, 4, 6, 8], 0]).max() == 0.0
+
+
+def test_smooth_gaps_lowers_noise_keeps_gaps_and_agrees_with_brute_force():
+    """Gaussian smoothing of a noisy path: nearer the truth than the noise; a point unseen
+    stays unseen and its neighbours average only what was seen (brute-force weighted mean
+    of the seen frames with Gaussian weights, away from the edges); sigma 0 changes nothing."""
+    rng = np.random.default_rng(3)
+    fps = 60.0
+    t = np.arange(240) / fps
+    path = np.stack([300 * np.cos(3 * t), 200 * np.sin(3 * t), 50 * t], axis=1)[:, None]
+    noisy = path + rng.normal(0.0, 10.0, path.shape)
+    noisy[100:104] = np.nan
+    out = smooth_gaps(noisy, 2.0)
+    seen = np.isfinite(noisy).all(-1)
+    assert np.isnan(out[~seen]).all() and np.isfinite(out[seen]).all()
+    raw = np.linalg.norm(noisy - path, axis=-1)[seen].mean()
+    assert np.linalg.norm(out - path, axis=-1)[seen].mean() < 0.7 * raw
+    frames = np.arange(len(t))
+    for f in (20, 98, 105, 150):  # beside the gap too
+        w = np.exp(-0.5 * ((frames - f) / 2.0) ** 2) * seen[:, 0]
+        brute = np.nansum(w[:, None] * np.nan_to_num(noisy[:, 0]), axis=0) / w.sum()
+        np.testing.assert_allclose(out[f, 0], brute, atol=1e-3)
+    np.testing.assert_array_equal(smooth_gaps(noisy, 0.0), noisy)
 
 
 def test_despike_leaves_real_motion_capture_alone():

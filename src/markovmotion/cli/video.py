@@ -152,6 +152,11 @@ def track(
         "by triangulation; continuity: each view over time; both; mediapipe.",
     ),
     person: str = person_option(),
+    smooth: str = typer.Option(
+        None,
+        help="Triangulate: the landmarks' smoothing over time, auto (chosen by leaving one "
+        "camera out; default) or SECONDS (a Gaussian's sigma, 0: none).",
+    ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
@@ -167,6 +172,9 @@ def track(
             "measured with --reference",
             param_hint="--truth",
         )
+    if smooth is not None and method != "triangulate":
+        raise typer.BadParameter("is for --method triangulate", param_hint="--smooth")
+    smoothing = _smoothing(smooth)
     if stature is not None and method != "monocular":
         raise typer.BadParameter("is for --method monocular", param_hint="--stature")
     guided, note, cams = False, None, []
@@ -197,6 +205,7 @@ def track(
             json_out,
             left_right,
             person,
+            smoothing,
         )
         return
     from markovmotion.errors import MotionFormatError
@@ -335,6 +344,7 @@ def _track_landmarks(
     json_out: bool,
     left_right: str = "continuity",
     person: str | None = None,
+    smooth: float | None = None,
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
     body points, written as the 13 markers."""
@@ -352,7 +362,7 @@ def _track_landmarks(
         from markovmotion.video.triangulation import track_triangulated_video
 
         tr, summary = track_triangulated_video(
-            video, cameras, max_frames, reference, views, left_right, person
+            video, cameras, max_frames, reference, views, left_right, person, smooth
         )
         where = _views(summary["views"])
     else:
@@ -393,6 +403,19 @@ def _whom_notes(summary: dict, person: str | None) -> None:
 
     for line in whom_notes(summary, named=person is not None):
         err_console.print(line, highlight=False)
+
+
+def _smoothing(text: str | None) -> float | None:
+    """``--smooth``: None (not given) and auto choose; else seconds, 0 to 1."""
+    if text is None or text == "auto":
+        return None
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = -1.0
+    if not 0.0 <= seconds <= 1.0:
+        raise typer.BadParameter("auto or SECONDS (0 to 1)", param_hint="--smooth")
+    return seconds
 
 
 def _body_size(text: str) -> str | tuple[float, float, float]:

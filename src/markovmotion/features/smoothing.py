@@ -6,7 +6,7 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
+from scipy.ndimage import gaussian_filter1d, uniform_filter1d
 
 from markovmotion.features.base import FeatureStep
 from markovmotion.state import register
@@ -84,3 +84,24 @@ def despike(
         out[s:e][far] = median[far]
         spiked[s:e] = far
     return out, spiked
+
+
+def smooth_gaps(points: np.ndarray, sigma_frames: float) -> np.ndarray:
+    """Point trajectories (F, P, 3) smoothed over time by a Gaussian of ``sigma_frames``
+    frames, a point unseen in a frame (NaN) left out and left NaN.
+
+    Normalised convolution (Knutsson and Westin 1993): SciPy's ``gaussian_filter1d`` of the
+    seen values over the same filter of where they were seen, so a gap or a clip's edge
+    averages what is there rather than zeros (``mode="nearest"``). ``sigma_frames`` 0 returns
+    the points unchanged."""
+    pts = np.asarray(points, dtype=float)
+    if sigma_frames <= 0 or len(pts) < 2:
+        return pts.copy()
+    seen = np.isfinite(pts).all(axis=-1)
+    total = gaussian_filter1d(
+        np.where(seen[..., None], pts, 0.0), sigma_frames, axis=0, mode="nearest"
+    )
+    weight = gaussian_filter1d(seen.astype(float), sigma_frames, axis=0, mode="nearest")
+    out = total / np.maximum(weight, 1e-12)[..., None]
+    out[~seen] = np.nan
+    return out

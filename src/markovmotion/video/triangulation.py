@@ -27,7 +27,10 @@ multi-view video" (the dual-HMM paper's tracker, §3, Deutscher et al. 2000). Tw
    finds one person per image, and with two people in the room each camera may pick another),
    and MediaPipe's left and right are made to agree across the views
    (:func:`consistent_views`, default ``views``: :func:`views_sides`), since the camera behind
-   the person sees it mirrored.
+   the person sees it mirrored. After it, a landmark that leaves its path for a frame or two
+   is taken out (:meth:`Triangulated.despiked`, a Hampel filter) and the paths are smoothed
+   over time by a Gaussian whose width is chosen on the video by leaving one view out
+   (:func:`choose_smoothing`).
 2. **Guide** (``track --guide mediapipe``). :class:`Guide` adds to the particle filter's cost
    (the ``E`` of ``w = exp(-beta E)``) a term for the distance between a particle's 12 limb
    joints projected into each view and MediaPipe's 2-D landmarks there, weighted by
@@ -858,6 +861,13 @@ class Triangulated:
         used = self.used & ~spiked[None]
         return replace(self, landmarks=landmarks, used=used), int(spiked.sum())
 
+    def smoothed(self, seconds: float, fps: float) -> Triangulated:
+        """These landmarks smoothed over time by a Gaussian of ``seconds``
+        (:func:`~markovmotion.features.smoothing.smooth_gaps`; 0: unchanged)."""
+        from markovmotion.features.smoothing import smooth_gaps
+
+        return replace(self, landmarks=smooth_gaps(self.landmarks, seconds * fps))
+
 
 def triangulate_views(views: ViewLandmarks, min_visibility: float = MIN_VISIBILITY) -> Triangulated:
     """Every frame's landmarks triangulated from the views that see them
@@ -869,6 +879,74 @@ def triangulate_views(views: ViewLandmarks, min_visibility: float = MIN_VISIBILI
     )
     return Triangulated(
         pts.reshape(f_n, l_n, 3), used.reshape(v_n, f_n, l_n), worst.reshape(f_n, l_n)
+    )
+
+
+#: The widths (s, the Gaussian's sigma) :func:`choose_smoothing` tries: none to 0.1 s.
+SMOOTHING_S: tuple[float, ...] = (0.0, 1 / 120, 1 / 60, 1 / 40, 1 / 30, 1 / 20, 1 / 15, 1 / 10)
+#: The width with two cameras, where no view can be left out to choose one: what
+#: :func:`choose_smoothing` chose on the real 4-view video (60 fps; docs/video.md).
+SMOOTHING_TWO_VIEWS_S = 1 / 30
+
+
+@dataclass
+class SmoothingChoice:
+    """The width :func:`choose_smoothing` took (s), and each width's mean reprojection error in
+    the views left out (px; empty when it could not choose)."""
+
+    seconds: float
+    errors_px: dict[float, float]
+
+    def summary(self) -> dict:
+        """JSON-ready: ``smoothing_s`` and ``smoothing_px`` (width in ms: error)."""
+        return {
+            "smoothing_s": round(self.seconds, 4),
+            "smoothing_px": {f"{1000 * w:.1f} ms": round(e, 3) for w, e in self.errors_px.items()},
+        }
+
+
+def choose_smoothing(
+    views: ViewLandmarks, fps: float, widths: Sequence[float] = SMOOTHING_S
+) -> SmoothingChoice:
+    """How much to smooth the triangulated landmarks over time, chosen on the video itself by
+    leaving one view out: each camera's landmarks are triangulated from the other cameras
+    (robustly, glitches out: :meth:`Triangulated.despiked`), smoothed by each width
+    (:meth:`Triangulated.smoothed`), projected into the camera left out and compared with its
+    own MediaPipe landmarks (visibility at least ``MIN_VISIBILITY``; each error capped at the
+    triangulation's outlier distance, :data:`OUTLIER_ANGLE` focal lengths, so a landmark that
+    view put on the other arm counts as an outlier, not as a score). The left-out view's own
+    detection noise is independent of the others', so the width with the least error is the
+    one whose triangulation lies nearest the person in that view: cross-validation, no
+    reference. Smoothing trades MediaPipe's frame-to-frame jitter against lag at fast
+    motion; the best width depends on the frame rate, the image size and the motion. With
+    fewer than 3 cameras, :data:`SMOOTHING_TWO_VIEWS_S`."""
+    v_n = len(views.cameras)
+    widths = sorted({float(w) for w in widths})
+    if v_n < 3:
+        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {})
+    tau = np.sqrt(_tau2(views.cameras, OUTLIER_ANGLE))[:, 0]
+    total = np.zeros(len(widths))
+    count = 0
+    for v in range(v_n):
+        rest = [i for i in range(v_n) if i != v]
+        others = ViewLandmarks(
+            [views.cameras[i] for i in rest], views.pixels[rest], views.visibility[rest]
+        )
+        tri = triangulate_views(others).despiked(fps)[0]
+        for k, width in enumerate(widths):
+            points = tri.smoothed(width, fps).landmarks
+            seen = (views.visibility[v] >= MIN_VISIBILITY) & np.isfinite(points).all(-1)
+            if k == 0:
+                count += int(seen.sum())
+            px = views.cameras[v].project(np.nan_to_num(points[seen]))[0]
+            total[k] += np.minimum(
+                np.linalg.norm(px - views.pixels[v][seen], axis=-1), tau[v]
+            ).sum()
+    if count == 0:
+        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {})
+    errors = total / count
+    return SmoothingChoice(
+        widths[int(np.argmin(errors))], dict(zip(widths, errors.tolist(), strict=True))
     )
 
 
@@ -994,13 +1072,16 @@ def track_triangulated_video(
     views: int | None = None,
     left_right: str = "views",
     person: str | None = None,
+    smooth: float | None = None,
 ) -> tuple[TriangulatedTrack, dict]:
     """Track a multi-view video (a folder with ``cameras.json``, or that file) by MediaPipe in
     every view, triangulated (module docstring, 1); the track and a JSON-ready summary (with
     ``reference``, its errors); ``left_right`` (:data:`LEFT_RIGHT`): how MediaPipe's left and
     right are made consistent across the views first (:func:`consistent_views`); ``person``
     (``CAMERA:U,V``, :func:`person_ray`): of several people, follow the one at that pixel
-    (the summary's ``from_person_m``: how far the person followed stood from its ray)."""
+    (the summary's ``from_person_m``: how far the person followed stood from its ray);
+    ``smooth``: the landmarks' smoothing over time (s, a Gaussian's sigma; None: chosen by
+    leaving one view out, :func:`choose_smoothing`)."""
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
 
     check_left_right(left_right)  # before MediaPipe's minutes
@@ -1018,6 +1099,8 @@ def track_triangulated_video(
     one = person_views(videos, cams, fps, max_frames, person, left_right)
     lm = one.agreed
     tri, spikes = triangulate_views(lm).despiked(fps)
+    chosen = choose_smoothing(lm, fps) if smooth is None else SmoothingChoice(smooth, {})
+    tri = tri.smoothed(chosen.seconds, fps)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))
     tr = TriangulatedTrack(tri.points, conf, float(doc["fps"]), seconds, tri)
@@ -1036,6 +1119,7 @@ def track_triangulated_video(
         **whom(tr.points, cams, one.aim),
         "landmark_views_dropped": int(seen - tri.used.sum()),
         "landmarks_despiked": spikes,
+        **chosen.summary(),
         "landmarks_seen": int(seen),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
         "left_right": left_right,
