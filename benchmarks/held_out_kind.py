@@ -22,6 +22,10 @@ category of skeleton takes, the label with the most takes (ties: the first liste
         [--seeds 1] [--first-seed 0] [--models interaction,collection] [--guide none]
         [--body-size template] [--json]
 
+``--models triangulate`` (alone or beside the body models) adds ``track --method
+triangulate``'s row: no body model, MediaPipe's landmarks triangulated (frames/s with
+MediaPipe's time; no floor).
+
 ``--guide mediapipe``: MediaPipe's landmarks in every view guide the filter, as ``track
 --guide mediapipe`` does (``track_video(..., guide=True)``); ``guide_seconds`` (MediaPipe's
 time, not in frames/s) and ``seen`` (share of views and frames with landmarks) are reported.
@@ -51,7 +55,7 @@ from markovmotion.video.multiview import (
     tracking_errors,
     training_body_model,
 )
-from markovmotion.video.triangulation import GUIDE_POINTS, fit_state
+from markovmotion.video.triangulation import GUIDE_POINTS, fit_state, track_triangulated_video
 
 FPS = 30.0
 
@@ -102,6 +106,36 @@ def floor(body, truth: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
+def triangulated_row(kind: str, take, folder: Path, truth, args) -> dict:
+    """The row of ``--method triangulate`` (no body model: MediaPipe in the 3 views,
+    triangulated, glitches out, smoothed by the width the left-out cameras choose)."""
+    t0 = time.perf_counter()
+    tr, s = track_triangulated_video(folder)
+    seconds = time.perf_counter() - t0
+    true = body_points(truth)[: len(tr.points)]
+    dist = np.linalg.norm(tr.points[: len(true)] - true, axis=-1)
+    mpjpe = round(float(np.nanmean(dist)), 1)
+    return {
+        "kind": kind,
+        "take": take.file,
+        "body_model": "none (triangulate)",
+        "guide": "-",
+        "left_right": "views",
+        "body_size": "-",
+        "mpjpe_mm": mpjpe,
+        "mpjpe_runs": [mpjpe],
+        "limbs_mm": round(float(np.nanmean(dist[:, LIMBS])), 1),
+        "floor_mm": None,
+        "floor_limbs_mm": None,
+        "fps": round(len(tr.points) / seconds, 2),  # with MediaPipe's time
+        "smoothing_s": s["smoothing_s"],
+        "guide_seconds": 0.0,
+        "guide_seen": None,
+        "build_seconds": None,
+        "load": round(os.getloadavg()[0], 1),
+    }
+
+
 def kind_arguments(description: str, kinds: str | None = None) -> argparse.ArgumentParser:
     """A parser with the options of the rendered kinds (:func:`rendered`): --data, --kinds
     (default ``kinds``, else :func:`default_kinds`), --seconds, --start, --cache."""
@@ -120,7 +154,7 @@ def main() -> None:
     parser = kind_arguments(__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1, help="runs per body model")
     parser.add_argument("--models", default="interaction,collection",
-                        help="body models to run, comma-separated")  # fmt: skip
+                        help="body models to run, comma-separated (interaction, collection; triangulate: no body model)")  # fmt: skip
     parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
     parser.add_argument("--guide", choices=("none", "mediapipe"), default="none",
                         help="what guides the particle filter besides the images")  # fmt: skip
@@ -185,6 +219,10 @@ def main() -> None:
             )
             if not args.json:
                 Console().print(rows[-1])
+        if "triangulate" in args.models.split(","):
+            rows.append(triangulated_row(kind, take, folder, truth, args))
+            if not args.json:
+                Console().print(rows[-1])
     if args.json:
         print(json.dumps({"rows": rows, "cpus": os.cpu_count(), "seconds": args.seconds}))
         return
@@ -200,11 +238,15 @@ def main() -> None:
         table.add_row(
             r["kind"], Path(r["take"]).name, r["body_model"], f"{r['mpjpe_mm']:.1f}",
             " ".join(f"{e:.0f}" for e in r["mpjpe_runs"]), f"{r['limbs_mm']:.1f}",
-            f"{r['floor_mm']:.1f}", f"{r['floor_limbs_mm']:.1f}", f"{r['fps']:.2f}",
+            _mm(r["floor_mm"]), _mm(r["floor_limbs_mm"]), f"{r['fps']:.2f}",
             f"{r['guide_seconds']:.1f}", "-" if r["guide_seen"] is None else f"{r['guide_seen']:.2f}",
             str(r["load"]),
         )  # fmt: skip
     Console().print(table)
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f}"
 
 
 if __name__ == "__main__":
