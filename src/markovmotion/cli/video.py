@@ -166,17 +166,15 @@ def track(
         )
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
-    if truth is not None and method != "apf":
-        raise typer.BadParameter(
-            "is a rendered take's motion, for the particle filter; MediaPipe's tracks are "
-            "measured with --reference",
-            param_hint="--truth",
-        )
     if smooth is not None and method != "triangulate":
         raise typer.BadParameter("is for --method triangulate", param_hint="--smooth")
     smoothing = _smoothing(smooth)
     if stature is not None and method != "monocular":
         raise typer.BadParameter("is for --method monocular", param_hint="--stature")
+    if truth is not None and not truth.is_file():  # before minutes of tracking
+        from markovmotion.errors import MotionFormatError
+
+        raise MotionFormatError(truth, "no such file (--truth)")
     guided, note, cams = False, None, []
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
@@ -206,6 +204,7 @@ def track(
             left_right,
             person,
             smoothing,
+            truth,
         )
         return
     from markovmotion.errors import MotionFormatError
@@ -345,6 +344,7 @@ def _track_landmarks(
     left_right: str = "continuity",
     person: str | None = None,
     smooth: float | None = None,
+    truth: Path | None = None,
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
     body points, written as the 13 markers."""
@@ -370,6 +370,10 @@ def _track_landmarks(
             video, cameras, max_frames, stature, reference, left_right
         )
         where = f"{summary['camera']}, scale {summary['scale']:.3f}"
+    if truth is not None:
+        from markovmotion.video.multiview import truth_errors
+
+        summary.update(truth_errors(tr.points, tr.fps, truth, video, cameras))
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)
@@ -385,6 +389,8 @@ def _track_landmarks(
             if "aligned_mean_mm" in summary
             else ""
         )
+        if "mpjpe_mm" in summary:
+            err += f", MPJPE {_mm(summary['mpjpe_mm'])} mm"
         err_console.print(
             f"tracked {summary['frames']} frames ({summary['frames_placed']} with all 19 body "
             f"points) of {where} at {summary['fps']:.2f} frames/s{err}",

@@ -282,18 +282,47 @@ def default_body_model(
 
 def tracking_errors(tracked: Motion, truth: Motion) -> dict:
     """MPJPE (mm) over the body points, per point, per frame, of a tracked motion vs the truth."""
-    if not np.isclose(tracked.fps, truth.fps):
-        truth = truth.resample(tracked.fps)
-    n = min(tracked.n_frames, truth.n_frames)
-    err = np.linalg.norm(body_points(tracked)[:n] - body_points(truth)[:n], axis=-1)  # (F, 19)
+    return points_errors(body_points(tracked), tracked.fps, truth)
+
+
+def points_errors(points: np.ndarray, fps: float, truth: Motion) -> dict:
+    """MPJPE (mm) of tracked body points (F, 19, 3) at ``fps`` against the truth's, per point and
+    per frame (a point not tracked, NaN, left out; None where nothing is left)."""
+    if not np.isclose(fps, truth.fps):
+        truth = truth.resample(fps)
+    n = min(len(points), truth.n_frames)
+    err = np.linalg.norm(points[:n] - body_points(truth)[:n], axis=-1)  # (F, 19)
+
+    def mm(values: np.ndarray) -> float | None:
+        values = values[np.isfinite(values)]
+        return round(float(values.mean()), 1) if values.size else None
+
     return {
-        "mpjpe_mm": round(float(err.mean()), 1),
-        "per_joint_mm": {
-            p: round(float(e), 1) for p, e in zip(BODY_POINTS, err.mean(0), strict=True)
-        },
-        "per_frame_mm": [round(float(e), 1) for e in err.mean(1)],
+        "mpjpe_mm": mm(err.ravel()),
+        "per_joint_mm": {p: mm(e) for p, e in zip(BODY_POINTS, err.T, strict=True)},
+        "per_frame_mm": [mm(e) for e in err],
         "frames_compared": n,
     }
+
+
+def truth_errors(
+    points: np.ndarray,
+    fps: float,
+    truth: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    cameras: str | os.PathLike[str] | None = None,
+) -> dict:
+    """``track --truth``: tracked body points (F, 19, 3) at ``fps`` against a rendered take's
+    capture (:func:`points_errors`), aligned by the ``start_frame`` ``video render`` wrote in
+    the camera file."""
+    from markovmotion.video.cameras import camera_file, load_cameras
+
+    _, doc = load_cameras(camera_file(video, cameras))
+    start = doc.get("start_frame", 0)
+    true = read_listed_motion(truth)
+    if not np.isclose(true.fps, fps):
+        true = true.resample(fps)
+    return points_errors(points, fps, true.trim(start if isinstance(start, int) else 0))
 
 
 #: ``--guide``: ``auto`` (the default) is ``mediapipe`` for real video, ``none`` for rendered.
@@ -377,7 +406,6 @@ def track_take(
     segments measured from MediaPipe's landmarks of every view first (the summary's
     ``body_size``; the motion is on the skeleton so scaled).
     """
-    from markovmotion.video.cameras import camera_file, load_cameras
 
     first = None
     if start is not None:  # the first frame's pose, on the body model's skeleton
@@ -417,10 +445,5 @@ def track_take(
         "notes": result.video_notes,
     }
     if truth is not None:
-        _, doc = load_cameras(camera_file(video, cameras))
-        true = read_listed_motion(truth)
-        if not np.isclose(true.fps, result.fps):
-            true = true.resample(result.fps)
-        start = int(doc.get("start_frame", 0)) if isinstance(doc.get("start_frame", 0), int) else 0
-        summary.update(tracking_errors(motion, true.trim(start)))
+        summary.update(truth_errors(body_points(motion), result.fps, truth, video, cameras))
     return motion, result, summary
