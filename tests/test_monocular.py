@@ -275,12 +275,20 @@ def test_respond_monocular_draws_the_partner_into_the_real_video(
     assert ("--frame heading" in err) == (frame == "world")
 
 
+@pytest.mark.parametrize(
+    ("method", "said"),
+    [
+        ("monocular", "12 frames in camera 0 alone"),
+        ("triangulate", "12 frames in 4 views, triangulated"),
+    ],
+)
 def test_a_marker_partner_is_drawn_into_the_real_video_at_the_persons_height(
-    mocap, real_video, tmp_path, capsys
+    mocap, real_video, tmp_path, capsys, method, said
 ):
     """A partner learnt from a depth sensor's 8 upper-body markers (the collection's
-    handshakes) answers the man tracked in camera 0 and is drawn as the body parts its
-    markers name: its drawn pixels reach up to the man's head height and not to the floor."""
+    handshakes) answers the man tracked by MediaPipe (camera 0 alone, or every camera
+    triangulated) and is drawn into camera 0 as the body parts its markers name: its drawn
+    pixels reach up to the man's head height and not to the floor."""
     from markovmotion.models.hmm.dual import DualHMM
 
     pairs = [mocap.load_pair(a, b) for a, b in mocap.pairs("handshake", kind="markers")[:4]]
@@ -288,8 +296,8 @@ def test_a_marker_partner_is_drawn_into_the_real_video_at_the_persons_height(
     DualHMM(n_states=4, n_iter=3, window=4, frame="heading").fit(pairs).save(model)
     out = tmp_path / "composite.mp4"
     main(["dualhmm", "respond", "--model", str(model), "--video", str(real_video),
-          "--method", "monocular", "--max-frames", "12", "--out", str(out)])  # fmt: skip
-    assert "12 frames in camera 0 alone" in capsys.readouterr().err
+          "--method", method, "--max-frames", "12", "--out", str(out)])  # fmt: skip
+    assert said in capsys.readouterr().err
     frames = list(read_frames(out))
     original = list(read_frames(real_video / "cam0.mp4"))[:12]
     changed = np.array(
@@ -336,13 +344,24 @@ def test_live_respond_answers_a_video_at_twice_the_models_rate(
     assert sum(changed) > 500  # B drawn over the frames it answers (after the lag)
 
 
-def test_respond_monocular_is_not_live(real_video, partner_models, tmp_path, capsys):
+@pytest.mark.parametrize("method", ["monocular", "triangulate"])
+def test_respond_by_mediapipe_is_not_live(real_video, partner_models, tmp_path, capsys, method):
     with pytest.raises(SystemExit) as exc:
         main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
-              str(real_video), "--method", "monocular", "--realtime",
+              str(real_video), "--method", method, "--realtime",
               "--out", str(tmp_path / "c.mp4")])  # fmt: skip
     assert exc.value.code == 2
-    assert "no --method monocular" in capsys.readouterr().err
+    assert f"no --method {method}" in capsys.readouterr().err
+
+
+def test_respond_triangulate_needs_every_camera(real_video, partner_models, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+              str(real_video / "cam0.mp4"), "--method", "triangulate",
+              "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "needs the folder of every camera" in err and len(err.strip().splitlines()) == 1
 
 
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():

@@ -337,9 +337,10 @@ def respond(
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
     method: str = typer.Option(
         "apf",
-        callback=choice(("apf", "monocular")),
-        help="With --video, how A is tracked: apf (annealed particle filter, all views) or "
-        "monocular (MediaPipe Pose in the --view camera alone, needs scripts/install-camera).",
+        callback=choice(("apf", "monocular", "triangulate")),
+        help="With --video, how A is tracked: apf (annealed particle filter, all views), "
+        "monocular (MediaPipe Pose in the --view camera alone) or triangulate (MediaPipe Pose "
+        "in every camera, triangulated); both need scripts/install-camera.",
     ),
     guide: str = guide_option(),
     body_model: str = body_model_option(),
@@ -423,14 +424,14 @@ def _respond_video(
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-    from markovmotion.video.composite import respond_in_video, respond_monocular
+    from markovmotion.video.composite import respond_in_video, respond_mediapipe
     from markovmotion.video.multiview import default_body_model
 
     if out.suffix.lower() != ".mp4":
         raise typer.BadParameter(f"{out}: the composite is an .mp4 file", param_hint="'--out'")
-    if realtime and method == "monocular":
+    if realtime and method != "apf":
         raise typer.BadParameter(
-            "--realtime tracks with the particle filter: no --method monocular"
+            f"--realtime tracks with the particle filter: no --method {method}"
         )
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
@@ -441,7 +442,9 @@ def _respond_video(
     if method == "apf" and not realtime:
         lone = video.is_file() and video.suffix.lower() != ".json"
         guided, note = guide_for(guide, doc, 1 if lone else len(cams))
-    check_person(person, cams if not video.is_file() else cams[:1], guided)
+    check_person(
+        person, cams if not video.is_file() else cams[:1], guided or method == "triangulate"
+    )
     if note:
         err_console.print(note, highlight=False)
     if getattr(DualHMM.load(model), "frame_", "heading") == "world":
@@ -451,14 +454,20 @@ def _respond_video(
             "--frame heading to place B by where A faces",
             highlight=False,
         )
-    if method == "monocular":
-        summary = respond_monocular(
-            model, video, out, cameras, view, max_frames, "standard" if standard else "windowed"
-        )
+    if method != "apf":
+        summary = respond_mediapipe(
+            model, video, out, cameras, view, max_frames, "standard" if standard else "windowed",
+            method, person,
+        )  # fmt: skip
         for line in summary["notes"]:
             err_console.print(line, highlight=False)
+        where = (
+            f"camera {summary['view']} alone"
+            if method == "monocular"
+            else f"{summary['views']} views, triangulated"
+        )
         err_console.print(
-            f"tracked A over {summary['frames']} frames in camera {summary['view']} alone "
+            f"tracked A over {summary['frames']} frames in {where} "
             f"({summary['frames_placed']} placed, {summary['fps']:.2f} frames/s), partner "
             f"{summary['partner_frames']} frames; wrote {summary['out']}",
             highlight=False,

@@ -218,7 +218,7 @@ def respond_in_video(
     return summary
 
 
-def respond_monocular(
+def respond_mediapipe(
     model: str | os.PathLike[str],
     video: str | os.PathLike[str],
     out: str | os.PathLike[str],
@@ -226,20 +226,27 @@ def respond_monocular(
     view: int = 0,
     max_frames: int | None = None,
     method: str = "windowed",
+    tracker: str = "monocular",
+    person: str | None = None,
 ) -> dict:
-    """:func:`respond_in_video` with A tracked in camera ``view`` alone by the monocular front
-    end (:mod:`markovmotion.video.monocular`: MediaPipe Pose placed by PnP, sized by the
-    floor): A's 19 body points go to the dual HMM as a Motion of them
-    (:func:`~markovmotion.features.body_points.points_motion`), and B is hidden where the
-    body model's capsules on A's points are nearer the camera. Frames where no person is
-    found are missing observations for the partner."""
+    """:func:`respond_in_video` with A tracked by MediaPipe Pose: ``tracker="monocular"``, in
+    camera ``view`` alone (:mod:`markovmotion.video.monocular`: placed by PnP, sized by the
+    floor), or ``"triangulate"``, in every camera, triangulated
+    (:func:`~markovmotion.video.triangulation.track_triangulated_video`, following ``person``
+    if given) and composited into camera ``view``. A's 19 body points go to the dual HMM as a
+    Motion of them (:func:`~markovmotion.features.body_points.points_motion`), and B is hidden
+    where the body model's capsules on A's points are nearer the camera. Frames where no
+    person is found are missing observations for the partner."""
     from markovmotion.features.body_points import points_motion
-    from markovmotion.video.monocular import track_monocular
 
+    if tracker not in ("monocular", "triangulate"):
+        raise ValueError(f"tracker must be monocular or triangulate, got {tracker!r}")
     dual = _load_partner_model(model)
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
     if Path(video).is_file():
+        if tracker == "triangulate":
+            raise MotionFormatError(video, "--method triangulate needs the folder of every camera")
         view = camera_of_video(cams, video)
         path = Path(video)
     elif not 0 <= view < len(cams):
@@ -247,10 +254,24 @@ def respond_monocular(
     else:
         path = camera_videos(where, cams)[view]
     start = time.perf_counter()
-    tr = track_monocular(path, cams[view], float(doc["fps"]), max_frames)
+    extra: dict = {}
+    if tracker == "monocular":
+        from markovmotion.video.monocular import track_monocular
+
+        tr = track_monocular(path, cams[view], float(doc["fps"]), max_frames)
+        if not tr.placed.any():
+            raise MotionFormatError(path, "no person found in this video")
+        extra = {"views": 1, "scale": round(tr.scale, 4)}
+    else:
+        from markovmotion.video.triangulation import track_triangulated_video, whom_notes
+
+        tr, found = track_triangulated_video(video, cameras, max_frames, person=person)
+        extra = {
+            "views": found["views"],
+            "smoothing_s": found["smoothing_s"],
+            "notes": found["notes"] + whom_notes(found, named=person is not None),
+        }
     tracked = time.perf_counter() - start
-    if not tr.placed.any():
-        raise MotionFormatError(path, "no person found in this video")
     a = points_motion(tr.points, tr.fps, path.name)
     b = _respond(dual, a, method)
     written = write_video(
@@ -262,17 +283,16 @@ def respond_monocular(
     )
     n = len(tr.points)
     return {
-        "notes": framing_notes(cams, view, b),
-        "method": "monocular",
+        "method": tracker,
         "frames": n,
         "frames_placed": int(tr.placed.sum()),
-        "views": 1,
         "fps": round(n / max(tracked, 1e-9), 2),
-        "scale": round(tr.scale, 4),
         "tracking_seconds": round(tracked, 2),
         "partner_frames": b.n_frames,
         "out": str(written),
         "view": view,
+        **extra,
+        "notes": extra.get("notes", []) + framing_notes(cams, view, b),
     }
 
 
