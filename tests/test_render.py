@@ -391,8 +391,9 @@ def test_a_strip_of_a_walk_follows_the_walker(real):
     walk = real["bandai_bvh"]
     stage = _Stage.build(_tracks(walk, None), side_by_side=False, end=walk.duration)
     times = np.linspace(0, walk.duration, 6)
-    half = _follow_window(stage, times)
-    assert half is not None and half[0] < stage.panels[0].half[0] / 2
+    follow = _follow_window(stage, times)
+    assert follow is not None and follow.half[0] < stage.panels[0].half[0] / 2
+    half = follow.half
     for t in times:  # the walker inside that window wherever the cell is centred
         screen, floor, _ = stage.pose(0, np.array([t]))
         pts = np.vstack([screen[0], floor[0]])
@@ -401,3 +402,26 @@ def test_a_strip_of_a_walk_follows_the_walker(real):
     still.translations[:, 0] = still.translations[0, 0]  # on the spot
     stage = _Stage.build(_tracks(still, None), side_by_side=False, end=still.duration)
     assert _follow_window(stage, np.linspace(0, still.duration, 6)) is None
+
+
+def test_an_animation_of_a_walk_follows_the_walker(real, tmp_path):
+    """A GIF of a walk across the room: the window glides with the walker, who stays large
+    and near the middle of every frame (in one window holding the whole walk the walker
+    crossed it, about 70 pixels tall)."""
+    from PIL import Image, ImageSequence
+
+    from markovmotion.viz.animation import COLOURS
+
+    walk = real["bandai_bvh"]
+    path = render(walk, tmp_path / "walk.gif", fps=5)
+    colour = np.array([int(COLOURS[0][k : k + 2], 16) for k in (1, 3, 5)])
+    with Image.open(path) as gif:
+        frames = [np.asarray(f.convert("RGB"), dtype=int) for f in ImageSequence.Iterator(gif)]
+    assert len(frames) >= 10
+    heights, middles = [], []
+    for f in frames:
+        ys, xs = np.nonzero(np.abs(f - colour).sum(axis=-1) < 60)
+        heights.append((ys.max() - ys.min()) / f.shape[0])
+        middles.append(xs.mean() / f.shape[1])
+    assert min(heights) > 0.3
+    assert 0.2 < min(middles) and max(middles) < 0.8

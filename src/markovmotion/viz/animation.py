@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import textwrap
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -375,16 +376,18 @@ def _figure(
     return fig, axes
 
 
-def _draw_floor(ax, panel: _Panel, caption: str, floor: bool = True) -> None:
+def _draw_floor(ax, panel: _Panel, caption: str, floor: bool = True) -> LineCollection | None:
+    """The panel's window, floor grid (returned) and grid label, and its caption."""
     ax.set_xlim(panel.centre[0] - panel.half[0], panel.centre[0] + panel.half[0])
     ax.set_ylim(panel.centre[1] - panel.half[1], panel.centre[1] + panel.half[1])
     ax.set_aspect("equal", adjustable="box")
     if not floor:  # a point-light display: nothing but the points
-        return
-    ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
+        return None
+    grid = ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
     ax.text(0.01, 0.01, f"grid {_label_step(panel.step)}", transform=ax.transAxes, fontsize=8)
     if caption:
         ax.text(0.01, 0.985, caption, transform=ax.transAxes, va="top", fontsize=10)
+    return grid
 
 
 class _Actor:
@@ -476,10 +479,13 @@ class _Stage:
         caption: bool = True,
         legend: bool = True,
         legend_at: str = "lower center",
-    ) -> list[tuple[int, _Actor]]:
-        """Floor and per-track artists of ``panel`` on ``ax``, optionally with names."""
+    ) -> tuple[list[tuple[int, _Actor]], LineCollection | None]:
+        """Floor and per-track artists of ``panel`` on ``ax``, optionally with names; the
+        artists and the floor's grid (None without one)."""
         light = self.point_light
-        _draw_floor(ax, panel, self.caption(panel) if caption and not light else "", not light)
+        grid = _draw_floor(
+            ax, panel, self.caption(panel) if caption and not light else "", not light
+        )
         figs = [
             (
                 i,
@@ -509,7 +515,7 @@ class _Stage:
                 handlelength=1.2,
                 columnspacing=1.0,
             )
-        return figs
+        return figs, grid
 
     def pose(self, i: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Projected joints (T, N, 2), their shadows on the floor and depths (T,) at ``times``."""
@@ -547,27 +553,53 @@ def _sample_times(
     return np.arange(n) / fps
 
 
-def _frames(stage: _Stage, times: np.ndarray, title: str | None, label: str) -> Iterator:
-    """RGBA frames (H, W, 4) of ``stage`` at ``times``, drawn by blitting."""
+def _frames(
+    stage: _Stage,
+    times: np.ndarray,
+    title: str | None,
+    label: str,
+    fps: float = 15.0,
+    follow_people: bool = True,
+) -> Iterator:
+    """RGBA frames (H, W, 4) of ``stage`` at ``times`` (``fps`` apart), drawn by blitting;
+    with ``follow_people``, a window that follows people who travel (:func:`_follow_window`),
+    its path smoothed over :data:`FOLLOW_SMOOTH_S`."""
     n = len(stage.panels)
-    rows, cols = (n, 1) if stage.aspect > STACK_ASPECT else (1, n)  # wide views one above another
-    fig, axes = _figure(
-        rows, cols, stage.aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage)
-    )
+    follow = _follow_window(stage, times) if follow_people else None
+    aspect = stage.aspect if follow is None else float(follow.half[0] / follow.half[1])
+    if follow is not None:
+        for panel in stage.panels:
+            panel.half = follow.half
+    rows, cols = (n, 1) if aspect > STACK_ASPECT else (1, n)  # wide views one above another
+    fig, axes = _figure(rows, cols, aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage))
     drawn = []
-    for ax, panel in zip(axes, stage.panels, strict=True):
-        figs = stage.populate(ax, panel, animated=True)
+    for r, (ax, panel) in enumerate(zip(axes, stage.panels, strict=True)):
+        figs, grid = stage.populate(ax, panel, animated=True)
         clock = ax.text(0.99, 0.985, "", transform=ax.transAxes, ha="right", va="top")
         clock.set_animated(True)
         clock.set_visible(not stage.point_light)
         poses = {i: stage.pose(i, times) for i, _ in figs}
-        drawn.append((ax, figs, clock, poses))
+        if follow is not None:  # the window moves: the people and the floor drawn shifted
+            shift = _smooth_path(follow.centres[r], fps) - panel.centre
+            poses = {
+                i: (p[0] - shift[:, None], p[1] - shift[:, None], p[2]) for i, p in poses.items()
+            }
+            if grid is not None:
+                grid.set_animated(True)
+            grid_at = (grid, panel.grid, shift)
+        else:
+            grid_at = None
+        drawn.append((ax, figs, clock, poses, grid_at))
     canvas = fig.canvas
     canvas.draw()
     background = canvas.copy_from_bbox(fig.bbox)
     for k in track(range(len(times)), label):
         canvas.restore_region(background)
-        for ax, figs, clock, poses in drawn:
+        for ax, figs, clock, poses, grid_at in drawn:
+            if grid_at is not None and grid_at[0] is not None:
+                grid, lines, shift = grid_at
+                grid.set_segments(lines - shift[k])
+                ax.draw_artist(grid)
             ended = []  # a motion that is over holds its last pose, faded, and says when it ended
             for i, f in figs:
                 over = stage.tracks[i].over(times[k])
@@ -661,7 +693,9 @@ def render(
         return _strip(tracks, picks / tracks[0].fps, path, side_by_side, title, point_light)
     extra = _tracks(framed, None) if framed is not None else None
     stage = _Stage.build(tracks, side_by_side, times[-1], point_light, extra)
-    frames = _frames(stage, times, title, f"rendering {path.name}")
+    # clips given one frame keep its one fixed view (a window following each clip's own
+    # people would size them apart again)
+    frames = _frames(stage, times, title, f"rendering {path.name}", fps, framed is None)
     (_write_gif if suffix == ".gif" else write_mp4)(frames, path, fps)
     return path
 
@@ -718,29 +752,59 @@ def _background(stage: _Stage) -> str:
     return POINT_LIGHT_BACKGROUND if stage.point_light else "white"
 
 
-#: A strip's cells follow the people when the clip's window is wider than this many times
+#: An animation's following window moves along its path averaged over this long (s), so
+#: that it glides rather than shaking with every swing of an arm.
+FOLLOW_SMOOTH_S = 1.0
+
+
+def _smooth_path(centres: np.ndarray, fps: float) -> np.ndarray:
+    """Window centres (T, 2) averaged over :data:`FOLLOW_SMOOTH_S` (ends held)."""
+    from scipy.ndimage import uniform_filter1d
+
+    size = max(1, int(round(FOLLOW_SMOOTH_S * fps)))
+    return uniform_filter1d(centres, size, axis=0, mode="nearest")
+
+
+#: A strip's or an animation's window follows the people when the clip's window is wider than this many times
 #: the window one frame of them needs (a walk across a room: :func:`_follow_window`).
 FOLLOW_RATIO = 2.0
 
 
-def _follow_window(stage: _Stage, times: np.ndarray) -> np.ndarray | None:
-    """The half size (2,) of a window that holds every panel's people (and shadows) in any
-    one of ``times``, when the panels' windows are :data:`FOLLOW_RATIO` times wider than it
-    (the people travel: a 10 m walk left each person about 70 pixels tall); else None."""
+@dataclass
+class _Follow:
+    """A window that follows the people: its half size (2,) and, per panel, its centre at
+    each time (P, T, 2), in screen mm."""
+
+    half: np.ndarray
+    centres: np.ndarray
+
+
+def _follow_window(stage: _Stage, times: np.ndarray) -> _Follow | None:
+    """A window that holds every panel's people (and shadows) at any one of ``times``, and
+    where it is at each, when the panels' windows are :data:`FOLLOW_RATIO` times wider than
+    it (the people travel: a 10 m walk left each person about 70 pixels tall); else None."""
     half = np.zeros(2)
+    centres = []
     for panel in stage.panels:
-        for t in times:
-            pts = np.vstack(
-                [np.vstack(stage.pose(i, np.array([t]))[:2]).reshape(-1, 2) for i in panel.tracks]
-            )
-            pts = pts[np.isfinite(pts).all(axis=1)]
-            if len(pts):
-                half = np.maximum(half, (pts.max(0) - pts.min(0)) * 0.54 + 50.0)
+        pts = np.concatenate(
+            [np.concatenate(stage.pose(i, times)[:2], axis=1) for i in panel.tracks], axis=1
+        )  # (T, M, 2): every track's joints and shadows
+        with warnings.catch_warnings():  # a time with nothing shown (every point NaN)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lo, hi = np.nanmin(pts, axis=1), np.nanmax(pts, axis=1)
+        seen = np.isfinite(lo).all(axis=1)
+        if seen.any():
+            half = np.maximum(half, ((hi - lo)[seen] * 0.54 + 50.0).max(axis=0))
+        mid = np.where(seen[:, None], (lo + hi) / 2, panel.centre)
+        centres.append(mid)
     if not half.all() or stage.panels[0].half[0] < FOLLOW_RATIO * half[0]:
         return None
     half[1] *= 1.14  # room for the captions at the top
     ratio = np.clip(half[0] / half[1], 0.75, MAX_ASPECT)
-    return np.maximum(half, [half[1] * ratio, half[0] / ratio])
+    half = np.maximum(half, [half[1] * ratio, half[0] / ratio])
+    centres = np.stack(centres)
+    centres[..., 1] += 0.07 * half[1]  # room for the captions, as _panels leaves
+    return _Follow(half, centres)
 
 
 def _strip(
@@ -753,7 +817,7 @@ def _strip(
 ) -> Path:
     stage = _Stage.build(tracks, side_by_side, times.max(), point_light)
     follow = _follow_window(stage, times)
-    aspect = stage.aspect if follow is None else float(follow[0] / follow[1])
+    aspect = stage.aspect if follow is None else float(follow.half[0] / follow.half[1])
     height = PANEL_HEIGHT * 0.6
     most = int(np.clip(MAX_WIDTH // (height * aspect), 1, len(times)))
     wraps = -(-len(times) // most)
@@ -763,21 +827,17 @@ def _strip(
     for r, panel in enumerate(stage.panels):
         for c, t in enumerate(times):
             ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
-            shown = []
-            for i, f in stage.populate(
+            figs, _ = stage.populate(
                 ax, panel, False, caption=c % cols == 0, legend=c == 0, legend_at="upper right"
-            ):
+            )
+            for i, f in figs:
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
                 f.fade(stage.tracks[i].over(t))  # over: its last pose, faded
-                shown += [screen[0], floor[0]]
             if follow is not None:  # this cell's window on the people at this time
-                pts = np.vstack(shown)
-                pts = pts[np.isfinite(pts).all(axis=1)]
-                mid = (pts.min(0) + pts.max(0)) / 2 if len(pts) else panel.centre.copy()
-                mid[1] += 0.07 * follow[1]  # room for the captions, as _panels leaves
-                ax.set_xlim(mid[0] - follow[0], mid[0] + follow[0])
-                ax.set_ylim(mid[1] - follow[1], mid[1] + follow[1])
+                mid, half = follow.centres[r, c], follow.half
+                ax.set_xlim(mid[0] - half[0], mid[0] + half[0])
+                ax.set_ylim(mid[1] - half[1], mid[1] + half[1])
             over = [stage.tracks[i].name for i in panel.tracks if stage.tracks[i].over(t)]
             # bottom right: the top left holds the name caption, which a narrow panel overlaps
             # (the legend goes top right in a strip: at the bottom it covered the first time)
