@@ -81,6 +81,49 @@ def cameras(
     err_console.print(f"wrote {path} ({len(videos)} cameras)", highlight=False)
 
 
+@app.command("sync")
+def sync(
+    video: Path = typer.Argument(..., help="Folder with cameras.json and the videos it names."),
+    cameras: Path = typer.Option(None, help="Camera file (default: VIDEO/cameras.json)."),
+    max_lag: float = ranged("seconds", 2.0, max=60.0, help="Largest offset tried (s)."),
+    max_frames: int = ranged("count", None, max=1_000_000, help="Only the first frames."),
+    write: bool = typer.Option(
+        False, "--write", help="Record the offsets in the camera file (each camera's skip_frames)."
+    ),
+    json_out: bool = typer.Option(False, "--json", help="Print the offsets as JSON."),
+) -> None:
+    """Measure how many frames each camera's video is offset from the first camera's (cameras
+    started one after another), by where MediaPipe's landmarks lie against their epipolar
+    lines (needs scripts/install-camera); --write records it for every command that reads the
+    videos."""
+    from markovmotion.video.sync import sync_video, write_skips
+
+    result, fps, where = sync_video(video, cameras, max_lag, max_frames)
+    summary = {"fps": fps, "cameras": result.summary(fps), "in_step": result.in_step}
+    if write:
+        summary["wrote"] = str(write_skips(where, result))
+    if json_out:
+        print_json(summary)
+        return
+    for k, (name, c) in enumerate(summary["cameras"].items()):
+        if k == 0:
+            err_console.print(
+                f"{name}: the camera the others are measured against", highlight=False
+            )
+            continue
+        px = "-" if c["epipolar_px"] is None else f"{c['epipolar_px']:.2f}"
+        none = "-" if c["epipolar_px_in_step"] is None else f"{c['epipolar_px_in_step']:.2f}"
+        err_console.print(
+            f"{name}: offset {c['offset_frames']:+d} frames ({c['offset_s']:+.3f} s); landmarks "
+            f"{px} px from their epipolar lines so (as they are: {none} px)",
+            highlight=False,
+        )
+    if write:
+        err_console.print(f"wrote {summary['wrote']}", highlight=False)
+    elif not result.in_step:
+        err_console.print(f"--write records it in {where}", highlight=False)
+
+
 def register(root: typer.Typer) -> None:
     """Attach ``track`` to the root command."""
     root.command("track")(track)

@@ -15,7 +15,10 @@ camera. ``cameras.json`` lies beside the videos::
                   "distortion": [0, 0, 0, 0, 0]}, ...]}
 
 ``video`` is relative to the file; so is the optional ``background``, an
-image of the empty scene (else the tracker estimates it from the video). Any real video with such a file is read
+image of the empty scene (else the tracker estimates it from the video). The optional
+``skip_frames`` of a camera is how many frames of its video come before the cameras'
+shared first frame (cameras started one after another; ``markovmotion video sync``
+measures and writes it); every reader of the video with its camera skips them. Any real video with such a file is read
 the same way as the rendered ones; a malformed file is one error naming the
 file and the field.
 """
@@ -46,6 +49,8 @@ MAX_JSON_BYTES = 1_000_000
 DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
 #: Largest magnitude of a distortion coefficient accepted (real lenses: well under 10).
 MAX_DISTORTION = 1000.0
+#: Most frames a camera's video may skip to start with the others (``skip_frames``).
+MAX_SKIP = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,9 @@ class CalibratedCamera:
     background: str = ""
     #: OpenCV's lens distortion coefficients (k1 k2 p1 p2 [k3 ...]); () or zeros: none.
     distortion: tuple[float, ...] = ()
+    #: Frames of its video before the cameras' shared first frame (``skip_frames``; cameras
+    #: started at different times: ``markovmotion video sync`` measures it).
+    skip: int = 0
 
     def undistorter(self) -> Callable[[np.ndarray], np.ndarray] | None:
         """None without lens distortion; else a function that makes a frame of this camera
@@ -118,6 +126,7 @@ class CalibratedCamera:
             "t": self.t.tolist(),
             "distortion": [float(d) for d in self.distortion] or [0.0] * 5,
             **({"background": self.background} if self.background else {}),
+            **({"skip_frames": self.skip} if self.skip else {}),
         }
 
 
@@ -312,7 +321,12 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
         if not isinstance(bg, str) or len(bg) > 255:
             raise MotionFormatError(path, f"{where}.background must be a file name")
         name = c.get("name", f"cam{i}")
-        out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist))
+        skip = c.get("skip_frames", 0)
+        if isinstance(skip, bool) or not isinstance(skip, int) or not 0 <= skip <= MAX_SKIP:
+            raise MotionFormatError(
+                path, f"{where}.skip_frames must be a whole number 0 to {MAX_SKIP}"
+            )
+        out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist, skip))
         valid_camera(path, where, out[-1])
     doc["fps"] = float(fps)
     _check_rates(path.parent, out, doc["fps"])

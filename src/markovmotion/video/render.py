@@ -338,11 +338,15 @@ def read_frames(
     path: str | os.PathLike[str], camera: CalibratedCamera | None = None
 ) -> Iterator[np.ndarray]:
     """RGB frames of a video file (anything OpenCV/FFmpeg reads) or of a folder of images;
-    with ``camera``, each frame is checked to be the camera's size and, if the camera has
-    lens distortion, undistorted (:meth:`CalibratedCamera.undistorter`)."""
+    with ``camera``, from its shared first frame on (its ``skip`` frames before are passed
+    over), each frame checked to be the camera's size and, if the camera has lens
+    distortion, undistorted (:meth:`CalibratedCamera.undistorter`)."""
     path = Path(path)
     fix = camera.undistorter() if camera is not None else None
+    skip = camera.skip if camera is not None else 0
     for n, frame in enumerate(_decoded(path)):
+        if n < skip:
+            continue
         if camera is not None and frame.shape[:2] != (camera.height, camera.width):
             raise MotionFormatError(
                 path, f"camera {camera.name} is {camera.width}x{camera.height} but frame {n} "

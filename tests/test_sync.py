@@ -1,0 +1,156 @@
+"""Cameras started at different times: ``markovmotion video sync`` and ``skip_frames``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from markovmotion.cli import main
+from markovmotion.data.index import data_root
+from markovmotion.video.cameras import load_cameras, ring_of_cameras
+from markovmotion.video.sync import epipolar_distances, estimate_offsets, fundamental
+from markovmotion.video.triangulation import ViewLandmarks
+
+
+def _cameras(views: int = 3):
+    return ring_of_cameras(np.array([0.0, 900.0, 0.0]), 3500.0, views, (272, 480))
+
+
+def test_epipolar_distance_is_zero_on_true_pairs_and_agrees_with_brute_force():
+    """A point seen by two cameras lies on its epipolar line; a pixel moved off it is as far
+    from the line as brute force says: the other camera's ray through the pixel, two of its
+    points projected, the distance from the line through them (both ways, averaged)."""
+    rng = np.random.default_rng(0)
+    cams = _cameras(2)
+    pts = rng.uniform([-600, 0, -600], [600, 1800, 600], (30, 3))
+    x0, x1 = (c.project(pts)[0] for c in cams)
+    f = fundamental(*cams)
+    assert epipolar_distances(f, x0, x1).max() < 1e-6
+    moved = x1 + rng.normal(0, 5, x1.shape)
+    got = epipolar_distances(f, x0, moved)
+
+    def line_distance(src, dst, pixel, point):
+        """Distance of ``point`` from the line that ``src``'s ray through ``pixel`` makes in
+        ``dst``'s image: the ray's points at two depths, projected."""
+        ray = np.linalg.inv(src.K) @ np.r_[pixel, 1.0]
+        a, b = (dst.project((src.R.T @ (ray * z - src.t))[None])[0][0] for z in (1e3, 6e3))
+        u, w = b - a, point - a
+        return abs(u[0] * w[1] - u[1] * w[0]) / np.linalg.norm(u)
+
+    brute = [
+        0.5 * (line_distance(cams[0], cams[1], p0, p1) + line_distance(cams[1], cams[0], p1, p0))
+        for p0, p1 in zip(x0, moved, strict=True)
+    ]
+    np.testing.assert_allclose(got, brute, rtol=1e-6, atol=1e-6)
+
+
+def _moving_landmarks(frames: int, fps: float) -> np.ndarray:
+    """(F, 33, 3) mm: 33 points on a body swaying and reaching, each its own way."""
+    rng = np.random.default_rng(4)
+    base = rng.uniform([-250, 100, -150], [250, 1750, 150], (33, 3))
+    t = np.arange(frames)[:, None] / fps
+    freq, phase = rng.uniform(0.4, 1.6, (2, 33))
+    pts = np.repeat(base[None], frames, axis=0)
+    pts[..., 0] += 200 * np.sin(2 * np.pi * freq * t + 6 * phase)
+    pts[..., 1] += 120 * np.sin(2 * np.pi * 0.7 * freq * t + phase)
+    return pts
+
+
+@pytest.mark.parametrize("late", [0, 6, -4])
+def test_offsets_of_cameras_started_late_are_found(late):
+    """Camera 2's video starts ``late`` frames after the others' (its frame f shows their
+    frame f + late): the offset is found, the others stay in step; a person standing still
+    gives no offset."""
+    fps, frames = 30.0, 120
+    cams = _cameras(3)
+    pts = _moving_landmarks(frames + 20, fps)
+    pix = np.stack([c.project(pts.reshape(-1, 3))[0].reshape(frames + 20, 33, 2) for c in cams])
+    pix = pix + np.random.default_rng(1).normal(0.0, 1.0, pix.shape)
+    shown = pix[:, 10 : 10 + frames].copy()
+    shown[2] = pix[2, 10 + late : 10 + late + frames]
+    views = ViewLandmarks(cams, shown, np.ones(shown.shape[:3]))
+    result = estimate_offsets(views, fps)
+    assert result.offsets.tolist() == [0, 0, -late]
+    if late:
+        assert result.score_px[2] < 0.5 * result.score_none_px[2]
+        skips = result.skips()
+        assert skips.min() == 0 and skips[0] - skips[2] == late  # the others wait for it
+    still = np.repeat(pix[:, :1], frames, axis=1)
+    still = still + np.random.default_rng(2).normal(0.0, 1.0, still.shape)
+    assert not estimate_offsets(
+        ViewLandmarks(cams, still, np.ones(still.shape[:3])), fps
+    ).offsets.any()
+
+
+@pytest.fixture
+def real_copy(tmp_path):
+    """The real 4-view video's folder, its videos linked, its camera file a copy."""
+    src = data_root().parent / "video" / "pose2sim_balancing"
+    out = tmp_path / "video"
+    out.mkdir()
+    for p in src.iterdir():
+        if p.name == "cameras.json":
+            shutil.copy(p, out / p.name)
+        else:
+            (out / p.name).symlink_to(p)
+    return out
+
+
+def test_video_sync_measures_and_records_the_offsets_of_the_real_video(real_copy, capsys):
+    """The real video with camera 1 made to start 10 frames late (``skip_frames``): ``video
+    sync`` finds it (-10), and camera 2's own 3 frames (its landmarks 4.4 px from their
+    epipolar lines so shifted, 5.6 as given; the reference's README measured the same);
+    ``--write`` records skips that align all four, after which they are in step."""
+    doc = json.loads((real_copy / "cameras.json").read_text())
+    doc["cameras"][1]["skip_frames"] = 10
+    (real_copy / "cameras.json").write_text(json.dumps(doc))
+    main(["video", "sync", str(real_copy), "--json", "--write"])
+    s = json.loads(capsys.readouterr().out)
+    offsets = [c["offset_frames"] for c in s["cameras"].values()]
+    assert offsets[0] == 0 and abs(offsets[1] + 10) <= 1 and offsets[2] == 3 and offsets[3] == 0
+    cams, _ = load_cameras(real_copy)
+    assert [c.skip for c in cams] == [0, 10 + offsets[1], 3, 0]
+    main(["video", "sync", str(real_copy), "--json"])
+    again = json.loads(capsys.readouterr().out)
+    assert again["in_step"] or all(abs(c["offset_frames"]) <= 1 for c in again["cameras"].values())
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        ({"skip_frames": -1}, "skip_frames must be a whole number"),
+        ({"skip_frames": 2.5}, "skip_frames must be a whole number"),
+        ({"skip_frames": True}, "skip_frames must be a whole number"),
+    ],
+)
+def test_a_bad_skip_is_one_line(real_copy, capsys, edit, message):
+    doc = json.loads((real_copy / "cameras.json").read_text())
+    doc["cameras"][0].update(edit)
+    (real_copy / "cameras.json").write_text(json.dumps(doc))
+    with pytest.raises(SystemExit) as exc:
+        main(["video", "sync", str(real_copy)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_sync_needs_every_camera_and_a_writable_file(real_copy, capsys, monkeypatch):
+    with pytest.raises(SystemExit) as exc:
+        main(["video", "sync", str(real_copy / "cam0.mp4")])
+    assert exc.value.code == 2
+    assert "needs the folder of every camera" in capsys.readouterr().err
+    before = (real_copy / "cameras.json").read_bytes()
+
+    def refused(*args, **kwargs):  # a read-only folder (chmod does not stop root)
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr("markovmotion.io.files.atomic_write", refused)
+    with pytest.raises(SystemExit) as exc:
+        main(["video", "sync", str(real_copy), "--write", "--max-frames", "30"])
+    assert exc.value.code == 2
+    assert (real_copy / "cameras.json").read_bytes() == before
+    err = capsys.readouterr().err.strip()
+    assert "cannot write the offsets here" in err and len(err.splitlines()) == 1
