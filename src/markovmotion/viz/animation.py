@@ -566,10 +566,12 @@ def _frames(
     its path smoothed over :data:`FOLLOW_SMOOTH_S`."""
     n = len(stage.panels)
     follow = _follow_window(stage, times) if follow_people else None
-    aspect = stage.aspect if follow is None else float(follow.half[0] / follow.half[1])
-    if follow is not None:
+    if follow is not None:  # the window glides along its path, as much wider as that leaves it
+        path = np.stack([_smooth_path(c, fps) for c in follow.centres])
+        half = follow.half + np.abs(path - follow.centres).max(axis=(0, 1))
         for panel in stage.panels:
-            panel.half = follow.half
+            panel.half = half
+    aspect = stage.aspect
     rows, cols = (n, 1) if aspect > STACK_ASPECT else (1, n)  # wide views one above another
     fig, axes = _figure(rows, cols, aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage))
     drawn = []
@@ -580,7 +582,7 @@ def _frames(
         clock.set_visible(not stage.point_light)
         poses = {i: stage.pose(i, times) for i, _ in figs}
         if follow is not None:  # the window moves: the people and the floor drawn shifted
-            shift = _smooth_path(follow.centres[r], fps) - panel.centre
+            shift = path[r] - panel.centre
             poses = {
                 i: (p[0] - shift[:, None], p[1] - shift[:, None], p[2]) for i, p in poses.items()
             }
