@@ -425,3 +425,18 @@ def test_an_animation_of_a_walk_follows_the_walker(real, tmp_path):
         middles.append(xs.mean() / f.shape[1])
     assert min(heights) > 0.3
     assert 0.2 < min(middles) and max(middles) < 0.8
+
+
+def test_blitting_restores_every_column_of_the_frame():
+    """A figure 4.02 in wide at 100 dpi is 402 px, but its bbox is 401.99...: restoring that
+    left the last column holding every frame's pixels (a grey line at a video's right edge)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from markovmotion.viz.animation import _whole
+
+    fig = Figure(figsize=(4.02, 4.5), dpi=100)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    assert canvas.copy_from_bbox(fig.bbox).get_extents() == (0, 0, 401, 450)  # the trap
+    assert canvas.copy_from_bbox(_whole(canvas)).get_extents() == (0, 0, 402, 450)

@@ -180,6 +180,7 @@ def real_video():
         (["--stature", "1700"], "--method monocular"),
         (["--method", "triangulate", "--truth", "x.bvh"], "no such file (--truth)"),
         (["--truth", "x.bvh"], "no such file (--truth)"),
+        (["--truth", "cameras.json"], "the rendered take's motion"),
         (["--guide", "mediapipe", "--views", "1"], "at least 2 views"),
         (["--smooth", "0.05"], "--method triangulate"),
         (["--method", "triangulate", "--smooth", "slow"], "auto or SECONDS"),
@@ -190,6 +191,7 @@ def test_bad_guide_and_triangulate_options_are_one_line(
     real_video, tmp_path, capsys, extra, message
 ):
     extra = [str(tmp_path / e) if e.endswith(".bvh") else e for e in extra]
+    extra = [str(real_video / e) if e == "cameras.json" else e for e in extra]
     with pytest.raises(SystemExit) as exc:
         main(["track", "--video", str(real_video), *extra])
     assert exc.value.code == 2
@@ -231,7 +233,8 @@ def test_triangulated_track_of_real_video(real_video, tmp_path, capsys):
     # before, the right wrist left for frames 83-84 by 635-691 mm
     assert s["landmarks_despiked"] > 0
     # smoothed over time by the width the camera left out chose (choose_smoothing)
-    assert s["smoothing_s"] > 0 and len(s["smoothing_px"]) == 8
+    assert s["smoothing_s"] > 0 and len(s["smoothing_left_out_px"]) == 8
+    assert s["smoothing_chosen_by"] == "left-out cameras"
     assert not any("this camera's video" in n for n in s["notes"])  # every view agrees
     from markovmotion.io import read_c3d
 
@@ -267,6 +270,12 @@ def test_mediapipe_tracks_are_measured_against_a_rendered_take(tmp_path, take, c
     assert doc.pop("start_frame") == 30
     (out / "cameras.json").write_text(json.dumps(doc))
     assert truth_errors(tr.points, tr.fps, take[1], out)["mpjpe_mm"] > aligned + 50.0
+    # the truth of another take than the one rendered gets a note before any tracking
+    from markovmotion.video.multiview import check_truth
+
+    assert check_truth(take[1], out) is None
+    other = next(p for p in take[1].parent.iterdir() if p.name != take[1].name)
+    assert take[1].name in check_truth(other, out)
 
 
 def test_guide_option_reaches_the_tracker(tmp_path, take, capsys):

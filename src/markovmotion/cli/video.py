@@ -214,10 +214,12 @@ def track(
     smoothing = _smoothing(smooth)
     if stature is not None and method != "monocular":
         raise typer.BadParameter("is for --method monocular", param_hint="--stature")
-    if truth is not None and not truth.is_file():  # before minutes of tracking
-        from markovmotion.errors import MotionFormatError
+    if truth is not None:  # before minutes of tracking
+        from markovmotion.video.multiview import check_truth
 
-        raise MotionFormatError(truth, "no such file (--truth)")
+        said = check_truth(truth, video, cameras)
+        if said:
+            err_console.print(said, highlight=False)
     guided, note, cams = False, None, []
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
@@ -407,7 +409,10 @@ def _track_landmarks(
         tr, summary = track_triangulated_video(
             video, cameras, max_frames, reference, views, left_right, person, smooth
         )
-        where = _views(summary["views"])
+        where = (
+            f"{_views(summary['views'])}, smoothed over sigma "
+            f"{1000 * summary['smoothing_s']:.1f} ms ({summary['smoothing_chosen_by']})"
+        )
     else:
         tr, summary = track_monocular_video(
             video, cameras, max_frames, stature, reference, left_right

@@ -305,6 +305,32 @@ def points_errors(points: np.ndarray, fps: float, truth: Motion) -> dict:
     }
 
 
+def check_truth(
+    truth: str | os.PathLike[str],
+    video: str | os.PathLike[str],
+    cameras: str | os.PathLike[str] | None = None,
+) -> str | None:
+    """``track --truth``, before any tracking: a motion file (BVH or ASF/AMC), else one line
+    (:class:`MotionFormatError`); and a note when the camera file names another take as the
+    one ``video render`` rendered (its ``source``): measured against the wrong take, the
+    error is only a large number."""
+    from markovmotion.io import MOTION_SUFFIXES
+    from markovmotion.io.files import base_suffix
+    from markovmotion.video.cameras import camera_file, load_cameras
+
+    truth = Path(truth)
+    if not truth.is_file():
+        raise MotionFormatError(truth, "no such file (--truth)")
+    if base_suffix(truth) not in MOTION_SUFFIXES:
+        raise MotionFormatError(truth, "--truth is the rendered take's motion (BVH or ASF/AMC)")
+    _, doc = load_cameras(camera_file(video, cameras))
+    source = doc.get("source")
+    if isinstance(source, str) and base_suffix(source) in MOTION_SUFFIXES:
+        if Path(source).name != truth.name:
+            return f"note: this video was rendered from {source}, not from {truth.name} (--truth)"
+    return None
+
+
 def truth_errors(
     points: np.ndarray,
     fps: float,

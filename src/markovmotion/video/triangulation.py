@@ -891,17 +891,23 @@ SMOOTHING_TWO_VIEWS_S = 1 / 30
 
 @dataclass
 class SmoothingChoice:
-    """The width :func:`choose_smoothing` took (s), and each width's mean reprojection error in
-    the views left out (px; empty when it could not choose)."""
+    """The smoothing's width (s, the Gaussian's sigma), how it was set (``chosen_by``), and,
+    chosen by :func:`choose_smoothing`, each width's mean reprojection error (px) in the
+    cameras left out."""
 
     seconds: float
     errors_px: dict[float, float]
+    chosen_by: str = "left-out cameras"
 
     def summary(self) -> dict:
-        """JSON-ready: ``smoothing_s`` and ``smoothing_px`` (width in ms: error)."""
+        """JSON-ready: ``smoothing_s``, ``smoothing_chosen_by`` and
+        ``smoothing_left_out_px`` (``"sigma 33.3 ms"``: the left-out cameras' error)."""
         return {
             "smoothing_s": round(self.seconds, 4),
-            "smoothing_px": {f"{1000 * w:.1f} ms": round(e, 3) for w, e in self.errors_px.items()},
+            "smoothing_chosen_by": self.chosen_by,
+            "smoothing_left_out_px": {
+                f"sigma {1000 * w:.1f} ms": round(e, 3) for w, e in self.errors_px.items()
+            },
         }
 
 
@@ -923,7 +929,7 @@ def choose_smoothing(
     v_n = len(views.cameras)
     widths = sorted({float(w) for w in widths})
     if v_n < 3:
-        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {})
+        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {}, "fixed: fewer than 3 cameras")
     tau = np.sqrt(_tau2(views.cameras, OUTLIER_ANGLE))[:, 0]
     total = np.zeros(len(widths))
     count = 0
@@ -943,7 +949,7 @@ def choose_smoothing(
                 np.linalg.norm(px - views.pixels[v][seen], axis=-1), tau[v]
             ).sum()
     if count == 0:
-        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {})
+        return SmoothingChoice(SMOOTHING_TWO_VIEWS_S, {}, "fixed: no landmark to compare")
     errors = total / count
     return SmoothingChoice(
         widths[int(np.argmin(errors))], dict(zip(widths, errors.tolist(), strict=True))
@@ -1099,7 +1105,9 @@ def track_triangulated_video(
     one = person_views(videos, cams, fps, max_frames, person, left_right)
     lm = one.agreed
     tri, spikes = triangulate_views(lm).despiked(fps)
-    chosen = choose_smoothing(lm, fps) if smooth is None else SmoothingChoice(smooth, {})
+    chosen = (
+        choose_smoothing(lm, fps) if smooth is None else SmoothingChoice(smooth, {}, "--smooth")
+    )
     tri = tri.smoothed(chosen.seconds, fps)
     seconds = time.perf_counter() - t0
     conf = lm.visibility.mean(axis=(0, 2))

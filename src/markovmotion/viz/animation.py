@@ -33,6 +33,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+from matplotlib.transforms import Bbox
 
 from markovmotion.core.motion import GROUND, UP, Motion
 from markovmotion.errors import LimitError, MotionFormatError
@@ -277,6 +279,21 @@ class _Panel:
     step: float
     centre: np.ndarray
     half: np.ndarray
+    floor: np.ndarray  # (2, 2) the floor's extent (ground axes) the tracks cover: low, high
+
+
+def _floor_grid(
+    floor: np.ndarray, step: float, ground: float, cam: _Camera, margin: float
+) -> np.ndarray:
+    """Projected floor grid lines (L, 2, 2) over ``floor`` (low, high ground coordinates)
+    widened by ``margin`` mm, on ``step`` mm lines."""
+    g0 = np.floor((floor[0] - margin) / step) * step
+    g1 = np.ceil((floor[1] + margin) / step) * step
+    xs = np.arange(g0[0], g1[0] + step / 2, step)
+    zs = np.arange(g0[1], g1[1] + step / 2, step)
+    lines = [[(x, ground, g0[1]), (x, ground, g1[1])] for x in xs]
+    lines += [[(g0[0], ground, z), (g1[0], ground, z)] for z in zs]
+    return cam.project(np.array(lines))
 
 
 def _panels(
@@ -293,13 +310,7 @@ def _panels(
     step = _grid_step(float(max(spans)) + 600.0)  # one grid for all panels, like the scale
     panels = []
     for group, pts in zip(groups, clouds, strict=True):
-        lo, hi = pts[:, GROUND].min(0), pts[:, GROUND].max(0)
-        g0 = np.floor((lo - 0.25 * step) / step) * step
-        g1 = np.ceil((hi + 0.25 * step) / step) * step
-        xs = np.arange(g0[0], g1[0] + step / 2, step)
-        zs = np.arange(g0[1], g1[1] + step / 2, step)
-        lines = [[(x, ground, g0[1]), (x, ground, g1[1])] for x in xs]
-        lines += [[(g0[0], ground, z), (g1[0], ground, z)] for z in zs]
+        extent = np.stack([pts[:, GROUND].min(0), pts[:, GROUND].max(0)])
         floor = pts.copy()
         floor[:, 1] = ground
         screen = np.vstack([cam.project(pts), cam.project(floor)])
@@ -309,7 +320,8 @@ def _panels(
         below = 0.12 if len(group) > 1 else 0.0
         centre[1] += (0.14 - below) / 2 * (smax[1] - smin[1])
         half[1] += (0.14 + below) / 2 * (smax[1] - smin[1])
-        panels.append(_Panel(group, cam.project(np.array(lines)), step, centre, half))
+        grid = _floor_grid(extent, step, ground, cam, 0.25 * step)
+        panels.append(_Panel(group, grid, step, centre, half, extent))
     # every panel gets the same window size, so that all are at one scale
     half = np.max([p.half for p in panels], axis=0)
     ratio = np.clip(half[0] / half[1], 0.75, MAX_ASPECT)
@@ -376,15 +388,19 @@ def _figure(
     return fig, axes
 
 
-def _draw_floor(ax, panel: _Panel, caption: str, floor: bool = True) -> LineCollection | None:
-    """The panel's window, floor grid (returned) and grid label, and its caption."""
+def _draw_floor(
+    ax, panel: _Panel, caption: str, floor: bool = True, label: bool = True
+) -> LineCollection | None:
+    """The panel's window, floor grid (returned) and, with ``label``, the grid's spacing, and
+    its caption."""
     ax.set_xlim(panel.centre[0] - panel.half[0], panel.centre[0] + panel.half[0])
     ax.set_ylim(panel.centre[1] - panel.half[1], panel.centre[1] + panel.half[1])
     ax.set_aspect("equal", adjustable="box")
     if not floor:  # a point-light display: nothing but the points
         return None
     grid = ax.add_collection(LineCollection(panel.grid, colors="0.82", linewidths=0.8, zorder=0))
-    ax.text(0.01, 0.01, f"grid {_label_step(panel.step)}", transform=ax.transAxes, fontsize=8)
+    if label:
+        ax.text(0.01, 0.01, f"grid {_label_step(panel.step)}", transform=ax.transAxes, fontsize=8)
     if caption:
         ax.text(0.01, 0.985, caption, transform=ax.transAxes, va="top", fontsize=10)
     return grid
@@ -479,12 +495,13 @@ class _Stage:
         caption: bool = True,
         legend: bool = True,
         legend_at: str = "lower center",
+        grid_label: bool = True,
     ) -> tuple[list[tuple[int, _Actor]], LineCollection | None]:
         """Floor and per-track artists of ``panel`` on ``ax``, optionally with names; the
         artists and the floor's grid (None without one)."""
         light = self.point_light
         grid = _draw_floor(
-            ax, panel, self.caption(panel) if caption and not light else "", not light
+            ax, panel, self.caption(panel) if caption and not light else "", not light, grid_label
         )
         figs = [
             (
@@ -569,8 +586,10 @@ def _frames(
     if follow is not None:  # the window glides along its path, as much wider as that leaves it
         path = np.stack([_smooth_path(c, fps) for c in follow.centres])
         half = follow.half + np.abs(path - follow.centres).max(axis=(0, 1))
-        for panel in stage.panels:
+        for panel in stage.panels:  # the floor reaches as far as the window does
             panel.half = half
+            reach = float(half.max()) / np.sin(ELEVATION)  # depth is foreshortened
+            panel.grid = _floor_grid(panel.floor, panel.step, stage.ground, stage.camera, reach)
     aspect = stage.aspect
     rows, cols = (n, 1) if aspect > STACK_ASPECT else (1, n)  # wide views one above another
     fig, axes = _figure(rows, cols, aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage))
@@ -591,13 +610,13 @@ def _frames(
             grid_at = (grid, panel.grid, shift)
         else:
             grid_at = None
-        drawn.append((ax, figs, clock, poses, grid_at))
+        drawn.append((ax, figs, clock, poses, grid_at, r == len(stage.panels) - 1))
     canvas = fig.canvas
     canvas.draw()
-    background = canvas.copy_from_bbox(fig.bbox)
+    background = canvas.copy_from_bbox(_whole(canvas))
     for k in track(range(len(times)), label):
         canvas.restore_region(background)
-        for ax, figs, clock, poses, grid_at in drawn:
+        for ax, figs, clock, poses, grid_at, timed in drawn:
             if grid_at is not None and grid_at[0] is not None:
                 grid, lines, shift = grid_at
                 grid.set_segments(lines - shift[k])
@@ -615,9 +634,18 @@ def _frames(
             for _, f in sorted(figs, key=lambda e: poses[e[0]][2][k]):  # far to near
                 ax.draw_artist(f.bones)
                 ax.draw_artist(f.joints)
-            clock.set_text("\n".join([f"t = {times[k]:.2f} s", *ended]))
+            # the time once, in the last panel (side by side, a panel's time ran into the
+            # next one's name); each panel says which of its motions ended
+            clock.set_text("\n".join([f"t = {times[k]:.2f} s"] * timed + ended))
             ax.draw_artist(clock)
         yield np.array(canvas.buffer_rgba())
+
+
+def _whole(canvas) -> Bbox:
+    """The canvas's whole buffer, to restore between blitted frames: ``fig.bbox`` can round
+    a column short (4.02 in at 100 dpi is 401.99... px), and the last column then kept every
+    frame's pixels, a stray line at the right edge of a video."""
+    return Bbox.from_bounds(0, 0, *canvas.get_width_height())
 
 
 def _write_gif(frames: Iterator[np.ndarray], path: Path, fps: float) -> None:
@@ -829,9 +857,16 @@ def _strip(
     for r, panel in enumerate(stage.panels):
         for c, t in enumerate(times):
             ax = axes[((c // cols) * n_panels + r) * cols + c % cols]
+            first = c % cols == 0  # names and the grid's spacing once per row
             figs, _ = stage.populate(
-                ax, panel, False, caption=c % cols == 0, legend=c == 0, legend_at="upper right"
-            )
+                ax, panel, False, caption=first, legend=c == 0, legend_at="upper right",
+                grid_label=first,
+            )  # fmt: skip
+            if len(times) > 1 and not point_light:  # each cell framed: times apart
+                ax.add_patch(
+                    Rectangle((0, 0), 1, 1, transform=ax.transAxes, fill=False,
+                              edgecolor="0.8", linewidth=0.8)
+                )  # fmt: skip
             for i, f in figs:
                 screen, floor, _ = stage.pose(i, np.array([t]))
                 f.set_pose(screen[0], floor[0], stage.tracks[i].bones)
