@@ -217,12 +217,12 @@ def main() -> None:
                     "load": round(os.getloadavg()[0], 1),
                 }
             )
-            if not args.json:
-                Console().print(rows[-1])
+            if not args.json:  # as each run ends (the table comes at the end)
+                print(json.dumps(rows[-1]), flush=True)
         if "triangulate" in args.models.split(","):
             rows.append(triangulated_row(kind, take, folder, truth, args))
-            if not args.json:
-                Console().print(rows[-1])
+            if not args.json:  # as each run ends (the table comes at the end)
+                print(json.dumps(rows[-1]), flush=True)
     if args.json:
         print(json.dumps({"rows": rows, "cpus": os.cpu_count(), "seconds": args.seconds}))
         return
@@ -231,7 +231,7 @@ def main() -> None:
         f"guide {args.guide})"
     )
     cols = ("kind", "take", "body model", "MPJPE mm", "runs", "limbs mm", "floor", "floor limbs",
-            "frames/s", "guide s", "seen", "load")  # fmt: skip
+            "frames/s", "guide s", "seen", "smoothing", "load")  # fmt: skip
     for col in cols:
         table.add_column(col)
     for r in rows:
@@ -240,9 +240,9 @@ def main() -> None:
             " ".join(f"{e:.0f}" for e in r["mpjpe_runs"]), f"{r['limbs_mm']:.1f}",
             _mm(r["floor_mm"]), _mm(r["floor_limbs_mm"]), f"{r['fps']:.2f}",
             f"{r['guide_seconds']:.1f}", "-" if r["guide_seen"] is None else f"{r['guide_seen']:.2f}",
-            str(r["load"]),
+            f"{1000 * r['smoothing_s']:.0f} ms" if "smoothing_s" in r else "-", str(r["load"]),
         )  # fmt: skip
-    Console().print(table)
+    Console(width=max(160, Console().width)).print(table)
 
 
 def _mm(value: float | None) -> str:

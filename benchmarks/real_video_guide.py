@@ -71,6 +71,7 @@ def main() -> None:
             rows.append({"method": name, "background": "-", "seed": "-",
                          "mean_mm": s["mean_mm"], "outside_45_70_mm": outside_wrong(tr.points, reference),
                          "aligned_mean_mm": s["aligned_mean_mm"], "smoothing_s": s["smoothing_s"],
+                         "smoothing_left_out_px": s["smoothing_left_out_px"],
                          "per_joint_mm": s["per_joint_mm"], "fps": s["fps"], "fps_with_guide": s["fps"]})  # fmt: skip
             if args.json:
                 print(json.dumps(rows[-1]), flush=True)
@@ -109,7 +110,11 @@ def main() -> None:
         for r in rows:
             print(f"| {r['method']} | {r['background']} | {r['seed']} | {r['mean_mm']} | "
                   f"{r['outside_45_70_mm']} | {r['fps']} | {r['fps_with_guide']} |")  # fmt: skip
-        print("\nper joint (mm), left / right: shoulder, elbow, wrist, hip, knee, ankle")
+        print("\nper joint (mm), left / right")
+        print(
+            "| method | background | seed | shoulders | elbows | wrists | hips | knees | ankles |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|")
         for r in rows:
             pj = r["per_joint_mm"]
             parts = [f"{pj['left_' + p]:.0f} / {pj['right_' + p]:.0f}"
@@ -117,6 +122,11 @@ def main() -> None:
             print(
                 f"| {r['method']} | {r['background']} | {r['seed']} | " + " | ".join(parts) + " |"
             )
+
+        for r in rows:
+            if r.get("smoothing_left_out_px"):
+                print(f"\n{r['method']}: the left-out cameras' error (px) by the smoothing's sigma")
+                print(", ".join(f"{k} {v}" for k, v in r["smoothing_left_out_px"].items()))
 
 
 if __name__ == "__main__":
