@@ -215,6 +215,22 @@ def test_monocular_track_of_real_video(real_video, tmp_path, capfd):
     for upper, lower in (("L_ELBOW", "L_WRIST"), ("R_KNEE", "R_ANKLE")):  # constant bones
         length = np.linalg.norm(at[upper] - at[lower], axis=1)
         assert 150 < length.mean() < 600 and np.ptp(length) < 1e-3 * length.mean()
+    # smoothed over time by the sigma chosen on rendered kinds (MONOCULAR_SMOOTHING_S): the
+    # wrists' frame-to-frame jitter is lower than unsmoothed (--smooth 0), and so is the error
+    assert summary["smoothing_s"] == round(1 / 15, 4)
+    assert summary["smoothing_chosen_by"].startswith("fixed")
+    main(["track", "--video", str(real_video / "cam0.mp4"), "--method", "monocular", "--smooth",
+          "0", "--reference", str(real_video / "reference_mediapipe_triangulated_mm.csv"),
+          "--out", str(tmp_path / "raw.c3d"), "--json"])  # fmt: skip
+    raw = json.loads(capfd.readouterr().out)
+    assert raw["smoothing_s"] == 0 and raw["aligned_mean_mm"] > summary["aligned_mean_mm"]
+    rough = read_c3d(tmp_path / "raw.c3d")
+
+    def jerk(m) -> float:  # second differences of the wrists (mm per frame squared)
+        w = m.positions[:, [m.names.index(n) for n in ("L_WRIST", "R_WRIST")]]
+        return float(np.nanmedian(np.linalg.norm(np.diff(w, 2, axis=0), axis=-1)))
+
+    assert jerk(markers) < 0.5 * jerk(rough)
 
 
 @pytest.mark.parametrize(

@@ -182,7 +182,7 @@ def real_video():
         (["--truth", "x.bvh"], "no such file (--truth)"),
         (["--truth", "cameras.json"], "the rendered take's motion"),
         (["--guide", "mediapipe", "--views", "1"], "at least 2 views"),
-        (["--smooth", "0.05"], "--method triangulate"),
+        (["--smooth", "0.05"], "--method triangulate or monocular"),
         (["--method", "triangulate", "--smooth", "slow"], "auto or SECONDS"),
         (["--method", "triangulate", "--smooth", "-1"], "auto or SECONDS"),
     ],

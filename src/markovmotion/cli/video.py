@@ -197,8 +197,9 @@ def track(
     person: str = person_option(),
     smooth: str = typer.Option(
         None,
-        help="Triangulate: the landmarks' smoothing over time, auto (chosen by leaving one "
-        "camera out; default) or SECONDS (a Gaussian's sigma, 0: none).",
+        help="Triangulate and monocular: the smoothing over time, auto (the default: chosen "
+        "by leaving one camera out; monocular: 1/15 s, chosen on rendered video) or SECONDS "
+        "(a Gaussian's sigma, 0: none).",
     ),
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
@@ -209,8 +210,8 @@ def track(
         )
     if sides and method != "apf":
         raise typer.BadParameter("is for the particle filter (--method apf)", param_hint="--sides")
-    if smooth is not None and method != "triangulate":
-        raise typer.BadParameter("is for --method triangulate", param_hint="--smooth")
+    if smooth is not None and method == "apf":
+        raise typer.BadParameter("is for --method triangulate or monocular", param_hint="--smooth")
     smoothing = _smoothing(smooth)
     if stature is not None and method != "monocular":
         raise typer.BadParameter("is for --method monocular", param_hint="--stature")
@@ -415,9 +416,12 @@ def _track_landmarks(
         )
     else:
         tr, summary = track_monocular_video(
-            video, cameras, max_frames, stature, reference, left_right
+            video, cameras, max_frames, stature, reference, left_right, smooth
         )
-        where = f"{summary['camera']}, scale {summary['scale']:.3f}"
+        where = (
+            f"{summary['camera']}, scale {summary['scale']:.3f}, smoothed over sigma "
+            f"{1000 * summary['smoothing_s']:.1f} ms ({summary['smoothing_chosen_by']})"
+        )
     if truth is not None:
         from markovmotion.video.multiview import truth_errors
 

@@ -256,9 +256,11 @@ def respond_mediapipe(
     start = time.perf_counter()
     extra: dict = {}
     if tracker == "monocular":
-        from markovmotion.video.monocular import track_monocular
+        from markovmotion.video.monocular import MONOCULAR_SMOOTHING_S, track_monocular
 
-        tr = track_monocular(path, cams[view], float(doc["fps"]), max_frames)
+        tr = track_monocular(
+            path, cams[view], float(doc["fps"]), max_frames, smooth_s=MONOCULAR_SMOOTHING_S
+        )
         if not tr.placed.any():
             raise MotionFormatError(path, "no person found in this video")
         extra = {"views": 1, "scale": round(tr.scale, 4)}

@@ -381,6 +381,14 @@ def stature_scale(world: np.ndarray, stature: float) -> float:
     return float(stature / np.percentile(height, 90))  # the most upright frames
 
 
+#: Sigma (s) of the Gaussian that smooths a whole video's monocular track over time: chosen
+#: by leaving one kind of motion out over 11 rendered kinds (3 cameras each, 30 fps), among
+#: 0-100 ms, by the rigidly aligned error against the capture (``python3
+#: benchmarks/monocular_smoothing.py``; every fold chose 67 ms: 113.1 to 110.8 mm on
+#: the kind left out); one camera leaves no view out to choose it on the video itself.
+MONOCULAR_SMOOTHING_S = 1 / 15
+
+
 @dataclass
 class MonocularTrack:
     """Body points (F, 19, 3) mm in the world (NaN where no person), confidence (F,) (mean
@@ -399,6 +407,23 @@ class MonocularTrack:
         return np.isfinite(self.points).all(axis=(1, 2))
 
 
+def finished_points(
+    points: np.ndarray, fps: float, smooth_s: float = 0.0, constant_bones: bool = True
+) -> np.ndarray:
+    """A whole video's body points (F, 19, 3) smoothed over time by a Gaussian of sigma
+    ``smooth_s`` (s; :func:`~markovmotion.features.smoothing.smooth_gaps`), then, with
+    ``constant_bones``, each segment given its median length
+    (:func:`~markovmotion.features.body_points.with_bone_lengths`; after the smoothing, so the
+    lengths stay exact)."""
+    if smooth_s > 0:
+        from markovmotion.features.smoothing import smooth_gaps
+
+        points = smooth_gaps(points, smooth_s * fps)
+    if constant_bones:
+        points = with_bone_lengths(points, bone_lengths(points))
+    return points
+
+
 def track_monocular(
     video: str | os.PathLike[str],
     camera: CalibratedCamera,
@@ -409,6 +434,7 @@ def track_monocular(
     snap: bool = True,
     left_right: str = "continuity",
     constant_bones: bool = True,
+    smooth_s: float = 0.0,
 ) -> MonocularTrack:
     """Track the person of one camera's video in 3-D (module docstring): body points in the
     world's mm, scaled so the feet rest on ``floor`` (None: MediaPipe's size), or so the
@@ -417,7 +443,10 @@ def track_monocular(
     (:func:`~markovmotion.video.left_right.consistent_sides`), with the prior that the person
     faces the camera for ``"facing"``. ``constant_bones``: each segment of the body points
     given its median length over the video
-    (:func:`~markovmotion.features.body_points.with_bone_lengths`)."""
+    (:func:`~markovmotion.features.body_points.with_bone_lengths`). ``smooth_s``: the points
+    first smoothed over time by a Gaussian of that sigma (s; offline, the whole video:
+    :func:`finished_points`; ``track --method monocular`` uses
+    :data:`MONOCULAR_SMOOTHING_S`)."""
     if left_right not in LEFT_RIGHT:
         raise ValueError(f"left_right must be one of {', '.join(LEFT_RIGHT)}, got {left_right!r}")
     t0 = time.perf_counter()
@@ -454,9 +483,7 @@ def track_monocular(
         scale = 1.0
     world = camera.centre + scale * (world - camera.centre)
     conf = np.where(placed, np.where(lm.found[:, None], lm.visibility, 0.0).mean(axis=1), 0.0)
-    points = to_body_points(world)
-    if constant_bones:
-        points = with_bone_lengths(points, bone_lengths(points))
+    points = finished_points(to_body_points(world), fps, smooth_s, constant_bones)
     return MonocularTrack(points, conf, scale, fps, time.perf_counter() - t0, lm, world)
 
 
@@ -592,10 +619,12 @@ def track_monocular_video(
     stature: float | None = None,
     reference: str | os.PathLike[str] | None = None,
     left_right: str = "continuity",
+    smooth: float | None = None,
 ) -> tuple[MonocularTrack, dict]:
     """Track one camera's video (a folder with ``cameras.json``: its first camera; a video
     file: the camera naming it, see :func:`~markovmotion.video.cameras.camera_of_video`);
-    the track and a JSON-ready summary (with ``reference``, its errors)."""
+    the track and a JSON-ready summary (with ``reference``, its errors). ``smooth``: the
+    track's smoothing over time (s, a Gaussian's sigma; None: :data:`MONOCULAR_SMOOTHING_S`)."""
     from markovmotion.video.cameras import (
         camera_file,
         camera_of_video,
@@ -609,7 +638,10 @@ def track_monocular_video(
         cam, path = cams[camera_of_video(cams, video)], Path(video)
     else:
         cam, path = cams[0], camera_videos(where, cams[:1])[0]
-    tr = track_monocular(path, cam, float(doc["fps"]), max_frames, stature, left_right=left_right)
+    sigma = MONOCULAR_SMOOTHING_S if smooth is None else smooth
+    tr = track_monocular(
+        path, cam, float(doc["fps"]), max_frames, stature, left_right=left_right, smooth_s=sigma
+    )
     n = len(tr.points)
     summary = {
         "method": "monocular",
@@ -620,6 +652,8 @@ def track_monocular_video(
         "video_fps": tr.fps,
         "scale": round(tr.scale, 4),
         "left_right": left_right,
+        "smoothing_s": round(sigma, 4),
+        "smoothing_chosen_by": "fixed: chosen on rendered kinds" if smooth is None else "--smooth",
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
