@@ -51,6 +51,7 @@ from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import track_video
 from markovmotion.video.multiview import (
     collection_body_model,
+    points_errors,
     render_multiview,
     tracking_errors,
     training_body_model,
@@ -106,15 +107,14 @@ def floor(body, truth: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def triangulated_row(kind: str, take, folder: Path, truth, args) -> dict:
+def triangulated_row(kind: str, take, folder: Path, truth) -> dict:
     """The row of ``--method triangulate`` (no body model: MediaPipe in the 3 views,
     triangulated, glitches out, smoothed by the width the left-out cameras choose)."""
     t0 = time.perf_counter()
     tr, s = track_triangulated_video(folder)
     seconds = time.perf_counter() - t0
-    true = body_points(truth)[: len(tr.points)]
-    dist = np.linalg.norm(tr.points[: len(true)] - true, axis=-1)
-    mpjpe = round(float(np.nanmean(dist)), 1)
+    err = points_errors(tr.points, tr.fps, truth)
+    mpjpe = err["mpjpe_mm"]
     return {
         "kind": kind,
         "take": take.file,
@@ -124,7 +124,7 @@ def triangulated_row(kind: str, take, folder: Path, truth, args) -> dict:
         "body_size": "-",
         "mpjpe_mm": mpjpe,
         "mpjpe_runs": [mpjpe],
-        "limbs_mm": round(float(np.nanmean(dist[:, LIMBS])), 1),
+        "limbs_mm": round(float(np.mean([err["per_joint_mm"][p] for p in GUIDE_POINTS])), 1),
         "floor_mm": None,
         "floor_limbs_mm": None,
         "fps": round(len(tr.points) / seconds, 2),  # with MediaPipe's time
@@ -220,7 +220,7 @@ def main() -> None:
             if not args.json:  # as each run ends (the table comes at the end)
                 print(json.dumps(rows[-1]), flush=True)
         if "triangulate" in args.models.split(","):
-            rows.append(triangulated_row(kind, take, folder, truth, args))
+            rows.append(triangulated_row(kind, take, folder, truth))
             if not args.json:  # as each run ends (the table comes at the end)
                 print(json.dumps(rows[-1]), flush=True)
     if args.json:

@@ -378,6 +378,11 @@ def test_respond_triangulate_needs_every_camera(real_video, partner_models, tmp_
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "needs the folder of every camera" in err and len(err.strip().splitlines()) == 1
+    # the camera file names every camera as well as its folder does
+    main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+          str(real_video / "cameras.json"), "--method", "triangulate", "--max-frames", "5",
+          "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert "5 frames in 4 views, triangulated" in capsys.readouterr().err
 
 
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -154,3 +155,49 @@ def test_sync_needs_every_camera_and_a_writable_file(real_copy, capsys, monkeypa
     assert (real_copy / "cameras.json").read_bytes() == before
     err = capsys.readouterr().err.strip()
     assert "cannot write the offsets here" in err and len(err.splitlines()) == 1
+
+
+def test_a_camera_that_cannot_be_measured_is_said_and_not_written(real_copy, capsys):
+    """On 8 frames too few landmarks are seen in camera 1 and the first camera together: it is
+    'not measured' (JSON None), the cameras are not called in step, and --write refuses."""
+    from markovmotion.video.sync import MIN_PAIRS
+
+    cams, _ = load_cameras(real_copy)
+    fps, frames = 30.0, 8
+    pts = _moving_landmarks(frames, fps)
+    pix = np.stack([c.project(pts.reshape(-1, 3))[0].reshape(frames, 33, 2) for c in cams])
+    vis = np.ones(pix.shape[:3])
+    vis[1, :, : 33 - MIN_PAIRS // frames + 2] = 0.0  # camera 1 sees too little
+    result = estimate_offsets(ViewLandmarks(cams, pix, vis), fps)
+    assert not result.measured[1] and result.measured[[0, 2, 3]].all()
+    assert not result.in_step and result.summary(fps)["cam1"]["offset_frames"] is None
+    from markovmotion.errors import MotionFormatError
+    from markovmotion.video.sync import write_skips
+
+    with pytest.raises(MotionFormatError, match="cam1 could not be measured"):
+        write_skips(real_copy, result)
+
+
+def test_skipped_frames_are_counted_everywhere_and_a_skip_past_the_end_is_one_line(
+    real_copy, capsys
+):
+    """A camera skipping 60 of its 100 frames: its reader gives 40, the progress bar expects
+    40, the background is spread over those 40; skipping 150 is one line naming the camera."""
+    from markovmotion.video.render import expected_frames, read_frames, spread_frames
+
+    cams, _ = load_cameras(real_copy)
+    cam = dataclasses.replace(cams[0], skip=60)
+    video = real_copy / cam.video
+    assert sum(1 for _ in read_frames(video, cam)) == 40
+    assert expected_frames([video], None, [cam]) == 40
+    assert len(spread_frames(video, 31, cam)) == 31
+    doc = json.loads((real_copy / "cameras.json").read_text())
+    doc["cameras"][0]["skip_frames"] = 150
+    (real_copy / "cameras.json").write_text(json.dumps(doc))
+    for method in ("monocular", "triangulate"):
+        with pytest.raises(SystemExit) as exc:
+            main(["track", "--video", str(real_copy), "--method", method])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert "camera cam0 skips 150 frames (skip_frames) but its video has 100" in err, err
+        assert len(err.splitlines()) == 1

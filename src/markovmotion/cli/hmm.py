@@ -423,7 +423,7 @@ def _respond_video(
     """``respond --video``: track A, generate B, composite B into the video (live with
     ``realtime``; A by the monocular front end with ``method="monocular"``)."""
     from markovmotion.models.hmm.dual import DualHMM
-    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras, lone_video
     from markovmotion.video.composite import respond_in_video, respond_mediapipe
     from markovmotion.video.multiview import default_body_model
 
@@ -440,7 +440,7 @@ def _respond_video(
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
     guided, note = False, None
     if method == "apf" and not realtime:
-        lone = video.is_file() and video.suffix.lower() != ".json"
+        lone = lone_video(video)
         guided, note = guide_for(guide, doc, 1 if lone else len(cams))
     check_person(
         person, cams if not video.is_file() else cams[:1], guided or method == "triangulate"

@@ -100,6 +100,7 @@ def sync(
 
     result, fps, where = sync_video(video, cameras, max_lag, max_frames)
     summary = {"fps": fps, "cameras": result.summary(fps), "in_step": result.in_step}
+    summary["measured"] = bool(result.measured.all())
     if write:
         summary["wrote"] = str(write_skips(where, result))
     if json_out:
@@ -111,6 +112,12 @@ def sync(
                 f"{name}: the camera the others are measured against", highlight=False
             )
             continue
+        if c["offset_frames"] is None:
+            err_console.print(
+                f"{name}: not measured (too few landmarks seen in it and the first camera)",
+                highlight=False,
+            )
+            continue
         px = "-" if c["epipolar_px"] is None else f"{c['epipolar_px']:.2f}"
         none = "-" if c["epipolar_px_in_step"] is None else f"{c['epipolar_px_in_step']:.2f}"
         err_console.print(
@@ -120,7 +127,7 @@ def sync(
         )
     if write:
         err_console.print(f"wrote {summary['wrote']}", highlight=False)
-    elif not result.in_step:
+    elif not result.in_step and result.measured.all():
         err_console.print(f"--write records it in {where}", highlight=False)
 
 
@@ -221,15 +228,18 @@ def track(
         said = check_truth(truth, video, cameras)
         if said:
             err_console.print(said, highlight=False)
-    guided, note, cams = False, None, []
+    guided, note, cams, first_skip = False, None, [], 0
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
 
         where = camera_file(video, cameras)
         cams, doc = load_cameras(where)
+        first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
         if not video.is_file():
             camera_videos(where, cams)
-    if video.is_file() and video.suffix.lower() != ".json":  # one camera's video
+    from markovmotion.video.cameras import lone_video
+
+    if lone_video(video):  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
     if method == "apf":
         guided, note = guide_for(guide, doc, min(len(cams), views or len(cams)))
@@ -272,7 +282,7 @@ def track(
             size = body_size_from_points(body, tr.points)
         except ValueError as exc:
             raise MotionFormatError(video, f"cannot measure the body size ({exc})") from None
-    if size == "views" and video.is_file() and video.suffix.lower() != ".json":
+    if size == "views" and lone_video(video):
         raise MotionFormatError(video, "--body-size views needs the folder of every camera")
     if size not in ("template", "views"):
         from markovmotion.video.body_size import scaled_body
@@ -318,7 +328,9 @@ def track(
         from markovmotion.features.body_points import body_points
         from markovmotion.video.monocular import reference_errors
 
-        summary["reference"] = reference_errors(body_points(motion), reference)
+        summary["reference"] = reference_errors(
+            body_points(motion), reference, first_frame=first_skip
+        )
     if size not in ("template", "views"):
         summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:

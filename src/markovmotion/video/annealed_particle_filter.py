@@ -67,6 +67,7 @@ from markovmotion.video.cameras import (
     camera_of_video,
     camera_videos,
     load_cameras,
+    lone_video,
 )
 from markovmotion.video.monocular import mediapipe_installed
 from markovmotion.video.render import expected_frames, read_frames, shortest_note
@@ -851,7 +852,7 @@ def open_video(
     """
     cams_path = camera_file(video, cameras_file)
     cameras, doc = load_cameras(cams_path)
-    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+    if lone_video(video):
         k = camera_of_video(cameras, video)  # one camera's video
         cameras, videos = [cameras[k]], [Path(video)]
     else:
@@ -999,7 +1000,7 @@ def track_video(
         body, mv.cameras, particles, layers, fps=mv.fps, seed=seed, start=start, sides=check,
         guide=guided,
     )  # fmt: skip
-    total = expected_frames(mv.videos, max_frames)
+    total = expected_frames(mv.videos, max_frames, mv.cameras)
     result = track_features(mv.features(seed), apf, total, mv.source)
     result.background_notes = mv.background_notes
     result.video_notes = [*mv.video_notes, *result.video_notes]

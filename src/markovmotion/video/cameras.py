@@ -248,6 +248,13 @@ def read_distortion(path: Path, where: str, value: object) -> tuple[float, ...]:
     return tuple(a.tolist()) if a.any() else ()
 
 
+def lone_video(video: str | os.PathLike[str]) -> bool:
+    """Whether ``--video`` names one camera's video file (not the folder of every camera, nor
+    their ``cameras.json``)."""
+    video = Path(video)
+    return video.is_file() and video.suffix.lower() != ".json"
+
+
 def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
     """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
     ``video`` or beside the video file ``video``.
@@ -260,7 +267,7 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
         raise MotionFormatError(video, "no such video file or folder")
     if cameras is not None:
         return Path(cameras)
-    if video.is_file() and video.suffix.lower() != ".json":
+    if lone_video(video):
         return video.parent / CAMERAS_FILE
     return video
 

@@ -37,6 +37,7 @@ from markovmotion.video.cameras import (
     camera_of_video,
     camera_videos,
     load_cameras,
+    lone_video,
 )
 from markovmotion.video.multiview import track_take
 from markovmotion.video.render import BodyShape, read_frames, write_video
@@ -183,7 +184,7 @@ def respond_in_video(
     dual = _load_partner_model(model)
     where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
-    single = Path(video).is_file()
+    single = lone_video(video)
     if single:  # one camera's video: that camera
         view = camera_of_video(cams, video)
     if view is not None and not 0 <= view < len(cams):
@@ -244,7 +245,7 @@ def respond_mediapipe(
     dual = _load_partner_model(model)
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
-    if Path(video).is_file():
+    if lone_video(video):  # one camera's video
         if tracker == "triangulate":
             raise MotionFormatError(video, "--method triangulate needs the folder of every camera")
         view = camera_of_video(cams, video)
@@ -329,7 +330,7 @@ def _track_live(
 
     dual = _load_partner_model(model)
     mv = open_video(video, cameras, None, max_frames)  # before the clock
-    if Path(video).is_file():
+    if lone_video(video):
         view = 0
     if not 0 <= view < len(mv.cameras):
         raise MotionFormatError(mv.source, f"no camera {view}: the video has {len(mv.cameras)}")

@@ -68,7 +68,7 @@ from markovmotion.features.body_points import (
     with_bone_lengths,
 )
 from markovmotion.progress import track
-from markovmotion.video.cameras import CalibratedCamera
+from markovmotion.video.cameras import CalibratedCamera, lone_video
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 from markovmotion.video.left_right import OnlineSides, consistent_sides
 from markovmotion.video.render import expected_frames, read_frames
@@ -463,7 +463,7 @@ def track_monocular(
         itertools.chain([first], frames),
         max_frames,
         f"MediaPipe {camera.name}",
-        expected_frames([video], max_frames),
+        expected_frames([video], max_frames, [camera]),
     )
     if left_right == "online":
         pixels, world_lm, vis = online_sides(lm)
@@ -571,16 +571,22 @@ def kabsch_align(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
 
 
 def reference_errors(
-    points: np.ndarray, reference: str | os.PathLike[str], joints: Sequence[str] = BODY_POINTS
+    points: np.ndarray,
+    reference: str | os.PathLike[str],
+    joints: Sequence[str] = BODY_POINTS,
+    first_frame: int = 0,
 ) -> dict:
     """Mean error (mm) of (F, P, 3) tracked ``points`` (named ``joints``) against a reference
     CSV (:func:`read_reference`): over its 12 joints, per joint, with and without each frame's
     rigid alignment (on the joints known in both). Every joint known in both counts, also in
     a frame where another is unknown (a triangulation from two views misses single joints:
     leaving out the whole frame dropped 13 of 40); frames with none are counted as
-    ``frames_missing``, unknown joints of the others as ``joints_missing``."""
+    ``frames_missing``, unknown joints of the others as ``joints_missing``. The reference's
+    frames are numbered in the first camera's video; ``first_frame``: the video frame that is
+    the track's first (the camera's ``skip_frames``)."""
     frames, ref = read_reference(reference)
-    keep = frames < len(points)
+    frames = frames - first_frame
+    keep = (frames >= 0) & (frames < len(points))
     frames, ref = frames[keep], ref[keep]
     idx = [list(joints).index(j) for j in REFERENCE_JOINTS]
     mine = points[frames][:, idx]
@@ -634,7 +640,7 @@ def track_monocular_video(
 
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
-    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+    if lone_video(video):
         cam, path = cams[camera_of_video(cams, video)], Path(video)
     else:
         cam, path = cams[0], camera_videos(where, cams[:1])[0]
@@ -657,7 +663,7 @@ def track_monocular_video(
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
-        errors = reference_errors(tr.points, reference)
+        errors = reference_errors(tr.points, reference, first_frame=cams[0].skip)
         # flat, as before, and under "reference" as the particle filter's summary has them
         summary.update(errors, reference=errors)
     return tr, summary

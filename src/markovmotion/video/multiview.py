@@ -340,15 +340,16 @@ def truth_errors(
 ) -> dict:
     """``track --truth``: tracked body points (F, 19, 3) at ``fps`` against a rendered take's
     capture (:func:`points_errors`), aligned by the ``start_frame`` ``video render`` wrote in
-    the camera file."""
+    the camera file (and the first camera's ``skip_frames``: the track starts there)."""
     from markovmotion.video.cameras import camera_file, load_cameras
 
-    _, doc = load_cameras(camera_file(video, cameras))
+    cams, doc = load_cameras(camera_file(video, cameras))
     start = doc.get("start_frame", 0)
+    start = (start if isinstance(start, int) else 0) + cams[0].skip
     true = read_listed_motion(truth)
     if not np.isclose(true.fps, fps):
         true = true.resample(fps)
-    return points_errors(points, fps, true.trim(start if isinstance(start, int) else 0))
+    return points_errors(points, fps, true.trim(start))
 
 
 #: ``--guide``: ``auto`` (the default) is ``mediapipe`` for real video, ``none`` for rendered.

@@ -344,6 +344,7 @@ def read_frames(
     path = Path(path)
     fix = camera.undistorter() if camera is not None else None
     skip = camera.skip if camera is not None else 0
+    n = -1
     for n, frame in enumerate(_decoded(path)):
         if n < skip:
             continue
@@ -353,6 +354,11 @@ def read_frames(
                 f"of its video is {frame.shape[1]}x{frame.shape[0]}",
             )  # fmt: skip
         yield frame if fix is None else fix(frame)
+    if n + 1 <= skip and skip and camera is not None:
+        raise MotionFormatError(
+            path,
+            f"camera {camera.name} skips {skip} frames (skip_frames) but its video has {n + 1}",
+        )
 
 
 def _decoded(path: Path) -> Iterator[np.ndarray]:
@@ -406,7 +412,7 @@ def spread_frames(
     Raises:
         MotionFormatError: no frames.
     """
-    n = frame_count(video)
+    n = frame_count(video) - (camera.skip if camera is not None else 0)  # those read_frames gives
     keep = set(np.linspace(0, max(n - 1, 0), min(frames, max(n, 1))).round().astype(int).tolist())
     stack = [f for i, f in enumerate(read_frames(video, camera)) if i in keep]
     if not stack:
@@ -415,11 +421,16 @@ def spread_frames(
 
 
 def expected_frames(
-    videos: Sequence[str | os.PathLike[str]], max_frames: int | None = None
+    videos: Sequence[str | os.PathLike[str]],
+    max_frames: int | None = None,
+    cameras: Sequence[CalibratedCamera] | None = None,
 ) -> int | None:
     """How many frames the videos give together, from their files' own counts (not decoded:
-    for a progress bar), at most ``max_frames``; None when a count is unknown."""
+    for a progress bar), less each of ``cameras``' skipped frames, at most ``max_frames``;
+    None when a count is unknown."""
     counts = [frame_count(path, decode=False) for path in videos]
+    if cameras is not None:
+        counts = [n - c.skip if n > 0 else n for n, c in zip(counts, cameras, strict=True)]
     if not counts or min(counts) <= 0:
         return max_frames
     return min(counts) if max_frames is None else min(min(counts), max_frames)

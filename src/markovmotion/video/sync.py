@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from markovmotion.video.cameras import CalibratedCamera
+from markovmotion.video.cameras import CalibratedCamera, lone_video
 from markovmotion.video.monocular import MIN_VISIBILITY
 
 if TYPE_CHECKING:
@@ -75,18 +75,21 @@ def epipolar_distances(f: np.ndarray, x0: np.ndarray, x1: np.ndarray) -> np.ndar
 @dataclass
 class SyncResult:
     """Per camera: its offset to camera 0 in frames (camera 0's frame ``f`` shows the moment of
-    this camera's frame ``f + offset``), the score (px) at that offset and without one, and
-    the landmark pairs scored."""
+    this camera's frame ``f + offset``), the score (px) at that offset and without one, the
+    landmark pairs scored, and whether it could be measured (too few landmarks seen in both
+    it and camera 0: offset 0, scores NaN)."""
 
     names: list[str]
     offsets: np.ndarray
     score_px: np.ndarray
     score_none_px: np.ndarray
     pairs: np.ndarray
+    measured: np.ndarray
 
     @property
     def in_step(self) -> bool:
-        return not self.offsets.any()
+        """Every camera measured, and none offset."""
+        return bool(self.measured.all()) and not self.offsets.any()
 
     def skips(self, current: np.ndarray | None = None) -> np.ndarray:
         """Each camera's frames to skip so that all start together, from the ``current``
@@ -99,18 +102,19 @@ class SyncResult:
         """JSON-ready, per camera."""
         return {
             n: {
-                "offset_frames": int(o),
-                "offset_s": round(float(o) / fps, 4),
+                "offset_frames": int(o) if m else None,
+                "offset_s": round(float(o) / fps, 4) if m else None,
                 "epipolar_px": _px(s),
                 "epipolar_px_in_step": _px(z),
                 "pairs": int(p),
             }
-            for n, o, s, z, p in zip(
+            for n, o, s, z, p, m in zip(
                 self.names,
                 self.offsets,
                 self.score_px,
                 self.score_none_px,
                 self.pairs,
+                self.measured,
                 strict=True,
             )  # fmt: skip
         }
@@ -126,11 +130,14 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
     cams = views.cameras
     v_n, f_n, _ = views.visibility.shape
     seen = (views.visibility >= MIN_VISIBILITY) & np.isfinite(views.pixels).all(axis=-1)
-    max_lag = int(min(round(max_lag_s * fps), max(0, f_n // 2)))
+    # every offset scored on most of the clip (an offset over half of it picked wrong ones)
+    max_lag = int(min(round(max_lag_s * fps), max(0, f_n // 4)))
     offsets = np.zeros(v_n, int)
     best = np.full(v_n, np.nan)
     none = np.full(v_n, np.nan)
     pairs = np.zeros(v_n, int)
+    measured = np.zeros(v_n, bool)
+    measured[0] = True
     for v in range(1, v_n):
         f = fundamental(cams[0], cams[v])
         cap = CAP_ANGLE * 0.5 * (cams[0].focal + cams[v].focal)
@@ -147,6 +154,7 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
             counts[lag] = n
         if 0 not in scores:
             continue
+        measured[v] = True
         lag = min(scores, key=scores.get)
         none[v], best[v], pairs[v] = scores[0], scores[lag], counts[lag]
         if scores[lag] <= MIN_GAIN * scores[0] and scores[0] - scores[lag] >= MIN_GAIN_PX:
@@ -154,18 +162,25 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
         else:
             best[v], pairs[v] = scores[0], counts[0]
     best[0] = none[0] = 0.0
-    return SyncResult([c.name for c in cams], offsets, best, none, pairs)
+    return SyncResult([c.name for c in cams], offsets, best, none, pairs, measured)
 
 
 def write_skips(path: str | os.PathLike[str], result: SyncResult) -> Path:
     """Record ``result`` in the camera file at ``path`` (atomically): each camera's
     ``skip_frames`` grows by what aligns it (:meth:`SyncResult.skips`); the rest is kept."""
+    from markovmotion.errors import MotionFormatError
     from markovmotion.io.files import atomic_write
     from markovmotion.video.cameras import CAMERAS_FILE, load_cameras
 
     path = Path(path)
     if path.is_dir():
         path = path / CAMERAS_FILE
+    lost = [n for n, m in zip(result.names, result.measured, strict=True) if not m]
+    if lost:
+        raise MotionFormatError(
+            path, f"{', '.join(lost)} could not be measured (too few landmarks seen in it and "
+            f"{result.names[0]}): nothing written",
+        )  # fmt: skip
     cams, _ = load_cameras(path)
     doc = json.loads(path.read_text(encoding="utf-8"))
     skips = result.skips(np.array([c.skip for c in cams[: len(result.offsets)]]))
@@ -178,8 +193,6 @@ def write_skips(path: str | os.PathLike[str], result: SyncResult) -> Path:
         with atomic_write(path, "w") as fh:
             json.dump(doc, fh, indent=1)
     except OSError as exc:
-        from markovmotion.errors import MotionFormatError
-
         raise MotionFormatError(path, f"cannot write the offsets here ({exc.strerror})") from None
     return path
 
@@ -200,7 +213,7 @@ def sync_video(
 
     where = camera_file(video, cameras)
     where = where / CAMERAS_FILE if where.is_dir() else where
-    if Path(video).is_file() and Path(video).suffix.lower() != ".json":
+    if lone_video(video):
         raise MotionFormatError(video, "syncing needs the folder of every camera")
     cams, doc = load_cameras(where)
     if len(cams) < 2:

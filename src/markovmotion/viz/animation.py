@@ -586,10 +586,7 @@ def _frames(
     if follow is not None:  # the window glides along its path, as much wider as that leaves it
         path = np.stack([_smooth_path(c, fps) for c in follow.centres])
         half = follow.half + np.abs(path - follow.centres).max(axis=(0, 1))
-        for panel in stage.panels:  # the floor reaches as far as the window does
-            panel.half = half
-            reach = float(half.max()) / np.sin(ELEVATION)  # depth is foreshortened
-            panel.grid = _floor_grid(panel.floor, panel.step, stage.ground, stage.camera, reach)
+        _follow_floor(stage, half)
     aspect = stage.aspect
     rows, cols = (n, 1) if aspect > STACK_ASPECT else (1, n)  # wide views one above another
     fig, axes = _figure(rows, cols, aspect, title, PANEL_HEIGHT, MAX_HEIGHT, _background(stage))
@@ -787,6 +784,15 @@ def _background(stage: _Stage) -> str:
 FOLLOW_SMOOTH_S = 1.0
 
 
+def _follow_floor(stage: _Stage, half: np.ndarray) -> None:
+    """Give every panel the window ``half`` that follows its people, and a floor grid that
+    reaches as far as that window does wherever it goes (depth is foreshortened)."""
+    reach = float(half.max()) / np.sin(ELEVATION)
+    for panel in stage.panels:
+        panel.half = half
+        panel.grid = _floor_grid(panel.floor, panel.step, stage.ground, stage.camera, reach)
+
+
 def _smooth_path(centres: np.ndarray, fps: float) -> np.ndarray:
     """Window centres (T, 2) averaged over :data:`FOLLOW_SMOOTH_S` (ends held)."""
     from scipy.ndimage import uniform_filter1d
@@ -847,7 +853,9 @@ def _strip(
 ) -> Path:
     stage = _Stage.build(tracks, side_by_side, times.max(), point_light)
     follow = _follow_window(stage, times)
-    aspect = stage.aspect if follow is None else float(follow.half[0] / follow.half[1])
+    if follow is not None:
+        _follow_floor(stage, follow.half)
+    aspect = stage.aspect
     height = PANEL_HEIGHT * 0.6
     most = int(np.clip(MAX_WIDTH // (height * aspect), 1, len(times)))
     wraps = -(-len(times) // most)
