@@ -593,7 +593,9 @@ def _frames(
     drawn = []
     for r, (ax, panel) in enumerate(zip(axes, stage.panels, strict=True)):
         figs, grid = stage.populate(ax, panel, animated=True)
-        clock = ax.text(0.99, 0.985, "", transform=ax.transAxes, ha="right", va="top")
+        # below the panel's name, which may be as wide as the panel
+        top = 0.985 - (0.05 if stage.caption(panel) and not stage.point_light else 0.0)
+        clock = ax.text(0.99, top, "", transform=ax.transAxes, ha="right", va="top")
         clock.set_animated(True)
         clock.set_visible(not stage.point_light)
         poses = {i: stage.pose(i, times) for i, _ in figs}
