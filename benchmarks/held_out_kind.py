@@ -136,6 +136,20 @@ def triangulated_row(kind: str, take, folder: Path, truth) -> dict:
     }
 
 
+#: The 11 kinds the docs' tables are measured on (one per category of the collection's
+#: skeleton takes when they were made).
+ELEVEN_KINDS = "indian_dance,salsa,martial_arts,run,punch,normal,active,swordplay,bend,jump,wash"
+
+
+def rendered_kinds(args: argparse.Namespace):
+    """``(kind, folder, truth)`` of each of ``args.kinds`` from the index at ``args.data``
+    (:func:`kind_arguments`), rendered once into ``args.cache`` (:func:`rendered`)."""
+    index = MocapIndex.load(args.data)
+    for kind in args.kinds.split(","):
+        _, folder, truth = rendered(index, kind, args.seconds, args.start, args.cache)
+        yield kind, folder, truth
+
+
 def kind_arguments(description: str, kinds: str | None = None) -> argparse.ArgumentParser:
     """A parser with the options of the rendered kinds (:func:`rendered`): --data, --kinds
     (default ``kinds``, else :func:`default_kinds`), --seconds, --start, --cache."""

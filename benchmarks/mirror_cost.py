@@ -15,7 +15,7 @@ reported: the cross-validated error beside each fixed cost's.
 from __future__ import annotations
 
 import numpy as np
-from held_out_kind import LIMBS, kind_arguments, rendered
+from held_out_kind import ELEVEN_KINDS, LIMBS, kind_arguments, rendered_kinds
 from rich.console import Console
 from rich.table import Table
 
@@ -29,8 +29,6 @@ from markovmotion.video.triangulation import (
     views_sides,
 )
 
-KINDS = "indian_dance,salsa,martial_arts,run,punch,normal,active,swordplay,bend,jump,wash"
-
 
 def limb_error(views: ViewLandmarks, truth: np.ndarray) -> float:
     """Mean distance (mm) of the triangulated limb joints from the true ones (F, 19, 3)."""
@@ -42,20 +40,16 @@ def limb_error(views: ViewLandmarks, truth: np.ndarray) -> float:
 def main() -> None:
     parser = kind_arguments(
         "Choose MIRROR_COST (the cost of taking, of a left/right labelling of the views and its mirror, the one that swaps every view) by leaving one kind of motion out: triangulated limb-joint error (mm) per kind and cost, and the cross-validated choice. About 3 min; renders are cached in --cache.",
-        KINDS,
+        ELEVEN_KINDS,
     )
     parser.add_argument("--costs", default="0,0.25,0.5,1,2,4", help="MIRROR_COST values")
     args = parser.parse_args()
 
-    from markovmotion.data import MocapIndex
-
-    index = MocapIndex.load(args.data)
     kinds = args.kinds.split(",")
     costs = [float(c) for c in args.costs.split(",")]
     errors = np.zeros((len(kinds), len(costs)))
     raw = np.zeros(len(kinds))
-    for k, kind in enumerate(kinds):
-        _, folder, truth = rendered(index, kind, args.seconds, args.start, args.cache)
+    for k, (_, folder, truth) in enumerate(rendered_kinds(args)):
         cams, _ = load_cameras(folder)
         views = ViewLandmarks.from_videos(camera_videos(folder, cams), cams)
         true = body_points(truth)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from held_out_kind import kind_arguments, rendered
+from held_out_kind import ELEVEN_KINDS, kind_arguments, rendered_kinds
 from rich.console import Console
 from rich.table import Table
 
@@ -32,8 +32,6 @@ from markovmotion.video.monocular import (
     track_monocular,
 )
 from markovmotion.video.triangulation import SMOOTHING_S
-
-KINDS = "indian_dance,salsa,martial_arts,run,punch,normal,active,swordplay,bend,jump,wash"
 
 
 def aligned_error(points: np.ndarray, truth: np.ndarray) -> float:
@@ -50,18 +48,14 @@ def main() -> None:
         "Choose MONOCULAR_SMOOTHING_S by leaving one kind of motion out: the rigidly aligned "
         "limb error (mm) of each camera's monocular track per smoothing sigma, and the "
         "cross-validated choice. About 2 min; renders are cached in --cache.",
-        KINDS,
+        ELEVEN_KINDS,
     )
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
 
-    from markovmotion.data import MocapIndex
-
-    index = MocapIndex.load(args.data)
     kinds = args.kinds.split(",")
     rows, names = [], []  # one per kind and camera: the error per sigma
-    for kind in kinds:
-        _, folder, truth = rendered(index, kind, args.seconds, args.start, args.cache)
+    for kind, folder, truth in rendered_kinds(args):
         cams, doc = load_cameras(folder)
         fps, true = float(doc["fps"]), body_points(truth)
         for cam, video in zip(cams, camera_videos(folder, cams), strict=True):
