@@ -99,8 +99,12 @@ def sync(
     from markovmotion.video.sync import sync_video, write_skips
 
     result, fps, where = sync_video(video, cameras, max_lag, max_frames)
-    summary = {"fps": fps, "cameras": result.summary(fps), "in_step": result.in_step}
-    summary["measured"] = bool(result.measured.all())
+    summary = {
+        "fps": fps,
+        "cameras": result.summary(fps),
+        "in_step": result.in_step,
+        "measured": bool(result.measured.all()),
+    }
     if write:
         summary["wrote"] = str(write_skips(where, result))
     if json_out:
@@ -228,17 +232,15 @@ def track(
         said = check_truth(truth, video, cameras)
         if said:
             err_console.print(said, highlight=False)
+    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras, lone_video
+
     guided, note, cams, first_skip = False, None, [], 0
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
-        from markovmotion.video.cameras import camera_file, camera_videos, load_cameras
-
         where = camera_file(video, cameras)
         cams, doc = load_cameras(where)
         first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
         if not video.is_file():
             camera_videos(where, cams)
-    from markovmotion.video.cameras import lone_video
-
     if lone_video(video):  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
     if method == "apf":
@@ -422,18 +424,12 @@ def _track_landmarks(
         tr, summary = track_triangulated_video(
             video, cameras, max_frames, reference, views, left_right, person, smooth
         )
-        where = (
-            f"{_views(summary['views'])}, smoothed over sigma "
-            f"{1000 * summary['smoothing_s']:.1f} ms ({summary['smoothing_chosen_by']})"
-        )
+        where = f"{_views(summary['views'])}, {_smoothed(summary)}"
     else:
         tr, summary = track_monocular_video(
             video, cameras, max_frames, stature, reference, left_right, smooth
         )
-        where = (
-            f"{summary['camera']}, scale {summary['scale']:.3f}, smoothed over sigma "
-            f"{1000 * summary['smoothing_s']:.1f} ms ({summary['smoothing_chosen_by']})"
-        )
+        where = f"{summary['camera']}, scale {summary['scale']:.3f}, {_smoothed(summary)}"
     if truth is not None:
         from markovmotion.video.multiview import truth_errors
 
@@ -460,6 +456,14 @@ def _track_landmarks(
             f"points) of {where} at {summary['fps']:.2f} frames/s{err}",
             highlight=False,
         )
+
+
+def _smoothed(summary: dict) -> str:
+    """How a MediaPipe track was smoothed over time, as the command's line says it."""
+    return (
+        f"smoothed over sigma {1000 * summary['smoothing_s']:.1f} ms "
+        f"({summary['smoothing_chosen_by']})"
+    )
 
 
 def _views(n: int) -> str:
