@@ -872,11 +872,17 @@ class Triangulated:
         missing = ~np.isfinite(self.landmarks).all(axis=-1)
         if not missing.any():
             return self, 0
-        low = triangulate_views(views, min_visibility=1e-6)
-        fill = missing & np.isfinite(low.landmarks).all(axis=-1)
-        landmarks = np.where(fill[..., None], low.landmarks, self.landmarks)
-        used = np.where(fill[None], low.used, self.used)
-        residual = np.where(fill, low.residual, self.residual)
+        # only the missing ones are triangulated again (each point is triangulated alone)
+        pts, used_low, worst = triangulate_points(
+            views.cameras, views.pixels[:, missing], views.visibility[:, missing]
+        )
+        got = np.isfinite(pts).all(axis=-1)
+        fill = np.zeros_like(missing)
+        fill[missing] = got
+        landmarks, used, residual = self.landmarks.copy(), self.used.copy(), self.residual.copy()
+        landmarks[fill] = pts[got]
+        used[:, fill] = used_low[:, got]
+        residual[fill] = worst[got]
         return replace(self, landmarks=landmarks, used=used, residual=residual), int(fill.sum())
 
     def smoothed(self, seconds: float, fps: float) -> Triangulated:

@@ -582,7 +582,8 @@ def _frames(
     with ``follow_people``, a window that follows people who travel (:func:`_follow_window`),
     its path smoothed over :data:`FOLLOW_SMOOTH_S`."""
     n = len(stage.panels)
-    follow = _follow_window(stage, times) if follow_people else None
+    every = {i: stage.pose(i, times) for i in range(len(stage.tracks))}  # once, for all below
+    follow = _follow_window(stage, times, every) if follow_people else None
     if follow is not None:  # the window glides along its path, as much wider as that leaves it
         path = np.stack([_smooth_path(c, fps) for c in follow.centres])
         half = follow.half + np.abs(path - follow.centres).max(axis=(0, 1))
@@ -598,7 +599,7 @@ def _frames(
         clock = ax.text(0.99, top, "", transform=ax.transAxes, ha="right", va="top")
         clock.set_animated(True)
         clock.set_visible(not stage.point_light)
-        poses = {i: stage.pose(i, times) for i, _ in figs}
+        poses = {i: every[i] for i, _ in figs}
         if follow is not None:  # the window moves: the people and the floor drawn shifted
             shift = path[r] - panel.centre
             poses = {
@@ -817,15 +818,19 @@ class _Follow:
     centres: np.ndarray
 
 
-def _follow_window(stage: _Stage, times: np.ndarray) -> _Follow | None:
+def _follow_window(
+    stage: _Stage, times: np.ndarray, poses: dict[int, tuple] | None = None
+) -> _Follow | None:
     """A window that holds every panel's people (and shadows) at any one of ``times``, and
     where it is at each, when the panels' windows are :data:`FOLLOW_RATIO` times wider than
-    it (the people travel: a 10 m walk left each person about 70 pixels tall); else None."""
+    it (the people travel: a 10 m walk left each person about 70 pixels tall); else None.
+    ``poses``: each track's :meth:`_Stage.pose` at ``times``, if already computed."""
+    poses = poses or {i: stage.pose(i, times) for i in range(len(stage.tracks))}
     half = np.zeros(2)
     centres = []
     for panel in stage.panels:
         pts = np.concatenate(
-            [np.concatenate(stage.pose(i, times)[:2], axis=1) for i in panel.tracks], axis=1
+            [np.concatenate(poses[i][:2], axis=1) for i in panel.tracks], axis=1
         )  # (T, M, 2): every track's joints and shadows
         with warnings.catch_warnings():  # a time with nothing shown (every point NaN)
             warnings.simplefilter("ignore", RuntimeWarning)
