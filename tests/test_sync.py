@@ -6,6 +6,7 @@ import dataclasses
 import json
 import shutil
 
+import cv2
 import numpy as np
 import pytest
 
@@ -188,7 +189,17 @@ def test_skipped_frames_are_counted_everywhere_and_a_skip_past_the_end_is_one_li
     cams, _ = load_cameras(real_copy)
     cam = dataclasses.replace(cams[0], skip=60)
     video = real_copy / cam.video
-    assert sum(1 for _ in read_frames(video, cam)) == 40
+    skipped = list(read_frames(video, cam))
+    whole = list(read_frames(video, dataclasses.replace(cam, skip=0)))
+    assert len(skipped) == 40 and all(
+        np.array_equal(a, b) for a, b in zip(skipped, whole[60:], strict=True)
+    )
+    folder = real_copy / "frames"  # a folder of images skips its first files
+    folder.mkdir()
+    for i, frame in enumerate(whole[58:63]):
+        cv2.imwrite(str(folder / f"{i:03d}.png"), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+    got = list(read_frames(folder, dataclasses.replace(cam, skip=2, distortion=())))
+    assert len(got) == 3 and np.array_equal(got[0], whole[60])
     assert expected_frames([video], None, [cam]) == 40
     assert len(spread_frames(video, 31, cam)) == 31
     doc = json.loads((real_copy / "cameras.json").read_text())

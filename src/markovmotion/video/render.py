@@ -345,28 +345,29 @@ def read_frames(
     fix = camera.undistorter() if camera is not None else None
     skip = camera.skip if camera is not None else 0
     n = -1
-    for n, frame in enumerate(_decoded(path)):
-        if n < skip:
-            continue
+    for n, frame in enumerate(_decoded(path, skip), start=skip):
         if camera is not None and frame.shape[:2] != (camera.height, camera.width):
             raise MotionFormatError(
                 path, f"camera {camera.name} is {camera.width}x{camera.height} but frame {n} "
                 f"of its video is {frame.shape[1]}x{frame.shape[0]}",
             )  # fmt: skip
         yield frame if fix is None else fix(frame)
-    if n + 1 <= skip and skip and camera is not None:
+    if n < skip and skip and camera is not None:
         raise MotionFormatError(
             path,
-            f"camera {camera.name} skips {skip} frames (skip_frames) but its video has {n + 1}",
+            f"camera {camera.name} skips {skip} frames (skip_frames) but its video has "
+            f"{frame_count(path)}",
         )
 
 
-def _decoded(path: Path) -> Iterator[np.ndarray]:
+def _decoded(path: Path, skip: int = 0) -> Iterator[np.ndarray]:
+    """RGB frames from frame ``skip`` on; the frames before are passed over unconverted
+    (a video's are decoded, ``grab``, as they must be; an image folder's are not read)."""
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
         if not files:
             raise MotionFormatError(path, "no PNG or JPEG frames in this folder")
-        for f in files:
+        for f in files[skip:]:
             img = cv2.imread(str(f), cv2.IMREAD_COLOR)
             if img is None:
                 raise MotionFormatError(f, "not an image")
@@ -379,6 +380,8 @@ def _decoded(path: Path) -> Iterator[np.ndarray]:
         raise MotionFormatError(path, "cannot read this video")
     try:
         n = 0
+        while n < skip and cap.grab():
+            n += 1
         while True:
             ok, img = cap.read()
             if not ok:
