@@ -124,9 +124,15 @@ def sync(
             continue
         px = "-" if c["epipolar_px"] is None else f"{c['epipolar_px']:.2f}"
         none = "-" if c["epipolar_px_in_step"] is None else f"{c['epipolar_px_in_step']:.2f}"
+        weak = (
+            f"; the best offset, {c['best_offset_frames']:+d} frames at "
+            f"{c['best_offset_px']:.2f} px, is not clearly better than none, so none is taken"
+            if c["best_offset_frames"] != c["offset_frames"]
+            else ""
+        )
         err_console.print(
             f"{name}: offset {c['offset_frames']:+d} frames ({c['offset_s']:+.3f} s); landmarks "
-            f"{px} px from their epipolar lines so (as they are: {none} px)",
+            f"{px} px from their epipolar lines so (as they are: {none} px){weak}",
             highlight=False,
         )
     if write:

@@ -41,10 +41,12 @@ MAX_LAG_S = 2.0
 #: A landmark's epipolar distance is capped at this many focal lengths (12 px at focal 400).
 CAP_ANGLE = 0.03
 #: An offset is taken when its score is at most this share of the score without one, and at
-#: least :data:`MIN_GAIN_PX` lower (a person standing still scores every offset alike; on
-#: the real 4-view video neighbouring offsets differ by 0.1-0.6 px, smoothly).
+#: least :data:`MIN_GAIN_ANGLE` focal lengths lower (a person standing still scores every
+#: offset alike; on the real 4-view video, focal 420 px, neighbouring offsets differ by 0.1-0.6
+#: px, smoothly). In focal lengths, so that the same video at half its size (every score
+#: halved) is judged alike.
 MIN_GAIN = 0.9
-MIN_GAIN_PX = 0.5
+MIN_GAIN_ANGLE = 0.5 / 420
 #: Fewest landmark pairs an offset must be scored on (else it is not tried).
 MIN_PAIRS = 200
 
@@ -77,7 +79,9 @@ class SyncResult:
     """Per camera: its offset to camera 0 in frames (camera 0's frame ``f`` shows the moment of
     this camera's frame ``f + offset``), the score (px) at that offset and without one, the
     landmark pairs scored, and whether it could be measured (too few landmarks seen in both
-    it and camera 0: offset 0, scores NaN)."""
+    it and camera 0: offset 0, scores NaN); ``best`` and ``best_px``: the offset that scored
+    least and its score, which differ from ``offsets`` where it was not clearly better than
+    none (:data:`MIN_GAIN`)."""
 
     names: list[str]
     offsets: np.ndarray
@@ -85,6 +89,8 @@ class SyncResult:
     score_none_px: np.ndarray
     pairs: np.ndarray
     measured: np.ndarray
+    best: np.ndarray
+    best_px: np.ndarray
 
     @property
     def in_step(self) -> bool:
@@ -107,14 +113,18 @@ class SyncResult:
                 "epipolar_px": _px(s),
                 "epipolar_px_in_step": _px(z),
                 "pairs": int(p),
+                "best_offset_frames": int(b) if m else None,
+                "best_offset_px": _px(bp),
             }
-            for n, o, s, z, p, m in zip(
+            for n, o, s, z, p, m, b, bp in zip(
                 self.names,
                 self.offsets,
                 self.score_px,
                 self.score_none_px,
                 self.pairs,
                 self.measured,
+                self.best,
+                self.best_px,
                 strict=True,
             )  # fmt: skip
         }
@@ -133,6 +143,8 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
     # every offset scored on most of the clip (an offset over half of it picked wrong ones)
     max_lag = int(min(round(max_lag_s * fps), max(0, f_n // 4)))
     offsets = np.zeros(v_n, int)
+    best_lag = np.zeros(v_n, int)
+    best_px = np.full(v_n, np.nan)
     best = np.full(v_n, np.nan)
     none = np.full(v_n, np.nan)
     pairs = np.zeros(v_n, int)
@@ -157,12 +169,15 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
         measured[v] = True
         lag = min(scores, key=scores.get)
         none[v], best[v], pairs[v] = scores[0], scores[lag], counts[lag]
-        if scores[lag] <= MIN_GAIN * scores[0] and scores[0] - scores[lag] >= MIN_GAIN_PX:
+        best_lag[v], best_px[v] = lag, scores[lag]
+        gain_px = MIN_GAIN_ANGLE * 0.5 * (cams[0].focal + cams[v].focal)
+        if scores[lag] <= MIN_GAIN * scores[0] and scores[0] - scores[lag] >= gain_px:
             offsets[v] = lag
         else:
             best[v], pairs[v] = scores[0], counts[0]
-    best[0] = none[0] = 0.0
-    return SyncResult([c.name for c in cams], offsets, best, none, pairs, measured)
+    best[0] = none[0] = best_px[0] = 0.0
+    names = [c.name for c in cams]
+    return SyncResult(names, offsets, best, none, pairs, measured, best_lag, best_px)
 
 
 def write_skips(path: str | os.PathLike[str], result: SyncResult) -> Path:
