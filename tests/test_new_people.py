@@ -489,7 +489,7 @@ def test_nested_crossval_reports_each_folds_pick(tmp_path, capsys):
 def test_evaluate_on_a_mixed_index_keeps_the_models_own_kind(mocap, tmp_path, capsys):
     """A marker partner evaluated on an index of marker and skeleton takes (the collection)
     answers the marker takes alone and lists the skeleton takes as of another kind, not in
-    one mean with them; a take whose A lacks a marker is listed with the marker named."""
+    one mean with them; a take whose A or B lacks a marker is listed with the marker named."""
     from markovmotion.cli import main
 
     pairs = mocap.pairs("handshake", kind="markers")
@@ -515,6 +515,15 @@ def test_evaluate_on_a_mixed_index_keeps_the_models_own_kind(mocap, tmp_path, ca
     left: list[str] = []
     assert not list(evaluation.pairs_that_fit(dual, index, [(a, b)], left))
     assert left == [f"{a.file} (markers not found: R_HAND)", b.file]
+    # person B without one of the model's markers: listed the same way, not a traceback
+    names = tuple("LEFT_HAND" if n == "L_HAND" else n for n in xb.names)
+    lacking = Markers(names, xb.positions, xb.fps, xb.name)
+    index = type("Index", (), {"load_pair": lambda self, ea, eb: (xa, lacking)})()
+    left = []
+    assert not list(evaluation.pairs_that_fit(dual, index, [(a, b)], left))
+    assert left == [a.file, f"{b.file} (markers not found: L_HAND)"]
+    index = type("Index", (), {"load_pair": lambda self, ea, eb: (xa, xb)})()
+    assert len(list(evaluation.pairs_that_fit(dual, index, [(a, b)], left))) == 1
 
 
 def test_choose_says_what_it_replaces_and_what_it_picked(tmp_path, capsys):

@@ -665,15 +665,21 @@ def own_kind(model: DualHMM, pairs: Sequence[Pair]) -> tuple[list[Pair], list[Pa
 def pairs_that_fit(
     model: DualHMM, index: MocapIndex, pairs: Iterable[Pair], other_skeleton: list[str]
 ) -> Iterator[tuple[Entry, Entry, Motion, Motion]]:
-    """The takes of ``pairs`` loaded, those whose person A the model can answer; the files
-    of the others (A on a skeleton without the model's body points, or without its markers)
-    go to ``other_skeleton``, each with why (``file (markers not found: R_HAND)``)."""
+    """The takes of ``pairs`` loaded, those whose person A the model can answer and whose
+    person B it can be compared with; the files of the others (A or B on a skeleton without
+    the model's body points, or without its markers) go to ``other_skeleton``, the one that
+    does not fit with why (``file (markers not found: R_HAND)``)."""
     for ea, eb in pairs:
         a, b = index.load_pair(ea, eb)
         try:
             model.check_input(a, ea.path)
         except SkeletonMismatchError as exc:
             other_skeleton += [f"{ea.file} ({exc.reason})", eb.file]
+            continue
+        try:
+            model.check_partner(b, eb.path)
+        except SkeletonMismatchError as exc:
+            other_skeleton += [ea.file, f"{eb.file} ({exc.reason})"]
             continue
         yield ea, eb, a, b
 

@@ -860,6 +860,30 @@ class DualHMM(Model):
                 f"{where}: person A's skeleton does not fit the model ({exc})", exc.reason
             ) from None
 
+    def check_partner(
+        self, motion: Motion | Markers, source: str | os.PathLike[str] | None = None
+    ) -> None:
+        """Raise :class:`SkeletonMismatchError` (naming ``source``) unless person B of a test
+        take can be compared with what the model generates (:meth:`body_positions`): on
+        markers, B's markers (or the virtual ones placed on B's skeleton) include the
+        model's B markers, by name; on skeletons, B's skeleton has the body points (a model
+        that compares every joint: B's skeleton is the model's)."""
+        try:
+            if self.uses_markers:
+                self.as_markers(motion).select(self.marker_names_b_)
+            elif isinstance(motion, Markers):
+                raise SkeletonMismatchError("markers, but the model generates a skeleton")
+            elif self.points == "all":
+                self.skeleton_b_.check_compatible(motion.skeleton, "partner")
+            else:
+                body_point_index(motion.skeleton, BODY_POINTS, "its skeleton")
+        except (KeyError, ValueError, SkeletonMismatchError) as exc:
+            reason = getattr(exc, "reason", None) or (exc.args[0] if exc.args else str(exc))
+            where = source or motion.name or "partner"
+            raise SkeletonMismatchError(
+                f"{where}: person B does not fit the model ({reason})", reason
+            ) from None
+
     def _check_markers(self, x: Motion | Markers, source: str | os.PathLike[str] | None) -> None:
         where = source or x.name or "input"
         if not self.uses_markers:
