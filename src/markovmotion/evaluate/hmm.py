@@ -333,7 +333,8 @@ def plot_pair(result: PairResult, path: str | os.PathLike[str]) -> Path:
         ax.plot(frames, err, style, label=f"{label} (mean {np.mean(err):.0f})", **extra)
     ax.set_xlabel(f"frame ({result.fps:g} fps)")
     ax.set_ylabel("Euclidean distance (mm)")
-    ax.set_title(f"Error of the generated behaviour: {result.name} ({result.label})")
+    # two lines: a take's name beside the words ran past the figure's left edge
+    ax.set_title(f"Error of the generated behaviour\n{result.name} ({result.label})")
     ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
     # outside the axes, to the right: over the curves it hid frames 70-75 of a take
