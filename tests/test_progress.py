@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 from markovmotion import progress
 
 
@@ -11,6 +13,16 @@ def test_long_work_logs_plain_lines_off_a_terminal(monkeypatch, capsys):
     assert list(progress.track(range(3), "fitting")) == [0, 1, 2]
     lines = capsys.readouterr().err.splitlines()
     assert [ln.split(",")[0] for ln in lines] == ["fitting: 1/3", "fitting: 2/3", "fitting: 3/3"]
+
+
+def test_long_work_that_printed_a_line_prints_its_end(monkeypatch, capsys):
+    """A line came at 1/3 (its 30 s were up); the work ends before the next 30 s: the end is
+    still printed, so that a log does not look as if the last steps were skipped."""
+    clock = itertools.chain([0.0], itertools.count(40.0))  # 40 s, then a second a call
+    monkeypatch.setattr(progress.time, "monotonic", lambda: next(clock))
+    assert list(progress.track(range(3), "leave-one-out")) == [0, 1, 2]
+    lines = capsys.readouterr().err.splitlines()
+    assert [ln.split(",")[0] for ln in lines] == ["leave-one-out: 1/3", "leave-one-out: 3/3"]
 
 
 def test_short_work_prints_nothing(capsys):

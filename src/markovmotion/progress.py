@@ -74,6 +74,7 @@ class _Progress(Progress):
     def __init__(self, *columns, **options):
         super().__init__(*columns, **options)
         self._logged_at = time.monotonic()
+        self._logged: set[TaskID] = set()  # tasks that printed a line: they print their end too
 
     def advance(self, task_id: TaskID, advance: float = 1) -> None:
         super().advance(task_id, advance)
@@ -84,11 +85,15 @@ class _Progress(Progress):
         self._log(task_id)
 
     def _log(self, task_id: TaskID) -> None:
+        if not self.disable:
+            return
         now = time.monotonic()
-        if not self.disable or now - self._logged_at < LOG_EVERY:
+        task = self._tasks[task_id]
+        ended = bool(task.total) and task.completed >= task.total and task_id in self._logged
+        if now - self._logged_at < LOG_EVERY and not ended:
             return
         self._logged_at = now
-        task = self._tasks[task_id]
+        self._logged.add(task_id)
         done = f"{task.completed:g}/{task.total:g}" if task.total else f"{task.completed:g}"
         self.console.print(
             f"{task.description}: {done}, {task.elapsed or 0.0:.0f} s", highlight=False
