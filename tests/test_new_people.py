@@ -614,3 +614,31 @@ def test_a_marker_never_seen_in_a_take_is_left_out_of_the_model_not_the_take(peo
     assert dual.respond(pairs[1][0]).n_frames > 0
     chain = VirtualPartner(n_state_prototypes=6, n_behaviour_prototypes=5, n_epochs=1).fit(pairs)
     assert "L_HAND" not in chain.markers_ and len(chain.markers_) == 7
+
+
+def test_evaluate_names_labels_that_are_not_there_and_actions_the_model_never_saw(
+    mocap, tmp_path, capsys
+):
+    """``evaluate --labels`` naming a label no take has is one line (as ``train`` does), not
+    ignored; a handshake model asked to answer waves says so in a note and answers; without
+    ``--test``, a label none of the held-out takes has says how to answer others."""
+    from markovmotion.cli import main
+
+    held = sorted({a.subject for a, _ in mocap.pairs("handshake", kind="markers")})[-1]
+    model = tmp_path / "m.npz"
+    main(["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
+          "--n-iter", "2", "--test-people", held, "--out", str(model)])  # fmt: skip
+    capsys.readouterr()
+    base = ["dualhmm", "evaluate", "--model", str(model)]
+    with pytest.raises(SystemExit) as exc:
+        main([*base, "--test", str(mocap.root), "--labels", "handshake,hug", "--json"])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1 and "'hug'" in err, err
+    with pytest.raises(SystemExit) as exc:
+        main([*base, "--labels", "wave", "--json"])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and "held out at training" in err and "--test" in err, err
+    main([*base, "--test", str(mocap.root), "--labels", "wave", "--json"])
+    captured = capsys.readouterr()
+    assert "the model learnt handshake, not wave" in captured.err
+    assert _strict_json(captured.out)["per_label"].keys() == {"wave"}

@@ -59,7 +59,7 @@ from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.contact import CONTACT_MM, right_hand
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
-from markovmotion.progress import track
+from markovmotion.progress import note, track
 from markovmotion.viz.plots import new_figure, save_figure
 
 METHODS = ("standard", "windowed", "mean_pose", "nearest_neighbour", "gmr", "known_motion")
@@ -624,13 +624,28 @@ def evaluation_pairs(
         DataNotFoundError: no take fits, or every one that does is a training take (one
             line listing them).
     """
-    wanted = list(labels or getattr(model, "labels_", None) or []) or None
+    learnt = list(getattr(model, "labels_", None) or [])
+    wanted = list(labels or learnt) or None
     if test is not None:
         index = MocapIndex.load(test)
     else:
         record = getattr(model, "data_index_", None)
         root = record.get("root") if isinstance(record, dict) else None
         index = MocapIndex.load(root if root and Path(root).is_dir() else None)
+    if labels:  # each label asked for is there, as train asks (a typo is not ignored)
+        there = sorted({a.label for a, _ in index.pairs()})
+        absent = [lab for lab in labels if lab not in there]
+        if absent:
+            raise DataNotFoundError(
+                f"no two-person take of {index.root / INDEX_NAME} is labelled "
+                f"{', '.join(map(repr, absent))}; its labels: {', '.join(there) or 'none'}"
+            )
+        if learnt and (other := [lab for lab in labels if lab not in learnt]):
+            note(
+                f"the model learnt {', '.join(learnt)}, not {', '.join(other)}: it answers "
+                "those takes as best it can, and the numbers say how it does on an action "
+                "it never saw"
+            )
     if trials is not None:
         pairs = select_pairs(index, wanted, trials, held_out=True)
     else:
@@ -644,7 +659,14 @@ def evaluation_pairs(
             )
         held = getattr(model, "held_out_files_", None)
         if test is None and held:
-            pairs = [p for p in pairs if p[0].file in held]
+            kept = [p for p in pairs if p[0].file in held]
+            if not kept:
+                raise DataNotFoundError(
+                    f"none of the {len(held)} files held out at training is a take labelled "
+                    f"{', '.join(wanted or [])}: give --test INDEX (or a folder) to answer "
+                    "other takes"
+                )
+            pairs = kept
     pairs, other_kind = own_kind(model, pairs)
     takes = test_takes(model, index, pairs, "two-person take")
     takes.other_kind = TestTakes._files(other_kind)
