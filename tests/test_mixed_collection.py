@@ -14,7 +14,7 @@ from conftest import make_motion
 
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
-from markovmotion.data.kinds import choose_kind, largest_group
+from markovmotion.data.kinds import KIND_WORDS, choose_kind, counted, largest_group
 from markovmotion.errors import DataNotFoundError
 from markovmotion.io import describe_take
 from markovmotion.models import Model
@@ -61,7 +61,7 @@ def test_choose_kind_takes_the_larger_group_and_says_so(mocap, capsys):
     assert [e.kind for e in kept] == ["markers"] * 3 and [e.kind for e in left] == ["skeleton"] * 2
     (line,) = _notes(capsys.readouterr().err)
     assert "both kinds" in line and "larger group" in line and "--kind" in line
-    assert "left out 2 skeleton" in line
+    assert "using the 3 takes of markers only" in line and "left out 2 takes of skeletons" in line
 
 
 def test_choose_kind_tie_goes_to_skeletons_and_the_asked_kind_wins(mocap, capsys):
@@ -71,7 +71,13 @@ def test_choose_kind_tie_goes_to_skeletons_and_the_asked_kind_wins(mocap, capsys
     kept, left = choose_kind(entries, "markers")
     assert {e.kind for e in kept} == {"markers"} and len(left) == 2
     (line,) = _notes(capsys.readouterr().err)
-    assert "--kind markers" in line and "left out 2 skeleton" in line
+    assert "--kind markers" in line and "left out 2 takes of skeletons" in line
+
+
+def test_counted_says_one_take_not_one_takes():
+    assert counted(1, "two-person takes") == "1 two-person take"
+    assert counted(2, "two-person takes") == "2 two-person takes"
+    assert counted(0, "findings") == "0 findings"
 
 
 def test_choose_kind_one_kind_says_nothing(mocap, capsys):
@@ -146,7 +152,8 @@ def test_dualhmm_trains_on_the_larger_kind_or_the_one_asked(tmp_path: Path, caps
     larger = max(both, key=lambda k: (len(both[k]), k == "skeleton"))
     other = "markers" if larger == "skeleton" else "skeleton"
     (line,) = _notes(err)
-    assert "both kinds" in line and f"left out {len(both[other])} {other}" in line
+    left = f"left out {counted(len(both[other]), 'two-person takes')} of {KIND_WORDS[other]}"
+    assert "both kinds" in line and left in line
     assert Model.load(out).uses_markers == (larger == "markers")
     for kind in ("skeleton", "markers"):
         code, err = _run(
@@ -170,7 +177,8 @@ def test_chain_trains_on_the_larger_kind_or_the_one_asked(tmp_path: Path, capsys
     larger = max(both, key=lambda k: (len(both[k]), k == "skeleton"))
     other = "markers" if larger == "skeleton" else "skeleton"
     (line,) = _notes(err)
-    assert "both kinds" in line and f"left out {len(both[other])} {other}" in line
+    left = f"left out {counted(len(both[other]), 'two-person takes')} of {KIND_WORDS[other]}"
+    assert "both kinds" in line and left in line
     assert VirtualPartner.load(out).uses_markers == (larger == "markers")
     for kind in ("skeleton", "markers"):
         code, err = _run(["chain", "train", "--label", LABEL, "--kind", kind, *small], capsys)
@@ -207,7 +215,7 @@ def test_vlmm_learns_markers_or_skeletons_by_kind(tmp_path: Path, capsys, mocap)
     code, err = _run([*base, "--prototypes", "12", "--out", str(out)], capsys)
     assert code == 0, err
     (line,) = _notes(err)
-    assert "learns from skeleton takes" in line and "markers" in line
+    assert "learns from skeletons" in line and "markers" in line
     code, err = _run([*base, "--kind", "markers", "--out", str(out)], capsys)
     assert code == 2 and len([ln for ln in err.splitlines() if ln.strip()]) == 1
 

@@ -642,3 +642,19 @@ def test_evaluate_names_labels_that_are_not_there_and_actions_the_model_never_sa
     captured = capsys.readouterr()
     assert "the model learnt handshake, not wave" in captured.err
     assert _strict_json(captured.out)["per_label"].keys() == {"wave"}
+
+
+def test_test_people_on_an_index_without_subjects_says_its_subject_column_is_empty(mocap):
+    """``--test-people`` on an index whose ``subject`` column is empty: the line says so,
+    not "(its pairs of people: )"."""
+    import dataclasses
+
+    from markovmotion.data.splits import people_out
+    from markovmotion.errors import DataNotFoundError
+
+    pairs = [
+        (dataclasses.replace(a, subject=""), dataclasses.replace(b, subject=""))
+        for a, b in mocap.pairs("handshake", kind="markers")
+    ]
+    with pytest.raises(DataNotFoundError, match="none: its subject column is empty"):
+        people_out(mocap, pairs, ["pair3"])

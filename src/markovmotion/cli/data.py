@@ -12,7 +12,7 @@ from markovmotion.cli.options import choice
 from markovmotion.cli.tables import print_table
 from markovmotion.data import MocapIndex
 from markovmotion.data.fetch import BANDAI_BASE_URL, CMU_BASE_URL, INTERACTION_SUBJECTS, fetch
-from markovmotion.data.kinds import KINDS
+from markovmotion.data.kinds import KINDS, counted
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -72,7 +72,7 @@ def check_(
                     "errors": errors, "findings": [f.to_dict() for f in found]})  # fmt: skip
     else:
         if found:
-            table = Table(title=f"{len(found)} findings in {index.root / 'INDEX.csv'}")
+            table = Table(title=f"{counted(len(found), 'findings')} in {index.root / 'INDEX.csv'}")
             for col in ("file", "level", "problem"):
                 table.add_column(col)
             for f in found:
@@ -80,7 +80,8 @@ def check_(
             print_table(table)
         notes = len(found) - errors
         err_console.print(
-            f"{index.root / 'INDEX.csv'}: {len(index)} takes, {errors} errors, {notes} notes"
+            f"{index.root / 'INDEX.csv'}: {counted(len(index), 'takes')}, "
+            f"{counted(errors, 'errors')}, {counted(notes, 'notes')}"
             + ("" if found else ": every take read whole, frames as listed, pairs paired")
         )
     if errors:

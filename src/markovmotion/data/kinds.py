@@ -30,6 +30,8 @@ T = TypeVar("T")
 
 #: The kinds of take: a skeleton's motion (BVH, ASF/AMC) or named markers (C3D).
 KINDS = ("skeleton", "markers")
+#: Each kind in a sentence ("the 6 two-person takes of markers only").
+KIND_WORDS = {"skeleton": "skeletons", "markers": "markers only"}
 #: Files named in one line before "and N more".
 SHOWN = 6
 
@@ -39,6 +41,12 @@ def names(files: Sequence[str]) -> str:
     short = [f.rsplit("/", 1)[-1].split(".")[0] for f in files]
     more = f" and {len(short) - SHOWN} more" if len(short) > SHOWN else ""
     return ", ".join(short[:SHOWN]) + more
+
+
+def counted(n: int, plural: str) -> str:
+    """``n`` and its noun, singular for one: ``counted(1, "two-person takes")`` is "1
+    two-person take"."""
+    return f"{n} {plural[:-1] if n == 1 and plural.endswith('s') else plural}"
 
 
 def choose_kind(
@@ -82,17 +90,21 @@ def choose_kind(
         found = ", ".join(f"{len(v)} {k}" for k, v in by_kind.items() if v)
         raise DataNotFoundError(f"no {kind} {what} among those asked for (found: {found})")
     if left:
-        other = " and ".join(sorted({entry(x).kind for x in left}))
+        of = KIND_WORDS.get(kind, kind)
         if asked:
-            why = f"using the {len(kept)} {kind} {what} (--kind {kind})"
+            why = f"using the {counted(len(kept), what)} of {of} (--kind {kind})"
         elif len(usable) > 1 and all(usable.values()):
             why = (
-                f"{what} of both kinds: using the {len(kept)} {kind} ones "
+                f"{what} of both kinds: using the {counted(len(kept), what)} of {of} "
                 "(the larger group; --kind to choose)"
             )
         else:
-            why = f"using the {len(kept)} {kind} {what} (the model learns from {kind} takes)"
-        note(f"{why}; left out {len(left)} {other} {what}: {names([entry(x).file for x in left])}")
+            why = f"using the {counted(len(kept), what)} of {of} (the model learns from {of})"
+        left_of = " and ".join(KIND_WORDS.get(k, k) for k in sorted({entry(x).kind for x in left}))
+        note(
+            f"{why}; left out {counted(len(left), what)} of {left_of}: "
+            f"{names([entry(x).file for x in left])}"
+        )
     return kept, left
 
 

@@ -153,7 +153,8 @@ def people_out(
     if unknown:
         raise DataNotFoundError(
             f"--test-people: no two-person take of {', '.join(map(repr, unknown))} in "
-            f"{index.root / 'INDEX.csv'} (its pairs of people: {', '.join(sorted(have - {''}))})"
+            f"{index.root / 'INDEX.csv'} (its pairs of people: "
+            f"{', '.join(sorted(have - {''})) or 'none: its subject column is empty'})"
         )
     away = [p for p in pairs if p[0].subject in set(people)]
     if len(away) == len(pairs):
