@@ -642,6 +642,11 @@ def test_evaluate_names_labels_that_are_not_there_and_actions_the_model_never_sa
     captured = capsys.readouterr()
     assert "the model learnt handshake, not wave" in captured.err
     assert _strict_json(captured.out)["per_label"].keys() == {"wave"}
+    main([*base, "--test", str(mocap.root)])  # the table: the observer's column, said what
+    captured = capsys.readouterr()
+    head = captured.out.splitlines()[1].split(",")
+    assert "observer" in head and "paper trellis std/win" in head
+    assert "observer: a classifier's accuracy" in captured.err
 
 
 def test_test_people_on_an_index_without_subjects_says_its_subject_column_is_empty(mocap):

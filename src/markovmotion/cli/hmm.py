@@ -636,28 +636,44 @@ def _print_table(report: dict) -> None:
     if "gmr_mm" in report["overall"]:
         cols = (*cols, "gmr_mm")
     jumps = ("standard_jump_p90_mm", "windowed_jump_p90_mm", "real_jump_p90_mm")
-    heads = ("group", *cols, "body-centred std/win/mean", "known motion world/body")
-    heads = (*heads, "at true place win/mean", "paper trellis std/win", *jumps)
-    for c in (*heads, "hand gap real/win", "latency median/p99 (µs)"):
-        table.add_column(c)
     rows = {
         "overall": report["overall"],
         **report["per_label"],
         **{f"people {p}": r for p, r in report.get("per_people", {}).items()},
         **report["per_pair"],
     }
+    # the paper's trellis picks training frames: a model that regresses B has none to show
+    paper = any(r["trellis"].get("paper") for r in rows.values())
+    heads = ("group", *cols, "body-centred std/win/mean", "known motion world/body")
+    heads = (*heads, "at true place win/mean", "paper trellis std/win", *jumps)
+    heads = (*heads, "hand gap real/win", "observer", "latency median/p99 (µs)")
+    for c in heads:
+        if paper or c != "paper trellis std/win":
+            table.add_column(c)
     for name, r in rows.items():
-        lat, paper, body = r["latency_us"], r["trellis"].get("paper"), r["body_centred"]
-        gap, place = r.get("hand_gap_in_contact_median_mm"), r.get("place")
-        table.add_row(
+        lat, body = r["latency_us"], r["body_centred"]
+        gap, place, trellis = r.get("hand_gap_in_contact_median_mm"), r.get("place"), r["trellis"]
+        seen = r.get("observer_accuracy")
+        cells = [
             name,
             *(f"{r[c]:.1f}" for c in cols),
             "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
             f"{r['known_motion_mm']:.1f}/{body['known_motion_mm']:.1f}",
             "/".join(f"{place[f'{k}_at_true_place_mm']:.1f}" for k in PLACED) if place else "-",
-            f"{paper['standard_mm']:.1f}/{paper['windowed_mm']:.1f}" if paper else "-",
+        ]
+        if paper:
+            t = trellis.get("paper")
+            cells.append(f"{t['standard_mm']:.1f}/{t['windowed_mm']:.1f}" if t else "-")
+        cells += [
             *(f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",
+            f"{seen:.2f}" if isinstance(seen, float) and np.isfinite(seen) else "-",
             f"{lat['median']:.0f}/{lat['p99']:.0f}",
-        )
+        ]
+        table.add_row(*cells)
     print_table(table)
+    err_console.print(
+        "observer: a classifier's accuracy telling the partner from the real B given A, "
+        "folds by pair of people (0.5: it cannot tell them apart; '-': too few takes to fold)",
+        highlight=False,
+    )
