@@ -444,3 +444,24 @@ def test_heading_from_named_markers_or_the_markers_spread():
     origin, found = step.place(markers.positions)
     np.testing.assert_allclose(np.angle(np.exp(1j * (found - yaw))), 0.0, atol=1e-9)
     np.testing.assert_allclose(origin[:, [0, 2]], pos.mean(axis=1)[:, [0, 2]] + [500, -300])
+
+
+def test_markers_are_found_whatever_the_case_of_their_labels(marker_takes):
+    """Marker labels that differ from the model's only in case (``r_hand``, ``Head``) are
+    the same markers: a take so labelled is answered exactly as the original; a label that
+    two markers share whatever the case, or none has, is not found."""
+    from markovmotion.core.markers import find_markers
+
+    assert find_markers(("R_Hand", "HEAD", "head"), ["R_HAND", "HEAD", "Head", "TOE"]) == (
+        [0, 1],
+        ["Head", "TOE"],
+    )
+    model = DualHMM(n_states=4, n_iter=3).fit(marker_takes[:2])
+    a = marker_takes[2][0]
+    relabelled = Markers(
+        tuple(n.lower() if k % 2 else n.title() for k, n in enumerate(a.names)),
+        a.positions, a.fps, a.name,
+    )  # fmt: skip
+    assert relabelled.names != a.names
+    model.check_input(relabelled)
+    np.testing.assert_array_equal(model.respond(relabelled).positions, model.respond(a).positions)

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from markovmotion.cli.options import choice, kind_option, ranged, split_labels
 from markovmotion.cli.tables import print_json, print_table
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
@@ -297,7 +297,7 @@ def predict(
         if fps is not None:
             motion.fps = fps
         if not behaviour.fits(motion):
-            missing = sorted(set(behaviour.marker_names) - set(motion.names))
+            missing = sorted(find_markers(motion.names, behaviour.marker_names)[1])
             raise SkeletonMismatchError(f"{input}: markers not found: {', '.join(missing)}")
     else:
         if base_suffix(input) == ".c3d":

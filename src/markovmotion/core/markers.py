@@ -65,13 +65,16 @@ class Markers:
         return Markers(self.names, pos, self.fps, self.name, self.source)
 
     def select(self, names: tuple[str, ...] | list[str]) -> Markers:
-        """Only the markers ``names``, in that order (KeyError naming those not found)."""
-        where = {n: i for i, n in enumerate(self.names)}
-        missing = [n for n in names if n not in where]
+        """Only the markers ``names``, in that order, under those names (matched as
+        :func:`find_markers` does; KeyError naming those not found)."""
+        idx, missing = find_markers(self.names, names)
         if missing:
             raise KeyError(f"markers not found: {', '.join(missing)}")
-        idx = [where[n] for n in names]
         return Markers(tuple(names), self.positions[:, idx], self.fps, self.name, self.source)
+
+    def has(self, names: tuple[str, ...] | list[str]) -> bool:
+        """Whether every one of ``names`` is among the markers (:func:`find_markers`)."""
+        return not find_markers(self.names, names)[1]
 
     def resample(self, fps: float) -> Markers:
         """The same trajectories sampled at ``fps`` (linear; a new sample next to an unseen
@@ -111,3 +114,23 @@ class Markers:
         width = max(len(k) for k, _ in rows)
         lines = [self.name] if self.name else []
         return "\n".join(lines + [f"{k:<{width}}  {v}" for k, v in rows])
+
+
+def find_markers(have: tuple[str, ...], wanted: tuple[str, ...] | list[str]) -> tuple[list, list]:
+    """(indices into ``have`` of each of ``wanted``, those of ``wanted`` not found). A name
+    is found as it is, else by its letters whatever their case when exactly one of
+    ``have`` matches so (``R_Hand`` is ``R_HAND``: capture software and people's labelling
+    differ in case, and one label differing only in case would otherwise refuse a take)."""
+    exact = {n: i for i, n in enumerate(have)}
+    folded: dict[str, list[int]] = {}
+    for i, n in enumerate(have):
+        folded.setdefault(n.casefold(), []).append(i)
+    idx, missing = [], []
+    for n in wanted:
+        if n in exact:
+            idx.append(exact[n])
+        elif len(alike := folded.get(n.casefold(), [])) == 1:
+            idx.append(alike[0])
+        else:
+            missing.append(n)
+    return idx, missing

@@ -112,7 +112,11 @@ def same_set(a: Motion | Markers, b: Motion | Markers) -> bool:
     """Whether two takes can be learnt together: skeletons of one topology, or markers of
     the same names."""
     if isinstance(a, Markers) or isinstance(b, Markers):
-        return isinstance(a, Markers) and isinstance(b, Markers) and set(a.names) == set(b.names)
+        return (
+            isinstance(a, Markers)
+            and isinstance(b, Markers)
+            and {n.casefold() for n in a.names} == {n.casefold() for n in b.names}
+        )
     return a.skeleton.same_topology(b.skeleton)
 
 

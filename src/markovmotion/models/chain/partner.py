@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markovmotion.algorithms.kinematics import fit_rotations
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.defaults import DEFAULT_PROTOTYPES
@@ -352,7 +352,7 @@ class VirtualPartner(Model):
                     f"{where}: the model was trained on {learnt}, not "
                     f"{'markers' if isinstance(motion, Markers) else 'a skeleton'}"
                 )
-            missing = [n for n in self.markers_ if n not in motion.names]
+            missing = find_markers(motion.names, self.markers_)[1]
             if missing:
                 raise SkeletonMismatchError(
                     f"{where}: lacks the model's markers {', '.join(missing)}"

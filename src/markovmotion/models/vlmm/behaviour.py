@@ -42,7 +42,7 @@ from markovmotion.algorithms.vector_quantisation import (
     nearest_prototype,
 )
 from markovmotion.core.frames import check_frames, is_sparse
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
@@ -323,7 +323,7 @@ class BehaviourModel(Model):
         """Whether the model can observe ``take``: its skeleton's topology, or (a model
         learnt from markers files) markers holding every one the model learnt."""
         if self._from_markers():
-            return isinstance(take, Markers) and set(self.marker_names) <= set(take.names)
+            return isinstance(take, Markers) and take.has(self.marker_names)
         if isinstance(take, Motion) and self._by_points():
             try:
                 body_point_index(take.skeleton, MARKER_POINTS, take.name or "take")
@@ -343,7 +343,7 @@ class BehaviourModel(Model):
         if self._from_markers():
             if not isinstance(take, Markers):
                 return "a skeleton, and the model learnt markers"
-            missing = [n for n in self.marker_names if n not in take.names]
+            missing = find_markers(take.names, self.marker_names)[1]
             return f"markers not found: {', '.join(missing[:8])}"
         if not isinstance(take, Motion):
             return "markers, and the model learnt a skeleton"
