@@ -87,3 +87,15 @@ def test_choosing_on_takes_of_one_pair_of_people_says_so_once(capsys):
     assert fold_groups(["p1", "p2"], ["a", "b"], choosing=True) == ["p1", "p2"]
     assert fold_groups(["p3", "p3"], ["a", "b"]) == ["a", "b"]
     assert capsys.readouterr().err == ""
+
+
+def test_leaving_takes_out_without_people_says_so(capsys):
+    """Takes whose INDEX.csv names no people (``subject`` empty or absent) are left out one
+    at a time, and the line says that their people may be in the training folds."""
+    from markovmotion.evaluate.choose import _note_once, fold_groups
+
+    _note_once.cache_clear()
+    assert fold_groups(["", ""], ["a", "b"]) == ["a", "b"]
+    assert fold_groups(None, ["a", "b"]) == ["a", "b"]
+    err = capsys.readouterr().err
+    assert err.count("names no people") == 1

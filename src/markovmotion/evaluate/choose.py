@@ -115,6 +115,11 @@ def fold_groups(
         return list(people)
     if len(set(names)) < len(names):
         raise ValueError("the takes' names must be unique (one pair of people: one take a fold)")
+    if not choosing and not any(people or ()) and len(names) > 1:
+        _note_once(
+            "INDEX.csv's subject names no people for these takes: one take is left out at a "
+            "time, so a take's people may also be in the takes it is answered from"
+        )
     if choosing and people is not None and len(names) > 1:
         _note_once(
             f"the settings are chosen by leaving one take out: the takes they are chosen on "
