@@ -170,7 +170,8 @@ def test_a_missing_video_is_named_not_its_camera_file(tmp_path, capsys, method):
 
 def test_index_mistakes_say_what_to_do(tmp_path, capsys):
     """A take given where an INDEX.csv is asked for, a row with an open quote, a label the
-    index lacks: one line each, saying what is wrong (not "get the data")."""
+    index lacks, a partner with no row: one line each, saying what is wrong (not "get the
+    data")."""
     from markovmotion.data.index import data_root
 
     take = next(data_root().glob("buetepage/shaking/*.c3d"))
@@ -180,10 +181,16 @@ def test_index_mistakes_say_what_to_do(tmp_path, capsys):
         'a.c3d,lab,"p9,rec0,interaction,handshake,b.c3d,30,10,my capture\n'
         "b.c3d,lab,p9,rec0,interaction,handshake,a.c3d,30,10,my capture\n"
     )
+    (tmp_path / "one_way").mkdir()  # each take listed one way only: B has no row
+    (tmp_path / "one_way" / "INDEX.csv").write_text(
+        "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+        "a.c3d,lab,p9,rec0,interaction,handshake,b.c3d,30,10,my capture\n"
+    )
     for args, message in (
         (["dualhmm", "crossval", "--data", str(take)], "is a file, not an INDEX.csv"),
         (["data", "list", "--data", str(tmp_path)], "check its quotes and commas"),
         (["dualhmm", "train", "--labels", "handshak", "--out", str(tmp_path / "m.npz")], "its two-person labels: "),
+        (["dualhmm", "crossval", "--data", str(tmp_path / "one_way")], "give it a row of its own"),
     ):  # fmt: skip
         with pytest.raises(SystemExit) as stop:
             main(args)

@@ -246,7 +246,14 @@ class MocapIndex:
         for e in self.query(category="interaction", label=label, kind=kind):
             if not e.partner_file or e.file in seen:
                 continue
-            partner = self.find(e.partner_file)
+            try:
+                partner = self.find(e.partner_file)
+            except DataNotFoundError:
+                raise DataNotFoundError(
+                    f"{e.partner_file}, the partner_file of {e.file}, is not in "
+                    f"{self.root / INDEX_NAME}: give it a row of its own (its label, fps, "
+                    f"frames, and partner_file {e.file})"
+                ) from None
             seen.update({e.file, partner.file})
             out.append((e, partner))
         return out
