@@ -256,6 +256,13 @@ def main() -> None:
         f"({100 * cpu / wall:.0f} % of one core), "
         + (f"{1000 * cpu / handled:.2f} ms per frame sent or dropped" if handled else "no frame")
     )
+    if live is not None and live.latency_ms and dual.latency_ms:
+        # the peer here is the stand-in: the streaming alone, with no model behind it
+        p99 = [float(np.quantile(x.latency_ms, 0.99)) for x in (dual, live)]
+        console.print(
+            f"ratio: the dual HMM partner's latency p99 {p99[0]:.1f} ms against the stand-in's "
+            f"(streaming alone) {p99[1]:.1f} ms: {p99[0] / max(p99[1], 1e-9):.2f}x"
+        )
     console.print(f"meanwhile {args.load} busy-loop process(es); at the end of each phase:")
     for phase, load in phases:
         console.print(f"  {phase}: {load}")
