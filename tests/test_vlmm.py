@@ -535,3 +535,30 @@ def test_a_markers_model_observes_any_skeleton_with_the_13_points(mocap):
     assert future.names == tuple(model.marker_names) and np.isfinite(future.positions).all()
     rotations = BehaviourModel(n_prototypes=12, max_memory=2, fps=15.0).fit(dances)
     assert not rotations.fits(walk) and "joints differ" in rotations.why_not(walk)
+
+
+def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys):
+    """An index whose last take of a label is on another skeleton: that take is left out as
+    of another skeleton, and the last take on the skeleton learnt is the one held out (it
+    had been held out itself, leaving the model nothing to be evaluated on)."""
+    from markovmotion.data import MocapIndex
+    from markovmotion.models.vlmm.behaviour import fit_index
+
+    take = {e.name: e for e in mocap.query(category="exercise", label="indian_dance")}
+    walk = mocap.query(source="bandai")[0]
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    lines = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for name, e in (("a.bvh.gz", take["indian_04"]), ("b.bvh.gz", take["indian_06"]),
+                    ("c.bvh.gz", take["indian_07"]), ("z.bvh.gz", walk)):  # fmt: skip
+        shutil.copyfile(e.path, folder / name)
+        lines.append(f"{name},lab,s1,1,exercise,dance,,{e.fps:g},{e.frames},mine")
+    (folder / "INDEX.csv").write_text("\n".join(lines) + "\n")
+    capsys.readouterr()
+    fit = fit_index(
+        BehaviourModel(n_prototypes=20, max_memory=3, fps=10.0, random_state=0),
+        MocapIndex.load(folder), "exercise",
+    )  # fmt: skip
+    assert fit.model.held_out_files_ == ["c.bvh.gz"]
+    assert [e.file for e in fit.used] == ["a.bvh.gz", "b.bvh.gz"]
+    assert [e.file for e in fit.other_skeleton] == ["z.bvh.gz"]

@@ -699,11 +699,17 @@ def fit_index(
     )
     can = ("skeleton", "markers") if base.configuration == "markers" else ("skeleton",)
     entries, other_kind = choose_kind(entries, kind, f"{category} takes", can=can)
-    train, held_out = held_out_last(entries) if hold_out else (list(entries), [])
-    motions, skipped = load_motions(index, train, base.fps)
-    used = [e for e in train if e not in skipped]
+    # the largest skeleton group first, then the last take of each label held out of it: a
+    # take held out on another skeleton would leave the model no take to be evaluated on
+    takes = [index.load_take(e) for e in entries]
+    best, left = largest_group(takes, [e.file for e in entries])
+    kept = [entries[i] for i in best]
+    train, held_out = held_out_last(kept) if hold_out else (kept, [])
+    motions = [
+        _take(t).resample(base.fps) for t in _seen(takes[i] for i in best if entries[i] in train)
+    ]
     model.fit(motions)
     model.category_ = category
-    model.labels_ = sorted({e.label for e in used})
+    model.labels_ = sorted({e.label for e in train})
     model.held_out_files_ = [e.file for e in held_out]
-    return IndexFit(model, motions, used, held_out, skipped + other_kind)
+    return IndexFit(model, motions, train, held_out, [entries[i] for i in left] + other_kind)
