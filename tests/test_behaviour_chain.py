@@ -515,3 +515,23 @@ def test_a_response_holds_its_own_shape_not_the_frames_hypotheses():
     r = Response(hypotheses[17], 0, 0.5)
     assert r.shape.base is None and r.shape.nbytes == 119 * 8
     np.testing.assert_array_equal(r.shape, hypotheses[17])
+
+
+def test_evaluate_without_test_answers_the_takes_held_out_of_the_index_learnt(
+    mocap, tmp_path, capsys
+):
+    """A chain trained on a user's own index holds out a trial there; ``chain evaluate``
+    without ``--test`` answers that trial's take from that index (it had answered the
+    shared collection's held-out takes, which the user never gave it)."""
+    trials = [a.trial for a, _ in mocap.pairs(label="salsa")][:3]
+    _copy_index(tmp_path / "own", mocap, dict(zip(("x", "y", "z"), trials, strict=True)))
+    model = tmp_path / "m.npz"
+    main(["chain", "train", "--data", str(tmp_path / "own"), "--label", "salsa", "--epochs", "1",
+          "--prototypes", "4", "--behaviours", "4", "--test-trials", "z", "--out", str(model)])  # fmt: skip
+    assert VirtualPartner.load(model).held_out_files_ == ["takes/z_a.bvh.gz", "takes/z_b.bvh.gz"]
+    capsys.readouterr()
+    main(["chain", "evaluate", "--model", str(model), "--hypotheses", "4", "--json"])
+    assert json.loads(capsys.readouterr().out)["test_files"] == [
+        "takes/z_a.bvh.gz",
+        "takes/z_b.bvh.gz",
+    ]

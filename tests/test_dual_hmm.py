@@ -17,7 +17,8 @@ from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data import MocapIndex
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
-from markovmotion.evaluate.hmm import cross_validate, evaluate_pair, index_record, summarise
+from markovmotion.evaluate.hmm import cross_validate, evaluate_pair, summarise
+from markovmotion.evaluate.takes import index_record
 from markovmotion.io import write_motion
 from markovmotion.models.base import KINDS, Model
 from markovmotion.models.hmm.dual import DualHMM, into_frame, out_of_frame

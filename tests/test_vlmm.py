@@ -540,7 +540,8 @@ def test_a_markers_model_observes_any_skeleton_with_the_13_points(mocap):
 def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys):
     """An index whose last take of a label is on another skeleton: that take is left out as
     of another skeleton, and the last take on the skeleton learnt is the one held out (it
-    had been held out itself, leaving the model nothing to be evaluated on)."""
+    had been held out itself, leaving the model nothing to be evaluated on); ``vlmm
+    evaluate`` without ``--test`` answers it from that index, not the shared one."""
     from markovmotion.data import MocapIndex
     from markovmotion.models.vlmm.behaviour import fit_index
 
@@ -562,3 +563,13 @@ def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys
     assert fit.model.held_out_files_ == ["c.bvh.gz"]
     assert [e.file for e in fit.used] == ["a.bvh.gz", "b.bvh.gz"]
     assert [e.file for e in fit.other_skeleton] == ["z.bvh.gz"]
+    # trained on this index, evaluate without --test answers its held-out take, from it
+    from markovmotion.cli import main
+
+    model = tmp_path / "m.npz"
+    main(["vlmm", "train", "--data", str(folder), "--prototypes", "20", "--max-memory", "3",
+          "--fps", "10", "--out", str(model)])  # fmt: skip
+    capsys.readouterr()
+    main(["vlmm", "evaluate", "--model", str(model), "--samples", "2", "--stride", "60",
+          "--horizon", "1", "--json"])  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["test_files"] == ["c.bvh.gz"]

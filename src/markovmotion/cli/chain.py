@@ -136,7 +136,7 @@ def _training_takes(
     pairs of people (INDEX.csv's ``subject``) whose takes are held out too."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
-        from markovmotion.evaluate.takes import take_names
+        from markovmotion.evaluate.takes import index_record, take_names
         from markovmotion.models.chain.partner import KINDS
 
         index = MocapIndex.load(data)
@@ -154,13 +154,21 @@ def _training_takes(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
             )
         names = take_names(train)
+        # what evaluate without --test answers: the takes of these labels and kind not learnt
+        held = [
+            e.file
+            for a, b in index.pairs(label=labels, kind=train[0][0].kind)
+            if (a, b) not in train
+            for e in (a, b)
+        ]
+        record = {"data_index": index_record(index), "held_out_files": held}
         return [
             (names[(a, b)], a.label, a.subject, *index.load_pair(a, b))
             for a, b in track(train, "reading takes")
-        ]
+        ], record
     from markovmotion.video.dataset import silhouette_takes
 
-    return silhouette_takes(data, split="train")
+    return silhouette_takes(data, split="train"), {}
 
 
 @app.command()
@@ -218,7 +226,7 @@ def train(
         )
     grid = grid_of("chain", choose)
     labels = [x.strip() for x in label.split(",") if x.strip()] or [label]
-    takes = _training_takes(
+    takes, record = _training_takes(
         data, source, labels if len(labels) > 1 else labels[0], kind, test_trials, test_people
     )
     model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink)
@@ -230,7 +238,7 @@ def train(
             model, extras = fit_takes(model, takes, roles, grid, n_hypotheses=hypotheses, seed=seed)
         else:
             model.fit(takes)
-    model.save(out, source=source, labels=labels if source == "mocap" else [], **extras)
+    model.save(out, source=source, labels=labels if source == "mocap" else [], **extras, **record)
     if "chosen" in extras:
         err_console.print(
             chosen_line(

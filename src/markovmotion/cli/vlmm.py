@@ -184,8 +184,11 @@ def train(
             err_console.print(_memory_table(f"key-prototype VLMM (N = {key_memory})", model.vlmm_))
         err_console.print(f"wrote {out}")
         return
-    run = fit_index(model, MocapIndex.load(data), category, label, hold_out, kind)
-    model.save(out)
+    from markovmotion.evaluate.takes import index_record
+
+    index = MocapIndex.load(data)
+    run = fit_index(model, index, category, label, hold_out, kind)
+    model.save(out, data_index=index_record(index))  # where evaluate finds its held-out takes
     base = model.prototype_model_ if structured else model
     err_console.print(
         f"trained on {len(run.used)} takes ({sum(m.n_frames for m in run.motions)} frames at "
@@ -364,6 +367,7 @@ def evaluate(
     their names; without, on the takes the model held out in training.
     """
     label = split_labels(label)
+    from markovmotion.evaluate.takes import evaluation_index
     from markovmotion.evaluate.vlmm import evaluate_model
     from markovmotion.models.vlmm.structured import load_behaviour
     from markovmotion.viz.plots import check_figure_output
@@ -399,7 +403,7 @@ def evaluate(
         raise typer.BadParameter("pixels only for a contour model", param_hint="--space")
     result = evaluate_model(
         behaviour,
-        MocapIndex.load(test),
+        evaluation_index(behaviour, test),
         held_out=test is None,
         category=category,
         labels=label,

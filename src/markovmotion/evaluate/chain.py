@@ -49,7 +49,7 @@ from markovmotion.defaults import SOURCES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.evaluate import choose
 from markovmotion.evaluate.choose import ROLES
-from markovmotion.evaluate.takes import take_names, test_takes
+from markovmotion.evaluate.takes import evaluation_index, take_names, test_takes
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
 from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
@@ -127,7 +127,7 @@ def test_set(
         return TestSet(list(takes), report={"test_files": names, "left_out_training_files": []})
     if model.source != "mocap":
         raise ValueError("a silhouette model is evaluated on tracked takes: give takes")
-    index = MocapIndex.load(test)
+    index = evaluation_index(model, test)
     candidates, _ = choose_kind(
         index.pairs(label=model_labels(model, labels)),
         "markers" if model.uses_markers else "skeleton",
@@ -135,7 +135,15 @@ def test_set(
         lambda p: p[0],
         KINDS,
     )
-    if test is None:
+    held = getattr(model, "held_out_files_", None)
+    if test is None and held is not None:  # the takes it held out, in the index it learnt
+        candidates = [p for p in candidates if p[0].file in set(held)]
+        if not candidates:
+            raise DataNotFoundError(
+                f"none of the {len(held)} files the model held out at training is a two-person "
+                f"take of {index.root / 'INDEX.csv'} it can answer: give --test INDEX"
+            )
+    elif test is None:  # a model saved before it recorded them: the collection's split
         _, candidates = held_out_pairs(candidates)
     chosen = test_takes(model, index, candidates, "two-person take")
     pairs, takes = [], []

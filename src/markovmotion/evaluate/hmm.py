@@ -52,10 +52,15 @@ from markovmotion.data.splits import people_out, select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate import choose
 from markovmotion.evaluate.choose import ROLES
-from markovmotion.evaluate.takes import TestTakes, take_names, test_takes
+from markovmotion.evaluate.takes import (
+    TestTakes,
+    evaluation_index,
+    index_record,
+    take_names,
+    test_takes,
+)
 from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.features.markers import turn_about_up
-from markovmotion.models.base import file_sha256
 from markovmotion.models.hmm.contact import CONTACT_MM, right_hand
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import TRELLISES, blend_positions
@@ -537,12 +542,6 @@ def cross_validate(
 Pair = tuple[Entry, Entry]
 
 
-def index_record(index: MocapIndex) -> dict[str, str]:
-    """Where an index is and what its INDEX.csv holds (SHA-256), for a model file."""
-    path = index.root / INDEX_NAME
-    return {"root": str(index.root.resolve()), "sha256": file_sha256(path)}
-
-
 def load_pairs(
     index: MocapIndex, pairs: Sequence[Pair], kind: str | None = None
 ) -> tuple[list[Pair], list[tuple]]:
@@ -626,12 +625,7 @@ def evaluation_pairs(
     """
     learnt = list(getattr(model, "labels_", None) or [])
     wanted = list(labels or learnt) or None
-    if test is not None:
-        index = MocapIndex.load(test)
-    else:
-        record = getattr(model, "data_index_", None)
-        root = record.get("root") if isinstance(record, dict) else None
-        index = MocapIndex.load(root if root and Path(root).is_dir() else None)
+    index = evaluation_index(model, test)
     if labels:  # each label asked for is there, as train asks (a typo is not ignored)
         there = sorted({a.label for a, _ in index.pairs()})
         absent = [lab for lab in labels if lab not in there]

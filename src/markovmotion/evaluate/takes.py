@@ -7,15 +7,21 @@ file content the model trained on (``train_files_``, compared by SHA-256, not
 by path or name) are left out and listed. If nothing remains, one line says
 so (:class:`~markovmotion.errors.DataNotFoundError`, exit 2 on the command
 line). Every family's JSON carries :meth:`TestTakes.report`'s two lists.
+
+Without ``--test``, each family evaluates on the takes its model held out, in the index it
+was trained on (:func:`evaluation_index`, from the model file's :func:`index_record`), not
+in the default collection: a model of a user's own collection is evaluated on it.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
-from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.models.base import Model, file_sha256, training_hashes
 
@@ -111,3 +117,21 @@ def take_names(pairs: Iterable[tuple[Entry, Entry]]) -> dict[tuple[Entry, Entry]
         for n, lab, f in zip(plain, labelled, files, strict=True)
     ]
     return dict(zip(pairs, names, strict=True))
+
+
+def index_record(index: MocapIndex) -> dict[str, str]:
+    """Where an index is and what its INDEX.csv holds (SHA-256), for a model file
+    (``data_index``)."""
+    path = index.root / INDEX_NAME
+    return {"root": str(index.root.resolve()), "sha256": file_sha256(path)}
+
+
+def evaluation_index(model: Any, test: str | os.PathLike[str] | None = None) -> MocapIndex:
+    """The index ``model`` is evaluated on: ``test`` (an INDEX.csv or its folder) if given,
+    else the one it was trained on (its ``data_index_``, :func:`index_record`) while that
+    folder is there, else the default collection."""
+    if test is not None:
+        return MocapIndex.load(test)
+    record = getattr(model, "data_index_", None)
+    root = record.get("root") if isinstance(record, dict) else None
+    return MocapIndex.load(root if isinstance(root, str) and Path(root).is_dir() else None)
