@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -339,8 +340,9 @@ def test_the_guide_is_on_for_real_people_and_off_for_rendered_ones(
 
 
 def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
-    """A camera's video that ends before the others' (a recording cut short): both trackers
-    follow the frames the views have together and say which video ended, not silently."""
+    """A camera's video that ends before the others' (a recording cut short): the particle
+    filter follows the frames the views have together, the triangulation carries on with the
+    other views; both say which video ended, not silently."""
     import itertools
     import shutil
 
@@ -359,13 +361,129 @@ def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
     said = "note: cam1.mp4 ended after 4 frames, before the other views: 4 frames tracked"
     assert shortest_note(["cam0.mp4", "cam1.mp4"], [100, 4]) == said
     assert shortest_note(["cam0.mp4", "cam1.mp4"], [4, 4]) is None
-    for extra in (["--method", "triangulate"], ["--guide", "none", "--particles", "10",
-                  "--layers", "2", "--background", "median"]):  # fmt: skip
-        main(["track", "--video", str(tmp_path), "--max-frames", "6", *extra])
-        err = capsys.readouterr().err
-        assert said in err and "tracked 4 frames" in err, err
+    main(["track", "--video", str(tmp_path), "--max-frames", "6", "--guide", "none",
+          "--particles", "10", "--layers", "2", "--background", "median"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert said in err and "tracked 4 frames" in err, err
+    main(["track", "--video", str(tmp_path), "--max-frames", "6", "--method", "triangulate"])
+    err = capsys.readouterr().err
+    carry = "note: cam1.mp4 ended after 4 frames, before the other views: they carry on"
+    assert f"{carry} without it over frames 4-5" in err and "tracked 6 frames" in err, err
+    assert "by its header" not in err  # its header counts 4: not damaged
     main(["track", "--video", str(tmp_path), "--max-frames", "3", "--method", "triangulate"])
     assert "ended after" not in capsys.readouterr().err  # cut by --max-frames: nothing to say
+
+
+def _damaged_copy(real_video, folder):
+    """The real video with camera 2's file zeroed over 8000 bytes a third of the way in
+    (a new user's trial: OpenCV then decodes 18 of the 100 frames its header counts); the
+    other files linked, the camera file copied."""
+    for p in real_video.iterdir():
+        if p.name == "cameras.json":
+            shutil.copy(p, folder / p.name)
+        elif p.name != "cam2.mp4":
+            (folder / p.name).symlink_to(p)
+    data = bytearray((real_video / "cam2.mp4").read_bytes())
+    at = len(data) // 3
+    data[at : at + 8000] = bytes(8000)
+    (folder / "cam2.mp4").write_bytes(bytes(data))
+    return folder
+
+
+def test_a_video_damaged_in_its_middle_is_said_and_the_other_views_carry_on(
+    real_video, tmp_path, capsys
+):
+    """Camera 2's video damaged in its middle: OpenCV stops there as at an end. Monocular had
+    tracked 18 frames without a word, the triangulation only 18 of 100 frames; now each says
+    which video ended, after how many frames, and what its header counts, and the
+    triangulation carries on over the frames the other three views have, placing them all."""
+    import subprocess
+    import sys
+
+    _need_mediapipe()
+    folder = _damaged_copy(real_video, tmp_path)
+    # FFmpeg's lines on the damaged frames are held back although the camera file's reading
+    # opens the videos first (a new process: OpenCV reads the setting once)
+    read = subprocess.run(
+        [sys.executable, "-c", "import sys; from markovmotion.video.cameras import load_cameras; "
+         "load_cameras(sys.argv[1]); from markovmotion.video.render import read_frames; "
+         "print(sum(1 for _ in read_frames(sys.argv[1] + '/cam2.mp4')))", str(folder)],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert read.stdout.strip() == "18" and "h264" not in read.stderr, read.stderr
+    said = "cam2.mp4 ended after 18 frames (100 frames by its header: damaged or cut short?)"
+    main(["track", "--video", str(folder / "cam2.mp4"), "--method", "monocular", "--json",
+          "--max-frames", "30"])  # fmt: skip
+    run = capsys.readouterr()
+    s = json.loads(run.out)
+    assert s["frames"] == 18 and s["notes"] == [f"note: {said}"] and said in run.err
+    main(["track", "--video", str(folder), "--method", "triangulate", "--json", "--max-frames",
+          "30"])  # fmt: skip
+    s = json.loads(capsys.readouterr().out)
+    assert s["frames"] == s["frames_placed"] == 30
+    assert f"note: {said}, before the other views: they carry on without it over frames " \
+        "18-29" in s["notes"], s["notes"]  # fmt: skip
+    main(["track", "--video", str(folder), "--max-frames", "30", "--guide", "none",
+          "--particles", "10", "--layers", "1", "--json"])  # fmt: skip
+    s = json.loads(capsys.readouterr().out)  # the particle filter stops, and says why
+    assert s["frames"] == 18
+    assert f"note: {said}, before the other views: 18 frames tracked" in s["notes"]
+
+
+def test_views_dropped_are_views_seen_surely_and_not_used(tmp_path, monkeypatch):
+    """``landmark_views_dropped`` was the views seen surely less the views used, and the
+    views used include those of landmarks filled from unsure views (Triangulated.filled):
+    -58 and -203 in a new user's trial. A wrist seen surely by one of three views, unsurely
+    by two, is filled from all three; one view's elbow is put 60 px off, and only that is
+    dropped."""
+    from markovmotion.video.cameras import save_cameras
+    from markovmotion.video.triangulation import PersonViews, track_triangulated_video
+
+    rng = np.random.default_rng(5)
+    cams = _cameras(3)
+    pts = _standing_landmarks(12)
+    pix = _project(cams, pts.reshape(-1, 3)).reshape(3, 12, -1, 2)
+    pix = pix + rng.normal(0.0, 0.5, pix.shape)
+    vis = np.ones(pix.shape[:3])
+    wrist, elbow = LANDMARKS.index("left_wrist"), LANDMARKS.index("right_elbow")
+    vis[1:, :, wrist] = 0.2
+    pix[0, :, elbow] += 60.0
+    views = ViewLandmarks(cams, pix, vis)
+    save_cameras(cams, tmp_path / "cameras.json", 30.0)
+    for c in cams:
+        (tmp_path / c.video).write_bytes(b"")  # named, never read: MediaPipe is replaced
+    monkeypatch.setattr(
+        "markovmotion.video.triangulation.person_views",
+        lambda *args, **kwargs: PersonViews(views, views, None, 0, []),
+    )
+    _, s = track_triangulated_video(tmp_path, smooth=0.0)
+    assert s["landmarks_filled_low_visibility"] == 12
+    assert s["landmark_views_dropped"] == 12  # the elbow's view, in every frame
+
+
+def test_a_reference_of_another_length_than_the_track_is_said(tmp_path):
+    """A 100-row reference at 60 fps against a 50-frame track of the same take at 30 fps was
+    compared frame by frame without a word (264.7 mm): a note gives both lengths and, when
+    they differ by more than a tenth, the rate the reference would have over the same time.
+    None when they match, or when --max-frames cut the track and the reference goes on."""
+    from markovmotion.video.monocular import REFERENCE_JOINTS, reference_note
+
+    cols = [f"{j}_{a}" for j in REFERENCE_JOINTS for a in "xyz"]
+    lines = ["frame," + ",".join(cols)] + [
+        f"{f}," + ",".join(["1"] * len(cols)) for f in range(100)
+    ]
+    ref = tmp_path / "ref.csv"
+    ref.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    said = reference_note(ref, 50, 30.0)
+    assert said.startswith("note: the reference ref.csv has 100 rows and the track 50 frames")
+    assert "row k is compared with frame k" in said and "would be at 60 fps" in said
+    assert reference_note(ref, 100, 60.0) is None
+    assert reference_note(ref, 97, 60.0, first_frame=3) is None  # skip_frames 3: 97 rows on
+    assert reference_note(ref, 30, 60.0, max_frames=30) is None  # --max-frames 30
+    shorter = reference_note(ref, 120, 60.0, max_frames=120)  # cut, and the reference too
+    assert "has 100 rows and the track 120 frames" in shorter and "fps" not in shorter
+    longer = reference_note(ref, 104, 60.0)
+    assert "has 100 rows and the track 104 frames" in longer and "fps" not in longer
 
 
 def test_a_view_of_another_size_is_one_line(real_video, tmp_path, capsys):

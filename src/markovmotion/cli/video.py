@@ -96,17 +96,21 @@ def sync(
     started one after another), by where MediaPipe's landmarks lie against their epipolar
     lines (needs scripts/install-camera); --write records it for every command that reads the
     videos."""
+    from markovmotion.video.cameras import new_command
     from markovmotion.video.sync import sync_video, write_skips
 
-    result, fps, where = sync_video(video, cameras, max_lag, max_frames)
+    new_command()
+    result, fps, where, notes = sync_video(video, cameras, max_lag, max_frames)
     summary = {
         "fps": fps,
         "cameras": result.summary(fps),
         "in_step": result.in_step,
         "measured": bool(result.measured.all()),
+        "notes": notes,
     }
     if write:
         summary["wrote"] = str(write_skips(where, result))
+    _print_notes(notes)
     if json_out:
         print_json(summary)
         return
@@ -221,6 +225,9 @@ def track(
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
+    from markovmotion.video.cameras import new_command
+
+    new_command()  # the camera file's notes are said once in this command
     if method != "apf" and guide == "mediapipe":
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
@@ -317,8 +324,10 @@ def track(
         person,
         size == "views",
     )
-    for line in ([note] if note else []) + summary["background"] + summary["notes"]:
+    summary["notes"] = [*([note] if note else []), *summary["notes"]]
+    for line in summary["background"]:
         err_console.print(line, highlight=False)
+    _print_notes(summary["notes"])
     if size == "views":
         summary["body_size"] = result.body_size
         err_console.print(
@@ -326,19 +335,25 @@ def track(
             + ", ".join(f"{k} {v:.3f}" for k, v in result.body_size.items()),
             highlight=False,
         )
+    later = []  # notes printed, and in the summary's
     if summary["views"] == 1:
-        err_console.print(
+        later.append(
             "note: one view leaves the particle filter depth and mirror ambiguous (hundreds of mm "
-            "off, docs/video.md); for one camera, --method monocular",
-            highlight=False,
+            "off, docs/video.md); for one camera, --method monocular"
         )
     if reference is not None:
         from markovmotion.features.body_points import body_points
-        from markovmotion.video.monocular import reference_errors
+        from markovmotion.video.monocular import reference_errors, reference_note
 
         summary["reference"] = reference_errors(
             body_points(motion), reference, first_frame=first_skip
         )
+        said = reference_note(
+            reference, summary["frames"], summary["video_fps"], first_skip, max_frames
+        )
+        later += [said] if said else []
+    _print_notes(later)
+    summary["notes"] += later
     if size not in ("template", "views"):
         summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
     if out is not None:
@@ -443,8 +458,7 @@ def _track_landmarks(
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)
-    for line in summary.get("notes", []):
-        err_console.print(line, highlight=False)
+    _print_notes(summary["notes"])
     _whom_notes(summary, person)
     if json_out:
         print_json(summary)
@@ -478,11 +492,24 @@ def _views(n: int) -> str:
 
 def _whom_notes(summary: dict, person: str | None) -> None:
     """Print the lines that say whom MediaPipe followed (stderr, with or without ``--json``;
-    :func:`~markovmotion.video.triangulation.whom_notes`)."""
+    :func:`~markovmotion.video.triangulation.whom_notes`), and add them to the summary's
+    notes."""
     from markovmotion.video.triangulation import whom_notes
 
-    for line in whom_notes(summary, named=person is not None):
-        err_console.print(line, highlight=False)
+    lines = whom_notes(summary, named=person is not None)
+    _print_notes(lines)
+    summary["notes"] = [*summary.get("notes", []), *lines]
+
+
+def _print_notes(lines: list[str]) -> None:
+    """Print a summary's notes (stderr, with or without ``--json``), but those the camera
+    file's reading printed already (:func:`~markovmotion.video.cameras.say`): every note is
+    in the JSON's ``notes``, and on the terminal once."""
+    from markovmotion.video.cameras import said
+
+    for line in lines:
+        if not said(line):
+            err_console.print(line, highlight=False)
 
 
 def _smoothing(text: str | None) -> float | None:

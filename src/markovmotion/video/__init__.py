@@ -14,3 +14,12 @@ articulated body tracked in 3-D; ``shading`` shaded bodies with depth;
 ``annealed_particle_filter`` tracks a person in 3-D (Deutscher et al.);
 ``composite`` draws the dual HMM's partner into the tracked video.
 """
+
+import os
+
+#: FFmpeg's own log lines (a broken file's "moov atom not found", a damaged frame's "Invalid NAL
+#: unit size") held back, so that a bad video gets our one line: OpenCV reads this when it first
+#: opens a video, so it is set here, before any module of the package opens one (the camera
+#: file's reading opens each video for its frame rate; set in ``render`` alone, a damaged
+#: video's log reached the particle filter's terminal). A user's own setting is kept.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")

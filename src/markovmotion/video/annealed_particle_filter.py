@@ -70,7 +70,12 @@ from markovmotion.video.cameras import (
     lone_video,
 )
 from markovmotion.video.monocular import mediapipe_installed
-from markovmotion.video.render import expected_frames, read_frames, shortest_note
+from markovmotion.video.render import (
+    expected_frames,
+    header_shortfall,
+    read_frames,
+    shortest_note,
+)
 
 if TYPE_CHECKING:
     from markovmotion.video.sides import SideCheck
@@ -781,15 +786,23 @@ def multiview_frames(
 ) -> Iterator[list[np.ndarray]]:
     """One frame per camera at a time, until the shortest video ends (undistorted by their
     ``cameras``, :func:`~markovmotion.video.render.read_frames`); a video that ends before
-    the others is said in ``notes`` (:func:`~markovmotion.video.render.shortest_note`)."""
+    the others is said in ``notes`` (:func:`~markovmotion.video.render.shortest_note`), with
+    its header's count if that is more (:func:`~markovmotion.video.render.header_shortfall`:
+    damaged in the middle)."""
     cams = list(cameras) if cameras is not None else [None] * len(videos)
     readers = [read_frames(v, c) for v, c in zip(videos, cams, strict=True)]
     n = 0
     while max_frames is None or n < max_frames:
         frames = [next(r, None) for r in readers]
         if any(f is None for f in frames):
+            lengths = [n + (f is not None) for f in frames]
             note = shortest_note(
-                [Path(v).name for v in videos], [n + (f is not None) for f in frames]
+                [Path(v).name for v in videos],
+                lengths,
+                [
+                    header_shortfall(v, k, c) if f is None else ""
+                    for v, k, c, f in zip(videos, lengths, cams, frames, strict=True)
+                ],
             )
             if note is not None and notes is not None:
                 notes.append(note)
@@ -811,7 +824,8 @@ class MultiviewVideo:
     videos: list[Path]
     #: One line per camera without an empty-scene image: what its background is.
     background_notes: list[str] = field(default_factory=list)
-    #: One line when a camera's video ended before the others' (filled as the frames are read).
+    #: The camera file's notes (:func:`~markovmotion.video.cameras.load_cameras`), and one
+    #: line when a camera's video ended before the others' (filled as the frames are read).
     video_notes: list[str] = field(default_factory=list)
 
     def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
@@ -851,9 +865,10 @@ def open_video(
             background, or frames of another size than their camera's.
     """
     cams_path = camera_file(video, cameras_file)
-    cameras, doc = load_cameras(cams_path)
+    ended: list[str] = []  # the camera file's notes, then a video that ended before the others
+    cameras, doc = load_cameras(cams_path, ended)
     if lone_video(video):
-        k = camera_of_video(cameras, video)  # one camera's video
+        k = camera_of_video(cameras, video, ended)  # one camera's video
         cameras, videos = [cameras[k]], [Path(video)]
     else:
         videos = camera_videos(cams_path, cameras)
@@ -874,7 +889,6 @@ def open_video(
             backgrounds.append(estimate_background(v, camera=c))
             why = "" if not learn_background else " (MediaPipe not installed)"
             notes.append(f"{c.name}: median background, not checked for the person{why}")
-    ended: list[str] = []
     frames = multiview_frames(videos, max_frames, cameras, ended)
     return MultiviewVideo(
         cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes,

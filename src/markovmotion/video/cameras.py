@@ -18,7 +18,8 @@ camera. ``cameras.json`` lies beside the videos::
 image of the empty scene (else the tracker estimates it from the video). The optional
 ``skip_frames`` of a camera is how many frames of its video come before the cameras'
 shared first frame (cameras started one after another; ``markovmotion video sync``
-measures and writes it); every reader of the video with its camera skips them. Any real video with such a file is read
+measures and writes it); every reader of the video with its camera skips them. Without
+``fps`` the rate the videos' own headers agree on is taken, and said. Any real video with such a file is read
 the same way as the rendered ones; a malformed file is one error naming the
 file and the field.
 """
@@ -29,7 +30,7 @@ import functools
 import json
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -272,28 +273,44 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
     return video
 
 
-def camera_of_video(cameras: list[CalibratedCamera], video: str | os.PathLike[str]) -> int:
-    """Which camera a lone video file is: the one naming it, else the first (said in a note
-    when there are several: a video of another camera tracked through the first's
-    calibration is far off at full confidence)."""
+def camera_of_video(
+    cameras: list[CalibratedCamera], video: str | os.PathLike[str], notes: list[str] | None = None
+) -> int:
+    """Which camera a lone video file is: the one naming it, else the first (said in a note,
+    :func:`say`, when there are several: a video of another camera tracked through the
+    first's calibration is far off at full confidence)."""
     name = Path(video).name
     found = next((k for k, c in enumerate(cameras) if Path(c.video).name == name), None)
     if found is None and len(cameras) > 1:
-        note(
-            f"{name} is not a video the camera file names ({', '.join(Path(c.video).name for c in cameras)}): "
-            f"taken as the first camera's, {Path(cameras[0].video).name}; name it so in the "
-            "camera file if it is another camera's"
+        listed = ", ".join(Path(c.video).name for c in cameras)
+        say(
+            [
+                f"note: {name} is not a video the camera file names ({listed}): taken as the "
+                f"first camera's, {Path(cameras[0].video).name}; name it so in the camera "
+                "file if it is another camera's"
+            ],
+            notes,
+            Path(video).resolve(),
         )
     return 0 if found is None else found
 
 
-def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], dict]:
-    """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document.
+def load_cameras(
+    path: str | os.PathLike[str], notes: list[str] | None = None
+) -> tuple[list[CalibratedCamera], dict]:
+    """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document,
+    whose ``fps`` is the file's or, without one, the rate the videos' own headers agree on.
+
+    What may be wrong with a file that reads (a video's header giving another rate, no
+    ``fps``, a principal point far from the image's middle) is said in notes, printed once
+    per command (:func:`say`: a command reads its camera file more than once) and added to
+    ``notes`` if given, for a summary's ``notes``.
 
     Raises:
         MotionFormatError: no such file, not JSON, or a camera without valid
             size, intrinsics, an orthonormal rotation, a translation, or with
-            distortion coefficients OpenCV does not take.
+            distortion coefficients OpenCV does not take; no ``fps`` and no rate the
+            videos agree on.
     """
     path = Path(path)
     if path.is_dir():
@@ -306,8 +323,10 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
     cams = doc.get("cameras") if isinstance(doc, dict) else None
     if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
         raise MotionFormatError(path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras")
-    fps = doc.get("fps", 25.0)
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000):
+    fps = doc.get("fps")
+    if fps is not None and (
+        isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000)
+    ):
         raise MotionFormatError(path, "'fps' must be a number above 0 and at most 1000")
     out = []
     for i, c in enumerate(cams):
@@ -335,13 +354,45 @@ def load_cameras(path: str | os.PathLike[str]) -> tuple[list[CalibratedCamera], 
             )
         out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist, skip))
         valid_camera(path, where, out[-1])
+    lines: list[str] = []
+    if fps is None:
+        fps = _rate_of_videos(path, out, lines)
+    else:
+        lines += _rate_notes(path.parent, out, float(fps))
     doc["fps"] = float(fps)
-    _check_rates(path.parent, out, doc["fps"])
+    lines += centre_notes(out)
+    say(lines, notes, path.resolve())
     return out, doc
 
 
-#: (video, camera file rate) pairs already said to disagree, in this process.
-_RATES_SAID: set[tuple[Path, float]] = set()
+#: The notes printed in this command (:func:`say`), with the file each is about.
+_SAID: set[tuple[str, str]] = set()
+
+
+def say(lines: Sequence[str], notes: list[str] | None = None, about: object = "") -> None:
+    """Print each note (``"note: ..."``) not printed before in this command about the same
+    file (``about``), and add every one to ``notes`` if given: a command reads its camera
+    file more than once (the CLI, then the tracker, then ``--truth``), and a summary's
+    ``notes`` must hold them all the same."""
+    for line in lines:
+        key = (str(about), line)
+        if key not in _SAID:
+            _SAID.add(key)
+            note(line.removeprefix("note: "))
+        if notes is not None:
+            notes.append(line)
+
+
+def said(line: str) -> bool:
+    """Whether :func:`say` printed this line in this command (a summary's notes that the
+    command prints at its end leave them out)."""
+    return any(line == printed for _, printed in _SAID)
+
+
+def new_command() -> None:
+    """Forget the notes said (:func:`say`): a command starts, and says them again (tests run
+    many commands in one process)."""
+    _SAID.clear()
 
 
 @functools.lru_cache(maxsize=64)
@@ -351,25 +402,88 @@ def _header_rate(video: str, mtime_ns: int) -> float:
     cap = cv2.VideoCapture(video)
     own = cap.get(cv2.CAP_PROP_FPS) if cap.isOpened() else 0.0
     cap.release()
-    return float(own)
+    return float(own) if own and own > 0 else 0.0
 
 
-def _check_rates(folder: Path, cameras: list[CalibratedCamera], fps: float) -> None:
+def _header_rates(folder: Path, cameras: list[CalibratedCamera]) -> dict[str, float]:
+    """The own frame rate (0: unknown) of each camera's video file found beside the camera
+    file, by the video's name (an image folder has none; a missing video is left to
+    :func:`camera_videos` to name)."""
+    out = {}
+    for c in cameras:
+        video = folder / c.video if c.video else None
+        if video is not None and video.is_file():
+            out[video.name] = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
+        elif video is not None and video.exists():
+            out[video.name] = 0.0
+    return out
+
+
+def _rate_notes(folder: Path, cameras: list[CalibratedCamera], fps: float) -> list[str]:
     """A note for each camera's video (beside the camera file) whose own frame rate is not the
     camera file's ``fps``, which is the one used: a video re-encoded at 30 fps under a file
     saying 60 was tracked at twice its speed, and paired with a reference frame by frame,
     without a word."""
+    return [
+        f"note: {name} is {own:g} fps by its own header, the camera file says {fps:g}: "
+        "the camera file's rate is used (set its fps if the video's is right)"
+        for name, own in _header_rates(folder, cameras).items()
+        if own > 0 and abs(own - fps) > 0.01 * fps
+    ]
+
+
+def _rate_of_videos(path: Path, cameras: list[CalibratedCamera], notes: list[str]) -> float:
+    """The frame rate of a camera file without ``fps``: the one its videos' own headers agree
+    on (within 1 %), said in ``notes``. It had been 25 without a word: the real 60 fps video
+    was then tracked and smoothed at 25.
+
+    Raises:
+        MotionFormatError: no video gives a rate (image folders), or they disagree."""
+    rates = _header_rates(path.parent, cameras)
+    known = {name: r for name, r in rates.items() if r > 0}
+    if not known:
+        raise MotionFormatError(
+            path, 'no "fps" (frames per second), and no video\'s header gives one: add "fps"'
+        )
+    first = next(iter(known.values()))
+    if any(abs(r - first) > 0.01 * first for r in known.values()):
+        listed = ", ".join(f"{name} {r:g}" for name, r in known.items())
+        raise MotionFormatError(
+            path,
+            f'no "fps" (frames per second), and the videos\' headers disagree ({listed}): '
+            'add "fps"',
+        )
+    names = ", ".join(known)
+    notes.append(
+        f'note: {path.name} gives no "fps": {first:g} fps taken from the videos\' own '
+        f'headers ({names}); add "fps" to it if that is not the rate they were filmed at'
+    )
+    return first
+
+
+#: A principal point further from the image's middle than this share of its width or
+#: height (0.25: outside the middle half) is said (:func:`centre_notes`).
+CENTRE_SHARE = 0.25
+
+
+def centre_notes(cameras: Sequence[CalibratedCamera]) -> list[str]:
+    """A note for each camera whose principal point ``(cx, cy)`` lies outside the middle
+    half of its image (:data:`CENTRE_SHARE`): intrinsics left at another image size, as a
+    video resized to half without its ``K``, put every point far off (a new user's trial:
+    973 mm from the reference, the videos blamed). Not an error: a lens shifted off the
+    sensor's middle is real, if rare this far."""
+    out = []
     for c in cameras:
-        video = folder / c.video if c.video else None
-        if video is None or not video.is_file():
-            continue
-        own = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
-        if own > 0 and abs(own - fps) > 0.01 * fps and (video, fps) not in _RATES_SAID:
-            _RATES_SAID.add((video, fps))  # a command loads its camera file more than once
-            note(
-                f"{video.name} is {own:g} fps by its own header, the camera file says {fps:g}: "
-                "the camera file's rate is used (set its fps if the video's is right)"
+        cx, cy = float(c.K[0, 2]), float(c.K[1, 2])
+        u, v = (cx + 0.5) / c.width, (cy + 0.5) / c.height  # pixel centres at integers
+        if not (CENTRE_SHARE <= u <= 1 - CENTRE_SHARE and CENTRE_SHARE <= v <= 1 - CENTRE_SHARE):
+            out.append(
+                f"note: {c.name}'s principal point ({cx:.1f}, {cy:.1f}) lies outside the middle "
+                f"of its {c.width}x{c.height} image: was its K made for another image size? "
+                "(a video resized by s needs fx, fy, cx + 0.5 and cy + 0.5 times s; "
+                "`video cameras` scales them)"
             )
+    return out
 
 
 def camera_videos(

@@ -71,7 +71,7 @@ from markovmotion.progress import track
 from markovmotion.video.cameras import CalibratedCamera, lone_video
 from markovmotion.video.landmarks import LANDMARKS, MIN_VISIBILITY
 from markovmotion.video.left_right import OnlineSides, consistent_sides
-from markovmotion.video.render import expected_frames, read_frames
+from markovmotion.video.render import expected_frames, header_shortfall, read_frames
 
 #: The release whose bundled pose models load offline (the 1.x releases ship none).
 MEDIAPIPE_VERSION = "0.10.21"
@@ -401,6 +401,8 @@ class MonocularTrack:
     seconds: float
     landmarks: Landmarks = field(repr=False)
     landmarks_world: np.ndarray = field(repr=False)
+    #: One line when the video gave fewer frames than its header counts (damaged?).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def placed(self) -> np.ndarray:
@@ -484,7 +486,10 @@ def track_monocular(
     world = camera.centre + scale * (world - camera.centre)
     conf = np.where(placed, np.where(lm.found[:, None], lm.visibility, 0.0).mean(axis=1), 0.0)
     points = finished_points(to_body_points(world), fps, smooth_s, constant_bones)
-    return MonocularTrack(points, conf, scale, fps, time.perf_counter() - t0, lm, world)
+    n = len(lm.found)
+    short = header_shortfall(video, n, camera, max_frames)
+    notes = [f"note: {Path(video).name} ended after {n} frames{short}"] if short else []
+    return MonocularTrack(points, conf, scale, fps, time.perf_counter() - t0, lm, world, notes)
 
 
 def online_sides(lm: Landmarks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -618,6 +623,36 @@ def reference_errors(
     }
 
 
+def reference_note(
+    reference: str | os.PathLike[str],
+    frames: int,
+    fps: float,
+    first_frame: int = 0,
+    max_frames: int | None = None,
+) -> str | None:
+    """One line when a reference's rows (from the track's first frame, ``first_frame`` of
+    the first camera's video, on) are not as many as the track's ``frames`` at ``fps``:
+    :func:`reference_errors` pairs them frame by frame, which is right only for a reference
+    of the same video at its rate (a 60 fps reference against a 30 fps re-encoding was
+    264.7 mm off without a word). None when they match, or when the track was cut by
+    ``max_frames`` and the reference goes on."""
+    rows, _ = read_reference(reference)
+    n = int((rows >= first_frame).sum())
+    cut = max_frames is not None and frames >= max_frames
+    if n == frames or (cut and n > frames):
+        return None
+    line = (
+        f"note: the reference {Path(reference).name} has {n} rows and the track {frames} "
+        f"frames: row k is compared with frame k"
+    )
+    if not cut and frames > 0 and abs(n / frames - 1.0) > 0.1:
+        line += (
+            f"; over the same time the reference would be at {fps * n / frames:.3g} fps, "
+            f"the video is at {fps:g}: give a reference at the video's rate"
+        )
+    return line
+
+
 def track_monocular_video(
     video: str | os.PathLike[str],
     cameras: str | os.PathLike[str] | None = None,
@@ -639,9 +674,10 @@ def track_monocular_video(
     )
 
     where = camera_file(video, cameras)
-    cams, doc = load_cameras(where)
+    notes: list[str] = []
+    cams, doc = load_cameras(where, notes)
     if lone_video(video):
-        cam, path = cams[camera_of_video(cams, video)], Path(video)
+        cam, path = cams[camera_of_video(cams, video, notes)], Path(video)
     else:
         cam, path = cams[0], camera_videos(where, cams[:1])[0]
     sigma = MONOCULAR_SMOOTHING_S if smooth is None else smooth
@@ -660,10 +696,13 @@ def track_monocular_video(
         "left_right": left_right,
         "smoothing_s": round(sigma, 4),
         "smoothing_chosen_by": "fixed: chosen on rendered kinds" if smooth is None else "--smooth",
+        "notes": [*notes, *tr.notes],
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
         errors = reference_errors(tr.points, reference, first_frame=cams[0].skip)
         # flat, as before, and under "reference" as the particle filter's summary has them
         summary.update(errors, reference=errors)
+        said = reference_note(reference, n, tr.fps, cams[0].skip, max_frames)
+        summary["notes"] += [said] if said else []
     return tr, summary

@@ -28,11 +28,6 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.features.joint_shape import MAJOR_JOINTS, Person
 from markovmotion.io.files import atomic_path
 
-#: FFmpeg's own log lines (a broken file's "moov atom not found", a damaged frame's "Invalid NAL
-#: unit size") held back, so that a bad video gets our one line: OpenCV reads this when it first
-#: opens a video. A user's own setting is kept.
-os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
-
 if TYPE_CHECKING:
     from markovmotion.video.cameras import CalibratedCamera
 
@@ -323,15 +318,54 @@ def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps:
     return path
 
 
-def shortest_note(names: Sequence[str], lengths: Sequence[int]) -> str | None:
+def shortest_note(
+    names: Sequence[str], lengths: Sequence[int], short: Sequence[str] | None = None
+) -> str | None:
     """One line when some views' videos (``names``) end before the others' (``lengths``: the
     frames read of each): which, and how many frames the views have together, the ones
-    tracked; None when they end together (nothing is cut silently)."""
+    tracked; None when they end together (nothing is cut silently), unless one gave fewer
+    frames than its header counts. ``short``: each video's :func:`header_shortfall` (""
+    when it gave what its header counts)."""
     n = min(lengths)
-    if n == max(lengths):
+    short = short or [""] * len(names)
+    ended = [
+        (name, why)
+        for name, k, why in zip(names, lengths, short, strict=True)
+        if k == n and (why or n < max(lengths))
+    ]
+    if not ended:
         return None
-    ended = ", ".join(name for name, k in zip(names, lengths, strict=True) if k == n)
-    return f"note: {ended} ended after {n} frames, before the other views: {n} frames tracked"
+    if len(ended) == 1:
+        said = f"{ended[0][0]} ended after {n} frames{ended[0][1]}"
+    else:
+        said = f"{', '.join(name + why for name, why in ended)} ended after {n} frames"
+    if n == max(lengths):
+        return f"note: {said}"
+    return f"note: {said}, before the other views: {n} frames tracked"
+
+
+def header_shortfall(
+    path: str | os.PathLike[str],
+    frames: int,
+    camera: CalibratedCamera | None = None,
+    max_frames: int | None = None,
+) -> str:
+    """What to add to a note on a video that gave ``frames`` frames (read from ``camera``'s
+    skipped ones on, :func:`read_frames`) when its header counts more: "(100 frames by its
+    header: damaged or cut short?)"; "" when it gave them all (within 1 %, a container's
+    estimate), was cut by ``max_frames``, or has no count (an image folder).
+
+    OpenCV stops at a frame it cannot decode as at the end: a video damaged in its middle
+    gave 18 of its 100 frames, and was tracked as an 18-frame video without a word."""
+    if max_frames is not None and frames >= max_frames:
+        return ""
+    path = Path(path)
+    header = frame_count(path, decode=False) if path.is_file() else 0
+    skip = camera.skip if camera is not None else 0
+    if header <= 0 or frames + skip >= header - max(1, round(0.01 * header)):
+        return ""
+    read = f", {frames + skip} with the {skip} skipped" if skip else ""
+    return f" ({header} frames by its header{read}: damaged or cut short?)"
 
 
 def read_frames(

@@ -217,11 +217,11 @@ def sync_video(
     cameras: str | os.PathLike[str] | None = None,
     max_lag_s: float = MAX_LAG_S,
     max_frames: int | None = None,
-) -> tuple[SyncResult, float, Path]:
+) -> tuple[SyncResult, float, Path, list[str]]:
     """``video sync``: MediaPipe over every camera's video (as ``track --method triangulate``
     reads them: one person, left and right agreed, each camera's ``skip_frames`` honoured),
-    each camera's offset to camera 0 (:func:`estimate_offsets`); also the frame rate and the
-    camera file."""
+    each camera's offset to camera 0 (:func:`estimate_offsets`); also the frame rate, the
+    camera file, and the notes on them (the camera file's, a video that ended early)."""
     from markovmotion.errors import MotionFormatError
     from markovmotion.video.cameras import CAMERAS_FILE, camera_file, camera_videos, load_cameras
     from markovmotion.video.triangulation import person_views
@@ -230,9 +230,10 @@ def sync_video(
     where = where / CAMERAS_FILE if where.is_dir() else where
     if lone_video(video):
         raise MotionFormatError(video, "syncing needs the folder of every camera")
-    cams, doc = load_cameras(where)
+    notes: list[str] = []
+    cams, doc = load_cameras(where, notes)
     if len(cams) < 2:
         raise MotionFormatError(where, "syncing needs at least 2 cameras")
     fps = float(doc["fps"])
-    views = person_views(camera_videos(where, cams), cams, fps, max_frames).agreed
-    return estimate_offsets(views, fps, max_lag_s), fps, where
+    views = person_views(camera_videos(where, cams), cams, fps, max_frames)
+    return estimate_offsets(views.agreed, fps, max_lag_s), fps, where, [*notes, *views.notes]

@@ -61,8 +61,14 @@ from markovmotion.video.monocular import (
     Landmarks,
     detect_landmarks,
     reference_errors,
+    reference_note,
 )
-from markovmotion.video.render import expected_frames, read_frames, shortest_note
+from markovmotion.video.render import (
+    expected_frames,
+    header_shortfall,
+    read_frames,
+    shortest_note,
+)
 
 #: A view whose reprojection error exceeds this many focal lengths (radians) is dropped when
 #: at least 3 views see the landmark (0.03: 12 px at the real video's 272x480, focal ~400 px;
@@ -237,8 +243,7 @@ class ViewLandmarks:
     seconds: float = 0.0
     #: MediaPipe's hip-centred world points (V, F, 33, 3) mm, if kept (``continuity`` needs them).
     world: np.ndarray | None = None
-    #: One line when a camera's video ended before the others'
-    #: (:func:`~markovmotion.video.render.shortest_note`).
+    #: One line per camera's video that ended before the others' (:func:`ended_notes`).
     notes: list[str] = field(default_factory=list)
 
     @classmethod
@@ -248,8 +253,12 @@ class ViewLandmarks:
         cameras: Sequence[CalibratedCamera],
         max_frames: int | None = None,
     ) -> ViewLandmarks:
-        """MediaPipe Pose over each camera's video (``scripts/install-camera``), cut to the
-        shortest."""
+        """MediaPipe Pose over each camera's video (``scripts/install-camera``), over the
+        frames at least two of them have: a video that ends before the others (cut short, or
+        damaged in its middle: OpenCV stops at a frame it cannot decode) gives no landmarks
+        after its end, as a view that does not see the person, and the others carry on
+        (:func:`ended_notes` says so). They had all been cut to the shortest: one damaged
+        video of four had left 18 of 100 frames tracked."""
         got: list[Landmarks] = [
             detect_landmarks(
                 read_frames(v, c),
@@ -259,16 +268,54 @@ class ViewLandmarks:
             )
             for v, c in zip(videos, cameras, strict=True)
         ]
-        n = min(len(g.found) for g in got)
-        note = shortest_note([Path(v).name for v in videos], [len(g.found) for g in got])
+        lengths = [len(g.found) for g in got]
+        n = sorted(lengths)[-2] if len(got) > 1 else lengths[0]  # frames 2 views have
+
+        def padded(a: np.ndarray, fill: float) -> np.ndarray:  # cut or padded to n frames
+            out = np.full((n, *a.shape[1:]), fill)
+            out[: min(n, len(a))] = a[:n]
+            return out
+
+        short = [
+            header_shortfall(v, k, c, max_frames)
+            for v, k, c in zip(videos, lengths, cameras, strict=True)
+        ]
         return cls(
             list(cameras),
-            np.stack([g.pixels[:n] for g in got]),
-            np.stack([np.where(g.found[:n, None], g.visibility[:n], 0.0) for g in got]),
+            np.stack([padded(g.pixels, np.nan) for g in got]),
+            np.stack([padded(np.where(g.found[:, None], g.visibility, 0.0), 0.0) for g in got]),
             sum(g.seconds for g in got),
-            np.stack([g.world[:n] for g in got]),
-            [note] if note else [],
+            np.stack([padded(g.world, np.nan) for g in got]),
+            ended_notes([Path(v).name for v in videos], lengths, short),
         )
+
+
+def ended_notes(names: Sequence[str], lengths: Sequence[int], short: Sequence[str]) -> list[str]:
+    """One line per view whose video (``names``) gave fewer frames (``lengths``) than the
+    others', with its header's count when that is more (``short``,
+    :func:`~markovmotion.video.render.header_shortfall`), and what is done: the frames after
+    its end come from the views that still have video (at least two), and a view alone past
+    the others' ends is cut (a point needs two views)."""
+    if len(lengths) == 1:
+        note = shortest_note(names, lengths, short)
+        return [note] if note else []
+    n = sorted(lengths)[-2]
+    out = []
+    for name, k, why in zip(names, lengths, short, strict=True):
+        if k < n:
+            out.append(
+                f"note: {name} ended after {k} frames{why}, before the other views: they "
+                f"carry on without it over frames {k}-{n - 1}"
+            )
+        elif why:
+            out.append(f"note: {name} ended after {k} frames{why}")
+    if max(lengths) > n:
+        longest = names[int(np.argmax(lengths))]
+        out.append(
+            f"note: {longest} alone goes on after the others end: {n} frames tracked "
+            "(a point needs two views)"
+        )
+    return out
 
 
 #: Cost per frame (torso lengths) of taking, of a labelling and its mirror, the one that swaps
@@ -1121,7 +1168,8 @@ def track_triangulated_video(
     check_left_right(left_right)  # before MediaPipe's minutes
     t0 = time.perf_counter()
     where = camera_file(video, cameras)
-    cams, doc = load_cameras(where)
+    file_notes: list[str] = []
+    cams, doc = load_cameras(where, file_notes)
     if lone_video(video):
         raise MotionFormatError(video, "--method triangulate needs the folder of every camera")
     videos = camera_videos(where, cams)
@@ -1144,7 +1192,7 @@ def track_triangulated_video(
     if not np.isfinite(tr.points).all(axis=2).any():  # as --method monocular says
         raise MotionFormatError(where, "no person found in this video (no frame placed)")
     n = len(tr.points)
-    seen = (lm.visibility >= MIN_VISIBILITY).sum()
+    seen = lm.visibility >= MIN_VISIBILITY
     summary = {
         "method": "triangulate",
         "views": len(cams),
@@ -1154,21 +1202,31 @@ def track_triangulated_video(
         "video_fps": tr.fps,
         "views_of_someone_else": one.someone_else,
         **whom(tr.points, cams, one.aim),
-        "landmark_views_dropped": int(seen - tri.used.sum()),
+        "landmark_views_dropped": dropped_views(lm, tri),
         "landmarks_despiked": spikes,
         "landmarks_filled_low_visibility": filled,
         **chosen.summary(),
-        "landmarks_seen": int(seen),
+        "landmarks_seen": int(seen.sum()),
         "median_residual_px": round(float(np.nanmedian(tri.residual)), 2),
         "left_right": left_right,
-        "notes": [*one.notes, *lone_views(one.found, tri)],
+        "notes": [*file_notes, *one.notes, *lone_views(one.found, tri)],
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
         errors = reference_errors(tr.points, reference, first_frame=cams[0].skip)
         # flat, as before, and under "reference" as the particle filter's summary has them
         summary.update(errors, reference=errors)
+        said = reference_note(reference, n, tr.fps, cams[0].skip, max_frames)
+        summary["notes"] += [said] if said else []
     return tr, summary
+
+
+def dropped_views(views: ViewLandmarks, tri: Triangulated) -> int:
+    """How many views saw a landmark surely (visibility at least ``MIN_VISIBILITY``) and
+    were not used for it: left out by the robust triangulation, or as a glitch. Counted
+    as the views seen less those used, it went negative (-58, -203 in a new user's trial):
+    :meth:`Triangulated.filled` uses views seen unsurely too."""
+    return int(((views.visibility >= MIN_VISIBILITY) & ~tri.used).sum())
 
 
 def whom(points: np.ndarray, cameras: Sequence[CalibratedCamera], aim: Aim | None) -> dict:

@@ -1,0 +1,144 @@
+"""What a camera file that reads may still get wrong, said once per command and kept in every
+tracker's JSON ``notes``: no ``fps``, a video's own rate, intrinsics of another image size."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import shutil
+
+import cv2
+import pytest
+
+from markovmotion.cli import main
+from markovmotion.data.index import data_root
+from markovmotion.errors import MotionFormatError
+from markovmotion.video.cameras import load_cameras, new_command
+from markovmotion.video.render import read_frames, write_video
+
+REAL = data_root().parent / "video" / "pose2sim_balancing"
+
+
+@pytest.fixture
+def real_copy(tmp_path):
+    """The real 4-view video's folder, its videos linked, its camera file a copy."""
+    out = tmp_path / "video"
+    out.mkdir()
+    for p in REAL.iterdir():
+        if p.name == "cameras.json":
+            shutil.copy(p, out / p.name)
+        else:
+            (out / p.name).symlink_to(p)
+    return out
+
+
+def _edit(folder, change) -> dict:
+    doc = json.loads((folder / "cameras.json").read_text(encoding="utf-8"))
+    change(doc)
+    (folder / "cameras.json").write_text(json.dumps(doc), encoding="utf-8")
+    return doc
+
+
+def _replace(link, frames, fps: float) -> None:
+    """A linked video replaced by a video of its own (the link removed first: never written
+    through into the shared data)."""
+    link.unlink()
+    write_video(frames, link, fps)
+
+
+def test_a_camera_file_without_fps_takes_the_rate_its_videos_agree_on(real_copy, capsys):
+    """No ``fps`` had become 25 without a word (the real 60 fps video tracked and smoothed at
+    25): the videos' own headers (all 60) give it, with a note; videos that disagree, or give
+    no rate (a folder of images), are one line asking for "fps"."""
+    _edit(real_copy, lambda d: d.pop("fps"))
+    new_command()
+    notes: list[str] = []
+    _, doc = load_cameras(real_copy, notes)
+    assert doc["fps"] == 60.0
+    assert len(notes) == 1 and 'gives no "fps": 60 fps taken from the videos' in notes[0]
+    assert capsys.readouterr().err.count('no "fps"') == 1
+    main(["track", "--video", str(real_copy), "--method", "triangulate", "--max-frames", "3",
+          "--json"])  # fmt: skip
+    run = capsys.readouterr()
+    summary = json.loads(run.out)
+    assert summary["video_fps"] == 60.0
+    assert [n for n in summary["notes"] if 'no "fps"' in n] == notes
+    assert run.err.count('no "fps"') == 1, run.err  # said once, though read three times
+    frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
+    _replace(real_copy / "cam1.mp4", frames, 30.0)
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_copy), "--method", "triangulate"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cameras.json" in err, err
+    assert 'no "fps"' in err and "cam0.mp4 60, cam1.mp4 30" in err and 'add "fps"' in err
+    for k in range(4):  # folders of images: no header, no rate
+        (real_copy / f"cam{k}.mp4").unlink()
+    folder = real_copy / "frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "000.png"), cv2.cvtColor(frames[0], cv2.COLOR_RGB2BGR))
+    _edit(real_copy, lambda d: [c.update(video="frames") for c in d["cameras"]])
+    with pytest.raises(MotionFormatError, match='no video\'s header gives one: add "fps"'):
+        load_cameras(real_copy)
+
+
+def _half_size_with_full_size_k(folder, frames: int = 4) -> None:
+    """The real cameras said to be 136x240, their K left at 272x480 (a video resized without
+    its intrinsics); camera 0's video and background image resized."""
+    _edit(folder, lambda d: [c.update(width=136, height=240) for c in d["cameras"]])
+    small = [
+        cv2.resize(f, (136, 240), interpolation=cv2.INTER_AREA)
+        for f in itertools.islice(read_frames(REAL / "cam0.mp4"), frames)
+    ]
+    _replace(folder / "cam0.mp4", small, 60.0)
+    plate = cv2.imread(str(REAL / "cam0_background.png"))
+    (folder / "cam0_background.png").unlink()
+    cv2.imwrite(str(folder / "cam0_background.png"), cv2.resize(plate, (136, 240)))
+
+
+def test_intrinsics_of_another_image_size_are_said_once_by_every_command(real_copy, capsys):
+    """Width and height halved, K not (a new user's trial: 973 mm from the reference, and
+    the note blamed the videos): each camera's principal point, at the corner of its image,
+    is named with the image's size, once per command though the file is read more than
+    once, and in the JSON's notes of the particle filter and of --method monocular. The real
+    cameras (principal points within 6 px of the middle) get no such note."""
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    assert notes == []
+    _half_size_with_full_size_k(real_copy)
+    new_command()
+    load_cameras(real_copy, notes)
+    assert len(notes) == 4 and notes[0].startswith("note: cam0's principal point (132.9, 236.7)")
+    assert all("of its 136x240 image" in n and "another image size" in n for n in notes)
+    capsys.readouterr()
+    video = str(real_copy / "cam0.mp4")
+    for extra in (["--method", "monocular"], ["--particles", "10", "--layers", "1",
+                  "--guide", "none"]):  # fmt: skip
+        main(["track", "--video", video, "--max-frames", "3", "--json", *extra])
+        run = capsys.readouterr()
+        summary = json.loads(run.out)
+        assert [n for n in summary["notes"] if "principal point" in n] == notes, extra
+        assert run.err.count("principal point") == 4, run.err
+
+
+def test_rate_and_reference_notes_reach_the_json_of_every_method(real_copy, tmp_path, capsys):
+    """A camera file saying 30 over videos whose headers say 60: the four notes went to
+    stderr but not into the JSON's notes (empty for triangulate, no key for monocular); a
+    reference of another length than the track was compared without a word. Now every note
+    printed is in the JSON too, and printed once, by every method."""
+    _edit(real_copy, lambda d: d.update(fps=30.0))
+    lines = (REAL / "reference_mediapipe_triangulated_mm.csv").read_text().splitlines()
+    reference = tmp_path / "short.csv"
+    reference.write_text("\n".join(lines[:3]) + "\n", encoding="utf-8")  # 2 rows
+    for extra in (["--method", "triangulate"], ["--method", "monocular"],
+                  ["--particles", "10", "--layers", "1"]):  # fmt: skip
+        main(["track", "--video", str(real_copy), "--max-frames", "3", "--json",
+              "--reference", str(reference), *extra])  # fmt: skip
+        run = capsys.readouterr()
+        notes = json.loads(run.out)["notes"]
+        said = [n for n in notes if "by its own header, the camera file says 30" in n]
+        assert len(said) == 4 and "cam0.mp4 is 60 fps" in said[0], (extra, notes)
+        assert run.err.count("the camera file says 30") == 4, run.err
+        assert "note: the reference short.csv has 2 rows and the track 3 frames" in run.err
+        printed = [line for line in run.err.splitlines() if line.startswith("note:")]
+        assert printed and all(line in notes for line in printed), (extra, printed, notes)
