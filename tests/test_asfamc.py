@@ -103,6 +103,20 @@ def small(tmp_path) -> Path:
     return tmp_path / "t_01.amc"
 
 
+def test_an_amc_not_named_as_cmus_takes_the_only_asf_beside_it(small):
+    """``walk.amc`` beside one ASF (``t.asf``) is read with it, as ``t_01.amc`` is; with
+    two ASF files there, one line says it cannot tell which and how to name it."""
+    other = small.with_name("forward walk.amc")
+    other.write_text(small.read_text())
+    np.testing.assert_array_equal(
+        read_amc(other, fps=30).rotations, read_amc(small, fps=30).rotations
+    )
+    (small.parent / "u.asf").write_text((small.parent / "t.asf").read_text())
+    with pytest.raises(MotionFormatError, match="not named SUBJECT_TRIAL.amc and 2 ASF files"):
+        read_amc(other, fps=30)
+    assert read_amc(small, fps=30).n_frames  # CMU's naming still finds t.asf
+
+
 def test_small_figure_hand_computed(small):
     m = read_amc(small, fps=30)
     sk = m.skeleton

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -478,3 +479,31 @@ def test_a_long_walk_is_scored_in_runs_of_steps_in_linear_memory(
     assert np.isfinite(cut) and abs(cut - whole) < 0.05 * abs(whole)
     with pytest.raises(LimitError, match="chain states"):
         small_model.hsmm_.score(small_model.walk_set([walk]).obs, [np.zeros(40, int)])
+
+
+def test_gait_reads_every_walk_of_a_users_own_index_of_one_skeleton(mocap, tmp_path, capsys):
+    """A user's index has no ``bandai/dataset-2/`` folder: its walks are every walk (the
+    default subset is the shared collection's only where the index has it); a walk on
+    another skeleton is left out in a note naming it, not a traceless error; a label no
+    walk has is one line that does not say "None"."""
+    from markovmotion.data.walks import load_walks
+
+    normal = gait_entries(mocap, "normal")[:3]
+    cmu = next(e for e in mocap.query(category="walk") if e.source == "cmu")
+    mine = _write_index(
+        tmp_path / "mine",
+        [(f"my_walks/w{k}.bvh.gz", e) for k, e in enumerate(normal)] + [("other/c.amc.gz", cmu)],
+    )
+    if cmu.file.endswith(".amc.gz"):  # an AMC reads its ASF beside it
+        asf = Path(cmu.path).parent / f"{Path(cmu.file).name.split('_')[0]}.asf"
+        shutil.copyfile(asf, tmp_path / "mine" / "other" / "c.asf")
+    capsys.readouterr()
+    walks = load_walks([mine], None, "all")
+    assert len(walks) == 3
+    assert "left out" in capsys.readouterr().err
+    main(["gait", "steps", "--data", str(mine), "--label", "normal"])
+    assert "steps in 3 walks" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "steps", "--data", str(mine), "--label", "nope"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "no walks labelled nope in" in err and "None" not in err

@@ -38,8 +38,10 @@ def train(
     ),
     out: Path = typer.Option(..., help="Average model to write (.npz)."),
     label: str = typer.Option("normal", help="Label of the walks to train on, from an index."),
-    subset: str = typer.Option(
-        "", help="Index files starting with this (default Bandai dataset-2)."
+    subset: str | None = typer.Option(
+        None,
+        help="Index files starting with this (default: Bandai dataset-2 where the index has "
+        "it, else every walk; '' for every walk).",
     ),
     split: str = SPLIT,
     n_iter: int = ranged("iterations", 10, min=1, help="EM iterations."),
@@ -79,7 +81,11 @@ def train(
 def adapt(
     model: Path = typer.Option(..., help="Average model (.npz) from 'gait train'."),
     style_data: list[Path] = typer.Option(
-        None, help="INDEX.csv (or its folder), or BVH files of the style's walks; repeatable."
+        None,
+        "--style-data",
+        "--data",
+        help="INDEX.csv (or its folder), or BVH files of the style's walks; repeatable "
+        "(--data, as train and evaluate call it, is the same).",
     ),
     label: str = typer.Option(..., help="The style (its label in an index)."),
     out: Path = typer.Option(..., help="Style model to write (.npz)."),
@@ -94,8 +100,10 @@ def adapt(
     scratch: bool = typer.Option(
         False, "--scratch", help="Train a style model from scratch on the same steps instead."
     ),
-    subset: str = typer.Option(
-        "", help="Index files starting with this (default Bandai dataset-2)."
+    subset: str | None = typer.Option(
+        None,
+        help="Index files starting with this (default: Bandai dataset-2 where the index has "
+        "it, else every walk; '' for every walk).",
     ),
     split: str = SPLIT,
 ) -> None:
@@ -275,8 +283,10 @@ def evaluate(
     ),
     seed: int = ranged("seed", 0, help="Seed of the synthesized durations and the bootstrap."),
     bootstrap: int = typer.Option(2000, min=100, help="Bootstrap replicates of the intervals."),
-    subset: str = typer.Option(
-        "", help="Index files starting with this (default Bandai dataset-2)."
+    subset: str | None = typer.Option(
+        None,
+        help="Index files starting with this (default: Bandai dataset-2 where the index has "
+        "it, else every walk; '' for every walk).",
     ),
 ) -> None:
     """Objective evaluation (§6 replacement): recognition, real vs synthesized, DTW, foot slide, GV.
@@ -363,8 +373,10 @@ def evaluate(
 def steps_(
     data: list[Path] = typer.Option(None, help="INDEX.csv (or its folder) or walk files."),
     label: list[str] = typer.Option(None, help="Labels to list from an index (default all)."),
-    subset: str = typer.Option(
-        "", help="Index files starting with this (default Bandai dataset-2)."
+    subset: str | None = typer.Option(
+        None,
+        help="Index files starting with this (default: Bandai dataset-2 where the index has "
+        "it, else every walk; '' for every walk).",
     ),
 ) -> None:
     """Heel strikes and steps found in each walk (gait paper §4)."""

@@ -69,7 +69,7 @@ from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.splits import held_out_every
-from markovmotion.data.walks import DEFAULT_SUBSET, gait_entries
+from markovmotion.data.walks import gait_entries
 from markovmotion.errors import DataNotFoundError, ModelFormatError
 from markovmotion.evaluate.perceptual import efficiency
 from markovmotion.evaluate.takes import TestTakes, test_takes
@@ -725,7 +725,7 @@ def evaluate_models(
     replicates: int = 3,
     seed: int = 0,
     n_boot: int = 2000,
-    subset: str = "",
+    subset: str | None = None,
     progress: Callable[[str, int], None] | None = None,
 ) -> dict[str, Any]:
     """Everything ``gait evaluate`` reports, on held-out walks or on the walks of another index.
@@ -733,7 +733,7 @@ def evaluate_models(
     The style classifier (and the sweep's adaptation) learns from the
     training takes (:func:`~markovmotion.data.splits.held_out_every`) of the
     walks of ``data`` (an INDEX.csv or its folder; default the shared
-    collection) whose file starts with ``subset`` (default Bandai dataset-2).
+    collection) whose file starts with ``subset`` (None: :func:`~markovmotion.data.walks.default_subset`).
     Without ``test``, the models are evaluated on the held-out takes of that
     index, which they must not have trained on. With ``test`` (another
     INDEX.csv), on its walks that fit the models (:func:`walks_to_test`),
@@ -753,7 +753,7 @@ def evaluate_models(
     if ks and not models["average"]:
         raise DataNotFoundError("the sweep needs an average model")
     index = MocapIndex.load(data)
-    train, held_out = held_out_every(gait_entries(index, None, subset or DEFAULT_SUBSET))
+    train, held_out = held_out_every(gait_entries(index, None, subset))
     by_classifier: list[str] = []
     train_motions: dict[str, list[Motion]] = {}
     test_motions: dict[str, list[Motion]] = {}

@@ -347,16 +347,23 @@ def _lines(path: str | os.PathLike[str], text: str) -> list[str]:
 
 
 def asf_beside(amc: str | os.PathLike[str]) -> Path:
-    """CMU's naming: ``NN_TT.amc[.gz]`` is animated with ``NN.asf`` in the same folder."""
+    """The ASF of an AMC file: CMU's naming (``NN_TT.amc[.gz]`` is animated with ``NN.asf``
+    in the same folder), else the folder's only ASF (a user's ``walk.amc`` beside its
+    ``me.asf``)."""
     amc = Path(amc)
-    if "_" not in amc.name:
-        raise MotionFormatError(
-            amc, "cannot tell its skeleton: name it SUBJECT_TRIAL.amc beside SUBJECT.asf"
-        )
-    asf = amc.with_name(amc.name.split("_", 1)[0] + ".asf")
-    if not asf.is_file():
-        raise MotionFormatError(amc, f"no skeleton file {asf} beside it (pass its ASF)")
-    return asf
+    named = amc.with_name(amc.name.split("_", 1)[0] + ".asf") if "_" in amc.name else None
+    if named is not None and named.is_file():
+        return named
+    alone = sorted(p for p in amc.parent.glob("*.asf") if p.is_file())
+    if len(alone) == 1:
+        return alone[0]
+    why = f"no {named.name} beside it" if named is not None else "not named SUBJECT_TRIAL.amc"
+    found = f"{len(alone)} ASF files there" if alone else "no ASF file there"
+    raise MotionFormatError(
+        amc,
+        f"cannot tell its skeleton: {why} and {found} (name it SUBJECT_TRIAL.amc beside "
+        "SUBJECT.asf, or keep one ASF in its folder)",
+    )
 
 
 def _parse_amc(path: str, text: str, asf: AsfSkeleton) -> tuple[np.ndarray, bool]:
