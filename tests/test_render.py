@@ -440,3 +440,35 @@ def test_blitting_restores_every_column_of_the_frame():
     canvas.draw()
     assert canvas.copy_from_bbox(fig.bbox).get_extents() == (0, 0, 401, 450)  # the trap
     assert canvas.copy_from_bbox(_whole(canvas)).get_extents() == (0, 0, 402, 450)
+
+
+def test_the_demo_on_a_users_own_walks_runs_what_it_can_and_says_what_it_skipped(
+    mocap, tmp_path, capsys
+):
+    """``demo --data`` on a user's index of three walks (no CMU takes, no partners): the
+    captured walk is the index's first walk, the PCA is of its walks, and every step that
+    needs takes it does not hold is skipped and named after the table; an index with
+    nothing a step can use is one line."""
+    import shutil
+
+    from markovmotion.errors import DataNotFoundError
+
+    mine = tmp_path / "mine"
+    (mine / "w").mkdir(parents=True)
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for k, e in enumerate(mocap.query(source="bandai", label="normal")[:3]):
+        shutil.copyfile(e.path, mine / "w" / f"{k}.bvh.gz")
+        rows.append(f"w/{k}.bvh.gz,lab,me,{k},walk,normal,,{e.fps:g},{e.frames},my walk")
+    (mine / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    capsys.readouterr()
+    run_demo(tmp_path / "out", mine)
+    assert read_motion(tmp_path / "out" / "walk.bvh").n_frames == mocap.query(
+        source="bandai", label="normal"
+    )[0].frames
+    assert (tmp_path / "out" / "pca-energy.png").stat().st_size > 0
+    err = capsys.readouterr().err
+    skipped = [ln for ln in err.splitlines() if ln.startswith("note: skipped on")]
+    assert len(skipped) == len(STEPS) - 2 and all("mine/INDEX.csv" in ln for ln in skipped)
+    (mine / "INDEX.csv").write_text(rows[0] + "\n")
+    with pytest.raises(DataNotFoundError, match="no step of the demo"):
+        run_demo(tmp_path / "none", mine)

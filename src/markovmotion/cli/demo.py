@@ -9,7 +9,11 @@ import typer
 
 def demo(
     out: Path = typer.Option(Path("demo-out"), help="Folder for the outputs."),
-    data: Path = typer.Option(None, help="Folder with INDEX.csv (default: see README)."),
+    data: Path = typer.Option(
+        None,
+        help="Folder with INDEX.csv (default: see README); on your own, each step runs on the "
+        "takes it finds there and the others are skipped, said at the end.",
+    ),
 ) -> None:
     """One model of each family on the CMU and Bandai data: motion (BVH), animations (GIF), plots (PNG)."""
     from markovmotion.demo import run_demo

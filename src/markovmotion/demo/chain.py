@@ -9,6 +9,7 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.demo.run import required
 from markovmotion.demo.scene import partner_scene
 from markovmotion.evaluate.chain import pose_error_mm
 from markovmotion.features.joint_shape import person_from_motion
@@ -24,7 +25,8 @@ HYPOTHESES = 100
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Virtual partner (behaviour chain, CONDENSATION, online): a held-out salsa dancer answered."""
-    train, held_out = held_out_pairs(index.pairs(label=LABEL))
+    pairs = required(index.pairs(label=LABEL), "two-person salsa takes, at least 2", index, 2)
+    train, held_out = held_out_pairs(pairs)
     pairs = [index.load_pair(a, b) for a, b in track(train[:TRAIN_TAKES], "loading salsa takes")]
     model = VirtualPartner(n_epochs=2).fit(pairs)
     ch = model.chain_

@@ -10,6 +10,7 @@ from rich.console import Console
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_every
 from markovmotion.data.walks import gait_entries
+from markovmotion.demo.run import required
 from markovmotion.features.gait import align_walk, detect_steps
 from markovmotion.io import write_motion
 from markovmotion.models.gait.synthesizer import GaitSynthesizer
@@ -23,8 +24,12 @@ ADAPTATION_STEPS = 12
 
 def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Stylistic gait (HSMM): an average walk adapted to an elderly style from 12 steps, beside a real one."""
-    normal_train, _ = held_out_every(gait_entries(index, "normal"))
-    style_train, style_test = held_out_every(gait_entries(index, STYLE))
+    normal_train, _ = held_out_every(
+        required(gait_entries(index, "normal"), "walks labelled normal, at least 2", index, 2)
+    )
+    style_train, style_test = held_out_every(
+        required(gait_entries(index, STYLE), f"walks labelled {STYLE}, at least 2", index, 2)
+    )
     normal = [
         index.load_motion(e) for e in track(normal_train[:AVERAGE_WALKS], "loading neutral walks")
     ]

@@ -11,44 +11,76 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
 from markovmotion.data import MocapIndex
-from markovmotion.data.index import Entry
+from markovmotion.data.index import Entry, data_root
+from markovmotion.data.kinds import largest_group
+from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.features import PCA, JointPositions
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
-from markovmotion.progress import track
+from markovmotion.progress import note, track
 from markovmotion.viz import render, render_frames, save_line_plot
 
 Step = Callable[[Path, MocapIndex, Console], list[Path]]
+T = TypeVar("T")
 
 WALK = "cmu/asfamc/02/02_01.amc.gz"  # CMU subject 2, trial 1: a straight walk
 
 
 def _cmu_training_set(index: MocapIndex) -> list[Entry]:
-    """CMU walks and exercise takes sharing the walk's skeleton (the ASF/AMC subjects)."""
+    """CMU walks and exercise takes sharing the walk's skeleton (the ASF/AMC subjects); in
+    a collection without them, its skeleton walks and exercise takes (the largest group of
+    one skeleton is kept when they are read)."""
     fmt = base_suffix(WALK)
-    return [
+    cmu = [
         e
         for e in index.query(source="cmu", category=("walk", "exercise"))
         if base_suffix(e.file) == fmt
     ]
+    return cmu or [e for e in index.query(category=("walk", "exercise")) if e.kind == "skeleton"]
+
+
+def required(items: Sequence[T], what: str, index: MocapIndex, least: int = 1) -> Sequence[T]:
+    """``items`` if there are at least ``least``, else the one line of a demo step whose
+    takes ``index`` does not hold (:class:`DataNotFoundError`: the step is skipped on a
+    user's own collection, :func:`run_demo`)."""
+    if len(items) < least:
+        raise DataNotFoundError(f"{what}: {len(items)} in {index.root / 'INDEX.csv'}")
+    return items
+
+
+def _walk_entry(index: MocapIndex) -> Entry:
+    """:data:`WALK` where the index has it (the shared collection), else its first walk
+    (a user's own collection)."""
+    if any(e.file == WALK for e in index):
+        return index.find(WALK)
+    walks = [e for e in index.query(category="walk") if e.kind == "skeleton"]
+    if not walks:
+        raise DataNotFoundError(f"no skeleton take of category walk in {index.root / 'INDEX.csv'}")
+    return walks[0]
 
 
 def captured_walk(out: Path, index: MocapIndex, console: Console) -> list[Path]:
-    """A captured CMU walk as BVH, an animated GIF and a strip of frames."""
-    walk = index.load_motion(index.find(WALK))
+    """A captured walk as BVH, an animated GIF and a strip of frames."""
+    entry = _walk_entry(index)
+    walk = index.load_motion(entry)
     console.print(
-        f"captured walk {WALK}: {walk.n_frames} frames at {walk.fps:g} fps "
+        f"captured walk {entry.file}: {walk.n_frames} frames at {walk.fps:g} fps "
         f"({walk.duration:.1f} s, {walk.skeleton.n_joints} joints)"
     )
     bvh, gif, png = out / "walk.bvh", out / "walk.gif", out / "walk-frames.png"
     write_motion(walk, bvh)
-    title = "CMU subject 02, trial 01: walk (captured)"
+    title = (
+        "CMU subject 02, trial 01: walk (captured)"
+        if entry.file == WALK
+        else f"{Path(entry.file).name}: walk (captured)"
+    )
     render(walk, gif, title=title)
     render_frames(walk, np.linspace(0, walk.n_frames - 1, 6).astype(int), png, title=title)
     return [bvh, gif, png]
@@ -57,7 +89,11 @@ def captured_walk(out: Path, index: MocapIndex, console: Console) -> list[Path]:
 def pca_energy(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """Energy kept by PCA of body-centred joint positions (CMU walks and exercise)."""
     entries = _cmu_training_set(index)
-    motions = [index.load_motion(e) for e in track(entries, "loading CMU walks and exercise")]
+    if not entries:
+        raise DataNotFoundError(f"no skeleton walk or exercise take in {index.root / 'INDEX.csv'}")
+    motions = [index.load_motion(e) for e in track(entries, "loading walks and exercise")]
+    best, _ = largest_group(motions, [e.file for e in entries])
+    motions = [motions[i] for i in best]
     n_frames = sum(m.n_frames for m in motions)
     features = JointPositions().fit_transform(motions)
     pca = PCA(energy=0.95).fit(features)
@@ -74,7 +110,7 @@ def pca_energy(out: Path, index: MocapIndex, console: Console) -> list[Path]:
         {"cumulative explained variance": cumulative[:shown]},
         xlabel="number of principal components K",
         ylabel="fraction of variance (energy) kept",
-        title=f"PCA of body-centred joint positions: {len(motions)} CMU takes, {n_frames} frames",
+        title=f"PCA of body-centred joint positions: {len(motions)} takes, {n_frames} frames",
         hlines={"95 % energy": 0.95},
         vlines={f"chosen K = {k}": k},
     )
@@ -135,8 +171,21 @@ STEPS: list[Step] = [
 ]
 
 
+def _default_root() -> Path | None:
+    """The shared collection's folder, if there is one."""
+    try:
+        return data_root().resolve()
+    except DataNotFoundError:
+        return None
+
+
 def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None = None) -> None:
-    """Run the demo ``steps`` (default :data:`STEPS`) on the data in ``data``, writing to ``out``."""
+    """Run the demo ``steps`` (default :data:`STEPS`) on the data in ``data``, writing to ``out``.
+
+    On the shared collection (``data`` None) every step must run. On a user's own index a
+    step whose takes are not there (or not of one skeleton) is skipped, and the skipped
+    steps are said after the table, each with why; none running is one line
+    (:class:`DataNotFoundError`)."""
     console = Console(soft_wrap=True)  # a log file keeps whole lines
     out = Path(out)
     index = MocapIndex.load(data)  # no data: one line, and no empty output folder left
@@ -147,14 +196,28 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
     table.add_column("file", no_wrap=True)
     table.add_column("size", justify="right")
     table.add_column("time", justify="right")
+    skipped: list[str] = []
+    shared = data is None or _default_root() == index.root.resolve()
     for step in STEPS if steps is None else steps:
         start = time.perf_counter()
-        paths = step(out, index, console)
-        seconds = time.perf_counter() - start
         what = (step.__doc__ or step.__name__).strip().splitlines()[0]
+        try:
+            paths = step(out, index, console)
+        except MarkovMotionError as exc:  # takes missing, or not of one skeleton
+            if shared:  # the shared collection holds every step's takes
+                raise
+            skipped.append(f"{what} ({exc})")  # said after the table
+            continue
+        seconds = time.perf_counter() - start
         for n, p in enumerate(paths):
             size = f"{p.stat().st_size / 1024:.0f} KiB"
             table.add_row(
                 what if n == 0 else "", p.name, size, f"{seconds:.1f} s" if n == 0 else ""
             )
+    if skipped and len(skipped) == len(STEPS if steps is None else steps):
+        raise DataNotFoundError(
+            f"no step of the demo found the takes it needs in {index.root / 'INDEX.csv'}"
+        )
     console.print(table)
+    for line in skipped:  # after the table, where a user looks last
+        note(f"skipped on {index.root / 'INDEX.csv'}: {line}")

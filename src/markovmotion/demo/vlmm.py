@@ -8,6 +8,7 @@ import numpy as np
 from rich.console import Console
 
 from markovmotion.data import MocapIndex
+from markovmotion.demo.run import required
 from markovmotion.io import write_motion
 
 #: The paper's configuration for synthesis (rotations, lambda 10, no join): the routine
@@ -23,7 +24,10 @@ def demo_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     from markovmotion.viz import render
     from markovmotion.viz.plots import new_figure, save_figure
 
-    entries = index.query(category="exercise", label=("indian_dance", "martial_arts"))
+    entries = required(
+        index.query(category="exercise", label=("indian_dance", "martial_arts")),
+        "exercise takes labelled indian_dance or martial_arts, at least 2", index, 2,
+    )  # fmt: skip
     train, _ = held_out_last(entries)
     train = [e for label in ("indian_dance", "martial_arts") for e in train if e.label == label][:8]
     motions, _ = load_motions(index, train, 30.0)

@@ -19,6 +19,7 @@ from rich.console import Console
 from markovmotion.algorithms.vector_quantisation import collapse_repeats, nearest_prototype
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_last
+from markovmotion.demo.run import required
 from markovmotion.errors import MotionFormatError
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.vlmm.behaviour import BehaviourModel
@@ -52,7 +53,9 @@ COHERENCE_SECONDS = 120.0
 
 def video_partner(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """A handshake on video: A tracked from 3 cameras, the virtual partner composited in."""
-    shakes = index.pairs(label=[HANDSHAKE], kind="skeleton")  # rendered from skeletons
+    shakes = required(
+        index.pairs(label=[HANDSHAKE], kind="skeleton"), "two-person handshakes (skeletons)", index
+    )  # rendered from skeletons
     if not shakes:
         console.print("no handshake in the index: video demo skipped")
         return []
@@ -110,7 +113,14 @@ def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     A structured VLMM of tracked silhouette contours; rows for its key memory and for its
     prototype VLMM's memory."""
     label = contour_label(index)
-    train, _ = held_out_last(index.query(category="exercise", label=label))
+    train, _ = held_out_last(
+        required(
+            index.query(category="exercise", label=label),
+            f"exercise takes labelled {label}, at least 2",
+            index,
+            2,
+        )
+    )
     cache = out / "contour-cache"  # videos and tracks, reused by the next run
     tracks = []
     for e in train:
