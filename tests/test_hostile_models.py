@@ -96,6 +96,7 @@ MUTATIONS = {
     "format_version 2": _set(["format_version"], 2),
     "no format_version": _drop(["format_version"]),
     "kind a number": _set(["kind"], 3),
+    "kind missing": lambda h, a: ({k: v for k, v in h.items() if k != "kind"}, a),
     "unknown class": _set(["model", "class"], "EvilHMM"),
     "class a list": _set(["model", "class"], ["GaussianHMM"]),
     "params a list": _set(["model", "params"], [1]),
@@ -161,6 +162,7 @@ def test_tampered_model_file_is_one_line(valid, tmp_path_factory, names):
     "name,field",
     [
         ("format_version a string", "format_version must be an integer"),
+        ("kind missing", "header field 'kind' is missing"),
         ("header a list", "not an object"),
         ("unknown class", "model.class"),
         ("n_components a string", "model.params.n_components"),

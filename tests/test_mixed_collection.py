@@ -309,3 +309,15 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     assert (a, "error", f"its partner {b} names gone.c3d back") in found
     assert (a, "note", "no subject") in found
     assert report["errors"] == sum(f["level"] == "error" for f in report["findings"]) == 6
+
+
+def test_a_skeletons_difference_says_how_many_more_joints_differ(mocap):
+    """Two skeletons that differ in many joints: five are named, then "and N more"."""
+    import dataclasses
+
+    walk = mocap.load_motion(mocap.query(source="bandai")[0])
+    renamed = tuple(n.lower() for n in walk.skeleton.names)
+    other = dataclasses.replace(walk.skeleton, names=renamed)
+    differ = 2 * sum(n != r for n, r in zip(walk.skeleton.names, renamed, strict=True))
+    text = walk.skeleton.difference(other)
+    assert f"and {differ - 5} more)" in text and text.split("differ: ")[1].count(",") == 4

@@ -105,6 +105,8 @@ def load_npz(
             f"{str(header.get('library_version', '?'))[:40]}); this markovmotion reads version "
             f"{FORMAT_VERSION}: retrain the model",
         )
+    if "kind" not in header:
+        raise ModelFormatError(path, "header field 'kind' is missing (damaged or not a model?)")
     if not isinstance(header.get("kind"), str):
         raise ModelFormatError(path, "header field 'kind' must be a string")
     if kind is not None and header.get("kind") != kind:

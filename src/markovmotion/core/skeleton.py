@@ -109,7 +109,10 @@ class Skeleton:
         if self.same_topology(other):
             return None
         missing = sorted(set(self.names) ^ set(other.names))
-        detail = f"joints differ: {', '.join(missing[:5])}" if missing else "joint order differs"
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        detail = (
+            f"joints differ: {', '.join(missing[:5])}{more}" if missing else "joint order differs"
+        )
         return f"({other.n_joints} joints, expected {self.n_joints}; {detail})"
 
     def check_compatible(self, other: Skeleton, what: str = "motion") -> None:
