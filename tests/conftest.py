@@ -119,6 +119,26 @@ def page(browser):
 
 
 @pytest.fixture
+def real_copy(tmp_path) -> Path:
+    """The real 4-view video's folder for a test to edit: its camera file a COPY (never a
+    link: an edit would write through into the shared data), its other files linked one by
+    one by name."""
+    import shutil
+
+    from markovmotion.data.index import data_root
+
+    src = data_root().parent / "video" / "pose2sim_balancing"
+    out = tmp_path / "video"
+    out.mkdir()
+    for p in src.iterdir():
+        if p.name == "cameras.json":
+            shutil.copy(p, out / p.name)
+        else:
+            (out / p.name).symlink_to(p)
+    return out
+
+
+@pytest.fixture
 def needs_mediapipe() -> None:
     """Fails (never skips) a camera test when MediaPipe is missing."""
     try:

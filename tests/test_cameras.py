@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import shutil
 
 import cv2
 import pytest
@@ -17,19 +16,6 @@ from markovmotion.video.cameras import load_cameras, new_command
 from markovmotion.video.render import read_frames, write_video
 
 REAL = data_root().parent / "video" / "pose2sim_balancing"
-
-
-@pytest.fixture
-def real_copy(tmp_path):
-    """The real 4-view video's folder, its videos linked, its camera file a copy."""
-    out = tmp_path / "video"
-    out.mkdir()
-    for p in REAL.iterdir():
-        if p.name == "cameras.json":
-            shutil.copy(p, out / p.name)
-        else:
-            (out / p.name).symlink_to(p)
-    return out
 
 
 def _edit(folder, change) -> dict:

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 
 import cv2
 import numpy as np
 import pytest
 
 from markovmotion.cli import main
-from markovmotion.data.index import data_root
 from markovmotion.video.cameras import load_cameras, ring_of_cameras
 from markovmotion.video.sync import (
     MIN_GAIN_ANGLE,
@@ -121,20 +119,6 @@ def test_an_offset_is_judged_alike_at_half_the_image_size(scale):
     assert gain >= MIN_GAIN_ANGLE * cams[2].focal  # asked in focal lengths: 0.35 px, 0.17 px
     if scale < 1:
         assert gain < 0.5  # 0.5 px, asked at any size, would have turned it down
-
-
-@pytest.fixture
-def real_copy(tmp_path):
-    """The real 4-view video's folder, its videos linked, its camera file a copy."""
-    src = data_root().parent / "video" / "pose2sim_balancing"
-    out = tmp_path / "video"
-    out.mkdir()
-    for p in src.iterdir():
-        if p.name == "cameras.json":
-            shutil.copy(p, out / p.name)
-        else:
-            (out / p.name).symlink_to(p)
-    return out
 
 
 def test_video_sync_measures_and_records_the_offsets_of_the_real_video(real_copy, capsys):

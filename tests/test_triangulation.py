@@ -344,7 +344,6 @@ def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
     filter follows the frames the views have together, the triangulation carries on with the
     other views; both say which video ended, not silently."""
     import itertools
-    import shutil
 
     from markovmotion.video.render import read_frames, shortest_note, write_video
 
@@ -374,25 +373,18 @@ def test_a_video_that_ends_early_is_said(real_video, tmp_path, capsys):
     assert "ended after" not in capsys.readouterr().err  # cut by --max-frames: nothing to say
 
 
-def _damaged_copy(real_video, folder):
-    """The real video with camera 2's file zeroed over 8000 bytes a third of the way in
-    (a new user's trial: OpenCV then decodes 18 of the 100 frames its header counts); the
-    other files linked, the camera file copied."""
-    for p in real_video.iterdir():
-        if p.name == "cameras.json":
-            shutil.copy(p, folder / p.name)
-        elif p.name != "cam2.mp4":
-            (folder / p.name).symlink_to(p)
-    data = bytearray((real_video / "cam2.mp4").read_bytes())
+def _damaged_copy(folder):
+    """``real_copy`` with camera 2's file zeroed over 8000 bytes a third of the way in (a
+    new user's trial: OpenCV then decodes 18 of the 100 frames its header counts)."""
+    data = bytearray((folder / "cam2.mp4").read_bytes())
     at = len(data) // 3
     data[at : at + 8000] = bytes(8000)
+    (folder / "cam2.mp4").unlink()  # the link, not the shared file
     (folder / "cam2.mp4").write_bytes(bytes(data))
     return folder
 
 
-def test_a_video_damaged_in_its_middle_is_said_and_the_other_views_carry_on(
-    real_video, tmp_path, capsys
-):
+def test_a_video_damaged_in_its_middle_is_said_and_the_other_views_carry_on(real_copy, capsys):
     """Camera 2's video damaged in its middle: OpenCV stops there as at an end. Monocular had
     tracked 18 frames without a word, the triangulation only 18 of 100 frames; now each says
     which video ended, after how many frames, and what its header counts, and the
@@ -401,7 +393,7 @@ def test_a_video_damaged_in_its_middle_is_said_and_the_other_views_carry_on(
     import sys
 
     _need_mediapipe()
-    folder = _damaged_copy(real_video, tmp_path)
+    folder = _damaged_copy(real_copy)
     # FFmpeg's lines on the damaged frames are held back although the camera file's reading
     # opens the videos first (a new process: OpenCV reads the setting once)
     read = subprocess.run(
@@ -430,6 +422,19 @@ def test_a_video_damaged_in_its_middle_is_said_and_the_other_views_carry_on(
     assert f"note: {said}, before the other views: 18 frames tracked" in s["notes"]
 
 
+def _wrist_unsure(noise: float):
+    """3 cameras, 12 frames of a standing person's landmarks (seed 5), pixels with
+    ``noise``, every landmark seen surely but the left wrist, unsure (0.2) in views 1-2."""
+    rng = np.random.default_rng(5)
+    cams = _cameras(3)
+    pts = _standing_landmarks(12)
+    pix = _project(cams, pts.reshape(-1, 3)).reshape(3, 12, -1, 2)
+    pix = pix + rng.normal(0.0, noise, pix.shape)
+    vis = np.ones(pix.shape[:3])
+    vis[1:, :, LANDMARKS.index("left_wrist")] = 0.2
+    return cams, pts, pix, vis
+
+
 def test_views_dropped_are_views_seen_surely_and_not_used(tmp_path, monkeypatch):
     """``landmark_views_dropped`` was the views seen surely less the views used, and the
     views used include those of landmarks filled from unsure views (Triangulated.filled):
@@ -439,14 +444,8 @@ def test_views_dropped_are_views_seen_surely_and_not_used(tmp_path, monkeypatch)
     from markovmotion.video.cameras import save_cameras
     from markovmotion.video.triangulation import PersonViews, track_triangulated_video
 
-    rng = np.random.default_rng(5)
-    cams = _cameras(3)
-    pts = _standing_landmarks(12)
-    pix = _project(cams, pts.reshape(-1, 3)).reshape(3, 12, -1, 2)
-    pix = pix + rng.normal(0.0, 0.5, pix.shape)
-    vis = np.ones(pix.shape[:3])
-    wrist, elbow = LANDMARKS.index("left_wrist"), LANDMARKS.index("right_elbow")
-    vis[1:, :, wrist] = 0.2
+    cams, pts, pix, vis = _wrist_unsure(noise=0.5)
+    elbow = LANDMARKS.index("right_elbow")
     pix[0, :, elbow] += 60.0
     views = ViewLandmarks(cams, pix, vis)
     save_cameras(cams, tmp_path / "cameras.json", 30.0)
@@ -489,7 +488,6 @@ def test_a_reference_of_another_length_than_the_track_is_said(tmp_path):
 def test_a_view_of_another_size_is_one_line(real_video, tmp_path, capsys):
     """A camera's video of another size than the camera (a copy made smaller) is refused by
     the triangulation as by the particle filter, not triangulated with the wrong pixels."""
-    import shutil
 
     from markovmotion.video.render import read_frames, write_video
 
@@ -582,14 +580,8 @@ def test_landmarks_seen_unsurely_are_filled_from_every_view():
     near the truth; the landmarks seen surely are not changed."""
     from markovmotion.video.triangulation import triangulate_views
 
-    rng = np.random.default_rng(5)
-    cams = _cameras(3)
-    pts = _standing_landmarks(12)
-    pix = _project(cams, pts.reshape(-1, 3)).reshape(3, 12, -1, 2)
-    pix = pix + rng.normal(0.0, 1.0, pix.shape)
-    vis = np.ones(pix.shape[:3])
+    cams, pts, pix, vis = _wrist_unsure(noise=1.0)
     wrist = LANDMARKS.index("left_wrist")
-    vis[1:, :, wrist] = 0.2
     vis[2, :4, wrist] = 0.0  # and not found at all in one view for a while
     views = ViewLandmarks(cams, pix, vis)
     tri = triangulate_views(views)
