@@ -462,9 +462,10 @@ def test_the_demo_on_a_users_own_walks_runs_what_it_can_and_says_what_it_skipped
     (mine / "INDEX.csv").write_text("\n".join(rows) + "\n")
     capsys.readouterr()
     run_demo(tmp_path / "out", mine)
-    assert read_motion(tmp_path / "out" / "walk.bvh").n_frames == mocap.query(
-        source="bandai", label="normal"
-    )[0].frames
+    assert (
+        read_motion(tmp_path / "out" / "walk.bvh").n_frames
+        == mocap.query(source="bandai", label="normal")[0].frames
+    )
     assert (tmp_path / "out" / "pca-energy.png").stat().st_size > 0
     err = capsys.readouterr().err
     skipped = [ln for ln in err.splitlines() if ln.startswith("note: skipped on")]

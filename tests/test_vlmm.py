@@ -457,6 +457,10 @@ def test_markers_source_learns_13_points_and_writes_c3d_and_point_lights(tmp_pat
     main(["vlmm", "predict", "--model", str(model), "--input", str(take), "--horizon", "1",
           "--out", str(tmp_path / "p.gif")])  # fmt: skip
     assert (tmp_path / "p.gif").stat().st_size > 1000
+    walk = mocap.query(source="bandai")[0].path  # another skeleton: its 13 points by name
+    main(["vlmm", "predict", "--model", str(model), "--input", str(walk), "--horizon", "1",
+          "--out", str(tmp_path / "w.c3d")])  # fmt: skip
+    assert read_c3d(tmp_path / "w.c3d").names == MARKER_POINTS
     capsys.readouterr()
     for space in ("mm", "configuration"):
         main(["vlmm", "evaluate", "--model", str(model), "--samples", "3", "--stride", "40",

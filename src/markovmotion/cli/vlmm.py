@@ -308,10 +308,9 @@ def predict(
                 f"{input}: the model learnt a skeleton: give BVH or ASF/AMC"
             )
         motion = read_listed_motion(input, fps=fps)
-        try:
-            behaviour.skeleton_.check_compatible(motion.skeleton, "input")
-        except SkeletonMismatchError as exc:
-            raise SkeletonMismatchError(f"{input}: {exc}") from None
+        if not behaviour.fits(motion):  # its skeleton, or (markers) its body points by name
+            why = behaviour.why_not(motion).removeprefix("(").removesuffix(")")
+            raise SkeletonMismatchError(f"{input}: the input's skeleton does not match ({why})")
     result = behaviour.predict(motion, horizon, np.random.default_rng(seed), stochastic=stochastic)
     _write(result, out)
     observed = result.n_frames - int(round(horizon * behaviour.fps))
