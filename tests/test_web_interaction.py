@@ -78,6 +78,20 @@ def study(tmp_path_factory, mocap):
     return root, model, train, test
 
 
+def test_a_label_without_a_clip_is_said(study, mocap, tmp_path, capsys):
+    """A label the model learnt every take of (the collection's one handshake) is offered
+    but has no clip: said in a note, which names how to give it one."""
+    from markovmotion.evaluate.interaction import write_interaction_stimuli
+
+    root, model, train, test = study
+    unshown = sorted({a.label for a, _ in train} - {a.label for a, _ in test})
+    assert unshown  # the fixture's study has one
+    capsys.readouterr()
+    write_interaction_stimuli(tmp_path / "s", root / "dual.npz", mocap.root / "INDEX.csv")
+    err = capsys.readouterr().err
+    assert f"no clip is labelled {', '.join(unshown)}" in err and "--test-trials" in err
+
+
 @pytest.fixture(scope="module")
 def server(study):
     root, *_ = study

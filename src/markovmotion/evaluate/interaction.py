@@ -35,6 +35,7 @@ import numpy as np
 from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionFormatError
 from markovmotion.io import write_motion
 from markovmotion.io.files import atomic_write, read_text
+from markovmotion.progress import note
 
 if TYPE_CHECKING:
     from markovmotion.evaluate.store import Item
@@ -183,6 +184,12 @@ def write_interaction_stimuli(
         )
     labels = list(getattr(model, "labels_", None) or []) or sorted({m[1] for m in made})
     labels += sorted({m[1] for m in made} - set(labels))
+    if unshown := [label for label in labels if label not in {m[1] for m in made}]:
+        note(
+            f"no clip is labelled {', '.join(unshown)} (every such take was learnt): offered "
+            "as an answer, but the study cannot measure how it is recognised; hold one out "
+            "(dualhmm train --test-trials) or give --test"
+        )
     order = (rng or np.random.default_rng()).permutation(2 * len(made))
     root.mkdir(parents=True, exist_ok=True)
     clips: list[Clip] = []
