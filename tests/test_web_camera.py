@@ -477,6 +477,44 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
         fake.close()
 
 
+def test_the_camera_page_says_when_nobody_is_in_view(camera_server, video, browser, tmp_path):
+    """The fake camera plays the empty scene (camera 0's plate): after a second without a
+    person the status says that nobody is found and where to stand, not "Tracking"."""
+    frames, fov = video
+    plate = cv2.cvtColor(
+        cv2.imread(
+            str(data_root().parent / "video" / "pose2sim_balancing" / "cam0_background.png")
+        ),
+        cv2.COLOR_BGR2RGB,
+    )
+    assert plate.shape == frames[0].shape
+    y4m = tmp_path / "empty.y4m"
+    write_y4m([plate] * 90, y4m)
+    fake = browser.browser_type.launch(
+        executable_path=str(CHROMIUM),
+        args=[
+            *CHROMIUM_ARGS,
+            "--use-fake-ui-for-media-stream",
+            "--use-fake-device-for-media-stream",
+            f"--use-file-for-fake-video-capture={y4m}",
+        ],
+    )
+    try:
+        page = fake.new_context().new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(f"{camera_server}/camera")
+        page.fill("#fov", f"{fov:.2f}")
+        page.click("#start")
+        page.wait_for_function("() => document.body.dataset.nobody === '1'", timeout=120000)
+        assert "Nobody found" in page.text_content("#status")
+        assert page.evaluate("() => document.body.dataset.framesA") == "0"
+        page.click("#stop")
+        assert not errors, errors
+    finally:
+        fake.close()
+
+
 def test_a_server_without_a_camera_tracker_says_so(tmp_path):
     from markovmotion.web.loadtest import MirrorPartner
 

@@ -117,7 +117,9 @@ function onMessage(event) {
       frameId: -1, sentId: -1,
       frames: 0, found: 0, b: 0, track: 0, partner: 0, fitted: false, fittedB: false };
     $("lag").textContent = String(msg.lag);
-    $("status").textContent = `Tracking; the partner answers at ${msg.fps.toFixed(0)} fps, ${msg.lag} frames behind you.`;
+    session.tracking = `Tracking; the partner answers at ${msg.fps.toFixed(0)} fps, ${msg.lag} frames behind you.`;
+    session.missing = 0;
+    $("status").textContent = session.tracking;
     onCameraFrame();
     return;
   }
@@ -131,6 +133,13 @@ function onMessage(event) {
   s.partner = msg.partner_ms;
   if (msg.a) s.found += 1;
   if (msg.b) s.b += 1;
+  // nobody found for a second: say so (the partner goes on answering its last A)
+  s.missing = msg.a ? 0 : s.missing + 1;
+  const lost = s.missing >= Math.max(10, Math.round(s.fps));
+  $("status").textContent = lost
+    ? "Nobody found in the last second: stand where the camera sees you, head to feet."
+    : s.tracking;
+  document.body.dataset.nobody = lost ? "1" : "0";
   send();
   drawOverlay(msg);
   const figs = [];
