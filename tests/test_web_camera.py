@@ -404,16 +404,10 @@ def test_track_is_landmarks_then_place(video):
 
 
 # ---------------------------------------------------------------- the page, fake camera
-def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
-    camera_server, video, browser, tmp_path
-):
-    """Chromium's fake camera plays camera 0 of the real video at 30 fps; the page tracks the
-    man and draws him (blue) and the partner (orange), with frames/s and latency."""
-    frames, fov = video
-    y4m = tmp_path / "cam0.y4m"
-    write_y4m(frames, y4m)
+def _fake_camera(browser, y4m):
+    """A Chromium whose camera plays ``y4m`` (its fake device, no permission prompt)."""
     assert CHROMIUM.exists()
-    fake = browser.browser_type.launch(
+    return browser.browser_type.launch(
         executable_path=str(CHROMIUM),
         args=[
             *CHROMIUM_ARGS,
@@ -422,6 +416,17 @@ def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
             f"--use-file-for-fake-video-capture={y4m}",
         ],
     )
+
+
+def test_camera_page_with_a_fake_camera_shows_the_person_and_the_partner(
+    camera_server, video, browser, tmp_path
+):
+    """Chromium's fake camera plays camera 0 of the real video at 30 fps; the page tracks the
+    man and draws him (blue) and the partner (orange), with frames/s and latency."""
+    frames, fov = video
+    y4m = tmp_path / "cam0.y4m"
+    write_y4m(frames, y4m)
+    fake = _fake_camera(browser, y4m)
     try:
         context = fake.new_context(viewport={"width": 1280, "height": 900})
         page = context.new_page()
@@ -490,15 +495,7 @@ def test_the_camera_page_says_when_nobody_is_in_view(camera_server, video, brows
     assert plate.shape == frames[0].shape
     y4m = tmp_path / "empty.y4m"
     write_y4m([plate] * 90, y4m)
-    fake = browser.browser_type.launch(
-        executable_path=str(CHROMIUM),
-        args=[
-            *CHROMIUM_ARGS,
-            "--use-fake-ui-for-media-stream",
-            "--use-fake-device-for-media-stream",
-            f"--use-file-for-fake-video-capture={y4m}",
-        ],
-    )
+    fake = _fake_camera(browser, y4m)
     try:
         page = fake.new_context().new_page()
         errors: list[str] = []
