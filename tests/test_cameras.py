@@ -128,3 +128,17 @@ def test_rate_and_reference_notes_reach_the_json_of_every_method(real_copy, tmp_
         assert "note: the reference short.csv has 2 rows and the track 3 frames" in run.err
         printed = [line for line in run.err.splitlines() if line.startswith("note:")]
         assert printed and all(line in notes for line in printed), (extra, printed, notes)
+
+
+def test_every_command_says_the_camera_files_notes_anew(capsys):
+    """A note said in one command is said again by the next in the same process (the tests,
+    a notebook): ``cli.main`` forgets what was said; a command that reads no camera file
+    imports nothing for it."""
+    from markovmotion.cli import main
+    from markovmotion.video import cameras
+
+    cameras.say(["note: a camera note"], None, "cameras.json")
+    assert cameras.said("note: a camera note")
+    main(["data", "list", "--category", "exercise"])
+    assert not cameras.said("note: a camera note")
+    capsys.readouterr()

@@ -465,3 +465,19 @@ def test_markers_are_found_whatever_the_case_of_their_labels(marker_takes):
     assert relabelled.names != a.names
     model.check_input(relabelled)
     np.testing.assert_array_equal(model.respond(relabelled).positions, model.respond(a).positions)
+
+
+def test_a_marker_never_seen_is_left_out_of_every_take_whatever_its_case():
+    """One take labels its markers in capitals, the other in lower case and never sees
+    ``rwra``: ``RWRA`` is left out of both (it had been left out of one only, and the two
+    takes, alike whatever the case, then failed as "not markers like" each other)."""
+    from markovmotion.features.markers import seen_in_every
+
+    rng = np.random.default_rng(0)
+    names = ("HEAD", "LSHO", "RSHO", "LWRA", "RWRA")
+    a = Markers(names, rng.normal(size=(20, 5, 3)), 30.0, "a")
+    positions = rng.normal(size=(20, 5, 3))
+    positions[:, 4] = np.nan
+    b = Markers(tuple(n.lower() for n in names), positions, 30.0, "b")
+    kept = seen_in_every([a, b])
+    assert kept[0].names == names[:4] and kept[1].names == tuple(n.lower() for n in names[:4])

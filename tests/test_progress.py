@@ -67,3 +67,19 @@ def test_the_librarys_log_warnings_are_notes_once_each_on_the_command_line(capsy
     assert not any(
         type(h).__name__ == "NoteOnce" for h in logging.getLogger("markovmotion").handlers
     )
+
+
+def test_a_task_reused_for_several_files_says_each_end_once(monkeypatch, capsys):
+    """One task reused file after file (``data fetch``'s bytes): a file that printed a line
+    prints its end once; later updates of the ended task print nothing more."""
+    clock = itertools.chain([0.0], itertools.count(40.0))  # 40 s, then a second a call
+    monkeypatch.setattr(progress.time, "monotonic", lambda: next(clock))
+    with progress.progress_bar() as bar:
+        task = bar.add_task("bytes", total=None)
+        for name in ("a", "b", "c"):
+            bar.update(task, description=name, completed=0, total=None)
+            for done in (500, 1000):
+                bar.update(task, completed=done, total=1000)
+            bar.update(task, visible=False)
+    lines = [ln.split(",")[0] for ln in capsys.readouterr().err.splitlines()]
+    assert lines == ["a: 0", "a: 1000/1000"]

@@ -471,5 +471,6 @@ def test_the_demo_on_a_users_own_walks_runs_what_it_can_and_says_what_it_skipped
     skipped = [ln for ln in err.splitlines() if ln.startswith("note: skipped on")]
     assert len(skipped) == len(STEPS) - 2 and all("mine/INDEX.csv" in ln for ln in skipped)
     (mine / "INDEX.csv").write_text(rows[0] + "\n")
-    with pytest.raises(DataNotFoundError, match="no step of the demo"):
+    with pytest.raises(DataNotFoundError, match="no step of the demo.*the first: A captured"):
         run_demo(tmp_path / "none", mine)
+    assert not (tmp_path / "none").exists()  # no empty folder left

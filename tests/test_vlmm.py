@@ -577,3 +577,8 @@ def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys
     main(["vlmm", "evaluate", "--model", str(model), "--samples", "2", "--stride", "60",
           "--horizon", "1", "--json"])  # fmt: skip
     assert json.loads(capsys.readouterr().out)["test_files"] == ["c.bvh.gz"]
+    folder.rename(tmp_path / "moved")  # the index gone: said, and its takes not found
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "evaluate", "--model", str(model), "--json"])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and f"the index the model was trained on ({folder})" in err

@@ -93,7 +93,10 @@ class _Progress(Progress):
         if now - self._logged_at < LOG_EVERY and not ended:
             return
         self._logged_at = now
-        self._logged.add(task_id)
+        if bool(task.total) and task.completed >= task.total:
+            self._logged.discard(task_id)  # its end is said once (a task reused prints anew)
+        else:
+            self._logged.add(task_id)
         done = f"{task.completed:g}/{task.total:g}" if task.total else f"{task.completed:g}"
         self.console.print(
             f"{task.description}: {done}, {task.elapsed or 0.0:.0f} s", highlight=False

@@ -24,7 +24,7 @@ from markovmotion.cli.options import (
     roles_option,
     stopped,
 )
-from markovmotion.cli.tables import print_json
+from markovmotion.cli.tables import print_json, print_notes
 from markovmotion.data.index import read_listed_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -459,8 +459,7 @@ def _respond_video(
             model, video, out, cameras, view, max_frames, "standard" if standard else "windowed",
             method, person,
         )  # fmt: skip
-        for line in summary["notes"]:
-            err_console.print(line, highlight=False)
+        print_notes(summary["notes"])
         where = (
             f"camera {summary['view']} alone"
             if method == "monocular"
@@ -478,8 +477,7 @@ def _respond_video(
             model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
             max_frames, live=True,
         )  # fmt: skip
-        for line in live["background"] + live["notes"]:
-            err_console.print(line, highlight=False)
+        print_notes(live["background"] + live["notes"])
         err_console.print(
             f"live: {live['frames']} frames at the video's rate, {live['tracked']} tracked, "
             f"{live['skipped']} skipped; latency per frame median {live['latency_ms_median']} ms, "
@@ -492,8 +490,7 @@ def _respond_video(
         model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed", guide=guided, person=person,
     )  # fmt: skip
-    for line in summary["background"] + summary["notes"]:
-        err_console.print(line, highlight=False)
+    print_notes(summary["background"] + summary["notes"])
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "
         f"({summary['fps']:.2f} frames/s{', guided by MediaPipe' if guided else ''}), partner "

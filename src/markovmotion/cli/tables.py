@@ -64,3 +64,15 @@ def print_table(table: Table, console: Console | None = None) -> None:
 def print_json(value: object, indent: int | None = None) -> None:
     """Print ``value`` as strict JSON on standard output (:func:`json_text`)."""
     print(json_text(value, indent))
+
+
+def print_notes(lines: list[str]) -> None:
+    """Print a summary's notes (stderr, with or without ``--json``), but those the camera
+    file's reading printed already (:func:`~markovmotion.video.cameras.say`): every note is
+    in the JSON's ``notes``, and on the terminal once."""
+    from markovmotion.progress import err_console
+    from markovmotion.video.cameras import said
+
+    for line in lines:
+        if not said(line):
+            err_console.print(line, highlight=False)

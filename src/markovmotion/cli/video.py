@@ -16,7 +16,7 @@ from markovmotion.cli.options import (
     person_option,
     ranged,
 )
-from markovmotion.cli.tables import print_json
+from markovmotion.cli.tables import print_json, print_notes
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -96,10 +96,8 @@ def sync(
     started one after another), by where MediaPipe's landmarks lie against their epipolar
     lines (needs scripts/install-camera); --write records it for every command that reads the
     videos."""
-    from markovmotion.video.cameras import new_command
     from markovmotion.video.sync import sync_video, write_skips
 
-    new_command()
     result, fps, where, notes = sync_video(video, cameras, max_lag, max_frames)
     summary = {
         "fps": fps,
@@ -110,7 +108,7 @@ def sync(
     }
     if write:
         summary["wrote"] = str(write_skips(where, result))
-    _print_notes(notes)
+    print_notes(notes)
     if json_out:
         print_json(summary)
         return
@@ -225,9 +223,6 @@ def track(
 ) -> None:
     """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
     one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
-    from markovmotion.video.cameras import new_command
-
-    new_command()  # the camera file's notes are said once in this command
     if method != "apf" and guide == "mediapipe":
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
@@ -327,7 +322,7 @@ def track(
     summary["notes"] = [*([note] if note else []), *summary["notes"]]
     for line in summary["background"]:
         err_console.print(line, highlight=False)
-    _print_notes(summary["notes"])
+    print_notes(summary["notes"])
     if size == "views":
         summary["body_size"] = result.body_size
         err_console.print(
@@ -352,7 +347,7 @@ def track(
             reference, summary["frames"], summary["video_fps"], first_skip, max_frames
         )
         later += [said] if said else []
-    _print_notes(later)
+    print_notes(later)
     summary["notes"] += later
     if size not in ("template", "views"):
         summary["body_size"] = dict(zip(("scale", "legs", "arms"), size, strict=True))
@@ -458,7 +453,7 @@ def _track_landmarks(
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)
-    _print_notes(summary["notes"])
+    print_notes(summary["notes"])
     _whom_notes(summary, person)
     if json_out:
         print_json(summary)
@@ -497,19 +492,8 @@ def _whom_notes(summary: dict, person: str | None) -> None:
     from markovmotion.video.triangulation import whom_notes
 
     lines = whom_notes(summary, named=person is not None)
-    _print_notes(lines)
+    print_notes(lines)
     summary["notes"] = [*summary.get("notes", []), *lines]
-
-
-def _print_notes(lines: list[str]) -> None:
-    """Print a summary's notes (stderr, with or without ``--json``), but those the camera
-    file's reading printed already (:func:`~markovmotion.video.cameras.say`): every note is
-    in the JSON's ``notes``, and on the terminal once."""
-    from markovmotion.video.cameras import said
-
-    for line in lines:
-        if not said(line):
-            err_console.print(line, highlight=False)
 
 
 def _smoothing(text: str | None) -> float | None:

@@ -59,6 +59,12 @@ def candidate_roots(path: str | os.PathLike[str] | None = None) -> list[Path]:
         return [Path(path)]
     if os.environ.get(ENV_VAR):
         return [Path(os.environ[ENV_VAR])]
+    return shared_roots()
+
+
+def shared_roots() -> list[Path]:
+    """Where the project's shared collection may be (``../shared/data/mocap`` beside the
+    project), whatever ``MARKOVMOTION_DATA`` says."""
     seen: list[Path] = []
     for root in _project_roots():
         cand = (root.parent / "shared" / "data" / "mocap").resolve()

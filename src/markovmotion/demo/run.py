@@ -18,7 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from markovmotion.data import MocapIndex
-from markovmotion.data.index import Entry, data_root
+from markovmotion.data.index import Entry, shared_roots
 from markovmotion.data.kinds import largest_group
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.features import PCA, JointPositions
@@ -171,14 +171,6 @@ STEPS: list[Step] = [
 ]
 
 
-def _default_root() -> Path | None:
-    """The shared collection's folder, if there is one."""
-    try:
-        return data_root().resolve()
-    except DataNotFoundError:
-        return None
-
-
 def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None = None) -> None:
     """Run the demo ``steps`` (default :data:`STEPS`) on the data in ``data``, writing to ``out``.
 
@@ -197,7 +189,7 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
     table.add_column("size", justify="right")
     table.add_column("time", justify="right")
     skipped: list[str] = []
-    shared = data is None or _default_root() == index.root.resolve()
+    shared = index.root.resolve() in shared_roots()  # not a user's, wherever it is given
     for step in STEPS if steps is None else steps:
         start = time.perf_counter()
         what = (step.__doc__ or step.__name__).strip().splitlines()[0]
@@ -215,8 +207,11 @@ def run_demo(out: Path, data: Path | None = None, steps: Sequence[Step] | None =
                 what if n == 0 else "", p.name, size, f"{seconds:.1f} s" if n == 0 else ""
             )
     if skipped and len(skipped) == len(STEPS if steps is None else steps):
+        if not any(out.iterdir()):
+            out.rmdir()  # nothing written: no empty folder left
         raise DataNotFoundError(
-            f"no step of the demo found the takes it needs in {index.root / 'INDEX.csv'}"
+            f"no step of the demo found the takes it needs in {index.root / 'INDEX.csv'} "
+            f"(the first: {skipped[0]})"
         )
     console.print(table)
     for line in skipped:  # after the table, where a user looks last

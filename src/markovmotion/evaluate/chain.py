@@ -142,6 +142,8 @@ def test_set(
             raise DataNotFoundError(
                 f"none of the {len(held)} files the model held out at training is a two-person "
                 f"take of {index.root / 'INDEX.csv'} it can answer: give --test INDEX"
+                if held
+                else "the model held no take out at training (--test-trials none): give --test INDEX"
             )
     elif test is None:  # a model saved before it recorded them: the collection's split
         _, candidates = held_out_pairs(candidates)

@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.models.base import Model, file_sha256, training_hashes
+from markovmotion.progress import note
 
 T = TypeVar("T", Entry, tuple)
 
@@ -134,4 +135,12 @@ def evaluation_index(model: Any, test: str | os.PathLike[str] | None = None) -> 
         return MocapIndex.load(test)
     record = getattr(model, "data_index_", None)
     root = record.get("root") if isinstance(record, dict) else None
-    return MocapIndex.load(root if isinstance(root, str) and Path(root).is_dir() else None)
+    if isinstance(root, str) and Path(root).is_dir():
+        return MocapIndex.load(root)
+    index = MocapIndex.load(None)
+    if isinstance(root, str) and Path(root).resolve() != index.root.resolve():
+        note(
+            f"the index the model was trained on ({root}) is not here: its held-out takes are "
+            f"looked for in {index.root / INDEX_NAME} (give --test INDEX for others)"
+        )
+    return index

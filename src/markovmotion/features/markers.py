@@ -407,15 +407,20 @@ def seen_in_every(takes: Sequence[Markers]) -> list[Markers]:
     """Training takes without the markers some take never sees (one occluded throughout a
     capture, common in real labs), said in one note: a model learns the markers every take
     shows, rather than losing a whole take, or stopping, for one marker of dozens."""
-    never: dict[str, list[str]] = {}
+    never: dict[str, list[str]] = {}  # by label whatever its case, as markers are matched
+    shown: dict[str, str] = {}
     for t in takes:
         for m in np.flatnonzero(~t.visible().any(axis=0)):
-            never.setdefault(t.names[m], []).append(t.name or "a take")
+            key = t.names[m].casefold()
+            shown.setdefault(key, t.names[m])
+            never.setdefault(key, []).append(t.name or "a take")
     if not never:
         return list(takes)
-    said = "; ".join(f"{n} (never seen in {', '.join(w[:3])})" for n, w in list(never.items())[:5])
+    said = "; ".join(
+        f"{shown[k]} (never seen in {', '.join(w[:3])})" for k, w in list(never.items())[:5]
+    )
     note(f"left out the markers some take never sees: {said}")
-    return [t.select([n for n in t.names if n not in never]) for t in takes]
+    return [t.select([n for n in t.names if n.casefold() not in never]) for t in takes]
 
 
 @register

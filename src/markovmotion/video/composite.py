@@ -38,7 +38,6 @@ from markovmotion.video.cameras import (
     camera_videos,
     load_cameras,
     lone_video,
-    said,
 )
 from markovmotion.video.multiview import track_take
 from markovmotion.video.render import BodyShape, read_frames, write_video
@@ -208,7 +207,7 @@ def respond_in_video(
     frames = read_frames(video_path, cams[view])
     shown = composite_frames(frames, cams[view], body_points(a), b, partner_caption(model))
     written = write_video(shown, out, result.fps)
-    summary["notes"] = _unsaid(summary["notes"]) + framing_notes(cams, view, b)
+    summary["notes"] = summary["notes"] + framing_notes(cams, view, b)
     summary.update(
         {
             "tracking_seconds": round(tracked, 2),
@@ -296,14 +295,8 @@ def respond_mediapipe(
         "out": str(written),
         "view": view,
         **extra,
-        "notes": _unsaid(extra["notes"]) + framing_notes(cams, view, b),
+        "notes": extra["notes"] + framing_notes(cams, view, b),
     }
-
-
-def _unsaid(notes: list[str]) -> list[str]:
-    """A tracker's notes less those the camera file's reading printed already
-    (:func:`~markovmotion.video.cameras.say`): ``dualhmm respond`` prints its summary's."""
-    return [line for line in notes if not said(line)]
 
 
 def _respond_live(
@@ -424,7 +417,7 @@ def _track_live(
         "out": str(written),
         "view": view,
         "background": mv.background_notes,
-        "notes": _unsaid(mv.video_notes) + framing_notes(mv.cameras, view, b),
+        "notes": mv.video_notes + framing_notes(mv.cameras, view, b),
     }
 
 
