@@ -767,6 +767,11 @@ def test_results_page_shows_the_recomputed_figures(server, site, page):
 
 def test_live_partner_page_draws_both_figures(dual_server, page):
     page.goto(f"{dual_server}/live")
+    page.wait_for_function("() => document.querySelectorAll('#motion option').length > 1")
+    offered = page.eval_on_selector_all("#motion option", "os => os.map((o) => o.value)")
+    # a partner of skeletons is not offered the library's C3D (it would refuse it)
+    assert "salsa_a.bvh" in offered and "markers.c3d" not in offered
+    assert json.loads(fetch(dual_server + "/api/motions")[1])["partner_reads"] == "skeleton"
     page.select_option("#motion", "salsa_a.bvh")
     page.check("#loop")
     page.click("#start")

@@ -264,7 +264,10 @@ def create_app(
     # ------------------------------------------------------------ motions
     @app.get("/api/motions")
     def motions() -> dict:
-        return {"files": lib.files(), "partner": partner is not None}
+        # partner_reads: "skeleton" (a C3D file is refused), "markers", or "any" (a factory
+        # given in code that does not say)
+        reads = getattr(partner, "reads", "any")
+        return {"files": lib.files(), "partner": partner is not None, "partner_reads": reads}
 
     @app.get("/api/motion")
     def motion(path: str) -> Response:

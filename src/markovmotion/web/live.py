@@ -199,7 +199,10 @@ def model_partner(path: str | os.PathLike[str]) -> PartnerFactory:
     compiled kernels ready (:func:`warm_up`)."""
     model = load_partner_model(path)
     warm_up(model)
-    return partial(ModelPartner, model)
+    factory = partial(ModelPartner, model)
+    # what person A may be: a skeleton model refuses markers (the live page lists no C3D)
+    factory.reads = "markers" if getattr(model, "uses_markers", False) else "skeleton"
+    return factory
 
 
 def warm_up(model: Model) -> None:

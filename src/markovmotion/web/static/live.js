@@ -90,8 +90,10 @@ $("upload").addEventListener("change", () => { if ($("upload").files[0]) $("moti
 
 (async () => {
   try {
-    const { files, partner } = await fetchJSON("/api/motions");
-    for (const f of files) $("motion").append(new Option(f, f));
+    const { files, partner, partner_reads: reads } = await fetchJSON("/api/motions");
+    // a partner of skeletons refuses markers: their C3D files are not offered
+    const offered = reads === "skeleton" ? files.filter((f) => !/\.c3d$/i.test(f)) : files;
+    for (const f of offered) $("motion").append(new Option(f, f));
     if (!partner) $("error").textContent = "This server has no partner model: start it with markovmotion serve --partner MODEL.";
   } catch (e) {
     $("error").textContent = e.message;
