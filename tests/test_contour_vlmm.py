@@ -136,6 +136,7 @@ def test_cli_contour_train_generate_evaluate(contour_source, mocap, tmp_path, ca
     loaded = Model.load(model)
     assert loaded.configuration == "contour" and loaded.contour_scale_ > 0
     assert loaded.held_out_files_ and entry.file in {r["file"] for r in loaded.train_files_}
+    assert loaded.data_index_["root"] == str(mocap.root.resolve())  # evaluate looks there
     main(["vlmm", "generate", "--model", str(model), "--seconds", "2", "--stochastic",
           "--out", str(tmp_path / "g.png")])  # fmt: skip
     assert (tmp_path / "g.png").stat().st_size > 500

@@ -162,10 +162,11 @@ def train(
 
         model = StructuredBehaviourModel(model, max_memory=key_memory, epsilon=epsilon)
     if source == "contour":
+        from markovmotion.evaluate.takes import index_record
         from markovmotion.video.contours import fit_contours
 
         takes = fit_contours(model, data, cache, category, label, hold_out)
-        model.save(out)
+        model.save(out, data_index=index_record(MocapIndex.load(data)))
         base = model.prototype_model_ if structured else model
         err_console.print(
             f"trained on {len(takes.train)} tracked takes "

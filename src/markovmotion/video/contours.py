@@ -390,7 +390,9 @@ def held_out_contours(
     Raises:
         DataNotFoundError: the model held out no take, or the index lacks them.
     """
-    index = MocapIndex.load(data)
+    from markovmotion.evaluate.takes import evaluation_index
+
+    index = evaluation_index(model, data)  # without --test, the index it was trained on
     wanted = list(getattr(model, "held_out_files_", []))
     entries = [e for e in index.query(category=model.category_) if e.file in wanted]
     if not entries:
