@@ -251,6 +251,11 @@ def test_invalid_upload_gets_a_clear_message(server):
     assert status == 422 and "only BVH" in body["detail"]
     status, body = upload(server, "mine.bvh", bvh_text(make_motion(12)).encode())
     assert status == 200 and body["frames"] == 12 and body["name"] == "mine.bvh"
+    # sent as JSON: 415, saying how to send a file (it had been a 422 naming upload.bvh)
+    status, data = fetch(
+        server + "/api/upload", b'{"file": "x"}', {"Content-Type": "application/json"}
+    )
+    assert status == 415 and "multipart/form-data" in json.loads(data)["detail"]
 
 
 # ---------------------------------------------------------------- evaluation API

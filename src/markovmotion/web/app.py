@@ -287,10 +287,16 @@ def create_app(
         streamed to disk with a running count: 413 past the upload limit, counted again
         after decompression; any problem reading it is a 422 with one line."""
         limit = max_upload_bytes()
+        kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if kind in ("application/json", "application/x-www-form-urlencoded"):
+            raise HTTPException(  # a motion file is neither: say how to send one
+                415, f"{kind}: send the BVH file as multipart/form-data (field \"file\") or "
+                "as the raw body",
+            )  # fmt: skip
         stream = _bounded(request.stream(), limit + UPLOAD_SLACK)
         form = None
         try:
-            if request.headers.get("content-type", "").startswith("multipart/form-data"):
+            if kind == "multipart/form-data":
                 parser = MultiPartParser(request.headers, stream, max_files=1, max_fields=8)
                 try:
                     form = await parser.parse()
@@ -298,7 +304,9 @@ def create_app(
                     raise HTTPException(400, shown(str(exc.message), 200)) from None
                 file = form.get("file")
                 if not isinstance(file, UploadFile):
-                    raise HTTPException(422, 'send the BVH file as the form field "file"')
+                    raise HTTPException(
+                        422, 'no whole form field "file" (cut short?): send the BVH file as it'
+                    )
                 name, fh = file.filename or "upload.bvh", file.file
             else:
                 fh = tempfile.SpooledTemporaryFile(max_size=1 << 20)
