@@ -507,3 +507,13 @@ def test_gait_reads_every_walk_of_a_users_own_index_of_one_skeleton(mocap, tmp_p
         main(["gait", "steps", "--data", str(mine), "--label", "nope"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "no walks labelled nope in" in err and "None" not in err
+
+
+def test_a_walk_of_too_many_or_no_steps_is_one_line(small_model):
+    """``generate(n_steps)`` from Python: past the steps limit (a million steps had asked
+    for 24.5 GiB), not whole, or under 1: one LimitError."""
+    from markovmotion.errors import LimitError
+
+    for n in (10**6, 0, 2.5, "4", None):
+        with pytest.raises(LimitError):
+            small_model.generate(n_steps=n)

@@ -582,3 +582,22 @@ def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys
         main(["vlmm", "evaluate", "--model", str(model), "--json"])
     err = capsys.readouterr().err
     assert info.value.code == 2 and f"the index the model was trained on ({folder})" in err
+
+
+def test_generate_takes_any_length_within_the_limit_in_linear_memory(behaviour_model):
+    """``generate(seconds)`` from Python: past the frame limit, or not a positive number, is
+    one LimitError (a day of routine had hung, and 1e5 s asked for 1.5 TiB); within it, the
+    samples are found by binary search, the curve the same as the all-pairs count gave."""
+    from markovmotion.algorithms.hermite import hermite_sample
+    from markovmotion.errors import LimitError
+
+    for seconds in (1e9, -1.0, float("nan"), None, "3"):
+        with pytest.raises(LimitError):
+            behaviour_model.generate(seconds)
+    assert behaviour_model.generate(600.0).n_frames == 600 * 15 + 1
+    rng = np.random.default_rng(0)
+    knots, tangents = rng.normal(size=(7, 3)), rng.normal(size=(7, 3))
+    times = np.cumsum(rng.uniform(0.5, 2.0, 7))
+    at = np.linspace(times[0] - 1, times[-1] + 1, 200)
+    two = hermite_sample(knots[None], tangents[None], times[None], at[None])[0]  # all pairs
+    np.testing.assert_allclose(hermite_sample(knots, tangents, times, at), two, atol=1e-12)

@@ -77,6 +77,8 @@ MAX_ANIMATION_FRAMES = Limit(
 #: Two minutes at ``render``'s default 15 fps: Pillow holds every frame of a GIF until it is
 #: written (about 0.5 MB a frame at the default size), where an MP4 is streamed.
 MAX_GIF_FRAMES = Limit("MARKOVMOTION_MAX_GIF_FRAMES", 1_800, "frames of one GIF")
+#: The command line's bound on ``gait synthesize --steps``, in the library too.
+MAX_STEPS = Limit("MARKOVMOTION_MAX_STEPS", 10_000, "steps of one synthesized walk")
 
 ALL = (
     MAX_BYTES,
@@ -88,6 +90,7 @@ ALL = (
     MAX_VALUES,
     MAX_ANIMATION_FRAMES,
     MAX_GIF_FRAMES,
+    MAX_STEPS,
 )
 
 
@@ -153,3 +156,20 @@ def check_rate(fps: float, what: str = "frame rate") -> float:
     if value > max_fps():
         raise LimitError(f"{what} {value:g} is above {max_fps():g} fps (limit {MAX_FPS.env})")
     return value
+
+
+def check_length(
+    amount: object, per_unit: float, limit: Limit, what: str, integer: bool = False
+) -> float:
+    """``amount`` (seconds, steps) of something a model makes, as a number: finite, above 0
+    (a whole number with ``integer``), and ``amount * per_unit`` (its frames, or steps) not
+    past ``limit``; else :class:`LimitError` in one line. The command line bounds these
+    options; the library takes them from any caller (a day of routine at 30 fps was an
+    S x R array of 1.5 TiB)."""
+    ok = isinstance(amount, int | float) and not isinstance(amount, bool)
+    if not ok or not math.isfinite(amount) or amount <= 0 or (integer and amount != int(amount)):
+        kind = "a whole number" if integer else "a finite number"
+        raise LimitError(f"{what} must be {kind} above 0, got {amount!r}")
+    if amount * per_unit > limit.value:
+        raise LimitError(exceeded(limit, f"{what} {amount:g}"))
+    return float(amount)

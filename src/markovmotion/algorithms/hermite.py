@@ -70,8 +70,13 @@ def hermite_sample(
         raise ValueError("Hermite interpolation needs at least two knots")
     t = np.broadcast_to(np.asarray(times, dtype=float), lead + np.shape(times)[-1:])
     t = np.clip(t, knot_times[..., :1], knot_times[..., -1:])
-    # segment of each sample: number of interior knot times at or before it
-    seg = (t[..., :, None] >= knot_times[..., None, 1:-1]).sum(axis=-1)
+    # segment of each sample: number of interior knot times at or before it (one path: a
+    # binary search, O(S log R); the all-pairs count made an S x R array, 1.5 TiB for a VLMM
+    # routine of a day; several paths, as the chain's hypotheses, are short)
+    if knot_times.ndim == 1:
+        seg = np.searchsorted(knot_times[1:-1], t, side="right")
+    else:
+        seg = (t[..., :, None] >= knot_times[..., None, 1:-1]).sum(axis=-1)
     t0 = np.take_along_axis(knot_times, seg, axis=-1)
     t1 = np.take_along_axis(knot_times, seg + 1, axis=-1)
     tau = t1 - t0

@@ -39,7 +39,7 @@ from markovmotion.features.gait import (
     step_positions,
 )
 from markovmotion.features.reference_pose import ReferencePose
-from markovmotion.limits import max_values
+from markovmotion.limits import MAX_STEPS, check_length, max_values
 from markovmotion.models.base import Model
 from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
 from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
@@ -387,8 +387,7 @@ class GaitSynthesizer(Model):
         with ``random_state``, 0 as in every family, so that the same call gives the same
         walk; give each walk its own ``rng`` for walks that differ).
         """
-        if n_steps < 1:
-            raise ValueError("a walk needs at least one step")
+        n_steps = int(check_length(n_steps, 1, MAX_STEPS, "n_steps", integer=True))
         if speed <= 0:
             raise ValueError("speed must be positive")
         contexts, sides = walk_contexts(n_steps, first_side)

@@ -53,6 +53,7 @@ from markovmotion.features.body_points import MARKER_POINTS, body_point_index
 from markovmotion.features.heading import RemoveHeading
 from markovmotion.features.markers import MarkerFeatures, fill_gaps, seen_in_every
 from markovmotion.features.select import DropStaticColumns
+from markovmotion.limits import MAX_FRAMES, check_length
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
 from markovmotion.state import (
@@ -498,6 +499,7 @@ class BehaviourModel(Model):
         Drawn from the automaton when ``stochastic`` (from ``rng``, else a
         generator seeded with ``random_state``), else its most likely path.
         """
+        seconds = check_length(seconds, self.fps, MAX_FRAMES, "seconds")
         rng = call_rng(rng, stochastic, self.random_state)
         n_frames = seconds * self.fps
         start = self.vlmm_.start_state(rng)
