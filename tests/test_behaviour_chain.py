@@ -535,3 +535,11 @@ def test_evaluate_without_test_answers_the_takes_held_out_of_the_index_learnt(
         "takes/z_a.bvh.gz",
         "takes/z_b.bvh.gz",
     ]
+
+
+def test_a_3d_partner_of_either_person_is_refused_in_one_line(pair_partner, mocap):
+    """``respond(person=None)`` on motion capture: a ValueError saying 0 or 1 (the partner
+    is written on the other's skeleton), not a TypeError from inside."""
+    a, _ = mocap.load_pair(*mocap.pairs(label="salsa")[-1])
+    with pytest.raises(ValueError, match=r"person must be 0 \(A\) or 1 \(B\) for a 3-D partner"):
+        pair_partner.respond(a.trim(0, 30), person=None)

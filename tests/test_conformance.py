@@ -339,6 +339,8 @@ def test_wrong_arguments_are_one_line_alike_in_every_family(fam, fitted, data):
         a, b = takes[0]
         with pytest.raises(ValueError, match="differ in length"):  # the chain cut it silently
             fam.make().fit([(a, b.trim(0, b.n_frames // 2))])
+        with pytest.raises(ValueError, match="fps and B"):  # as many frames, another rate
+            fam.make().fit([(a, b.resample(b.fps / 2).trim(0, a.n_frames // 2)), (a, b)])
     for verb in ("respond", "predict"):
         if verb in model.VERBS:
             method = getattr(model, verb)

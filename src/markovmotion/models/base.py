@@ -316,6 +316,12 @@ def check_takes(takes: object, where: str, pairs: bool) -> None:
             and all(isinstance(m, one) for m in pair)
         ):
             a, b = pair
+            if not math.isclose(a.fps, b.fps, rel_tol=1e-6):
+                raise ValueError(
+                    f"{where}: take {i}: A ({a.name or 'unnamed'}) at {a.fps:g} fps and B "
+                    f"({b.name or 'unnamed'}) at {b.fps:g}: a pair is recorded together, frame "
+                    "for frame (give both at one rate)"
+                )
             if a.n_frames != b.n_frames:
                 raise ValueError(
                     f"{where}: take {i}: A ({a.name or 'unnamed'}, {a.n_frames} frames) and B "

@@ -431,8 +431,15 @@ class VirtualPartner(Model):
         partner's skeleton (:meth:`partner_skeleton`); a marker model answers with
         the partner's markers (``markers_``, mm). ``options``: those of
         :meth:`propagator` (``n_hypotheses``, ``sigma``, ``response``, ``resync``).
+        ``person``: which of the pair the captured person is, 0 (A) or 1 (B); the partner is
+        written on the other's skeleton, so "either" (None, as for silhouettes) is refused.
         """
-        self.people(person)  # checked before any work
+        if person is None:  # checked before any work
+            raise ValueError(
+                "person must be 0 (A) or 1 (B) for a 3-D partner (None, either, is for "
+                "silhouettes: respond_shapes)"
+            )
+        self.people(person)
         self.check_input(motion)
         motion = (self.as_markers(motion) if self.uses_markers else motion).resample(self.fps_)
         resp = self.respond_shapes(self.person(motion), person, rng=rng, **options)
