@@ -138,3 +138,12 @@ def test_score_is_the_likelihood_of_the_key_sequence(structured):
     test, _ = routine(16, seed=7)
     deep, shallow = structured.score([test]), structured.with_key_memory(1).score([test])
     assert shallow < deep < 0  # the key order needs memory (paper Fig. 9)
+
+
+def test_a_structured_routine_past_the_frame_limit_is_one_line(structured):
+    """As the VLMM's: seconds past the frame limit, or not a positive number, a LimitError."""
+    from markovmotion.errors import LimitError
+
+    for seconds in (1e9, 0.0, None):
+        with pytest.raises(LimitError):
+            structured.generate(seconds)

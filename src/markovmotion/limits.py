@@ -32,6 +32,7 @@ Limits (see also ``docs/limits.md``):
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import dataclass
 
@@ -166,7 +167,7 @@ def check_length(
     past ``limit``; else :class:`LimitError` in one line. The command line bounds these
     options; the library takes them from any caller (a day of routine at 30 fps was an
     S x R array of 1.5 TiB)."""
-    ok = isinstance(amount, int | float) and not isinstance(amount, bool)
+    ok = isinstance(amount, numbers.Real) and not isinstance(amount, bool)  # NumPy's too
     if not ok or not math.isfinite(amount) or amount <= 0 or (integer and amount != int(amount)):
         kind = "a whole number" if integer else "a finite number"
         raise LimitError(f"{what} must be {kind} above 0, got {amount!r}")

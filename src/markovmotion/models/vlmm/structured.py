@@ -31,6 +31,7 @@ from markovmotion.algorithms.dtw import dtw_distance_matrix, open_end_dtw
 from markovmotion.algorithms.vector_quantisation import collapse_repeats, nearest_prototype
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError
+from markovmotion.limits import MAX_FRAMES, check_length
 from markovmotion.models.base import Model
 from markovmotion.models.vlmm.behaviour import BehaviourModel, call_rng
 from markovmotion.models.vlmm.prediction_suffix_tree import VLMM
@@ -327,6 +328,7 @@ class StructuredBehaviourModel(Model):
         Drawn when ``stochastic`` (from ``rng``, else seeded with ``random_state``),
         else the most likely keys and templates.
         """
+        seconds = check_length(seconds, self.fps, MAX_FRAMES, "seconds")  # as the VLMM's
         rng = call_rng(rng, stochastic, self.random_state)
         start = self.vlmm_.start_state(rng)
         memory = self.vlmm_.memories_[start]
