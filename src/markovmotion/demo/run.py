@@ -58,8 +58,8 @@ def required(items: Sequence[T], what: str, index: MocapIndex, least: int = 1) -
 def _walk_entry(index: MocapIndex) -> Entry:
     """:data:`WALK` where the index has it (the shared collection), else its first walk
     (a user's own collection)."""
-    if any(e.file == WALK for e in index):
-        return index.find(WALK)
+    if (shared := next((e for e in index if e.file == WALK), None)) is not None:
+        return shared
     walks = [e for e in index.query(category="walk") if e.kind == "skeleton"]
     if not walks:
         raise DataNotFoundError(f"no skeleton take of category walk in {index.root / 'INDEX.csv'}")

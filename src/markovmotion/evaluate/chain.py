@@ -137,7 +137,8 @@ def test_set(
     )
     held = getattr(model, "held_out_files_", None)
     if test is None and held is not None:  # the takes it held out, in the index it learnt
-        candidates = [p for p in candidates if p[0].file in set(held)]
+        listed = set(held)
+        candidates = [p for p in candidates if p[0].file in listed]
         if not candidates:
             raise DataNotFoundError(
                 f"none of the {len(held)} files the model held out at training is a two-person "

@@ -626,14 +626,17 @@ def evaluation_pairs(
     learnt = list(getattr(model, "labels_", None) or [])
     wanted = list(labels or learnt) or None
     index = evaluation_index(model, test)
+    there = sorted({a.label for a, _ in index.pairs()})
+
+    def unlabelled(asked: str) -> DataNotFoundError:
+        return DataNotFoundError(
+            f"no two-person take of {index.root / INDEX_NAME} is labelled {asked}; its labels: "
+            f"{', '.join(there) or 'none'}"
+        )
+
     if labels:  # each label asked for is there, as train asks (a typo is not ignored)
-        there = sorted({a.label for a, _ in index.pairs()})
-        absent = [lab for lab in labels if lab not in there]
-        if absent:
-            raise DataNotFoundError(
-                f"no two-person take of {index.root / INDEX_NAME} is labelled "
-                f"{', '.join(map(repr, absent))}; its labels: {', '.join(there) or 'none'}"
-            )
+        if absent := [lab for lab in labels if lab not in there]:
+            raise unlabelled(", ".join(map(repr, absent)))
         if learnt and (other := [lab for lab in labels if lab not in learnt]):
             note(
                 f"the model learnt {', '.join(learnt)}, not {', '.join(other)}: it answers "
@@ -645,12 +648,7 @@ def evaluation_pairs(
     else:
         pairs = index.pairs(label=wanted)
         if not pairs and wanted:
-            there = sorted({a.label for a, _ in index.pairs()})
-            raise DataNotFoundError(
-                f"no two-person take of {index.root / INDEX_NAME} is labelled "
-                f"{', '.join(wanted)} (the model's labels); its labels: "
-                f"{', '.join(there) or 'none'}"
-            )
+            raise unlabelled(f"{', '.join(wanted)} (the model's labels)")
         held = getattr(model, "held_out_files_", None)
         if test is None and held:
             kept = [p for p in pairs if p[0].file in held]
