@@ -35,6 +35,36 @@ def test_trim():
     np.testing.assert_array_equal(t.rotations, m.rotations[5:15])
 
 
+def test_core_exports_the_motion_types():
+    """``from markovmotion.core import Motion`` (it was an ImportError: the package was empty),
+    in a fresh interpreter so that no import cycle hides behind modules already loaded."""
+    import subprocess
+    import sys
+
+    import markovmotion.core
+    from markovmotion.core.markers import Markers
+    from markovmotion.core.skeleton import Skeleton
+
+    assert markovmotion.core.Motion is Motion
+    assert markovmotion.core.Markers is Markers and markovmotion.core.Skeleton is Skeleton
+    code = "from markovmotion.core import Markers, Motion, Skeleton; print(Motion.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "Motion"
+
+
+def test_repr_is_one_short_line_not_the_arrays():
+    """repr(Motion) printed every frame's rotations (29,000 characters for 40 frames)."""
+    from markovmotion.core import Markers
+
+    m = make_motion(n_frames=40, fps=30.0)
+    assert repr(m) == "Motion(40 frames, 5 joints, 30 fps, 'synthetic')"
+    m.name = ""
+    assert repr(m) == "Motion(40 frames, 5 joints, 30 fps)"
+    assert repr(make_motion(n_frames=5000, fps=120.0)).startswith("Motion(5000 frames, 5 joints")
+    markers = Markers(("A", "B"), np.zeros((7, 2, 3)), 100.0, name="take.c3d")
+    assert repr(markers) == "Markers(7 frames, 2 markers, 100 fps, 'take.c3d')"
+
+
 def turned(m: Motion, yaw: float) -> Motion:
     out = m.copy()
     turn = Rotation.from_rotvec([0, yaw, 0])

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class Markers:
     """Positions of named markers over frames.
 
@@ -54,6 +54,13 @@ class Markers:
 
     def __len__(self) -> int:
         return self.n_frames
+
+    def __repr__(self) -> str:
+        """One short line (the positions would print every frame): frames, markers, rate,
+        name."""
+        return f"Markers({self.n_frames} frames, {self.n_markers} markers, {self.fps:g} fps" + (
+            f", {self.name!r})" if self.name else ")"
+        )
 
     def copy(self) -> Markers:
         """A deep copy."""

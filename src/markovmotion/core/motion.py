@@ -19,7 +19,7 @@ UP = np.array([0.0, 1.0, 0.0])
 GROUND = [0, 2]
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class Motion:
     """Per-frame local rotations and translations of a :class:`Skeleton`.
 
@@ -87,6 +87,13 @@ class Motion:
 
     def __len__(self) -> int:
         return self.n_frames
+
+    def __repr__(self) -> str:
+        """One short line (the arrays would print every frame): frames, joints, rate, name."""
+        joints = self.skeleton.n_joints
+        return f"Motion({self.n_frames} frames, {joints} joints, {self.fps:g} fps" + (
+            f", {self.name!r})" if self.name else ")"
+        )
 
     def copy(self) -> Motion:
         return Motion(
