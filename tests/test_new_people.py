@@ -663,3 +663,28 @@ def test_test_people_on_an_index_without_subjects_says_its_subject_column_is_emp
     ]
     with pytest.raises(DataNotFoundError, match="none: its subject column is empty"):
         people_out(mocap, pairs, ["pair3"])
+
+
+def test_the_new_people_preset_sets_the_recommended_options_unless_given(mocap, tmp_path, capsys):
+    """``--preset new-people`` is the documented recommendation (both roles, heading frame,
+    person normalisation, regression output, place memory 300, energy 0.99, contact 1); an
+    option given beside it wins; the default preset is the paper's model."""
+    from markovmotion.cli import main
+    from markovmotion.defaults import NEW_PEOPLE
+
+    argv = ["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
+            "--n-iter", "2"]  # fmt: skip
+    main([*argv, "--preset", "new-people", "--energy", "0.9", "--out", str(tmp_path / "p.npz")])
+    assert "in both roles" in capsys.readouterr().err
+    preset = DualHMM.load(tmp_path / "p.npz")
+    for name, value in NEW_PEOPLE.items():
+        if name not in ("roles", "energy"):
+            assert getattr(preset, name) == value, name
+    assert preset.energy == 0.9
+    main([*argv, "--out", str(tmp_path / "paper.npz")])
+    assert "in both roles" not in capsys.readouterr().err
+    paper = DualHMM.load(tmp_path / "paper.npz")
+    assert (paper.output, paper.normalise, paper.place_memory) == ("frames", "none", 0)
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--preset", "new-poeple", "--out", str(tmp_path / "x.npz")])
+    assert exc.value.code == 2 and "new-poeple" in capsys.readouterr().err

@@ -34,3 +34,22 @@ DEFAULT_RESYNC = 0.0
 #: give partners that lose to the mean shape on the eight salsa training takes; 40 each
 #: was the best of 20-300 by leave-one-take-out over them (see the README).
 DEFAULT_PROTOTYPES = 40
+
+# The dual HMM's presets (``dualhmm train/crossval --preset``; models/hmm/dual.py).
+#: The partner for people the model has never seen (docs/hmm.md, "New people"): both roles
+#: of every take, the person normalisation, ``place_memory`` 300 and A's heading as the
+#: frame, fixed on principle; B's output by regression, PCA energy 0.99 and the hands'
+#: contact at 1, the collection's picks by leaving one pair of people out. ``roles`` is the
+#: command's (the takes learnt); the rest are :class:`DualHMM`'s parameters.
+NEW_PEOPLE: dict[str, object] = {
+    "roles": "both",
+    "frame": "heading",
+    "normalise": "person",
+    "output": "regression",
+    "place_memory": 300,
+    "energy": 0.99,
+    "contact_weight": 1.0,
+}
+#: ``--preset``: option values it sets where the command line leaves them at their defaults
+#: ("paper": none, the paper's model).
+DUALHMM_PRESETS: dict[str, dict[str, object]] = {"paper": {}, "new-people": NEW_PEOPLE}

@@ -14,6 +14,7 @@ from markovmotion.cli.options import (
     choice,
     choose_option,
     chosen_line,
+    given,
     grid_of,
     guide_for,
     guide_option,
@@ -148,6 +149,13 @@ JOBS = typer.Option(
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 KIND = kind_option()
 ROLES = roles_option()
+PRESET = typer.Option(
+    "paper",
+    callback=choice(("paper", "new-people")),
+    help="'new-people': the partner for people the model has never seen (--roles both "
+    "--frame heading --normalise person --output regression --place-memory 300 --energy 0.99 "
+    "--contact-weight 1; docs/hmm.md), each replaced by the option if given. 'paper': none.",
+)
 
 
 def _split(values: str | None) -> list[str] | None:
@@ -169,6 +177,16 @@ MODEL_OPTIONS = {
         )
     },
 }  # fmt: skip
+
+
+def with_preset(options: dict) -> dict:
+    """A command's options (its ``locals()``) with ``--preset``'s values
+    (:data:`~markovmotion.defaults.DUALHMM_PRESETS`) where the command line left them at their
+    defaults."""
+    from markovmotion.defaults import DUALHMM_PRESETS
+
+    preset = DUALHMM_PRESETS[options["preset"]]
+    return {**options, **{k: v for k, v in preset.items() if not given(k)}}
 
 
 def new_model(options: dict):
@@ -222,6 +240,7 @@ def train(
     kind: str = KIND,
     roles: str = ROLES,
     choose: str = CHOOSE,
+    preset: str = PRESET,
 ) -> None:
     """Train a dual HMM on the two-person takes of a motion-capture folder."""
     import joblib
@@ -230,11 +249,12 @@ def train(
 
     check_model_output(out)
     start = time.perf_counter()
-    model = new_model(locals())
+    options = with_preset(locals())
+    model = new_model(options)
     grid = grid_of("hmm", choose)
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(
-            model, data, _split(labels), _split(test_trials), kind, roles, grid,
+            model, data, _split(labels), _split(test_trials), kind, options["roles"], grid,
             _split(test_people),
         )  # fmt: skip
     model.save(out, **extras)
@@ -588,6 +608,7 @@ def crossval(
     json_out: bool = JSON,
     kind: str = KIND,
     roles: str = ROLES,
+    preset: str = PRESET,
 ) -> None:
     """Leave-one-out evaluation: train on all takes but those of one pair of people (INDEX.csv's
     subject; one take when all come from one pair), test on those, for every pair."""
@@ -595,10 +616,13 @@ def crossval(
 
     from markovmotion.evaluate.hmm import crossval_index
 
-    model = new_model(locals())
+    options = with_preset(locals())
+    model = new_model(options)
     grid = grid_of("hmm", choose)
     with joblib.parallel_config(n_jobs=jobs or -1):
-        report, written = crossval_index(model, data, _split(labels), plots, grid, kind, roles)
+        report, written = crossval_index(
+            model, data, _split(labels), plots, grid, kind, options["roles"]
+        )
     _report(report, written, json_out)
 
 

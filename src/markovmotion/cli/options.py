@@ -310,6 +310,26 @@ def grid_of(family: str, choose: str | None) -> list[dict] | None:
     return grid
 
 
+def _context() -> Any:
+    """The running command's click context (None outside a command)."""
+    try:  # Typer >= 0.26 vendors its own click (as cli.main)
+        from typer._click.globals import get_current_context
+    except ImportError:  # pragma: no cover - older Typer on the real click
+        from click import get_current_context
+    return get_current_context(silent=True)
+
+
+def given(name: str) -> bool:
+    """Whether the running command's option ``name`` (its parameter's name) was given on the
+    command line, not left at its default."""
+    try:
+        from typer._click.core import ParameterSource
+    except ImportError:  # pragma: no cover - older Typer on the real click
+        from click.core import ParameterSource
+    ctx = _context()
+    return ctx is not None and ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE
+
+
 #: ``--choose`` keys whose command-line option has another name.
 _OPTION_OF = {"n_states": "states", "n_state_prototypes": "prototypes",
               "n_behaviour_prototypes": "behaviours"}  # fmt: skip
@@ -318,21 +338,12 @@ _OPTION_OF = {"n_states": "states", "n_state_prototypes": "prototypes",
 def _note_replaced(grid: list[dict]) -> None:
     """One note per option given on the command line that ``--choose`` also sets: the
     grid's values replace it (``--output regression`` with ``output=frames,...``)."""
-    try:  # Typer >= 0.26 vendors its own click (as cli.main)
-        from typer._click.core import ParameterSource
-        from typer._click.globals import get_current_context
-    except ImportError:  # pragma: no cover - older Typer on the real click
-        from click import get_current_context
-        from click.core import ParameterSource
-
     from markovmotion.progress import note
 
-    ctx = get_current_context(silent=True)
-    if ctx is None:
-        return
     for key in dict.fromkeys(k for setting in grid for k in setting):
         name = _OPTION_OF.get(key, key)
-        if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE:
+        if given(name):
+            ctx = _context()
             values = ", ".join(dict.fromkeys(str(s[key]) for s in grid if key in s))
             option = "--" + name.replace("_", "-")
             note(f"{option} {ctx.params[name]} is replaced by --choose's {key} ({values})")

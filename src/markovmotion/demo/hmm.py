@@ -11,6 +11,7 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.defaults import NEW_PEOPLE
 from markovmotion.demo.run import required
 from markovmotion.demo.scene import partner_scene
 from markovmotion.evaluate.choose import both_roles
@@ -105,9 +106,9 @@ def handshake_step(out: Path, index: MocapIndex, console: Console) -> list[Path]
 
 def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     """A handshake of people the partner has never seen: a dual HMM of the markers-only
-    handshakes of every other pair of people (both roles, ``normalise="person"``,
-    ``output="regression"``, ``place_memory=300``, ``energy=0.99``, ``contact_weight=1``:
-    docs/hmm.md, "New people") answers the last pair's first take."""
+    handshakes of every other pair of people (:data:`~markovmotion.defaults.NEW_PEOPLE`,
+    ``dualhmm train --preset new-people``: docs/hmm.md, "New people") answers the last
+    pair's first take."""
     pairs = index.pairs(label=[HANDSHAKE], kind="markers")
     people = sorted({a.subject for a, _ in pairs})
     required(people, "pairs of people with handshakes of markers, at least 2", index, 2)
@@ -116,15 +117,8 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
     train = [p for p in pairs if p[0].subject != held]
     takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
     takes = both_roles(takes)
-    # the setting `dualhmm train --choose` picks for handshakes (docs/hmm.md, "New people")
-    model = DualHMM(
-        normalise="person",
-        output="regression",
-        place_memory=300,
-        frame="heading",
-        energy=0.99,
-        contact_weight=1.0,
-    )
+    # `dualhmm train --preset new-people` (docs/hmm.md, "New people")
+    model = DualHMM(**{k: v for k, v in NEW_PEOPLE.items() if k != "roles"})
     model.fit([(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2)
     a, b = (m.resample(model.fps) for m in index.load_pair(*test))
     virtual = model.respond(a, "windowed")
