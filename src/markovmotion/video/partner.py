@@ -15,7 +15,6 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError
-from markovmotion.features.joint_shape import person_from_motion
 from markovmotion.models.chain.partner import VirtualPartner
 from markovmotion.video.bspline import evaluate_closed_bspline
 from markovmotion.video.render import (
@@ -69,7 +68,7 @@ def respond_motion_video(
     **options,
 ) -> Path:
     """Render a captured person (colour) and its 3-D virtual partner (black) from the side."""
-    real = person_from_motion(motion)
+    real = model.person(motion)  # its shape joints by the model's names, as respond's
     partner = model.respond_shapes(real, person, **options).partner
     camera = side_camera([real, partner])
     frames = render_frames([real, partner], camera, colours=[PEOPLE_COLOURS[person], BLACK])
