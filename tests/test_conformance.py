@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -23,7 +24,7 @@ from sklearn.base import clone
 from markovmotion.core.motion import Motion
 from markovmotion.data.splits import held_out_every
 from markovmotion.data.walks import gait_entries
-from markovmotion.errors import ModelFormatError
+from markovmotion.errors import ModelFormatError, TooLittleDataError
 from markovmotion.models import KINDS, Model
 from markovmotion.models.base import ALL_VERBS
 from markovmotion.models.chain.behaviour_chain import BehaviourChain
@@ -318,6 +319,59 @@ def test_the_models_components_before_fit_raise_not_fitted(call):
 
     with pytest.raises(NotFittedError, match="is not fitted"):
         call()
+
+
+def _broken(motion: Motion, value: float, frames: slice) -> Motion:
+    out = motion.copy()
+    out.rotations[frames, 1] = value
+    return out
+
+
+@pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.name)
+def test_wrong_takes_to_fit_and_score_are_one_line_alike_in_every_family(fam, fitted, data):
+    """``fit([])`` was an IndexError (VLMM), NumPy's "need at least one array" (gait);
+    ``fit("x")`` and ``fit([None])`` AttributeErrors from inside; ``gait.score([])`` a
+    ZeroDivisionError; NaN or infinite frames were learnt and scored without a word (VLMM),
+    SVD errors (gait), PCA's "Input X contains NaN" (dual HMM) or "sequence 0 holds NaN"
+    (chain). Every family's takes are now checked alike (``models.base.check_takes``): one
+    line naming the model, the verb, the take and what is wrong with it."""
+    model = fitted[fam.name]
+    name = type(model).__name__
+    takes = data[fam.data]
+    pairs = fam.data == "pairs"
+    verbs = {"fit": lambda t: fam.make().fit(t)}
+    if "score" in model.VERBS and not type(model).SCORES_ONE:
+        verbs["score"] = model.score
+    for verb, call in verbs.items():
+        what = "take" if verb == "fit" else "motion"
+        error = TooLittleDataError if verb == "fit" else ValueError
+        with pytest.raises(error, match=rf"^{name}\.{verb}: no .* \(the list is empty\)$"):
+            call([])
+        for bad in ("x", None, 3):
+            with pytest.raises(TypeError, match=rf"^{name}\.{verb} takes a list of .*, not "):
+                call(bad)
+        with pytest.raises(TypeError, match=rf"^{name}\.{verb}: {what} 0 is None, not a"):
+            call([None])
+        nan, inf = r"3 frames \(first 5, last 7\)", r"1 frame \(first 5, last 5\)"
+        if pairs:
+            a, b = takes[0]
+            cases = [
+                ([(a, b), (_broken(a, np.nan, slice(5, 8)), b)], r"take 1 \(A\)", nan),
+                ([(a, _broken(b, np.inf, slice(5, 6)))], r"take 0 \(B\)", inf),
+            ]
+        else:
+            cases = [
+                ([takes[0], _broken(takes[1], np.nan, slice(5, 8))], f"{what} 1", nan),
+                ([_broken(takes[0], np.inf, slice(5, 6)), takes[1]], f"{what} 0", inf),
+            ]
+        for bad, at, frames in cases:
+            with pytest.raises(ValueError, match=rf"^{name}\.{verb}: {at}: .* holds NaN or") as err:
+                call(bad)
+            assert re.search(frames, str(err.value)) and "\n" not in str(err.value)
+    if fam.name == "hmm":  # on markers a gap is filled (virtual markers too): still learnt
+        a, b = takes[0]
+        on_markers = DualHMM(n_states=4, n_iter=3, window=4, placement_window=3, markers=13)
+        assert on_markers.fit([(_broken(a, np.nan, slice(5, 8)), b)]) is on_markers
 
 
 def _first_motion(fam: Family, data: dict) -> Motion:

@@ -35,7 +35,7 @@ import hashlib
 import inspect
 import math
 import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -44,7 +44,7 @@ from sklearn.exceptions import NotFittedError
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
-from markovmotion.errors import ModelFormatError
+from markovmotion.errors import ModelFormatError, TooLittleDataError
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, is_fitted, register, restore_estimator
 
@@ -91,12 +91,19 @@ class Model(BaseEstimator):
     #: Whether ``score`` takes one motion (the dual HMM: log P(A)) rather than a list of
     #: them (one motion given to a list's ``score`` is taken as a list of one).
     SCORES_ONE: ClassVar[bool] = False
-    #: Whether ``respond``/``predict`` take a Motion whose frames hold NaN (missing) and
-    #: answer them; the others refuse one in one line, naming the frames (markers' gaps
-    #: are filled by every model that reads markers).
+    #: Whether ``respond``, ``predict`` and ``score`` take a Motion whose frames hold NaN
+    #: (missing) and answer them, and ``fit`` learns from one (the dual HMM: on markers; on
+    #: joints it refuses one itself); the others refuse one in one line, naming the frames
+    #: (markers' gaps are filled by every model that reads markers).
     TAKES_MISSING: ClassVar[bool] = False
     #: Whether ``fit`` learns from two-person takes, (A, B) pairs (else from takes).
     FITS_PAIRS: ClassVar[bool] = False
+    #: What one take of ``fit`` (of a pair: each of A and B) and one motion of a list's
+    #: ``score`` may be (:func:`check_takes`; the gait model: Motions only).
+    TAKES: ClassVar[tuple[type, ...]] = (Motion, Markers)
+    #: Two-person takes a pair family's ``fit`` also learns from as they are (the behaviour
+    #: chain's TwoPeople of silhouettes tracked in video).
+    PREPARED_TAKES: ClassVar[tuple[type, ...]] = ()
     #: Header entries of :meth:`save` that are not extras (everything else is one).
     _RESERVED: ClassVar[frozenset[str]] = frozenset(
         {"format", "format_version", "library_version", "kind", "model"}
@@ -122,8 +129,8 @@ class Model(BaseEstimator):
 
     @property
     def takes_arrays(self) -> bool:
-        """Whether ``predict``/``respond`` take arrays of features rather than motions (the
-        VLMM's contour models)."""
+        """Whether ``fit``, ``score``, ``predict`` and ``respond`` take arrays of features rather
+        than motions (the VLMM's contour models)."""
         return False
 
     # ------------------------------------------------------------ files
@@ -230,8 +237,8 @@ def check_motion(motion: object, where: str, missing: bool = True) -> None:
         if len(bad):
             raise ValueError(
                 f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "
-                f"{len(bad)} frames (first {bad[0]}, last {bad[-1]}); this model answers "
-                "whole frames only: cut or fill them first"
+                f"{len(bad)} frame{'s' if len(bad) > 1 else ''} (first {bad[0]}, last "
+                f"{bad[-1]}); this model takes whole frames only: cut or fill them first"
             )
 
 
@@ -241,9 +248,10 @@ def check_arguments(
     """A verb's arguments checked alike in every family, so a wrong one is one line, not an
     error from deep inside: the motion of ``respond`` and ``predict`` (:func:`check_motion`;
     frames holding NaN unless the class :attr:`~Model.TAKES_MISSING`); ``score``'s one motion
-    (:attr:`~Model.SCORES_ONE`) or list of them, one motion given for a list taken as a list
-    of one; ``seconds`` finite and positive (``generate``: or 0); an integer ``rng`` is a
-    seed (``np.random.default_rng``), as ``random_state`` is. The arguments, so changed."""
+    (:attr:`~Model.SCORES_ONE`) or list of them (:func:`check_takes`), one motion given for a
+    list taken as a list of one; ``seconds`` finite and positive (``generate``: or 0); an
+    integer ``rng`` is a seed (``np.random.default_rng``), as ``random_state`` is. The
+    arguments, so changed."""
     where = f"{type(model).__name__}.{verb}"
     first = args[0] if args else None
     arrays = model.takes_arrays and isinstance(first, np.ndarray)
@@ -252,10 +260,9 @@ def check_arguments(
     elif verb == "score" and args:
         if type(model).SCORES_ONE:
             check_motion(first, where)
-        elif isinstance(first, (Motion, Markers)):
-            args = ([first], *args[1:])
-        elif not isinstance(first, Sequence) or isinstance(first, str):
-            raise TypeError(f"{where} takes a list of Motions, not {type(first).__name__}")
+        else:
+            one = isinstance(first, (Motion, Markers))
+            args = (check_takes(model, [first] if one else first, verb), *args[1:])
     seconds = kwargs.get("seconds")
     if seconds is not None:
         low_ok = verb == "generate"
@@ -273,31 +280,45 @@ def check_arguments(
 
 
 def _takes_checked(fit: Callable[..., Any]) -> Callable[..., Any]:
-    """``fit`` refusing in one line a lone take (or a lone pair) where a list of them is
-    meant, which failed deep inside with "'Motion' object is not iterable", and a pair of
-    two lengths (:func:`check_takes`, the one place every family's pairs are checked)."""
+    """``fit`` with its takes checked first (:func:`check_takes`, the one place every family's
+    takes are checked): a lone take (or a lone pair) where a list of them is meant failed deep
+    inside with "'Motion' object is not iterable", an empty list with an IndexError."""
 
     first = list(inspect.signature(fit).parameters)[1]  # after self: the takes
 
     @functools.wraps(fit)
     def checked(self: Model, *args: Any, **kwargs: Any) -> Any:
-        takes = args[0] if args else kwargs.get(first)
-        if takes is not None:
-            check_takes(takes, f"{type(self).__name__}.fit", type(self).FITS_PAIRS)
+        if args:
+            args = (check_takes(self, args[0], "fit"), *args[1:])
+        elif first in kwargs:
+            kwargs = {**kwargs, first: check_takes(self, kwargs[first], "fit")}
         return fit(self, *args, **kwargs)
 
     return checked
 
 
-def check_takes(takes: object, where: str, pairs: bool) -> None:
-    """Raise TypeError (one line) when ``takes`` is one take or one (A, B) pair rather than
-    a list of them; with ``pairs``, when a pair of Motions (or Markers) differs in length
-    (ValueError: A and B are recorded together, frame for frame)."""
+def check_takes(model: Model, takes: object, verb: str = "fit") -> Sequence[Any]:
+    """``takes`` as ``model``'s ``fit`` (or a list's ``score``, ``verb``) may take them, else
+    one line naming the model, the verb and the take (index from 0):
+
+    - TypeError: not a list (one take, one (A, B) pair, a string, None...); a take that is not
+      a Motion or Markers (:attr:`~Model.TAKES`; a contour model's arrays too, a pair family's
+      :attr:`~Model.PREPARED_TAKES`), or, where ``fit`` learns from pairs, not an (A, B) pair;
+    - ValueError: an empty list (:class:`~markovmotion.errors.TooLittleDataError` for
+      ``fit``); a pair whose A and B differ in length or rate (A and B are recorded together,
+      frame for frame); a take with no frame, or (unless the class
+      :attr:`~Model.TAKES_MISSING`) a Motion with NaN or infinite values
+      (:func:`check_motion`: the frames named; markers' gaps are filled by every model).
+
+    Returns the takes, an iterator (a generator) as a list."""
+    where = f"{type(model).__name__}.{verb}"
+    pairs = verb == "fit" and type(model).FITS_PAIRS
     one = (Motion, Markers)
+    kinds = type(model).TAKES
+    arrays = model.takes_arrays
+    noun = "(A, B) pairs" if pairs else "takes" if verb == "fit" else "Motions"
     if isinstance(takes, one):
-        raise TypeError(
-            f"{where} takes a list of {'(A, B) pairs' if pairs else 'takes'}: give [take]"
-        )
+        raise TypeError(f"{where} takes a list of {noun}: give [take]")
     if (
         pairs
         and isinstance(takes, tuple)
@@ -305,29 +326,73 @@ def check_takes(takes: object, where: str, pairs: bool) -> None:
         and all(isinstance(m, one) for m in takes)
     ):
         raise TypeError(f"{where} takes a list of (A, B) pairs: give [(a, b)]")
-    if not pairs or not isinstance(takes, Sequence):
-        return
-    for i, pair in enumerate(takes):
-        if isinstance(pair, one):
-            raise TypeError(f"{where}: take {i} is one motion, not an (A, B) pair")
-        if (
-            isinstance(pair, (tuple, list))
-            and len(pair) == 2
-            and all(isinstance(m, one) for m in pair)
-        ):
-            a, b = pair
-            if not math.isclose(a.fps, b.fps, rel_tol=1e-6):
-                raise ValueError(
-                    f"{where}: take {i}: A ({a.name or 'unnamed'}) at {a.fps:g} fps and B "
-                    f"({b.name or 'unnamed'}) at {b.fps:g}: a pair is recorded together, frame "
-                    "for frame (give both at one rate)"
+    if isinstance(takes, Iterator):
+        takes = list(takes)
+    if not isinstance(takes, Sequence) or isinstance(takes, (str, bytes)):
+        also = " (or of (frames, 2n) arrays)" if arrays else ""
+        raise TypeError(f"{where} takes a list of {noun}{also}, not {type(takes).__name__}")
+    if not len(takes):
+        if verb == "fit":
+            raise TooLittleDataError(f"{where}: no {noun} to learn from (the list is empty)")
+        raise ValueError(f"{where}: no motion to score (the list is empty)")
+    what = "take" if verb == "fit" else "motion"
+    missing = type(model).TAKES_MISSING
+    for i, take in enumerate(takes):
+        if pairs:
+            if isinstance(take, type(model).PREPARED_TAKES):
+                continue
+            if isinstance(take, one):
+                raise TypeError(f"{where}: take {i} is one motion, not an (A, B) pair")
+            if not isinstance(take, (tuple, list)) or len(take) != 2:
+                held = f" of {len(take)}" if isinstance(take, (tuple, list)) else ""
+                raise TypeError(
+                    f"{where}: take {i} is {_a(take)}{held}, not an (A, B) pair of Motions (or "
+                    "Markers)"
                 )
-            if a.n_frames != b.n_frames:
-                raise ValueError(
-                    f"{where}: take {i}: A ({a.name or 'unnamed'}, {a.n_frames} frames) and B "
-                    f"({b.name or 'unnamed'}, {b.n_frames}) differ in length: a pair is "
-                    "recorded together, frame for frame (trim both to the same frames)"
-                )
+            for role, m in zip("AB", take, strict=True):
+                if not isinstance(m, kinds):
+                    raise TypeError(f"{where}: take {i}: {role} is {_a(m)}, not {_kinds(kinds)}")
+            _check_pair(take, f"{where}: take {i}")
+            for role, m in zip("AB", take, strict=True):
+                check_motion(m, f"{where}: take {i} ({role})", missing=missing)
+        elif arrays and not isinstance(take, one):
+            continue  # a contour model checks its arrays itself (contour_arrays)
+        elif not isinstance(take, kinds):
+            raise TypeError(f"{where}: {what} {i} is {_a(take)}, not {_kinds(kinds)}")
+        else:
+            check_motion(take, f"{where}: {what} {i}", missing=missing)
+    return takes
+
+
+def _check_pair(pair: Sequence[Motion | Markers], where: str) -> None:
+    """Raise ValueError (one line) unless A and B of ``pair`` have one rate and one length."""
+    a, b = pair
+    if not math.isclose(a.fps, b.fps, rel_tol=1e-6):
+        raise ValueError(
+            f"{where}: A ({a.name or 'unnamed'}) at {a.fps:g} fps and B "
+            f"({b.name or 'unnamed'}) at {b.fps:g}: a pair is recorded together, frame "
+            "for frame (give both at one rate)"
+        )
+    if a.n_frames != b.n_frames:
+        raise ValueError(
+            f"{where}: A ({a.name or 'unnamed'}, {a.n_frames} frames) and B "
+            f"({b.name or 'unnamed'}, {b.n_frames}) differ in length: a pair is "
+            "recorded together, frame for frame (trim both to the same frames)"
+        )
+
+
+def _a(value: object) -> str:
+    """What ``value`` is, for messages: "None", "a str", "an int", "an ndarray"."""
+    if value is None:
+        return "None"
+    name = type(value).__name__
+    return f"{'an' if name[0] in 'AEIOUaeiou' or name == 'ndarray' else 'a'} {name}"
+
+
+def _kinds(kinds: tuple[type, ...]) -> str:
+    """What a take of ``kinds`` may be, for messages: "a Motion (or Markers)", "a Motion"."""
+    first, *rest = (k.__name__ for k in kinds)
+    return f"a {first}" + (f" (or {', '.join(rest)})" if rest else "")
 
 
 def file_record(motion: Motion | Markers) -> dict[str, str]:

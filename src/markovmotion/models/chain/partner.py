@@ -120,6 +120,7 @@ class VirtualPartner(Model):
     KIND = "behaviour-chain"
     VERBS = ("respond", "partner")
     FITS_PAIRS = True
+    PREPARED_TAKES = (TwoPeople,)
 
     def __init__(
         self,

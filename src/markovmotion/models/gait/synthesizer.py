@@ -206,6 +206,7 @@ class GaitSynthesizer(Model):
 
     KIND = KIND
     VERBS = ("generate", "score")
+    TAKES = (Motion,)  # walks of a skeleton: its joints' rotations and heel strikes
 
     def __init__(
         self,

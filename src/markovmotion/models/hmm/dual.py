@@ -91,7 +91,7 @@ from markovmotion.features.markers import (
     virtual_markers,
 )
 from markovmotion.features.person import RunningCentre, body_radius, on_average_body, size_scale
-from markovmotion.models.base import Model, finite_frames, flatten
+from markovmotion.models.base import Model, check_motion, finite_frames, flatten
 from markovmotion.models.hmm.contact import HandContact, contact_shifts, right_hand
 from markovmotion.models.hmm.gaussian import GaussianHMM, check_sequences, safe_log
 from markovmotion.models.hmm.partner import Partner
@@ -475,8 +475,11 @@ class DualHMM(Model):
         ):
             self.__dict__.pop(k, None)
         if self.markers or isinstance(pairs[0][0], Markers):
-            xa, xb, lengths = self._marker_features(pairs, groups)
+            xa, xb, lengths = self._marker_features(pairs, groups)  # gaps filled
         else:
+            for i, pair in enumerate(pairs):  # features of joints: whole frames only
+                for role, m in zip("AB", pair, strict=True):
+                    check_motion(m, f"DualHMM.fit: take {i} ({role})", missing=False)
             xa, xb, lengths = self._motion_features(pairs, groups)
         self._fit_chains(xa, xb, lengths)
         if self.output == "regression":

@@ -140,8 +140,10 @@ class StructuredBehaviourModel(Model):
 
     @property
     def takes_arrays(self) -> bool:
-        """Contour models predict from contour arrays (:meth:`Model.takes_arrays`)."""
-        return bool(getattr(getattr(self, "prototype_model_", None), "is_contour", False))
+        """Contour models learn and predict from contour arrays (:meth:`Model.takes_arrays`):
+        the fitted prototype model's kind, before ``fit`` the one given."""
+        base = getattr(self, "prototype_model_", None) or self.prototype_model
+        return bool(getattr(base, "is_contour", False))
 
     def __init__(
         self,
