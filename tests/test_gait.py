@@ -517,3 +517,18 @@ def test_a_walk_of_too_many_or_no_steps_is_one_line(small_model):
     for n in (10**6, 0, 2.5, "4", None):
         with pytest.raises(LimitError):
             small_model.generate(n_steps=n)
+
+
+def test_walks_of_two_skeletons_are_one_line_naming_the_joints_that_differ(mocap, normal_walks):
+    """fit on a Bandai walk and a CMU walk (other joints) was NumPy's "all the input array
+    dimensions except for the concatenation axis must match"; score and adapt said it already
+    (against the model's skeleton), now fit does too, against its first walk."""
+    from markovmotion.errors import SkeletonMismatchError
+
+    cmu = mocap.load_motion(mocap.find("cmu/asfamc/02/02_01.amc.gz"))
+    with pytest.raises(SkeletonMismatchError) as err:
+        GaitSynthesizer(n_iter=1).fit([normal_walks[0], cmu])
+    message = str(err.value)
+    assert message.startswith("GaitSynthesizer.fit: walk 1 (02_01.amc.gz) is not on the skeleton")
+    assert "(36 joints, expected 27; joints differ:" in message and "\n" not in message
+    assert err.value.reason.startswith("(36 joints, expected 27")

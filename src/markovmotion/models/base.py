@@ -382,10 +382,12 @@ def _check_pair(pair: Sequence[Motion | Markers], where: str) -> None:
 
 
 def _a(value: object) -> str:
-    """What ``value`` is, for messages: "None", "a str", "an int", "an ndarray"."""
+    """What ``value`` is, for messages: "None", "a str", "an int", "an ndarray", "Markers"."""
     if value is None:
         return "None"
     name = type(value).__name__
+    if name.endswith("s"):  # Markers
+        return name
     return f"{'an' if name[0] in 'AEIOUaeiou' or name == 'ndarray' else 'a'} {name}"
 
 

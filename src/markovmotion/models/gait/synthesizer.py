@@ -25,7 +25,7 @@ import numpy as np
 from markovmotion.algorithms.hsmm_recursions import chain_cells
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
-from markovmotion.errors import DataNotFoundError, MotionFormatError
+from markovmotion.errors import DataNotFoundError, MotionFormatError, SkeletonMismatchError
 from markovmotion.features import ExpMaps, FeaturePipeline, add_deltas
 from markovmotion.features.gait import (
     CONTEXTS,
@@ -234,14 +234,27 @@ class GaitSynthesizer(Model):
         role: str = "average",
         units: Sequence[str] | None = None,
     ) -> GaitSynthesizer:
-        """Train on walks (all their steps, or the first ``n_steps``).
+        """Train on walks (all their steps, or the first ``n_steps``), of one skeleton.
 
         ``units`` names the adaptation unit of each walk for ``wat="unit"``.
+
+        Raises:
+            SkeletonMismatchError: walks on skeletons of other joints, named with what differs
+                (it was NumPy's concatenation error).
         """
         if self.wat not in WAT_UNITS:
             raise ValueError(f"wat must be one of {WAT_UNITS}")
         if self.wat == "unit" and units is None:
             raise ValueError("walker-adaptive training by unit needs the unit of each walk")
+        first = motions[0]
+        for i, m in enumerate(motions[1:], 1):
+            if (differs := first.skeleton.difference(m.skeleton)) is not None:
+                raise SkeletonMismatchError(
+                    f"GaitSynthesizer.fit: walk {i} ({m.name or 'unnamed'}) is not on the "
+                    f"skeleton of walk 0 ({first.name or 'unnamed'}) {differs}: train on walks "
+                    "of one skeleton",
+                    reason=differs,
+                )
         self.pipeline_ = FeaturePipeline([ReferencePose(), ExpMaps(root_position="none")])
         self.pipeline_.fit([align_walk(m) for m in motions])
         data = walk_set(motions, self.pipeline_, units).first_steps(n_steps)
