@@ -232,6 +232,31 @@ def test_online_partners_follow_the_protocol(fam, fitted, data):
 
 
 @pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
+def test_online_partners_answer_every_step_even_before_a_is_seen(fam, fitted, data):
+    """N calls of ``step`` give N frames of B (those ``step`` returns and ``finish``'s), the
+    stream starting with frames missing (``step(None)``: a camera that sees no one yet) or
+    not: the chain did not count the missing frames before the first person (2 missing + 18
+    real frames gave 18, the dual HMM's 20). Before A is seen both answer a finite B frame
+    (the dual HMM from its dynamics, at the origin; the chain its training people's mean
+    shape, for an A at the origin)."""
+    model = fitted[fam.name]
+    a = _pairs_input(data[fam.data])
+    for missing in (0, 2, 7):
+        partner = model.partner()
+        frames = a.resample(partner.fps)
+        out = [partner.step(None) for _ in range(missing)]
+        out += [partner.step(frames.trim(t, t + 1)) for t in range(18)]
+        assert all(f is None for f in out[: partner.lag])
+        assert all(f is not None for f in out[partner.lag :]), "one answer per step"
+        shown = [f for f in out if f is not None] + partner.finish()
+        assert len(shown) == missing + 18
+        assert all(f.n_frames == 1 and np.isfinite(f.positions()).all() for f in shown)
+    partner = model.partner()
+    nobody = [partner.step(None) for _ in range(5)] + partner.finish()
+    assert len([f for f in nobody if f is not None]) == 5
+
+
+@pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
 def test_online_partners_go_on_after_dropped_frames(fam, fitted, data):
     """``drop()`` (a live session behind its clock) answers nothing, and the partner goes on
     in step with the stream: every frame not dropped gets its B frame, the first frame after

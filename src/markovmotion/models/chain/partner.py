@@ -111,7 +111,10 @@ class VirtualPartner(Model):
 
     Learnt: ``pipeline_`` (TwoPeople -> state vectors), ``chain_``,
     ``mean_shape_`` (d,) the mean normalised combined shape (the baseline
-    partner), ``centre_``, ``fps_``, ``skeletons_`` (each person's skeleton
+    partner), ``stance_`` (2, 2) each person's median size and reference height over the
+    training takes (mm: a skeleton's standing height and 0, its pelvis on the floor;
+    markers' :func:`marker_size` and centroid height; how an online partner stands A before
+    it has seen A), ``centre_``, ``fps_``, ``skeletons_`` (each person's skeleton
     of shape joints, from skeleton pairs; None from markers or prepared takes),
     ``markers_`` (the marker names each person is seen by, from marker pairs;
     else None), ``train_files_``.
@@ -215,6 +218,9 @@ class VirtualPartner(Model):
             random_state=self.random_state,
         ).fit(states)
         self.mean_shape_ = np.vstack(states)[:, : self.chain_.dim].mean(axis=0)
+        heights = np.vstack([t.height for t in people])  # (frames, 2)
+        levels = np.vstack([t.reference[..., 1] for t in people])
+        self.stance_ = np.column_stack([np.median(heights, axis=0), np.median(levels, axis=0)])
         self.centre_ = float(
             np.median(np.concatenate([t.reference[..., 0].ravel() for t in people]))
         )
@@ -239,6 +245,9 @@ class VirtualPartner(Model):
         width = self.pipeline_.output_width()
         check_shape("chain_.state_prototypes_", self.chain_.state_prototypes_, (None, width))
         check_shape("mean_shape_", self.mean_shape_, (self.chain_.dim,))
+        stance = getattr(self, "stance_", None)  # absent from files of older versions
+        if stance is not None:
+            check_positive("stance_ (sizes)", check_shape("stance_", stance, (2, 2))[:, 0])
         skeletons = self.skeletons_
         if skeletons is not None and not (
             isinstance(skeletons, list)
@@ -511,7 +520,9 @@ class ChainPartner:
     when frame t + ``lag`` has arrived (``lag = window - 1 - window // 2``, 2
     frames = 0.08 s at 25 fps with the paper's w = 5); over a whole motion the
     frames equal :meth:`VirtualPartner.respond`'s. A missing or dropped frame
-    repeats A's last one.
+    repeats A's last one; one before A is first seen is A as the training people stand
+    (:meth:`unseen`), so that, as with the dual HMM's partner, every frame of the stream
+    (N calls of :meth:`step`, :meth:`skip`, then :meth:`finish`) gets its B frame.
 
     A model of markers takes A's one-frame Markers and answers with B's markers
     (``markers_``). The person's size (:func:`marker_size`, which a whole take gives
@@ -597,6 +608,11 @@ class ChainPartner:
         s = self.model.shape_step.shape_vectors(real)[0]
         if self._centre is not None:  # normalise="person": as observe centres a whole take
             s = self._centre(s)
+        return self._push(s, real)
+
+    def _push(self, s: np.ndarray, real: Person) -> Motion | Markers | None:
+        """A's shape vector and place for the next frame in; B's frame for ``lag`` frames ago
+        out (None while the window fills)."""
         if self._first is None:
             self._first = s
         self._shapes.append(s)
@@ -605,6 +621,28 @@ class ChainPartner:
         if self._frames_in <= self.lag:
             return None
         return self._answer(self._frames_in - 1 - self.lag, self._frames_in - 1)
+
+    def unseen(self) -> tuple[np.ndarray, Person] | None:
+        """A before A's first frame (a stream that starts with frames missing: the camera
+        sees no one yet): the training people's mean shape of A's half (of ``mean_shape_``),
+        standing at the origin facing +Z, of their median size and reference height
+        (``stance_``; the ``size`` given, if any), as the dual HMM's partner answers from its
+        dynamics alone, placed at the origin. Its shape vector S^H (centred, unscaled) and
+        place. None for a model saved before it learnt ``stance_`` (then nothing is answered
+        before A is seen) unless ``size`` is given."""
+        model, p = self.model, self.person or 0
+        shape, scaling = model.shape_step, model.pipeline_.steps[-1]
+        own = shape.person_slice(p)  # the shape columns share one range (JointShapeScaling)
+        s = model.mean_shape_[own] * scaling.scale_[own] + scaling.min_[own]
+        stance = getattr(model, "stance_", None)
+        if stance is None and self._size is None:
+            return None
+        size, level = stance[p] if stance is not None else (self._size, 0.0)
+        size = self._size if self._size is not None else size
+        where = np.zeros((1, shape.n_dims_))
+        where[0, 1] = level
+        nobody = np.zeros((1, shape.n_points_, shape.n_dims_))
+        return s, Person(nobody, where, np.array([float(size)]), np.zeros(1))
 
     def _person(self, frame: Motion) -> Person:
         """:func:`person_from_motion` of one frame, the rest-pose height computed once."""
@@ -625,8 +663,14 @@ class ChainPartner:
         return Person(pos, pos.mean(axis=1), np.full(1, size), yaw)
 
     def skip(self) -> Motion | Markers | None:
-        """A frame that did not come in time: A's last frame again (nothing before the first)."""
-        return None if self._last is None else self.step(self._last)
+        """A frame that did not come in time: A's last frame again (before the first, A as
+        the training people stand: :meth:`unseen`)."""
+        if self._last is not None:
+            return self.step(self._last)
+        if self._finished:
+            raise ValueError(FINISHED)
+        unseen = self.unseen()
+        return None if unseen is None else self._push(*unseen)
 
     def drop(self) -> None:
         """A frame a caller dropped and will not show B's answer for: :meth:`skip`, its
