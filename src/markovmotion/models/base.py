@@ -127,6 +127,11 @@ class Model(BaseEstimator):
         if callable(fit := cls.__dict__.get("fit")):
             cls.fit = _takes_checked(fit)
 
+    def check_params(self) -> None:
+        """Raise ValueError (one line, naming the parameter) for a hyper-parameter out of its
+        choices or range; ``fit`` calls it before it looks at its takes, so a wrong setting is
+        said whatever the data (the dual HMM and the chain check theirs here)."""
+
     @property
     def takes_arrays(self) -> bool:
         """Whether ``fit``, ``score``, ``predict`` and ``respond`` take arrays of features rather
@@ -280,14 +285,16 @@ def check_arguments(
 
 
 def _takes_checked(fit: Callable[..., Any]) -> Callable[..., Any]:
-    """``fit`` with its takes checked first (:func:`check_takes`, the one place every family's
-    takes are checked): a lone take (or a lone pair) where a list of them is meant failed deep
-    inside with "'Motion' object is not iterable", an empty list with an IndexError."""
+    """``fit`` with its hyper-parameters (:meth:`Model.check_params`), then its takes checked
+    first (:func:`check_takes`, the one place every family's takes are checked): a lone take
+    (or a lone pair) where a list of them is meant failed deep inside with "'Motion' object
+    is not iterable", an empty list with an IndexError."""
 
     first = list(inspect.signature(fit).parameters)[1]  # after self: the takes
 
     @functools.wraps(fit)
     def checked(self: Model, *args: Any, **kwargs: Any) -> Any:
+        self.check_params()  # a wrong setting first, whatever the takes
         if args:
             args = (check_takes(self, args[0], "fit"), *args[1:])
         elif first in kwargs:
