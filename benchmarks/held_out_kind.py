@@ -22,8 +22,8 @@ category of skeleton takes, the label with the most takes (ties: the first liste
         [--seeds 1] [--first-seed 0] [--models interaction,collection] [--guide none]
         [--body-size template] [--json]
 
-``--models triangulate`` (alone or beside the body models) adds ``track --method
-triangulate``'s row: no body model, MediaPipe's landmarks triangulated (frames/s with
+``--models triangulate`` (alone or beside the body models; by default where MediaPipe is
+installed) adds ``track --method triangulate``'s row: no body model, MediaPipe's landmarks triangulated (frames/s with
 MediaPipe's time; no floor).
 
 ``--guide mediapipe``: MediaPipe's landmarks in every view guide the filter, as ``track
@@ -49,6 +49,7 @@ from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.video.annealed_particle_filter import track_video
+from markovmotion.video.monocular import mediapipe_installed
 from markovmotion.video.multiview import (
     collection_body_model,
     points_errors,
@@ -167,8 +168,9 @@ def kind_arguments(description: str, kinds: str | None = None) -> argparse.Argum
 def main() -> None:
     parser = kind_arguments(__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1, help="runs per body model")
-    parser.add_argument("--models", default="interaction,collection",
-                        help="body models to run, comma-separated (interaction, collection; triangulate: no body model)")  # fmt: skip
+    parser.add_argument("--models", default=None,
+                        help="body models to run, comma-separated (interaction, collection; triangulate: no body model; "
+                        "default: all three, triangulate only where MediaPipe is installed)")  # fmt: skip
     parser.add_argument("--first-seed", type=int, default=0, help="seeds from this one")
     parser.add_argument("--guide", choices=("none", "mediapipe"), default="none",
                         help="what guides the particle filter besides the images")  # fmt: skip
@@ -180,6 +182,8 @@ def main() -> None:
                         "guide's triangulated landmarks (track --body-size views)")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
+    if args.models is None:
+        args.models = ("triangulate," if mediapipe_installed() else "") + "interaction,collection"
 
     index = MocapIndex.load(args.data)
     kinds = args.kinds.split(",") if args.kinds else default_kinds(index)
