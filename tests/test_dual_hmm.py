@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from markovmotion import persist
 from markovmotion.cli import main
+from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.data import MocapIndex
@@ -398,6 +399,27 @@ def test_a_skeleton_that_is_not_the_models_is_a_clear_error(model):
     stranger = Motion(other, a.rotations, a.translations, a.fps, name="stranger.bvh")
     with pytest.raises(SkeletonMismatchError, match="stranger.bvh: person A's skeleton"):
         model.respond(stranger)
+    # markers to a model of skeletons: the same line online as respond's (it was a TypeError
+    # from inside the features)
+    markers = Markers(("a", "b", "c"), np.zeros((1, 3, 3)), a.fps, "x.c3d")
+    with pytest.raises(SkeletonMismatchError, match="x.c3d: markers") as online:
+        model.partner().step(markers)
+    with pytest.raises(SkeletonMismatchError) as whole:
+        model.respond(markers)
+    assert str(online.value) == str(whole.value)
+
+
+def test_a_take_with_nothing_recorded_is_refused_not_answered(model):
+    """NaN frames are missing observations, but a take of nothing else was answered with an
+    invented B and scored as certain (log P = 0)."""
+    a, _, _ = synthetic_pair(30, 9)
+    empty = a.copy()
+    empty.rotations[:] = np.nan
+    for verb in (model.respond, model.score):
+        with pytest.raises(ValueError, match="every one of its 30 frames"):
+            verb(empty)
+    empty.rotations[5:] = a.rotations[5:]  # some frames recorded: answered
+    assert np.isfinite(model.score(empty)) and model.respond(empty).n_frames == 30
 
 
 def test_cli_train_respond_evaluate(tmp_path, capsys):

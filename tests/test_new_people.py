@@ -255,6 +255,31 @@ def test_a_model_with_a_place_memory_streams_what_windowed_respond_gives(people,
     assert not np.allclose(short.respond(a, "windowed").positions, streamed)
 
 
+@pytest.mark.parametrize("output", ["frames", "regression"])
+def test_a_stream_that_starts_with_a_missing_places_b_as_respond_once_a_is_seen(people, output):
+    """A camera that sees no one yet: frames of A missing at the start of the stream are not
+    where A stood. Once A is seen, the partner's frames are those of ``respond`` on the take
+    with those frames missing (NaN), which fills them from A's first frame; the origin had
+    been averaged into A's place for ``place_memory`` frames (a partner metres off)."""
+    pairs = [(a, b) for _, a, b in people]
+    model = DualHMM(n_states=4, n_iter=5, place_memory=300, output=output).fit(pairs)
+    a = model._rate(people[-1][1])
+    k = 20
+    late = Markers(a.names, np.concatenate([np.full((k, *a.positions.shape[1:]), np.nan),
+                                            a.positions]), a.fps, "late")  # fmt: skip
+    partner = model.partner()
+    shown = [partner.step(None if t < k else late.trim(t, t + 1)) for t in range(late.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    streamed = np.concatenate([s.positions for s in shown])
+    whole = model.respond(late, "windowed").positions
+    assert len(streamed) == late.n_frames
+    np.testing.assert_allclose(streamed[k:], whole[k:], atol=1e-9)
+    # and B stands by A, as without the missing start
+    on_time = model.respond(a, "windowed").positions
+    gap = np.linalg.norm(streamed[k:].mean(axis=1) - on_time.mean(axis=1), axis=-1)
+    assert np.median(gap) < 50.0
+
+
 def test_place_memory_is_checked():
     with pytest.raises(ValueError, match="place_memory"):
         DualHMM(place_memory=-1).fit([])
@@ -536,6 +561,7 @@ def test_choose_says_what_it_replaces_and_what_it_picked(tmp_path, capsys):
           "--out", str(tmp_path / "m.npz")])  # fmt: skip
     err = capsys.readouterr().err
     assert "--output regression is replaced by --choose's output (frames)" in err
+    assert err.count("is replaced") == 1  # once (the option's check had said it too)
     assert "chose output=frames" in err and "the only setting" in err and "worst" not in err
 
 
@@ -675,7 +701,10 @@ def test_the_new_people_preset_sets_the_recommended_options_unless_given(mocap, 
     argv = ["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
             "--n-iter", "2"]  # fmt: skip
     main([*argv, "--preset", "new-people", "--energy", "0.9", "--out", str(tmp_path / "p.npz")])
-    assert "in both roles" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "in both roles" in err
+    assert "--preset new-people: --roles both --frame heading" in err  # said: what it set
+    assert "--energy given" in err and "--energy 0.99" not in err
     preset = DualHMM.load(tmp_path / "p.npz")
     for name, value in NEW_PEOPLE.items():
         if name not in ("roles", "energy"):

@@ -184,9 +184,21 @@ def with_preset(options: dict) -> dict:
     (:data:`~markovmotion.defaults.DUALHMM_PRESETS`) where the command line left them at their
     defaults."""
     from markovmotion.defaults import DUALHMM_PRESETS
+    from markovmotion.progress import note
 
     preset = DUALHMM_PRESETS[options["preset"]]
-    return {**options, **{k: v for k, v in preset.items() if not given(k)}}
+    set_ = {k: v for k, v in preset.items() if not given(k)}
+    if preset:  # said, so that an error about an option it set names where that came from
+        flags = " ".join(
+            f"--{k.replace('_', '-')} {format(v, 'g') if isinstance(v, float) else v}"
+            for k, v in set_.items()
+        )
+        kept = [f"--{k.replace('_', '-')}" for k in preset if k not in set_]
+        note(
+            f"--preset {options['preset']}: {flags}"
+            + (f" ({', '.join(kept)} given)" if kept else "")
+        )
+    return {**options, **set_}
 
 
 def new_model(options: dict):
@@ -281,7 +293,7 @@ def train(
     takes = f"{len(pairs)} take{'' if len(pairs) == 1 else 's'}"
     err_console.print(
         f"wrote {out}: {takes}{both}, {seen}{len(model.train_a_)} frames at {fps:g} fps, "
-        f"N={states} ({mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
+        f"N={states} (EM mode {mode}), PCA dims A={model.train_a_.shape[1]} B={model.train_b_.shape[1]}, "
         f"{hmm.n_iter_} EM iterations "
         f"({'converged' if hmm.converged_ else f'stopped at --n-iter {n_iter}, not converged'}), "
         f"log-likelihood {model.history_[-1]:.1f}, "
@@ -695,6 +707,7 @@ def _print_table(report: dict) -> None:
     print_table(table)
     err_console.print(
         "observer: a classifier's accuracy telling the partner from the real B given A, "
-        "folds by pair of people (0.5: it cannot tell them apart; '-': too few takes to fold)",
+        "folds by pair of people, by take when one pair is tested (0.5: it cannot tell them "
+        "apart; '-': one take)",
         highlight=False,
     )

@@ -277,8 +277,7 @@ def choose_option(family: str, criterion: str, example: str) -> Any:
     exit 2, before any work)."""
 
     def check(param: typer.CallbackParam, value: str | None) -> str | None:
-        if value:
-            grid_of(family, value)
+        _parsed(family, value)  # a bad grid before any work; the notes when it runs
         return value
 
     return typer.Option(
@@ -294,20 +293,26 @@ def choose_option(family: str, criterion: str, example: str) -> Any:
 
 
 def grid_of(family: str, choose: str | None) -> list[dict] | None:
-    """The settings of ``--choose`` for ``family`` (``hmm`` or ``chain``:
-    ``markovmotion.evaluate.<family>.parse_grid``), None without; BadParameter naming
-    ``--choose`` and the part at fault."""
+    """The settings of ``--choose`` for ``family`` (``hmm`` or ``chain``), None without
+    (:func:`_parsed`), with a note per option of the command line that they replace."""
+    grid = _parsed(family, choose)
+    if grid:
+        _note_replaced(grid)
+    return grid
+
+
+def _parsed(family: str, choose: str | None) -> list[dict] | None:
+    """``--choose`` parsed by ``markovmotion.evaluate.<family>.parse_grid``, None without;
+    BadParameter naming ``--choose`` and the part at fault."""
     if not choose:
         return None
     import importlib
 
     parse = importlib.import_module(f"markovmotion.evaluate.{family}").parse_grid
     try:
-        grid = parse(choose)
+        return parse(choose)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--choose") from None
-    _note_replaced(grid)
-    return grid
 
 
 def _context() -> Any:

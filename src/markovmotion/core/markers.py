@@ -58,7 +58,8 @@ class Markers:
     def __repr__(self) -> str:
         """One short line (the positions would print every frame): frames, markers, rate,
         name."""
-        return f"Markers({self.n_frames} frames, {self.n_markers} markers, {self.fps:g} fps" + (
+        frames = f"{self.n_frames} frame{'' if self.n_frames == 1 else 's'}"
+        return f"Markers({frames}, {self.n_markers} markers, {self.fps:g} fps" + (
             f", {self.name!r})" if self.name else ")"
         )
 

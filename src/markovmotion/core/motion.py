@@ -91,7 +91,8 @@ class Motion:
     def __repr__(self) -> str:
         """One short line (the arrays would print every frame): frames, joints, rate, name."""
         joints = self.skeleton.n_joints
-        return f"Motion({self.n_frames} frames, {joints} joints, {self.fps:g} fps" + (
+        frames = f"{self.n_frames} frame{'' if self.n_frames == 1 else 's'}"
+        return f"Motion({frames}, {joints} joints, {self.fps:g} fps" + (
             f", {self.name!r})" if self.name else ")"
         )
 

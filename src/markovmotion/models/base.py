@@ -228,15 +228,30 @@ def finite_frames(motion: Motion | Markers) -> np.ndarray:
     )
 
 
+def _anything_seen(motion: Motion | Markers) -> bool:
+    """Whether a Motion has a whole frame, or Markers one finite value (a marker unseen all
+    along is the model's to name or leave out)."""
+    if isinstance(motion, Markers):
+        return bool(np.isfinite(motion.positions).any())
+    return bool(finite_frames(motion).any())
+
+
 def check_motion(motion: object, where: str, missing: bool = True) -> None:
     """Raise (one line, naming ``where``) unless ``motion`` is a Motion or Markers with
     frames (TypeError, ValueError); with ``missing`` False, also unless every frame of a
     Motion is finite (ValueError naming the frames that are not; markers go unseen now and
-    then, and every model that reads them fills their gaps)."""
+    then, and every model that reads them fills their gaps); with ``missing``, unless
+    something of a take of two frames or more was recorded (a take of NaN alone was
+    answered, and scored as certain, by the dual HMM)."""
     if not isinstance(motion, (Motion, Markers)):
         raise TypeError(f"{where} takes a Motion (or Markers), not {type(motion).__name__}")
     if motion.n_frames == 0:
         raise ValueError(f"{where}: {motion.name or 'the motion'} has no frame")
+    if missing and motion.n_frames > 1 and not _anything_seen(motion):
+        raise ValueError(
+            f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in every one "
+            f"of its {motion.n_frames} frames: nothing of it was recorded"
+        )
     if not missing and isinstance(motion, Motion):
         bad = np.flatnonzero(~finite_frames(motion))
         if len(bad):

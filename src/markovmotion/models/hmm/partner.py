@@ -104,6 +104,7 @@ class Partner:
         # a ring of rows origin (3), yaw, cos yaw, sin yaw
         self._places = np.zeros((window + self._before, 6))
         self._places_in = 0
+        self._seen_a = False  # whether A has been seen (a place of A's own has come in)
         self._shown_count = 0
         self._blend = min(model.blend_window // 2, self.lag)
         keep = max(self._half, self._blend, 1)
@@ -113,7 +114,7 @@ class Partner:
         self._missed = 0  # frames of A missing or NaN (the first logged)
         self._finished = False
         self._place = (np.zeros(3), 0.0)
-        self._checked = None  # A's skeleton, once checked against the model's
+        self._checked = None  # A's skeleton (or markers' names), once checked
         self._lift: Lift | None = None  # a skeleton's points lifted to the model's markers
         self._lifted = 0.0  # the last frame's lift (mm)
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
@@ -144,10 +145,18 @@ class Partner:
             log_b = self._unseen
         else:
             log_b = gaussian_log_density(xa[None], *self._emission)[0]
-        self._add_place(place)
+        self._add_place(place, seen=xa is not None)
         return self.step_log_frameprob(log_b, xa)
 
-    def _add_place(self, place: tuple[np.ndarray, float]) -> None:
+    def _add_place(self, place: tuple[np.ndarray, float], seen: bool = False) -> None:
+        """A's place for the next frame into the ring (``seen``: A's own, not a missing
+        frame's). A's first place is also where A stood in the frames before it, as
+        :meth:`DualHMM.respond` fills them: a stream that starts with A missing (a camera that
+        sees no one yet) had averaged the origin into A's place for ``place_memory`` frames
+        after A appeared (a partner 1.9 m off at A's first frame, 145 mm off 8 s later)."""
+        if seen and not self._seen_a:
+            self._seen_a = True
+            self._places[:] = [*place[0], place[1], math.cos(place[1]), math.sin(place[1])]
         row = self._places[self._places_in % len(self._places)]
         row[:3], row[3] = place
         row[4], row[5] = math.cos(place[1]), math.sin(place[1])
@@ -255,11 +264,12 @@ class Partner:
             raise ValueError(FINISHED)
         if frame is not None:
             check_frame(frame, self.fps)
-        if frame is not None and self.model.uses_markers:
-            kind = frame.names if isinstance(frame, Markers) else id(frame.skeleton)
-            if kind != self._checked:
+            # what A is seen as (a skeleton, or markers' names), checked once against the model
+            kind = tuple(frame.names) if isinstance(frame, Markers) else frame.skeleton
+            if not (kind is self._checked or (isinstance(kind, tuple) and kind == self._checked)):
                 self.model.check_input(frame)
                 self._checked = kind
+        if frame is not None and self.model.uses_markers:
             lifting = self.model.lifts(frame)
             frame = self.model.input_markers(frame)
             if lifting:  # a skeleton's body points to a model of sensor markers: DualHMM.a_in
@@ -277,9 +287,6 @@ class Partner:
             origin, yaw = self.model.place(frame)
             origin[:, 1] -= self._lifted
         else:
-            if frame.skeleton is not self._checked:
-                self.model.check_input(frame)
-                self._checked = frame.skeleton
             pos = frame.positions()
             origin, yaw = self.model.ground(frame, pos)
         self._place = (origin[0], float(yaw[0]))
@@ -355,7 +362,7 @@ class Partner:
         if seen.features[t] is None:
             return self.skip()
         self._place = (seen.origin[t], float(seen.yaw[t]))
-        self._add_place(self._place)
+        self._add_place(self._place, seen=True)
         if seen.points is not None:
             self._see_points(seen.points[t])
         return self._motion(self.step_log_frameprob(seen.log_b[t], seen.features[t]))
