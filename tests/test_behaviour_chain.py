@@ -14,6 +14,7 @@ from markovmotion.cli import main
 from markovmotion.core.motion import Motion
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
 from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
+from markovmotion.evaluate.hmm import jump_sizes
 from markovmotion.features.joint_shape import JointShape, TwoPeople, joint_shape_pipeline
 from markovmotion.models.base import Model
 from markovmotion.models.chain.behaviour_chain import BehaviourChain, decay_behaviour, proximities
@@ -325,6 +326,18 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     }
     by_person = result["by_real_person"]
     assert np.mean([p["mean_shape"] for p in by_person]) == pytest.approx(result["mean_shape"])
+    # how much each partner jumps, the dual HMM's measure, beside the real partner's: the
+    # copy answers with the real partner, so it jumps as much
+    jumps = result["jump_p90_mm"]
+    assert set(jumps) == {"mean_shape", "single_hypothesis", "multiple_hypotheses", "copy",
+                          "real", *responses}  # fmt: skip
+    steps = np.concatenate([jump_sizes(take.person(p).points) for p in (0, 1)])
+    assert jumps["real"] == jumps["copy"] == round(float(np.percentile(steps, 90)), 1)
+    assert jumps["multiple_hypotheses"] == jumps["multiple_hypotheses_map"]
+    assert all(0 < v < 2000 for v in jumps.values())
+    assert by_person[0]["jump_p90_mm"]["real"] == round(
+        float(np.percentile(jump_sizes(take.person(1).points), 90)), 1
+    )
     small_partner.save(tmp_path / "m.npz")
     a, _ = mocap.pairs(label="salsa")[0]
     out = tmp_path / "partner.bvh"
@@ -475,6 +488,7 @@ def test_evaluation_table_lists_partners_not_parameters(capsys):
         "multiple_hypotheses": 96.3,
         "placement_mm": {"mean_shape": 590.6, "multiple_hypotheses_ml": 584.0},
         "per_frame_ms": {"multiple_hypotheses_ml": 0.4},
+        "jump_p90_mm": {"mean_shape": 108.4, "multiple_hypotheses_ml": 385.8, "real": 37.9},
         "sigma": 0.15,
         "resync": 0.0,
     }
@@ -482,6 +496,7 @@ def test_evaluation_table_lists_partners_not_parameters(capsys):
     out = capsys.readouterr().out
     assert "mean_shape" in out and "multiple_hypotheses_ml *" in out and "584" in out
     assert "sigma" not in out and "resync" not in out
+    assert "jump p90" in out and "385.8" in out and "real partner" in out and "37.9" in out
 
 
 def test_a_skeleton_is_matched_by_its_joint_names_not_their_count(pair_partner, mocap):

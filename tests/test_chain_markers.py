@@ -192,6 +192,12 @@ def test_crossval_leaves_out_every_pair_of_people_once_and_never_trains_on_it(ha
         weighted = sum(r[part]["mean_shape"] * r["frames"] for r in report["per_people"].values())
         assert report["overall"][part]["mean_shape"] == pytest.approx(weighted / frames, abs=0.1)
         assert all(0 < v < 2000 for v in report["overall"][part].values())
+    # how much each partner jumps (the dual HMM's jump p90), the real partner's beside
+    jumps = report["overall"]["jump_p90_mm"]
+    assert set(jumps) == {*PARTNERS, "real"} and all(0 < v < 2000 for v in jumps.values())
+    assert jumps["multiple_hypotheses"] == jumps["multiple_hypotheses_ml"]
+    one = next(iter(report["per_pair"].values()))["jump_p90_mm"]
+    assert set(one) == set(jumps)
     (label,) = report["per_label"]
     assert set(report["per_label"][label]["per_people"]) == people
     over = report["overall"]
@@ -215,6 +221,7 @@ def test_crossval_command_prints_json_and_refuses_unknown_labels(capsys):
     main([*argv, "4", "--behaviours", "4", "--epochs", "1", "--hypotheses", "4", "--json"])
     report = json.loads(capsys.readouterr().out)
     assert report["model"]["n_state_prototypes"] == 4 and report["model"]["hypotheses"] == 4
+    assert report["overall"]["jump_p90_mm"]["real"] > 0
     assert set(report["per_label"]) == {"handshake"} and report["folds"]
     with pytest.raises(SystemExit) as info:
         main(["chain", "crossval", "--labels", "no_such_label", "--json"])

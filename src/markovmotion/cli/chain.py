@@ -519,6 +519,18 @@ def crossval(
             met = "yes" if r["aim_met"][part] else "no"
             table.add_row(name, *(f"{r[part][k]:.1f}" for k in keys), met, str(r["frames"]))
         print_table(table)
+    table = Table(
+        title=f"behaviour chain, {report['left_out']} left out: how much the partner jumps "
+        "(p90 of frame steps, mm)",
+        caption="the median point's step from frame to frame (the dual HMM's jump p90); "
+        "real: the real partner's",
+    )
+    keys = list(report["overall"]["jump_p90_mm"])
+    for col in ("group", *keys, "frames"):
+        table.add_column(col)
+    for name, r in rows.items():
+        table.add_row(name, *(_mm(r["jump_p90_mm"][k]) for k in keys), str(r["frames"]))
+    print_table(table)
     for fold in report["folds"]:
         if "chosen" in fold:
             err_console.print(
@@ -533,11 +545,14 @@ def _print_errors(result: dict, title: str, response: str) -> None:
     table = Table(title=title, caption=f"* multiple_hypotheses ({response} response)")
     placement = result.get("placement_mm")
     ms = result.get("per_frame_ms")
+    jumps = result.get("jump_p90_mm")
     for col in (
         "partner",
         # mocap: each person in its own frame (crossval's body_centred_mm), and in the world
         "body-centred" if placement else "error",
         "world (mm)" if placement else "",
+        # how much B moves from frame to frame (the dual HMM's jump p90), the real B's below
+        "jump p90 (mm)" if jumps else "",
         "ms / frame" if ms else "",
     ):
         if col:
@@ -548,7 +563,16 @@ def _print_errors(result: dict, title: str, response: str) -> None:
         row = [f"{key} *" if key == f"multiple_hypotheses_{response}" else key, f"{value:.4g}"]
         if placement:
             row.append(f"{placement[key]:.4g}")
+        if jumps:
+            row.append(_mm(jumps.get(key)))
         if ms:
             row.append(f"{ms[key]:.2f}" if key in ms else "")
         table.add_row(*row)
+    if jumps:
+        table.add_row("real partner", "", "", _mm(jumps.get("real")), *([""] if ms else []))
     print_table(table)
+
+
+def _mm(value: float | None) -> str:
+    """A jump's millimetres for a table (none: a dash)."""
+    return "-" if value is None else f"{value:.1f}"

@@ -10,6 +10,10 @@ of a take is masked in turn. Errors (lower is better):
 - silhouettes: mean control-point distance in the image as a fraction of the
   true partner's height.
 
+How much a 3-D partner jumps, beside the real partner: ``jump_p90_mm``, the 90th
+percentile of its median point's frame-to-frame steps, measured as the dual HMM's
+(:func:`markovmotion.evaluate.hmm.jump_sizes`).
+
 The baseline holds the partner's mean shape (with the mean separation and
 relative scale) beside the real person. In silhouettes it must also pick the
 side: ``mean_shape`` puts the partner towards the middle of the training
@@ -266,6 +270,17 @@ def _errors(
     return point_error(pred, truth, True), None
 
 
+#: The key of the real partner in ``jump_p90_mm`` (how much the real partner moves).
+REAL = "real"
+
+
+def jump_p90(steps: Sequence[np.ndarray]) -> float | None:
+    """The 90th percentile (mm, to 0.1) of frame steps (arrays of
+    :func:`markovmotion.evaluate.hmm.jump_sizes`), None if there is none."""
+    pooled = np.concatenate([np.ravel(s) for s in steps]) if len(steps) else np.zeros(0)
+    return round(float(np.percentile(pooled, 90)), 1) if len(pooled) else None
+
+
 def evaluate_partner(
     model: VirtualPartner,
     takes: Sequence[TwoPeople],
@@ -276,6 +291,7 @@ def evaluate_partner(
     others: Mapping[str, Sequence[tuple[Person | None, Person | None]]] | None = None,
     sigma: float = DEFAULT_SIGMA,
     resync: float = DEFAULT_RESYNC,
+    steps: dict[str, list[list[np.ndarray]]] | None = None,
 ) -> dict:
     """Errors of the single- and multiple-hypothesis partners and of the mean-shape baseline.
 
@@ -289,11 +305,19 @@ def evaluate_partner(
     means over frames, overall (methods that answer both people) and in
     ``by_real_person`` (which person was real).
 
+    How much each partner jumps (motion capture): ``jump_p90_mm``, the 90th percentile
+    over every frame step of how far the partner's median point moves
+    (:func:`markovmotion.evaluate.hmm.jump_sizes`, the dual HMM's ``*_jump_p90_mm``),
+    with ``real`` the real partner's. ``steps``, if given (a dict), is filled with those
+    steps: per partner (and ``real``), a list of arrays for each real person (0, 1).
+
     In silhouette takes person 0 and 1 are two identities (not left and right):
     the model matches the real person to either half (eq. 18); the baseline
     takes the side towards the floor's middle (:meth:`VirtualPartner.centre_roles`)
     and, as ``mean_shape_true_side``, the side where the partner truly is.
     """
+    from markovmotion.evaluate.hmm import jump_sizes
+
     if source not in SOURCES:
         raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
     if response not in RESPONSES:
@@ -319,6 +343,8 @@ def evaluate_partner(
     placed = {k: [0.0, 0.0] for k in names}
     frames = {k: [0, 0] for k in names}
     seconds = {k: 0.0 for k in methods}
+    steps = {} if steps is None else steps
+    steps.update({k: [[], []] for k in (*names, REAL)})  # frame steps (mm), per real person
     jobs = [(i, take, person) for i, take in enumerate(takes) for person in (0, 1)]
     with threadpool_limits(1):  # per-frame times on one core, as for real-time use
         for i, take, person in track(jobs, "virtual partners"):
@@ -345,6 +371,8 @@ def evaluate_partner(
                 sums[name][person] += err * take.n_frames
                 placed[name][person] += (place or 0.0) * take.n_frames
                 frames[name][person] += take.n_frames
+                steps[name][person].append(jump_sizes(pred.points))
+            steps[REAL][person].append(jump_sizes(truth.points))
     total = sum(t.n_frames for t in takes)
     both = [k for k in names if sum(frames[k]) == 2 * total]
 
@@ -361,6 +389,10 @@ def evaluate_partner(
             place = table(placed, people, keys)
             place["multiple_hypotheses"] = place[f"multiple_hypotheses_{response}"]
             out["placement_mm"] = place
+            jumps = {k: jump_p90([s for p in people for s in steps[k][p]]) for k in keys}
+            jumps["multiple_hypotheses"] = jumps[f"multiple_hypotheses_{response}"]
+            jumps[REAL] = jump_p90([s for p in people for s in steps[REAL][p]])
+            out["jump_p90_mm"] = jumps
         return out
 
     per_frame_ms = {k: 1000.0 * s / (2 * total) for k, s in seconds.items()}
@@ -423,20 +455,27 @@ def _fit_on(model: VirtualPartner, takes: Sequence[Take], roles: str) -> Virtual
     return model.fit([(a, b) for _, _, a, b in learn])
 
 
-def _scores(result: Mapping, frames: int) -> dict:
-    """One take's errors from :func:`evaluate_partner`, as :func:`_pool` sums them."""
+def _scores(result: Mapping, frames: int, steps: Mapping[str, list[list[np.ndarray]]]) -> dict:
+    """One take's errors from :func:`evaluate_partner` (and its frame ``steps``), as
+    :func:`_pool` sums them."""
+    response = f"multiple_hypotheses_{result['multiple_hypotheses_response']}"
     return {
         "frames": frames,
         "world_mm": {k: result["placement_mm"][k] for k in PARTNERS},
         "body_centred_mm": {k: result[k] for k in PARTNERS},
         "per_frame_ms": {k: result["per_frame_ms"][k] for k in result["per_frame_ms"]},
+        "steps": {
+            k: [s for per in steps[response if k == "multiple_hypotheses" else k] for s in per]
+            for k in (*PARTNERS, REAL)
+        },
     }
 
 
 def _pool(rows: Sequence[Mapping]) -> dict:
     """Frame-weighted means of per-take :func:`_scores` (mm to 0.1, ms to 0.01), frames,
-    takes, and whether the aim is met: multiple hypotheses below one hypothesis and the
-    mean shape, in the world and body-centred."""
+    takes, how much each partner jumps (``jump_p90_mm``: :func:`jump_p90` over the takes'
+    frame steps, ``real`` the real partner's), and whether the aim is met: multiple
+    hypotheses below one hypothesis and the mean shape, in the world and body-centred."""
     frames = sum(r["frames"] for r in rows)
 
     def mean(part: str, key: str) -> float:
@@ -447,6 +486,9 @@ def _pool(rows: Sequence[Mapping]) -> dict:
         for part in ("world_mm", "body_centred_mm")
     }
     out["per_frame_ms"] = {k: round(mean("per_frame_ms", k), 2) for k in rows[0]["per_frame_ms"]}
+    out["jump_p90_mm"] = {
+        k: jump_p90([s for r in rows for s in r["steps"][k]]) for k in (*PARTNERS, REAL)
+    }
     out["aim_met"] = {
         part: bool(
             out[part]["multiple_hypotheses"]
@@ -481,7 +523,8 @@ def cross_validate_people(
     multiple hypotheses with every response, ``response`` repeated as
     ``multiple_hypotheses``; one hypothesis; the mean shape), and by the nearest neighbour
     (:func:`nearest_partners`), in the world (``world_mm``) and body-centred
-    (``body_centred_mm``: each person in its own frame, :func:`pose_error_mm`).
+    (``body_centred_mm``: each person in its own frame, :func:`pose_error_mm`), with how
+    much each partner jumps (``jump_p90_mm``, beside the real partner's, ``real``).
 
     ``grid``: settings to choose from in each fold (dicts of the model's parameters, and
     optionally ``roles``: :func:`parse_grid`), by leaving pairs of people out on the fold's
@@ -530,12 +573,13 @@ def cross_validate_people(
                 name, label, people, a, b = takes[i]
                 take = fold.two_people(a, b)
                 nn = nearest_partners(fold, seen, take)
+                steps: dict = {}
                 result = evaluate_partner(
                     fold, [take], "mocap", n_hypotheses, response, seed,
-                    {"nearest_neighbour": [nn]}, sigma, resync,
+                    {"nearest_neighbour": [nn]}, sigma, resync, steps,
                 )  # fmt: skip
                 rows[name] = {
-                    **_scores(result, 2 * take.n_frames),
+                    **_scores(result, 2 * take.n_frames, steps),
                     "label": label,
                     "people": people,
                 }
