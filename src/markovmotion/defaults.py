@@ -34,6 +34,12 @@ DEFAULT_RESYNC = 0.0
 #: give partners that lose to the mean shape on the eight salsa training takes; 40 each
 #: was the best of 20-300 by leave-one-take-out over them (see the README).
 DEFAULT_PROTOTYPES = 40
+#: Frames over which a 3-D partner's place in the world (reference point and heading) is
+#: averaged, causally, unless told (1: not at all, the paper's). 20 (0.8 s at 25 fps) was
+#: the best of 1-40 by leave-one-take-out over the eight salsa training takes (world error
+#: of 200 hypotheses, ML: 557.2 mm at 1, 510.9 at 20, 511.5 at 25; the partner's jump p90
+#: 402 to 66 mm, the real partner's 38; docs/chain.md, ``benchmarks/chain_place_window.py``).
+DEFAULT_PLACE_WINDOW = 20
 
 # The dual HMM's presets (``dualhmm train/crossval --preset``; models/hmm/dual.py).
 #: The partner for people the model has never seen (docs/hmm.md, "New people"): both roles

@@ -28,6 +28,7 @@ from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs, people_out, select_pairs
 from markovmotion.defaults import (
+    DEFAULT_PLACE_WINDOW,
     DEFAULT_PROTOTYPES,
     DEFAULT_RESPONSE,
     DEFAULT_RESYNC,
@@ -71,6 +72,12 @@ SHRINK = ranged(
     help="Pull the partner's shape this far toward the training people's mean shape (0: the "
     "paper's; for people the model has never seen, docs/chain.md).",
 )
+PLACE_WINDOW = ranged(
+    "window",
+    DEFAULT_PLACE_WINDOW,
+    help="Average a 3-D partner's place in the world (where it stands and faces) over its "
+    "last this many frames (1: not at all, the paper's; docs/chain.md).",
+)
 RESPONSE = typer.Option(
     DEFAULT_RESPONSE,
     help="The response of multiple hypotheses reported as multiple_hypotheses: ml (the "
@@ -87,6 +94,7 @@ def _new_model(
     seed: int,
     normalise: str = "none",
     shrink: float = 0.0,
+    place_window: int = DEFAULT_PLACE_WINDOW,
 ):
     """An unfitted :class:`VirtualPartner` with the command line's settings."""
     from markovmotion.models.chain.partner import VirtualPartner
@@ -100,6 +108,7 @@ def _new_model(
         random_state=seed,
         normalise=normalise,
         shrink=shrink,
+        place_window=place_window,
     )
 
 
@@ -197,6 +206,7 @@ def train(
     roles: str = roles_option(),
     normalise: str = NORMALISE,
     shrink: float = SHRINK,
+    place_window: int = PLACE_WINDOW,
     choose: str = CHOOSE,
     hypotheses: int = ranged(
         "hypotheses", 200, min=2, help="--choose: hypotheses N of the multiple-hypothesis runs."
@@ -229,7 +239,9 @@ def train(
     takes, record = _training_takes(
         data, source, labels if len(labels) > 1 else labels[0], kind, test_trials, test_people
     )
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink)
+    model = _new_model(
+        prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink, place_window
+    )
     extras: dict = {}
     with err_console.status("learning prototypes and chain"):
         if source == "mocap":
@@ -453,6 +465,7 @@ def crossval(
     roles: str = roles_option(),
     normalise: str = NORMALISE,
     shrink: float = SHRINK,
+    place_window: int = PLACE_WINDOW,
     one_model: bool = typer.Option(
         False, "--one-model", help="One model of every label per fold (default: one per label)."
     ),
@@ -474,7 +487,9 @@ def crossval(
     from markovmotion.evaluate.chain import crossval_index
 
     _check_response(response)
-    model = _new_model(prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink)
+    model = _new_model(
+        prototypes, behaviours, gamma, lam, epochs, seed, normalise, shrink, place_window
+    )
     wanted = [x.strip() for x in labels.split(",") if x.strip()] if labels else None
     parts = [choose] if choose else []  # and the old flags, as the grid they stand for
     if choose_prototypes:

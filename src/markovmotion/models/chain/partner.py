@@ -25,7 +25,7 @@ from markovmotion.algorithms.kinematics import fit_rotations
 from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
-from markovmotion.defaults import DEFAULT_PROTOTYPES
+from markovmotion.defaults import DEFAULT_PLACE_WINDOW, DEFAULT_PROTOTYPES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.base import FeaturePipeline
 from markovmotion.features.joint_shape import (
@@ -37,6 +37,7 @@ from markovmotion.features.joint_shape import (
     marker_size,
     person_from_motion,
     person_from_take,
+    rotate_yaw,
     shape_joints,
 )
 from markovmotion.features.markers import MarkerFeatures, named_body_points, seen_in_every
@@ -108,6 +109,14 @@ class VirtualPartner(Model):
             hypothesis is one training prototype, the mean averages them; a convex blend of
             the two, in the model's normalised shape space before placing, keeps the
             interaction's phases and loses much of a prototype's person (docs/chain.md).
+        place_window: frames over which where a 3-D partner stands on the floor and faces
+            is averaged, causally (:class:`PlaceAverage`; 1: not at all, the paper's),
+            whole and online alike; its pose is not changed. Our addition: the response hops from
+            hypothesis to hypothesis, and the half of C it shows but eq. (18) does not
+            compare (where the partner stands) hops with it, hundreds of mm a frame; and
+            the partner is placed by A's heading, which swings with A's hips. Default
+            :data:`~markovmotion.defaults.DEFAULT_PLACE_WINDOW`, chosen by leaving one
+            salsa training take out (docs/chain.md). Silhouettes are placed as the paper's.
 
     Learnt: ``pipeline_`` (TwoPeople -> state vectors), ``chain_``,
     ``mean_shape_`` (d,) the mean normalised combined shape (the baseline
@@ -138,6 +147,7 @@ class VirtualPartner(Model):
         fps: float = DEFAULT_FPS,
         normalise: str = "none",
         shrink: float = 0.0,
+        place_window: int = DEFAULT_PLACE_WINDOW,
     ):
         self.window = window
         self.lam = lam
@@ -150,6 +160,7 @@ class VirtualPartner(Model):
         self.fps = fps
         self.normalise = normalise
         self.shrink = shrink
+        self.place_window = place_window
 
     def check_params(self) -> None:
         """Raise ValueError (one line, naming the parameter) for a hyper-parameter out of its
@@ -159,6 +170,9 @@ class VirtualPartner(Model):
             raise ValueError(f"normalise must be one of {NORMALISE}, got {self.normalise!r}")
         if not 0.0 <= self.shrink <= 1.0:
             raise ValueError(f"shrink must be from 0 to 1, got {self.shrink!r}")
+        w = self.place_window
+        if not (isinstance(w, int | np.integer) and not isinstance(w, bool) and 1 <= w <= 1000):
+            raise ValueError(f"place_window must be 1 to 1000 frames, got {w!r}")
 
     def fit(
         self,
@@ -338,7 +352,13 @@ class VirtualPartner(Model):
         shapes, matched, errors = self.propagator(person, **options).run(self.observe(real, person))
         roles = np.asarray(self.people(person))[matched]
         shapes = self.toward_mean(shapes)
-        return PartnerResponse(self.place(shapes, roles, real), shapes, roles, errors)
+        placed = self.place_average()(self.place(shapes, roles, real))
+        return PartnerResponse(placed, shapes, roles, errors)
+
+    def place_average(self) -> PlaceAverage:
+        """A fresh :class:`PlaceAverage` over ``place_window`` frames (3-D; silhouettes: 1)."""
+        window = int(getattr(self, "place_window", DEFAULT_PLACE_WINDOW))
+        return PlaceAverage(window if self.shape_step.n_dims_ == 3 else 1)
 
     def toward_mean(self, shapes: np.ndarray) -> np.ndarray:
         """Normalised combined shapes (T, d) pulled ``shrink`` of the way to ``mean_shape_``."""
@@ -503,6 +523,41 @@ class VirtualPartner(Model):
         return self.place(shapes, np.asarray(roles), real)
 
 
+class PlaceAverage:
+    """Where a 3-D partner stands and faces, averaged over its last ``window`` frames
+    (causal: the online partner has no later response to average), its body moved and
+    turned with it (our addition, ``VirtualPartner(place_window=...)``).
+
+    Call it on the partner's frames in order (one or many at a time: the same frames give
+    the same result to the bit, so the online partner streams :meth:`VirtualPartner.respond`'s
+    frames). The reference point's place on the floor (x, z) is averaged by its mean, the
+    heading by the direction of the mean unit vector (as the dual HMM's
+    :func:`~markovmotion.models.hmm.trellis.smooth_place` averages A's ground frame); its
+    height and the body about it are left as they are, so the partner's pose, measured
+    body-centred (heights kept), does not change. ``window`` 1 returns the frames as they are.
+    """
+
+    def __init__(self, window: int = 1):
+        self.window = int(window)
+        self._rows: deque = deque(maxlen=max(self.window, 1))  # [x, z, cos, sin]
+
+    def __call__(self, partner: Person) -> Person:
+        """``partner``'s frames, which follow those given before, about the averaged place."""
+        if self.window <= 1:
+            return partner
+        points = np.empty_like(partner.points)
+        reference = partner.reference.copy()
+        heading = np.empty_like(partner.heading)
+        for t in range(partner.n_frames):  # frame by frame, as online
+            ref, yaw = partner.reference[t], partner.heading[t]
+            self._rows.append(np.array([ref[0], ref[2], np.cos(yaw), np.sin(yaw)]))
+            mean = np.mean(np.asarray(self._rows), axis=0)
+            reference[t, [0, 2]], heading[t] = mean[:2], np.arctan2(mean[3], mean[2])
+            body = rotate_yaw(partner.points[t] - ref, -yaw)  # in the partner's own frame
+            points[t] = reference[t] + rotate_yaw(body, heading[t])
+        return Person(points, reference, partner.height, heading)
+
+
 def _take_record(take: TwoPeople) -> dict[str, str]:
     """What :meth:`VirtualPartner.fit` records of a prepared take: its name and a points hash."""
     digest = hashlib.sha256(np.ascontiguousarray(take.points, dtype=np.float64).tobytes())
@@ -566,6 +621,7 @@ class ChainPartner:
         self._centre = None if centre is None else centre.online(person)
         self._propagator = model.propagator(person, rng=rng, **options)
         self._propagator.reset()
+        self._place = model.place_average()  # B's place averaged over its last frames
         self._shapes: deque = deque(maxlen=w)  # A's last raw shape vectors
         self._people: deque = deque(maxlen=self.lag + 1)  # A's last frames (Person)
         self._first: np.ndarray | None = None
@@ -698,7 +754,7 @@ class ChainPartner:
         r = self._propagator.step(self.model.scaled(np.mean(rows, axis=0)))
         real = self._people[t - (newest - len(self._people) + 1)]
         role = np.asarray(self.model.people(self.person))[[r.role]]
-        placed = self.model.place(self.model.toward_mean(r.shape[None]), role, real)
+        placed = self._place(self.model.place(self.model.toward_mean(r.shape[None]), role, real))
         if self._markers is not None:
             return Markers(tuple(self._markers), placed.points, self.fps, "virtual partner")
         return fit_rotations(self._skeleton, placed.points, fps=self.fps)
