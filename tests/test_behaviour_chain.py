@@ -473,6 +473,32 @@ def test_the_partners_place_is_averaged_over_its_last_frames(pair_partner, mocap
             VirtualPartner(place_window=wrong).check_params()
 
 
+def test_frames_before_a_is_first_seen_are_the_mean_shape_and_leave_the_stream_alone(
+    pair_partner, mocap
+):
+    """A stream that starts with frames missing (a camera that sees no one yet): each is
+    answered in its turn with the same frame, the mean shape beside a stand-in A at the
+    origin (200 hypotheses had been re-drawn on a constant input, B flickering 150-470 mm a
+    frame), and nothing is propagated: from A's first frame B is respond's for A alone, to
+    the bit (the stand-in had been pushed through the propagation, and B jumped when A
+    came). N calls and finish() give N frames, in order."""
+    a = mocap.load_motion(mocap.pairs(label="salsa")[0][0]).trim(600, 720).resample(25.0)
+    whole = pair_partner.respond(a, n_hypotheses=20)
+    partner = pair_partner.partner(n_hypotheses=20)
+    out = [partner.step(None) for _ in range(7)]
+    out += [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    assert out[:2] == [None, None] and all(f is not None for f in out[2:])
+    shown = concatenate([f for f in out if f is not None] + partner.finish(), 25.0)
+    assert shown.n_frames == 7 + a.n_frames
+    before = shown.positions()[:7]
+    assert all(np.array_equal(f, before[0]) for f in before)
+    stand_in = partner.unseen()
+    mean = pair_partner.mean_partner(stand_in, np.zeros(1, dtype=int))
+    np.testing.assert_allclose(before[0][0, [0, 2]], mean.reference[0, [0, 2]])  # the pelvis
+    np.testing.assert_array_equal(shown.rotations[7:], whole.rotations)
+    np.testing.assert_array_equal(shown.translations[7:], whole.translations)
+
+
 def _copy_index(root, mocap, trials: dict[str, str]) -> None:
     """An INDEX.csv of COPIES of salsa takes under other names: ``{new name: trial}``."""
     rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]

@@ -370,6 +370,15 @@ def test_the_online_marker_partner_streams_what_respond_gives(marker_partner, ha
     np.testing.assert_allclose(
         np.concatenate([f.positions for f in streamed]), whole.positions, atol=1e-6
     )
+    # frames before A is first seen: the same stand-in frame each, nothing propagated, so
+    # from A's first frame the stream is respond's (the stand-in had moved B 2 m when A came)
+    late = marker_partner.partner(rng=3, size=size, n_hypotheses=10)
+    out = [late.step(None) for _ in range(4)] + [late.step(a.trim(t, t + 1))
+                                                 for t in range(a.n_frames)]  # fmt: skip
+    shown = np.concatenate([f.positions for f in out if f is not None] +
+                           [f.positions for f in late.finish()])  # fmt: skip
+    assert len(shown) == 4 + a.n_frames and all(np.array_equal(shown[0], f) for f in shown[:4])
+    np.testing.assert_array_equal(shown[4:], np.concatenate([f.positions for f in streamed]))
     # the size unknown: the running median of the frames' sizes, the take's once all are in
     causal = marker_partner.partner(rng=3, n_hypotheses=10)
     for t in range(a.n_frames):

@@ -575,9 +575,13 @@ class ChainPartner:
     when frame t + ``lag`` has arrived (``lag = window - 1 - window // 2``, 2
     frames = 0.08 s at 25 fps with the paper's w = 5); over a whole motion the
     frames equal :meth:`VirtualPartner.respond`'s. A missing or dropped frame
-    repeats A's last one; one before A is first seen is A as the training people stand
-    (:meth:`unseen`), so that, as with the dual HMM's partner, every frame of the stream
-    (N calls of :meth:`step`, :meth:`skip`, then :meth:`finish`) gets its B frame.
+    repeats A's last one. A frame before A is first seen (a camera that sees no one yet)
+    is answered, in its turn, with the training people's mean shape beside a stand-in A
+    (:meth:`unseen`): the same frame every time, nothing propagated, so that the
+    propagation starts afresh at A's first frame (the frames from there are those
+    :meth:`VirtualPartner.respond` gives for A's frames alone) and, as with the dual HMM's
+    partner, every frame of the stream (N calls of :meth:`step`, :meth:`skip`, then
+    :meth:`finish`) gets its B frame, in order.
 
     A model of markers takes A's one-frame Markers and answers with B's markers
     (``markers_``). The person's size (:func:`marker_size`, which a whole take gives
@@ -628,7 +632,9 @@ class ChainPartner:
         self._last: Motion | None = None
         self._checked = None
         self._height: tuple[Skeleton, np.ndarray] | None = None
-        self._frames_in = 0
+        self._frames_in = 0  # A's frames seen (and repeated) since A was first seen
+        self._before = 0  # the stream's frames before A was first seen
+        self._stand_in: Motion | Markers | None = None  # B's answer to them (unseen)
         self._finished = False
 
     @property
@@ -674,31 +680,57 @@ class ChainPartner:
         self._shapes.append(s)
         self._people.append(real)
         self._frames_in += 1
-        if self._frames_in <= self.lag:
-            return None
-        return self._answer(self._frames_in - 1 - self.lag, self._frames_in - 1)
+        return self._due()
 
-    def unseen(self) -> tuple[np.ndarray, Person] | None:
-        """A before A's first frame (a stream that starts with frames missing: the camera
-        sees no one yet): the training people's mean shape of A's half (of ``mean_shape_``),
-        standing at the origin facing +Z, of their median size and reference height
-        (``stance_``; the ``size`` given, if any), as the dual HMM's partner answers from its
-        dynamics alone, placed at the origin. Its shape vector S^H (centred, unscaled) and
-        place. None for a model saved before it learnt ``stance_`` (then nothing is answered
-        before A is seen) unless ``size`` is given."""
+    def _due(self) -> Motion | Markers | None:
+        """B's frame for the stream's frame ``lag`` frames before its newest (None while the
+        window fills): the stand-in's answer for a frame before A was first seen, else the
+        propagated partner of A's frame (A's frames counted from A's first)."""
+        t = self._before + self._frames_in - 1 - self.lag
+        if t < 0:
+            return None
+        return self._owed(t)
+
+    def _owed(self, t: int) -> Motion | Markers:
+        """B's frame for the stream's frame ``t`` (in order, each once)."""
+        if t < self._before:
+            return self._unseen_answer()
+        return self._answer(t - self._before, self._frames_in - 1)
+
+    def unseen(self) -> Person | None:
+        """The stand-in for A before A's first frame (a stream that starts with frames
+        missing: the camera sees no one yet): standing at the origin facing +Z, of the
+        training people's median size and reference height (``stance_``; the ``size``
+        given, if any), as the dual HMM's partner answers from its dynamics alone, placed at
+        the origin. B beside it is the training people's mean shape
+        (:meth:`VirtualPartner.mean_partner`), the same frame for every such frame; nothing
+        is propagated. None for a model saved before it learnt ``stance_`` (then nothing is
+        answered before A is seen) unless ``size`` is given."""
         model, p = self.model, self.person or 0
-        shape, scaling = model.shape_step, model.pipeline_.steps[-1]
-        own = shape.person_slice(p)  # the shape columns share one range (JointShapeScaling)
-        s = model.mean_shape_[own] * scaling.scale_[own] + scaling.min_[own]
         stance = getattr(model, "stance_", None)
         if stance is None and self._size is None:
             return None
         size, level = stance[p] if stance is not None else (self._size, 0.0)
         size = self._size if self._size is not None else size
+        shape = model.shape_step
         where = np.zeros((1, shape.n_dims_))
         where[0, 1] = level
         nobody = np.zeros((1, shape.n_points_, shape.n_dims_))
-        return s, Person(nobody, where, np.array([float(size)]), np.zeros(1))
+        return Person(nobody, where, np.array([float(size)]), np.zeros(1))
+
+    def _unseen_answer(self) -> Motion | Markers:
+        """B's frame for a frame before A was first seen: the mean shape beside
+        :meth:`unseen`'s stand-in (made once; each answer its own copy)."""
+        if self._stand_in is None:
+            role = np.asarray(self.model.people(self.person))
+            placed = self.model.mean_partner(self.unseen(), role)
+            if self._markers is not None:
+                self._stand_in = Markers(
+                    tuple(self._markers), placed.points, self.fps, "virtual partner"
+                )
+            else:
+                self._stand_in = fit_rotations(self._skeleton, placed.points, fps=self.fps)
+        return self._stand_in.copy()
 
     def _person(self, frame: Motion) -> Person:
         """:func:`person_from_motion` of one frame, the rest-pose height computed once."""
@@ -719,14 +751,16 @@ class ChainPartner:
         return Person(pos, pos.mean(axis=1), np.full(1, size), yaw)
 
     def skip(self) -> Motion | Markers | None:
-        """A frame that did not come in time: A's last frame again (before the first, A as
-        the training people stand: :meth:`unseen`)."""
+        """A frame that did not come in time: A's last frame again (before A's first, a frame
+        of the stream answered by the mean shape beside a stand-in A: :meth:`unseen`)."""
         if self._last is not None:
             return self.step(self._last)
         if self._finished:
             raise ValueError(FINISHED)
-        unseen = self.unseen()
-        return None if unseen is None else self._push(*unseen)
+        if self.unseen() is None:  # a model file without stance_: nothing before A
+            return None
+        self._before += 1
+        return self._due()
 
     def drop(self) -> None:
         """A frame a caller dropped and will not show B's answer for: :meth:`skip`, its
@@ -740,8 +774,8 @@ class ChainPartner:
         if self._finished:
             raise ValueError(FINISHED)
         self._finished = True
-        n = self._frames_in
-        return [self._answer(t, n - 1) for t in range(max(n - self.lag, 0), n)]
+        n = self._before + self._frames_in
+        return [self._owed(t) for t in range(max(n - self.lag, 0), n)]
 
     def _answer(self, t: int, newest: int) -> Motion | Markers:
         """B's frame for A's frame ``t``, given A's frames up to ``newest``."""
