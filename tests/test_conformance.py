@@ -257,6 +257,28 @@ def test_online_partners_answer_every_step_even_before_a_is_seen(fam, fitted, da
 
 
 @pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
+def test_online_partners_log_a_missing_frame_once_per_stream(fam, fitted, data, caplog):
+    """A frame of A missing (None, or NaN) is one logged warning per stream, on the logger
+    ``markovmotion``, in the same words from either partner (the chain's said nothing); a
+    frame the caller dropped (``skip``, ``drop``) is not one."""
+    model = fitted[fam.name]
+    for missing in (0, 3):  # A unseen at first, or lost at frame 3; then a frame of NaN
+        partner = model.partner()
+        a = _pairs_input(data[fam.data]).resample(partner.fps).trim(0, 12).copy()
+        a.rotations[7] = np.nan
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="markovmotion"):
+            for t in range(a.n_frames):
+                partner.step(None if t == missing else a.trim(t, t + 1))
+            partner.skip()
+            partner.drop()
+            partner.finish()
+        said = [r.getMessage() for r in caplog.records]
+        assert said == [f"frame {missing} of A is missing or holds NaN: skipped"]
+        assert all(r.name.startswith("markovmotion.") for r in caplog.records)
+
+
+@pytest.mark.parametrize("fam", [f for f in FAMILIES if "partner" in f.verbs], ids=lambda f: f.name)
 def test_online_partners_go_on_after_dropped_frames(fam, fitted, data):
     """``drop()`` (a live session behind its clock) answers nothing, and the partner goes on
     in step with the stream: every frame not dropped gets its B frame, the first frame after

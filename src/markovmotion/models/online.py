@@ -18,10 +18,15 @@ with person B's frame for ``lag`` frames ago:
 
 A model offers one through ``model.partner()``; ``respond --realtime``, the
 ``/live`` page and ``serve --partner`` take any model that does.
+
+A frame of A that is missing (None, or NaN: a marker unseen) is skipped with a logged
+warning, once per stream (:class:`MissingFrames`; logger ``markovmotion``, which the
+command line shows as a note).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,6 +56,28 @@ class OnlinePartner(Protocol):
     def drop(self) -> None: ...
 
     def finish(self) -> list[Motion]: ...
+
+
+log = logging.getLogger(__name__)
+
+#: The warning an online partner logs for the first frame of A missing in a stream (the
+#: frame's index in the stream); the dual HMM's partner says the same.
+MISSING = "frame %d of A is missing or holds NaN: skipped"
+
+
+class MissingFrames:
+    """A stream's frames of A that were missing (None, or NaN), the first logged as a
+    warning (:data:`MISSING`), the others counted (``count``): once per stream, as the
+    contract says, so that a camera that loses a person for a minute does not log 1,500
+    lines. One per partner, called with each missing frame's index in the stream."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def __call__(self, frame: int) -> None:
+        if not self.count:
+            log.warning(MISSING, frame)
+        self.count += 1
 
 
 #: What a partner says when stepped after :meth:`OnlinePartner.finish` (a ValueError).

@@ -53,7 +53,7 @@ from markovmotion.models.chain.condensation import (
     Propagator,
     SingleHypothesis,
 )
-from markovmotion.models.online import FINISHED, check_frame
+from markovmotion.models.online import FINISHED, MissingFrames, check_frame
 from markovmotion.state import (
     StateError,
     check_positive,
@@ -635,6 +635,7 @@ class ChainPartner:
         self._frames_in = 0  # A's frames seen (and repeated) since A was first seen
         self._before = 0  # the stream's frames before A was first seen
         self._stand_in: Motion | Markers | None = None  # B's answer to them (unseen)
+        self._missing = MissingFrames()  # frames of A missing (the first logged)
         self._finished = False
 
     @property
@@ -645,11 +646,12 @@ class ChainPartner:
     def step(self, frame: Motion | Markers | None) -> Motion | Markers | None:
         """One frame of A in (None: missing); B's frame for ``lag`` frames ago out. A frame at
         another rate than the partner's, not one frame, or after :meth:`finish`: a ValueError
-        (:func:`check_frame`)."""
+        (:func:`check_frame`). A missing frame (None, NaN, a marker unseen) is skipped
+        (:meth:`skip`), with a logged warning (once per stream: :class:`MissingFrames`)."""
         if self._finished:
             raise ValueError(FINISHED)
         if frame is None:
-            return self.skip()
+            return self._skip_missing()
         check_frame(frame, self.fps)
         kind = frame.names if isinstance(frame, Markers) else frame.skeleton
         if kind is not self._checked:
@@ -660,12 +662,12 @@ class ChainPartner:
         if isinstance(frame, Markers):
             pos = frame.select(self._markers).positions
             if not np.isfinite(pos).all():
-                return self.skip()
+                return self._skip_missing()
             real = self._marker_person(pos)
         elif np.isfinite(frame.rotations).all() and np.isfinite(frame.translations).all():
             real = self._person(frame)
         else:
-            return self.skip()
+            return self._skip_missing()
         self._last = frame
         s = self.model.shape_step.shape_vectors(real)[0]
         if self._centre is not None:  # normalise="person": as observe centres a whole take
@@ -749,6 +751,11 @@ class ChainPartner:
         size = self._size if self._size is not None else float(np.median(self._sizes))
         _, yaw = self._place_step.place(pos)
         return Person(pos, pos.mean(axis=1), np.full(1, size), yaw)
+
+    def _skip_missing(self) -> Motion | Markers | None:
+        """A frame of A given missing: the warning (the stream's first), then :meth:`skip`."""
+        self._missing(self._before + self._frames_in)
+        return self.skip()
 
     def skip(self) -> Motion | Markers | None:
         """A frame that did not come in time: A's last frame again (before A's first, a frame
