@@ -13,7 +13,6 @@ takes the model as an argument (this module does not import the model's).
 
 from __future__ import annotations
 
-import logging
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -34,9 +33,7 @@ from markovmotion.models.base import finite_frames
 from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
-from markovmotion.models.online import FINISHED, check_frame
-
-log = logging.getLogger(__name__)
+from markovmotion.models.online import FINISHED, MissingFrames, check_frame
 
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
@@ -111,7 +108,7 @@ class Partner:
         self._history: deque = deque(maxlen=keep)  # B's training frames shown
         self._generated: deque = deque(maxlen=keep)  # output="regression": B's markers shown
         self._frames_in = 0
-        self._missed = 0  # frames of A missing or NaN (the first logged)
+        self._missed = MissingFrames()  # frames of A missing or NaN (the first logged)
         self._finished = False
         self._place = (np.zeros(3), 0.0)
         self._checked = None  # A's skeleton (or markers' names), once checked
@@ -276,9 +273,7 @@ class Partner:
                 self._lift = self._lift or self.model.lift()
                 frame, self._lifted = self._lift.step(frame)
         if frame is None or not finite_frames(frame)[0]:
-            if not self._missed:
-                log.warning("frame %d of A is missing or holds NaN: skipped", self._frames_in)
-            self._missed += 1
+            self._missed(self._frames_in)
             return self.skip()
         if isinstance(frame, Markers):
             pos = frame.positions
