@@ -27,6 +27,7 @@ from markovmotion.cli.options import (
 )
 from markovmotion.cli.tables import print_json, print_notes
 from markovmotion.data.index import read_listed_motion
+from markovmotion.defaults import DUALHMM_PRESETS
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -151,7 +152,7 @@ KIND = kind_option()
 ROLES = roles_option()
 PRESET = typer.Option(
     "paper",
-    callback=choice(("paper", "new-people")),
+    callback=choice(tuple(DUALHMM_PRESETS)),
     help="'new-people': the partner for people the model has never seen (--roles both "
     "--frame heading --normalise person --output regression --place-memory 300 --energy 0.99 "
     "--contact-weight 1; docs/hmm.md), each replaced by the option if given. 'paper': none.",
@@ -183,7 +184,6 @@ def with_preset(options: dict) -> dict:
     """A command's options (its ``locals()``) with ``--preset``'s values
     (:data:`~markovmotion.defaults.DUALHMM_PRESETS`) where the command line left them at their
     defaults."""
-    from markovmotion.defaults import DUALHMM_PRESETS
     from markovmotion.progress import note
 
     preset = DUALHMM_PRESETS[options["preset"]]
