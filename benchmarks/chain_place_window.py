@@ -28,7 +28,7 @@ from threadpoolctl import threadpool_limits
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
 from markovmotion.evaluate.chain import jump_p90, point_error, pose_error_mm
-from markovmotion.evaluate.hmm import jump_sizes
+from markovmotion.evaluate.takes import jump_sizes
 from markovmotion.models.chain.partner import PlaceAverage, VirtualPartner
 
 PARTNERS = {

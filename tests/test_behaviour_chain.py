@@ -16,7 +16,7 @@ from markovmotion.core.motion import Motion
 from markovmotion.defaults import DEFAULT_PLACE_WINDOW
 from markovmotion.errors import ModelFormatError, SkeletonMismatchError
 from markovmotion.evaluate.chain import evaluate_partner, pose_error_mm
-from markovmotion.evaluate.hmm import jump_sizes
+from markovmotion.evaluate.takes import jump_sizes
 from markovmotion.features.joint_shape import JointShape, Person, TwoPeople, joint_shape_pipeline
 from markovmotion.models.base import Model
 from markovmotion.models.chain.behaviour_chain import BehaviourChain, decay_behaviour, proximities
@@ -492,11 +492,25 @@ def test_frames_before_a_is_first_seen_are_the_mean_shape_and_leave_the_stream_a
     assert shown.n_frames == 7 + a.n_frames
     before = shown.positions()[:7]
     assert all(np.array_equal(f, before[0]) for f in before)
-    stand_in = partner.unseen()
+    stand_in = partner.unseen()  # at the origin, facing +Z, as the training people stand
+    np.testing.assert_array_equal(stand_in.reference[0], [0.0, pair_partner.stance_[0, 1], 0.0])
+    assert stand_in.heading[0] == 0.0 and stand_in.height[0] == pair_partner.stance_[0, 0]
     mean = pair_partner.mean_partner(stand_in, np.zeros(1, dtype=int))
     np.testing.assert_allclose(before[0][0, [0, 2]], mean.reference[0, [0, 2]])  # the pelvis
     np.testing.assert_array_equal(shown.rotations[7:], whole.rotations)
     np.testing.assert_array_equal(shown.translations[7:], whole.translations)
+
+
+def test_a_file_saved_before_the_place_window_answers_as_it_was_saved(small_partner):
+    """A parameter added since a file was saved takes the value the file answered with
+    (``PARAMS_OF_OLDER_FILES``): a chain saved before ``place_window`` placed B unaveraged."""
+    from markovmotion.state import estimator_state, restore_estimator
+
+    arrays: dict = {}
+    state = estimator_state(small_partner, "model", arrays)
+    assert state["params"]["place_window"] == DEFAULT_PLACE_WINDOW > 1
+    del state["params"]["place_window"]
+    assert restore_estimator(state, arrays).place_window == 1
 
 
 def _copy_index(root, mocap, trials: dict[str, str]) -> None:

@@ -55,6 +55,16 @@ def marker_partner(handshakes) -> VirtualPartner:
     return VirtualPartner(**SMALL).fit(train)
 
 
+def test_a_marker_take_never_seen_is_refused_by_name(short):
+    """Markers holding no value at all: one line naming the model, the take and the role
+    (it had been a note dropping every marker, NumPy's warnings and "sequence 0 holds NaN")."""
+    (*_, a, b), (*_, a1, b1) = short[:2]
+    blind = a.copy()
+    blind.positions[:] = np.nan
+    with pytest.raises(ValueError, match=r"VirtualPartner.fit: take 1 \(A\).*nothing of it"):
+        VirtualPartner(n_state_prototypes=5, n_behaviour_prototypes=5).fit([(a1, b1), (blind, b)])
+
+
 def test_marker_size_ignores_where_the_body_is_and_scales_with_it():
     rng = np.random.default_rng(0)
     pos = rng.normal(size=(20, 8, 3)) * 200

@@ -418,8 +418,21 @@ def test_a_take_with_nothing_recorded_is_refused_not_answered(model):
     for verb in (model.respond, model.score):
         with pytest.raises(ValueError, match="every one of its 30 frames"):
             verb(empty)
+    with pytest.raises(ValueError, match="its one frame"):
+        model.score(empty.trim(0, 1))
     empty.rotations[5:] = a.rotations[5:]  # some frames recorded: answered
     assert np.isfinite(model.score(empty)) and model.respond(empty).n_frames == 30
+
+
+def test_a_refit_refused_for_its_takes_leaves_the_model_as_it_was(model, training):
+    """A pair of joints with a NaN frame is refused before anything learnt is dropped."""
+    again = copy.deepcopy(model)
+    a, b = training[0]
+    broken = a.copy()
+    broken.rotations[3] = np.nan
+    with pytest.raises(ValueError, match=r"take 0 \(A\).*1 frame \(first 3"):
+        again.fit([(broken, b)])
+    np.testing.assert_array_equal(again.respond(a).positions(), model.respond(a).positions())
 
 
 def test_cli_train_respond_evaluate(tmp_path, capsys):

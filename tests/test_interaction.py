@@ -14,7 +14,8 @@ from scipy.spatial.transform import Rotation
 
 from markovmotion.core.motion import Motion
 from markovmotion.errors import SkeletonMismatchError
-from markovmotion.evaluate.hmm import evaluate_pair, jump_sizes, summarise
+from markovmotion.evaluate.hmm import evaluate_pair, summarise
+from markovmotion.evaluate.takes import jump_sizes
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.trellis import Trellis, smooth_place, successors
 

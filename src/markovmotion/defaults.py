@@ -42,13 +42,12 @@ DEFAULT_PROTOTYPES = 40
 DEFAULT_PLACE_WINDOW = 20
 
 # The dual HMM's presets (``dualhmm train/crossval --preset``; models/hmm/dual.py).
-#: The partner for people the model has never seen (docs/hmm.md, "New people"): both roles
-#: of every take, the person normalisation, ``place_memory`` 300 and A's heading as the
-#: frame, fixed on principle; B's output by regression, PCA energy 0.99 and the hands'
-#: contact at 1, the collection's picks by leaving one pair of people out. ``roles`` is the
-#: command's (the takes learnt); the rest are :class:`DualHMM`'s parameters.
+#: The partner for people the model has never seen (docs/hmm.md, "New people"), as
+#: :class:`DualHMM` parameters: A's heading as the frame, the person normalisation and
+#: ``place_memory`` 300, fixed on principle; B's output by regression, PCA energy 0.99 and the
+#: hands' contact at 1, the collection's picks by leaving one pair of people out. With
+#: :data:`NEW_PEOPLE_ROLES`: ``DualHMM(**NEW_PEOPLE)`` fitted on every take in both roles.
 NEW_PEOPLE: dict[str, object] = {
-    "roles": "both",
     "frame": "heading",
     "normalise": "person",
     "output": "regression",
@@ -56,6 +55,11 @@ NEW_PEOPLE: dict[str, object] = {
     "energy": 0.99,
     "contact_weight": 1.0,
 }
+#: The takes the partner for new people learns: each also with the people swapped.
+NEW_PEOPLE_ROLES = "both"
 #: ``--preset``: option values it sets where the command line leaves them at their defaults
 #: ("paper": none, the paper's model).
-DUALHMM_PRESETS: dict[str, dict[str, object]] = {"paper": {}, "new-people": NEW_PEOPLE}
+DUALHMM_PRESETS: dict[str, dict[str, object]] = {
+    "paper": {},
+    "new-people": {"roles": NEW_PEOPLE_ROLES, **NEW_PEOPLE},
+}

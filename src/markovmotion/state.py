@@ -262,6 +262,9 @@ def restore_estimator(
             raise StateError(f"{where}: not a parameter of {cls.__name__}")
         default = signature.get(k, inspect.Parameter.empty)
         kwargs[k] = _check_param(_from_json(v, arrays, where), default, where)
+    # a parameter added since a file was saved: the value it was saved with, not today's default
+    for k, v in getattr(cls, "PARAMS_OF_OLDER_FILES", {}).items():
+        kwargs.setdefault(k, v)
     try:
         est = cls(**kwargs)
     except (TypeError, ValueError) as exc:

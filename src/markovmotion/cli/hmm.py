@@ -150,12 +150,22 @@ JOBS = typer.Option(
 JSON = typer.Option(False, "--json", help="Print the results as JSON.")
 KIND = kind_option()
 ROLES = roles_option()
+
+
+def preset_flags(values: dict) -> str:
+    """``--roles both --energy 0.99 ...``: option values as the command line writes them."""
+    return " ".join(
+        f"--{k.replace('_', '-')} {format(v, 'g') if isinstance(v, float) else v}"
+        for k, v in values.items()
+    )
+
+
 PRESET = typer.Option(
     "paper",
     callback=choice(tuple(DUALHMM_PRESETS)),
-    help="'new-people': the partner for people the model has never seen (--roles both "
-    "--frame heading --normalise person --output regression --place-memory 300 --energy 0.99 "
-    "--contact-weight 1; docs/hmm.md), each replaced by the option if given. 'paper': none.",
+    help="'new-people': the partner for people the model has never seen ("
+    + preset_flags(DUALHMM_PRESETS["new-people"])
+    + "; docs/hmm.md), each replaced by the option if given. 'paper': none.",
 )
 
 
@@ -183,22 +193,19 @@ MODEL_OPTIONS = {
 def with_preset(options: dict) -> dict:
     """A command's options (its ``locals()``) with ``--preset``'s values
     (:data:`~markovmotion.defaults.DUALHMM_PRESETS`) where the command line left them at their
-    defaults."""
+    defaults, and those values as ``preset_set``."""
     from markovmotion.progress import note
 
     preset = DUALHMM_PRESETS[options["preset"]]
     set_ = {k: v for k, v in preset.items() if not given(k)}
     if preset:  # said, so that an error about an option it set names where that came from
-        flags = " ".join(
-            f"--{k.replace('_', '-')} {format(v, 'g') if isinstance(v, float) else v}"
-            for k, v in set_.items()
-        )
+        flags = preset_flags(set_)
         kept = [f"--{k.replace('_', '-')}" for k in preset if k not in set_]
         note(
             f"--preset {options['preset']}: {flags}"
             + (f" ({', '.join(kept)} given)" if kept else "")
         )
-    return {**options, **set_}
+    return {**options, **set_, "preset_set": set_}
 
 
 def new_model(options: dict):
@@ -263,7 +270,7 @@ def train(
     start = time.perf_counter()
     options = with_preset(locals())
     model = new_model(options)
-    grid = grid_of("hmm", choose)
+    grid = grid_of("hmm", choose, options["preset_set"])
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
         model, extras, pairs = fit_on_index(
             model, data, _split(labels), _split(test_trials), kind, options["roles"], grid,
@@ -630,7 +637,7 @@ def crossval(
 
     options = with_preset(locals())
     model = new_model(options)
-    grid = grid_of("hmm", choose)
+    grid = grid_of("hmm", choose, options["preset_set"])
     with joblib.parallel_config(n_jobs=jobs or -1):
         report, written = crossval_index(
             model, data, _split(labels), plots, grid, kind, options["roles"]

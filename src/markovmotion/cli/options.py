@@ -292,12 +292,13 @@ def choose_option(family: str, criterion: str, example: str) -> Any:
     )
 
 
-def grid_of(family: str, choose: str | None) -> list[dict] | None:
+def grid_of(family: str, choose: str | None, preset: dict | None = None) -> list[dict] | None:
     """The settings of ``--choose`` for ``family`` (``hmm`` or ``chain``), None without
-    (:func:`_parsed`), with a note per option of the command line that they replace."""
+    (:func:`_parsed`), with a note per option of the command line (or value ``preset`` set,
+    ``{option: value}``) that they replace."""
     grid = _parsed(family, choose)
     if grid:
-        _note_replaced(grid)
+        _note_replaced(grid, preset or {})
     return grid
 
 
@@ -340,18 +341,20 @@ _OPTION_OF = {"n_states": "states", "n_state_prototypes": "prototypes",
               "n_behaviour_prototypes": "behaviours"}  # fmt: skip
 
 
-def _note_replaced(grid: list[dict]) -> None:
-    """One note per option given on the command line that ``--choose`` also sets: the
-    grid's values replace it (``--output regression`` with ``output=frames,...``)."""
+def _note_replaced(grid: list[dict], preset: dict) -> None:
+    """One note per option given on the command line (or set by a ``preset``) that
+    ``--choose`` also sets: the grid's values replace it (``--output regression`` with
+    ``output=frames,...``)."""
     from markovmotion.progress import note
 
     for key in dict.fromkeys(k for setting in grid for k in setting):
         name = _OPTION_OF.get(key, key)
-        if given(name):
-            ctx = _context()
+        if given(name) or name in preset:
+            value = preset[name] if name in preset else _context().params[name]
             values = ", ".join(dict.fromkeys(str(s[key]) for s in grid if key in s))
             option = "--" + name.replace("_", "-")
-            note(f"{option} {ctx.params[name]} is replaced by --choose's {key} ({values})")
+            by = " (--preset's)" if name in preset else ""
+            note(f"{option} {value}{by} is replaced by --choose's {key} ({values})")
 
 
 def chosen_line(chosen: dict, error: str) -> str:

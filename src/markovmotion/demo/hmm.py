@@ -11,7 +11,7 @@ from rich.console import Console
 
 from markovmotion.data import MocapIndex
 from markovmotion.data.splits import held_out_pairs
-from markovmotion.defaults import NEW_PEOPLE
+from markovmotion.defaults import NEW_PEOPLE, NEW_PEOPLE_ROLES
 from markovmotion.demo.run import required
 from markovmotion.demo.scene import partner_scene
 from markovmotion.evaluate.choose import both_roles
@@ -116,10 +116,13 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
     test = next(p for p in pairs if p[0].subject == held)
     train = [p for p in pairs if p[0].subject != held]
     takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
-    takes = both_roles(takes)
     # `dualhmm train --preset new-people` (docs/hmm.md, "New people")
-    model = DualHMM(**{k: v for k, v in NEW_PEOPLE.items() if k != "roles"})
-    model.fit([(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * 2)
+    both = NEW_PEOPLE_ROLES == "both"
+    takes = both_roles(takes) if both else takes
+    model = DualHMM(**NEW_PEOPLE)
+    model.fit(
+        [(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * (2 if both else 1)
+    )
     a, b = (m.resample(model.fps) for m in index.load_pair(*test))
     virtual = model.respond(a, "windowed")
     quick = Baselines(model, regression=False)  # the GMR baseline: dualhmm crossval

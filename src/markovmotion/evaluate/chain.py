@@ -12,7 +12,7 @@ of a take is masked in turn. Errors (lower is better):
 
 How much a 3-D partner jumps, beside the real partner: ``jump_p90_mm``, the 90th
 percentile of its median point's frame-to-frame steps, measured as the dual HMM's
-(:func:`markovmotion.evaluate.hmm.jump_sizes`).
+(:func:`markovmotion.evaluate.takes.jump_sizes`).
 
 The baseline holds the partner's mean shape (with the mean separation and
 relative scale) beside the real person. In silhouettes it must also pick the
@@ -53,7 +53,13 @@ from markovmotion.defaults import SOURCES
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
 from markovmotion.evaluate import choose
 from markovmotion.evaluate.choose import ROLES
-from markovmotion.evaluate.takes import evaluation_index, take_names, test_takes
+from markovmotion.evaluate.takes import (
+    evaluation_index,
+    jump_p90,
+    jump_sizes,
+    take_names,
+    test_takes,
+)
 from markovmotion.features.joint_shape import Person, TwoPeople, person_from_motion
 from markovmotion.models.chain.condensation import (
     DEFAULT_RESPONSE,
@@ -274,13 +280,6 @@ def _errors(
 REAL = "real"
 
 
-def jump_p90(steps: Sequence[np.ndarray]) -> float | None:
-    """The 90th percentile (mm, to 0.1) of frame steps (arrays of
-    :func:`markovmotion.evaluate.hmm.jump_sizes`), None if there is none."""
-    pooled = np.concatenate([np.ravel(s) for s in steps]) if len(steps) else np.zeros(0)
-    return round(float(np.percentile(pooled, 90)), 1) if len(pooled) else None
-
-
 def evaluate_partner(
     model: VirtualPartner,
     takes: Sequence[TwoPeople],
@@ -307,7 +306,7 @@ def evaluate_partner(
 
     How much each partner jumps (motion capture): ``jump_p90_mm``, the 90th percentile
     over every frame step of how far the partner's median point moves
-    (:func:`markovmotion.evaluate.hmm.jump_sizes`, the dual HMM's ``*_jump_p90_mm``),
+    (:func:`markovmotion.evaluate.takes.jump_sizes`, the dual HMM's ``*_jump_p90_mm``),
     with ``real`` the real partner's. ``steps``, if given (a dict), is filled with those
     steps: per partner (and ``real``), a list of arrays for each real person (0, 1).
 
@@ -316,8 +315,6 @@ def evaluate_partner(
     takes the side towards the floor's middle (:meth:`VirtualPartner.centre_roles`)
     and, as ``mean_shape_true_side``, the side where the partner truly is.
     """
-    from markovmotion.evaluate.hmm import jump_sizes
-
     if source not in SOURCES:
         raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
     if response not in RESPONSES:

@@ -56,6 +56,8 @@ from markovmotion.evaluate.takes import (
     TestTakes,
     evaluation_index,
     index_record,
+    jump_p90,
+    jump_sizes,
     take_names,
     test_takes,
 )
@@ -209,12 +211,6 @@ def observer_accuracy(results: Sequence[PairResult], n_folds: int = 5) -> float:
     folds = GroupKFold(min(n_folds, len(groups_of)))
     guess = cross_val_predict(model, x, y, groups=groups, cv=folds)
     return float(balanced_accuracy_score(y, guess))
-
-
-def jump_sizes(points: np.ndarray) -> np.ndarray:
-    """(F - 1,) how far the median body point moves between consecutive frames (mm), from
-    positions (F, P, 3): a cut between two unrelated poses is a large step."""
-    return np.median(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1)
 
 
 def step_latencies(model: DualHMM, xa: np.ndarray) -> np.ndarray:
@@ -389,7 +385,7 @@ def _jumps(results: Sequence[PairResult], keys: Sequence[str]) -> dict:
     for k in keys:
         steps = np.concatenate([r.jumps[k] for r in results])
         name = k.split("/")[-1]
-        out[f"{name}_jump_p90_mm"] = round(float(np.percentile(steps, 90)), 1)
+        out[f"{name}_jump_p90_mm"] = jump_p90([steps])
         out[f"{name}_jump_over_100mm"] = round(float((steps > JUMP_MM).mean()), 4)
     return out
 

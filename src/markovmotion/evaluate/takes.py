@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
 from markovmotion.errors import DataNotFoundError
 from markovmotion.models.base import Model, file_sha256, training_hashes
@@ -144,3 +146,17 @@ def evaluation_index(model: Any, test: str | os.PathLike[str] | None = None) -> 
             f"looked for in {index.root / INDEX_NAME} (give --test INDEX for others)"
         )
     return index
+
+
+def jump_sizes(points: np.ndarray) -> np.ndarray:
+    """(F - 1,) how far the median body point moves between consecutive frames (mm), from
+    positions (F, P, 3): a cut between two unrelated poses is a large step. Both partner
+    families report how much their partner jumps by it, beside the real partner's."""
+    return np.median(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1)
+
+
+def jump_p90(steps: Sequence[np.ndarray]) -> float | None:
+    """The 90th percentile (mm, to 0.1) of frame steps (arrays of :func:`jump_sizes`) pooled,
+    None if there is none."""
+    pooled = np.concatenate([np.ravel(s) for s in steps]) if len(steps) else np.zeros(0)
+    return round(float(np.percentile(pooled, 90)), 1) if len(pooled) else None

@@ -240,17 +240,19 @@ def check_motion(motion: object, where: str, missing: bool = True) -> None:
     """Raise (one line, naming ``where``) unless ``motion`` is a Motion or Markers with
     frames (TypeError, ValueError); with ``missing`` False, also unless every frame of a
     Motion is finite (ValueError naming the frames that are not; markers go unseen now and
-    then, and every model that reads them fills their gaps); with ``missing``, unless
-    something of a take of two frames or more was recorded (a take of NaN alone was
-    answered, and scored as certain, by the dual HMM)."""
+    then, and every model that reads them fills their gaps); and unless something of it
+    was recorded (a take of NaN alone was answered, and scored as certain, by the dual HMM;
+    a take of markers never seen failed deep inside the chain)."""
     if not isinstance(motion, (Motion, Markers)):
         raise TypeError(f"{where} takes a Motion (or Markers), not {type(motion).__name__}")
     if motion.n_frames == 0:
         raise ValueError(f"{where}: {motion.name or 'the motion'} has no frame")
-    if missing and motion.n_frames > 1 and not _anything_seen(motion):
+    if not _anything_seen(motion):
+        n = motion.n_frames
         raise ValueError(
-            f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in every one "
-            f"of its {motion.n_frames} frames: nothing of it was recorded"
+            f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "
+            f"{'every one of its ' + str(n) + ' frames' if n > 1 else 'its one frame'}: "
+            "nothing of it was recorded"
         )
     if not missing and isinstance(motion, Motion):
         bad = np.flatnonzero(~finite_frames(motion))

@@ -80,6 +80,22 @@ class MissingFrames:
         self.count += 1
 
 
+class CheckedOnce:
+    """A stream's frames of A checked against the model (``check``, its ``check_input``) once
+    per kind of A: a skeleton (the same object), or markers' names (equal, whatever list
+    holds them: a live source gives a new one with each frame). One per partner."""
+
+    def __init__(self, check: Callable[[Motion | Markers], None]) -> None:
+        self._check = check
+        self._kind: Skeleton | tuple[str, ...] | None = None
+
+    def __call__(self, frame: Motion | Markers) -> None:
+        kind = tuple(frame.names) if isinstance(frame, Markers) else frame.skeleton
+        if not (kind is self._kind or (isinstance(kind, tuple) and kind == self._kind)):
+            self._check(frame)
+            self._kind = kind
+
+
 #: What a partner says when stepped after :meth:`OnlinePartner.finish` (a ValueError).
 FINISHED = (
     "the partner's stream is finished (finish() was called): start another with model.partner()"

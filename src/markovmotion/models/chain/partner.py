@@ -18,6 +18,7 @@ import hashlib
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.defaults import DEFAULT_PLACE_WINDOW, DEFAULT_PROTOTYPES
-from markovmotion.errors import DataNotFoundError, MarkovMotionError, SkeletonMismatchError
+from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.base import FeaturePipeline
 from markovmotion.features.joint_shape import (
     JointShape,
@@ -53,7 +54,7 @@ from markovmotion.models.chain.condensation import (
     Propagator,
     SingleHypothesis,
 )
-from markovmotion.models.online import FINISHED, MissingFrames, check_frame
+from markovmotion.models.online import FINISHED, CheckedOnce, MissingFrames, check_frame
 from markovmotion.state import (
     StateError,
     check_positive,
@@ -133,6 +134,9 @@ class VirtualPartner(Model):
     VERBS = ("respond", "partner")
     FITS_PAIRS = True
     PREPARED_TAKES = (TwoPeople,)
+    #: Parameters a file saved before they existed was answering with (restore_estimator):
+    #: the partner's place was not averaged.
+    PARAMS_OF_OLDER_FILES: ClassVar[dict[str, object]] = {"place_window": 1}
 
     def __init__(
         self,
@@ -188,10 +192,7 @@ class VirtualPartner(Model):
         (silhouettes tracked in video: their names and a hash of their points are
         recorded).
         """
-        takes = list(takes)
-        if not takes:
-            raise DataNotFoundError("no two-person takes to learn from")
-        self.check_params()
+        takes = list(takes)  # checked by Model's fit wrapper (check_params, check_takes)
         self.skeletons_ = self.markers_ = None
         if all(isinstance(t, TwoPeople) for t in takes):
             people = takes
@@ -357,7 +358,7 @@ class VirtualPartner(Model):
 
     def place_average(self) -> PlaceAverage:
         """A fresh :class:`PlaceAverage` over ``place_window`` frames (3-D; silhouettes: 1)."""
-        window = int(getattr(self, "place_window", DEFAULT_PLACE_WINDOW))
+        window = int(self.place_window)
         return PlaceAverage(window if self.shape_step.n_dims_ == 3 else 1)
 
     def toward_mean(self, shapes: np.ndarray) -> np.ndarray:
@@ -630,11 +631,13 @@ class ChainPartner:
         self._people: deque = deque(maxlen=self.lag + 1)  # A's last frames (Person)
         self._first: np.ndarray | None = None
         self._last: Motion | None = None
-        self._checked = None
+        self._checked = CheckedOnce(model.check_input)  # A against the model, once a kind
         self._height: tuple[Skeleton, np.ndarray] | None = None
         self._frames_in = 0  # A's frames seen (and repeated) since A was first seen
         self._before = 0  # the stream's frames before A was first seen
         self._stand_in: Motion | Markers | None = None  # B's answer to them (unseen)
+        # whether a stand-in A can be made (a file saved before stance_ without a size: no)
+        self._stands_in = getattr(model, "stance_", None) is not None or size is not None
         self._missing = MissingFrames()  # frames of A missing (the first logged)
         self._finished = False
 
@@ -653,10 +656,7 @@ class ChainPartner:
         if frame is None:
             return self._skip_missing()
         check_frame(frame, self.fps)
-        kind = frame.names if isinstance(frame, Markers) else frame.skeleton
-        if kind is not self._checked:
-            self.model.check_input(frame)
-            self._checked = kind
+        self._checked(frame)
         if self._markers is not None and isinstance(frame, Motion):
             frame = self.model.as_markers(frame)  # a skeleton's body points by name
         if isinstance(frame, Markers):
@@ -764,7 +764,7 @@ class ChainPartner:
             return self.step(self._last)
         if self._finished:
             raise ValueError(FINISHED)
-        if self.unseen() is None:  # a model file without stance_: nothing before A
+        if not self._stands_in:  # a model file without stance_: nothing before A
             return None
         self._before += 1
         return self._due()

@@ -440,8 +440,7 @@ class DualHMM(Model):
         pairs of people (INDEX.csv's ``subject``), which ``frame="auto"`` leaves out one at a
         time (:func:`choose_frame`); one take at a time if not given.
         """
-        self.check_params()
-        markers_in = self.markers or (pairs and isinstance(pairs[0][0], Markers))
+        markers_in = self.markers or isinstance(pairs[0][0], Markers)  # pairs: checked
         if self.output == "regression" and not markers_in:
             raise SkeletonMismatchError(
                 "output 'regression' generates B's markers: train on markers (C3D takes, or "
@@ -452,8 +451,6 @@ class DualHMM(Model):
                 "place_scale 'size' measures people by their markers: train on markers (C3D "
                 "takes, or virtual markers placed on skeletons: markers=N, --markers N)"
             )
-        if not pairs:
-            raise ValueError("no two-person takes to learn from")
         if labels is not None and len(labels) != len(pairs):
             raise ValueError(f"{len(labels)} labels for {len(pairs)} two-person takes")
         if groups is not None and len(groups) != len(pairs):
@@ -465,6 +462,9 @@ class DualHMM(Model):
             check_count("markers", self.markers, 1)
         elif not isinstance(pairs[0][0], Markers):
             _check_one_skeleton_b(pairs, labels)
+            for i, pair in enumerate(pairs):  # features of joints: whole frames only
+                for role, m in zip("AB", pair, strict=True):
+                    check_motion(m, f"DualHMM.fit: take {i} ({role})", missing=False)
         for k in (
             *_LEARNT,
             *_LEARNT_MARKERS,
@@ -477,9 +477,6 @@ class DualHMM(Model):
         if self.markers or isinstance(pairs[0][0], Markers):
             xa, xb, lengths = self._marker_features(pairs, groups)  # gaps filled
         else:
-            for i, pair in enumerate(pairs):  # features of joints: whole frames only
-                for role, m in zip("AB", pair, strict=True):
-                    check_motion(m, f"DualHMM.fit: take {i} ({role})", missing=False)
             xa, xb, lengths = self._motion_features(pairs, groups)
         self._fit_chains(xa, xb, lengths)
         if self.output == "regression":

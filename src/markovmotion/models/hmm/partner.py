@@ -33,7 +33,7 @@ from markovmotion.models.base import finite_frames
 from markovmotion.models.hmm.contact import OnlineContact
 from markovmotion.models.hmm.gaussian import safe_log
 from markovmotion.models.hmm.trellis import blend_positions
-from markovmotion.models.online import FINISHED, MissingFrames, check_frame
+from markovmotion.models.online import FINISHED, CheckedOnce, MissingFrames, check_frame
 
 if TYPE_CHECKING:
     from markovmotion.models.hmm.dual import DualHMM
@@ -111,7 +111,7 @@ class Partner:
         self._missed = MissingFrames()  # frames of A missing or NaN (the first logged)
         self._finished = False
         self._place = (np.zeros(3), 0.0)
-        self._checked = None  # A's skeleton (or markers' names), once checked
+        self._checked = CheckedOnce(model.check_input)  # A against the model, once a kind
         self._lift: Lift | None = None  # a skeleton's points lifted to the model's markers
         self._lifted = 0.0  # the last frame's lift (mm)
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
@@ -261,11 +261,7 @@ class Partner:
             raise ValueError(FINISHED)
         if frame is not None:
             check_frame(frame, self.fps)
-            # what A is seen as (a skeleton, or markers' names), checked once against the model
-            kind = tuple(frame.names) if isinstance(frame, Markers) else frame.skeleton
-            if not (kind is self._checked or (isinstance(kind, tuple) and kind == self._checked)):
-                self.model.check_input(frame)
-                self._checked = kind
+            self._checked(frame)
         if frame is not None and self.model.uses_markers:
             lifting = self.model.lifts(frame)
             frame = self.model.input_markers(frame)
