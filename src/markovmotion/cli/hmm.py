@@ -14,6 +14,7 @@ from markovmotion.cli.options import (
     choice,
     choose_option,
     chosen_line,
+    flag,
     given,
     grid_of,
     guide_for,
@@ -155,8 +156,7 @@ ROLES = roles_option()
 def preset_flags(values: dict) -> str:
     """``--roles both --energy 0.99 ...``: option values as the command line writes them."""
     return " ".join(
-        f"--{k.replace('_', '-')} {format(v, 'g') if isinstance(v, float) else v}"
-        for k, v in values.items()
+        f"{flag(k)} {format(v, 'g') if isinstance(v, float) else v}" for k, v in values.items()
     )
 
 
@@ -200,7 +200,7 @@ def with_preset(options: dict) -> dict:
     set_ = {k: v for k, v in preset.items() if not given(k)}
     if preset:  # said, so that an error about an option it set names where that came from
         flags = preset_flags(set_)
-        kept = [f"--{k.replace('_', '-')}" for k in preset if k not in set_]
+        kept = [flag(k) for k in preset if k not in set_]
         note(
             f"--preset {options['preset']}: {flags}"
             + (f" ({', '.join(kept)} given)" if kept else "")

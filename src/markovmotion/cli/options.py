@@ -325,6 +325,11 @@ def _context() -> Any:
     return get_current_context(silent=True)
 
 
+def flag(name: str) -> str:
+    """The command-line option of a parameter name: ``place_memory`` -> ``--place-memory``."""
+    return "--" + name.replace("_", "-")
+
+
 def given(name: str) -> bool:
     """Whether the running command's option ``name`` (its parameter's name) was given on the
     command line, not left at its default."""
@@ -352,7 +357,7 @@ def _note_replaced(grid: list[dict], preset: dict) -> None:
         if given(name) or name in preset:
             value = preset[name] if name in preset else _context().params[name]
             values = ", ".join(dict.fromkeys(str(s[key]) for s in grid if key in s))
-            option = "--" + name.replace("_", "-")
+            option = flag(name)
             by = " (--preset's)" if name in preset else ""
             note(f"{option} {value}{by} is replaced by --choose's {key} ({values})")
 

@@ -228,34 +228,29 @@ def finite_frames(motion: Motion | Markers) -> np.ndarray:
     )
 
 
-def _anything_seen(motion: Motion | Markers) -> bool:
-    """Whether a Motion has a whole frame, or Markers one finite value (a marker unseen all
-    along is the model's to name or leave out)."""
-    if isinstance(motion, Markers):
-        return bool(np.isfinite(motion.positions).any())
-    return bool(finite_frames(motion).any())
-
-
 def check_motion(motion: object, where: str, missing: bool = True) -> None:
     """Raise (one line, naming ``where``) unless ``motion`` is a Motion or Markers with
     frames (TypeError, ValueError); with ``missing`` False, also unless every frame of a
     Motion is finite (ValueError naming the frames that are not; markers go unseen now and
     then, and every model that reads them fills their gaps); and unless something of it
-    was recorded (a take of NaN alone was answered, and scored as certain, by the dual HMM;
-    a take of markers never seen failed deep inside the chain)."""
+    was recorded: a whole frame of a Motion, one finite value of Markers (a take of NaN
+    alone was answered, and scored as certain, by the dual HMM; a take of markers never
+    seen failed deep inside the chain)."""
     if not isinstance(motion, (Motion, Markers)):
         raise TypeError(f"{where} takes a Motion (or Markers), not {type(motion).__name__}")
     if motion.n_frames == 0:
         raise ValueError(f"{where}: {motion.name or 'the motion'} has no frame")
-    if not _anything_seen(motion):
+    finite = finite_frames(motion) if isinstance(motion, Motion) else None
+    seen = finite.any() if finite is not None else np.isfinite(motion.positions).any()
+    if not seen:
         n = motion.n_frames
         raise ValueError(
             f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "
             f"{'every one of its ' + str(n) + ' frames' if n > 1 else 'its one frame'}: "
             "nothing of it was recorded"
         )
-    if not missing and isinstance(motion, Motion):
-        bad = np.flatnonzero(~finite_frames(motion))
+    if not missing and finite is not None:
+        bad = np.flatnonzero(~finite)
         if len(bad):
             raise ValueError(
                 f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "

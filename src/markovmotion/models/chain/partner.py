@@ -672,11 +672,6 @@ class ChainPartner:
         s = self.model.shape_step.shape_vectors(real)[0]
         if self._centre is not None:  # normalise="person": as observe centres a whole take
             s = self._centre(s)
-        return self._push(s, real)
-
-    def _push(self, s: np.ndarray, real: Person) -> Motion | Markers | None:
-        """A's shape vector and place for the next frame in; B's frame for ``lag`` frames ago
-        out (None while the window fills)."""
         if self._first is None:
             self._first = s
         self._shapes.append(s)
@@ -708,10 +703,10 @@ class ChainPartner:
         (:meth:`VirtualPartner.mean_partner`), the same frame for every such frame; nothing
         is propagated. None for a model saved before it learnt ``stance_`` (then nothing is
         answered before A is seen) unless ``size`` is given."""
+        if not self._stands_in:
+            return None
         model, p = self.model, self.person or 0
         stance = getattr(model, "stance_", None)
-        if stance is None and self._size is None:
-            return None
         size, level = stance[p] if stance is not None else (self._size, 0.0)
         size = self._size if self._size is not None else size
         shape = model.shape_step
