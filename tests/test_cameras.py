@@ -134,11 +134,11 @@ def test_every_command_says_the_camera_files_notes_anew(capsys):
     """A note said in one command is said again by the next in the same process (the tests,
     a notebook): ``cli.main`` forgets what was said; a command that reads no camera file
     imports nothing for it."""
+    from markovmotion import progress
     from markovmotion.cli import main
-    from markovmotion.video import cameras
 
-    cameras.say(["note: a camera note"], None, "cameras.json")
-    assert cameras.said("note: a camera note")
+    progress.say(["note: a camera note"], None, "cameras.json")
+    assert progress.said("note: a camera note")
     main(["data", "list", "--category", "exercise"])
-    assert not cameras.said("note: a camera note")
+    assert not progress.said("note: a camera note")
     capsys.readouterr()

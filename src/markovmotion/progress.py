@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from typing import TypeVar
 
 from rich.console import Console
@@ -35,6 +35,36 @@ def note(message: str) -> None:
     """One line to stderr about a choice the library made for the user (takes left out,
     a kind chosen): where commands and the demo show it, off stdout's JSON."""
     err_console.print(f"[yellow]note:[/] {escape(message)}", highlight=False)
+
+
+#: The notes printed in this command (:func:`say`), with the file each is about.
+_SAID: set[tuple[str, str]] = set()
+
+
+def say(lines: Sequence[str], notes: list[str] | None = None, about: object = "") -> None:
+    """Print each note (``"note: ..."``) not printed before in this command about the same
+    file (``about``), and add every one to ``notes`` if given: a command reads a camera
+    file more than once (the CLI, then the tracker, then ``--truth``), and a summary's
+    ``notes`` must hold them all the same."""
+    for line in lines:
+        key = (str(about), line)
+        if key not in _SAID:
+            _SAID.add(key)
+            note(line.removeprefix("note: "))
+        if notes is not None:
+            notes.append(line)
+
+
+def said(line: str) -> bool:
+    """Whether :func:`say` printed this line in this command (a summary's notes that the
+    command prints at its end leave them out)."""
+    return any(line == printed for _, printed in _SAID)
+
+
+def new_command() -> None:
+    """Forget the notes said (:func:`say`): a command starts, and says them again (tests run
+    many commands in one process)."""
+    _SAID.clear()
 
 
 class NoteOnce(logging.Handler):

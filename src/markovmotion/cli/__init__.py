@@ -17,7 +17,7 @@ import typer
 from rich.markup import escape
 
 from markovmotion.errors import MarkovMotionError
-from markovmotion.progress import NoteOnce, err_console
+from markovmotion.progress import NoteOnce, err_console, new_command
 
 app = typer.Typer(
     name="markovmotion",
@@ -97,8 +97,7 @@ def main(argv: list[str] | None = None) -> None:
     _register()
     _GIVEN.clear()
     _GIVEN.update(sys.argv[1:] if argv is None else argv)
-    if (cameras := sys.modules.get("markovmotion.video.cameras")) is not None:
-        cameras.new_command()  # a camera file's notes are said once a command, every command
+    new_command()  # a camera file's notes are said once a command, every command
     with _log_as_notes():
         _run(argv)
 

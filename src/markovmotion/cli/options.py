@@ -22,7 +22,7 @@ from typing import Any
 
 import typer
 
-from markovmotion.limits import MAX_FPS, MIN_FPS
+from markovmotion.limits import MAX_FPS, MAX_STEPS, MIN_FPS
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,7 @@ RANGES: dict[str, Range] = {
     # a person's height in mm
     "stature": Range(500, 2500, unit="mm"),
     # walking steps to synthesize or adapt on
-    "steps": Range(1, 10_000),
+    "steps": Range(1, int(MAX_STEPS.default)),  # the library's bound (limits.MAX_STEPS)
     # CONDENSATION hypotheses
     "hypotheses": Range(1, 100_000),
     # EM iterations

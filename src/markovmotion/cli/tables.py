@@ -68,10 +68,9 @@ def print_json(value: object, indent: int | None = None) -> None:
 
 def print_notes(lines: list[str]) -> None:
     """Print a summary's notes (stderr, with or without ``--json``), but those the camera
-    file's reading printed already (:func:`~markovmotion.video.cameras.say`): every note is
+    file's reading printed already (:func:`~markovmotion.progress.say`): every note is
     in the JSON's ``notes``, and on the terminal once."""
-    from markovmotion.progress import err_console
-    from markovmotion.video.cameras import said
+    from markovmotion.progress import err_console, said
 
     for line in lines:
         if not said(line):

@@ -14,7 +14,7 @@ from markovmotion.data.splits import held_out_pairs
 from markovmotion.defaults import NEW_PEOPLE, NEW_PEOPLE_ROLES
 from markovmotion.demo.run import required
 from markovmotion.demo.scene import partner_scene
-from markovmotion.evaluate.choose import both_roles
+from markovmotion.evaluate.choose import learnt
 from markovmotion.evaluate.hmm import Baselines, evaluate_pair, plot_pair
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.progress import track
@@ -117,12 +117,9 @@ def new_people_step(out: Path, index: MocapIndex, console: Console) -> list[Path
     train = [p for p in pairs if p[0].subject != held]
     takes = [("", HANDSHAKE, *index.load_pair(*p)) for p in track(train, "loading handshakes")]
     # `dualhmm train --preset new-people` (docs/hmm.md, "New people")
-    both = NEW_PEOPLE_ROLES == "both"
-    takes = both_roles(takes) if both else takes
+    takes, groups = learnt(takes, [p[0].subject for p in train], NEW_PEOPLE_ROLES)
     model = DualHMM(**NEW_PEOPLE)
-    model.fit(
-        [(a, b) for _, _, a, b in takes], groups=[p[0].subject for p in train] * (2 if both else 1)
-    )
+    model.fit([(a, b) for _, _, a, b in takes], groups=groups)
     a, b = (m.resample(model.fps) for m in index.load_pair(*test))
     virtual = model.respond(a, "windowed")
     quick = Baselines(model, regression=False)  # the GMR baseline: dualhmm crossval

@@ -40,7 +40,7 @@ import numpy as np
 from markovmotion.errors import MotionFormatError
 from markovmotion.io import MOTION_SUFFIXES
 from markovmotion.io.files import atomic_write, base_suffix
-from markovmotion.progress import note
+from markovmotion.progress import say
 
 CAMERAS_FILE = "cameras.json"
 MAX_CAMERAS = 4
@@ -363,36 +363,6 @@ def load_cameras(
     lines += centre_notes(out)
     say(lines, notes, path.resolve())
     return out, doc
-
-
-#: The notes printed in this command (:func:`say`), with the file each is about.
-_SAID: set[tuple[str, str]] = set()
-
-
-def say(lines: Sequence[str], notes: list[str] | None = None, about: object = "") -> None:
-    """Print each note (``"note: ..."``) not printed before in this command about the same
-    file (``about``), and add every one to ``notes`` if given: a command reads its camera
-    file more than once (the CLI, then the tracker, then ``--truth``), and a summary's
-    ``notes`` must hold them all the same."""
-    for line in lines:
-        key = (str(about), line)
-        if key not in _SAID:
-            _SAID.add(key)
-            note(line.removeprefix("note: "))
-        if notes is not None:
-            notes.append(line)
-
-
-def said(line: str) -> bool:
-    """Whether :func:`say` printed this line in this command (a summary's notes that the
-    command prints at its end leave them out)."""
-    return any(line == printed for _, printed in _SAID)
-
-
-def new_command() -> None:
-    """Forget the notes said (:func:`say`): a command starts, and says them again (tests run
-    many commands in one process)."""
-    _SAID.clear()
 
 
 @functools.lru_cache(maxsize=64)

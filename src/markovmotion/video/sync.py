@@ -152,7 +152,8 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
     measured[0] = True
     for v in range(1, v_n):
         f = fundamental(cams[0], cams[v])
-        cap = CAP_ANGLE * 0.5 * (cams[0].focal + cams[v].focal)
+        focal = 0.5 * (cams[0].focal + cams[v].focal)  # the pair's, in pixels
+        cap = CAP_ANGLE * focal
         scores, counts = {}, {}
         for lag in range(-max_lag, max_lag + 1):
             a = slice(max(0, -lag), min(f_n, f_n - lag))  # camera 0's frames
@@ -170,7 +171,7 @@ def estimate_offsets(views: ViewLandmarks, fps: float, max_lag_s: float = MAX_LA
         lag = min(scores, key=scores.get)
         none[v], best[v], pairs[v] = scores[0], scores[lag], counts[lag]
         best_lag[v], best_px[v] = lag, scores[lag]
-        gain_px = MIN_GAIN_ANGLE * 0.5 * (cams[0].focal + cams[v].focal)
+        gain_px = MIN_GAIN_ANGLE * focal
         if scores[lag] <= MIN_GAIN * scores[0] and scores[0] - scores[lag] >= gain_px:
             offsets[v] = lag
         else:

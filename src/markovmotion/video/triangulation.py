@@ -269,7 +269,7 @@ class ViewLandmarks:
             for v, c in zip(videos, cameras, strict=True)
         ]
         lengths = [len(g.found) for g in got]
-        n = sorted(lengths)[-2] if len(got) > 1 else lengths[0]  # frames 2 views have
+        n = two_views_have(lengths)
 
         def padded(a: np.ndarray, fill: float) -> np.ndarray:  # cut or padded to n frames
             out = np.full((n, *a.shape[1:]), fill)
@@ -299,7 +299,7 @@ def ended_notes(names: Sequence[str], lengths: Sequence[int], short: Sequence[st
     if len(lengths) == 1:
         note = shortest_note(names, lengths, short)
         return [note] if note else []
-    n = sorted(lengths)[-2]
+    n = two_views_have(lengths)
     out = []
     for name, k, why in zip(names, lengths, short, strict=True):
         if k < n:
@@ -1202,7 +1202,7 @@ def track_triangulated_video(
         "video_fps": tr.fps,
         "views_of_someone_else": one.someone_else,
         **whom(tr.points, cams, one.aim),
-        "landmark_views_dropped": dropped_views(lm, tri),
+        "landmark_views_dropped": dropped_views(seen, tri),
         "landmarks_despiked": spikes,
         "landmarks_filled_low_visibility": filled,
         **chosen.summary(),
@@ -1221,12 +1221,18 @@ def track_triangulated_video(
     return tr, summary
 
 
-def dropped_views(views: ViewLandmarks, tri: Triangulated) -> int:
-    """How many views saw a landmark surely (visibility at least ``MIN_VISIBILITY``) and
-    were not used for it: left out by the robust triangulation, or as a glitch. Counted
-    as the views seen less those used, it went negative (-58, -203 in a new user's trial):
-    :meth:`Triangulated.filled` uses views seen unsurely too."""
-    return int(((views.visibility >= MIN_VISIBILITY) & ~tri.used).sum())
+def two_views_have(lengths: Sequence[int]) -> int:
+    """The frames at least two of the views' videos have (of ``lengths``, one per view; one
+    view: its own): the frames a point can be triangulated in."""
+    return sorted(lengths)[-2] if len(lengths) > 1 else lengths[0]
+
+
+def dropped_views(seen: np.ndarray, tri: Triangulated) -> int:
+    """How many views saw a landmark surely (``seen``: visibility at least ``MIN_VISIBILITY``,
+    (V, F, 33)) and were not used for it: left out by the robust triangulation, or as a
+    glitch. Counted as the views seen less those used, it went negative (-58, -203 in a new
+    user's trial): :meth:`Triangulated.filled` uses views seen unsurely too."""
+    return int((seen & ~tri.used).sum())
 
 
 def whom(points: np.ndarray, cameras: Sequence[CalibratedCamera], aim: Aim | None) -> dict:
