@@ -12,7 +12,8 @@ import pytest
 from markovmotion.cli import main
 from markovmotion.data.index import data_root
 from markovmotion.errors import MotionFormatError
-from markovmotion.video.cameras import load_cameras, new_command
+from markovmotion.progress import new_command
+from markovmotion.video.cameras import load_cameras
 from markovmotion.video.render import read_frames, write_video
 
 REAL = data_root().parent / "video" / "pose2sim_balancing"
