@@ -338,13 +338,10 @@ def track(
         )
     if reference is not None:
         from markovmotion.features.body_points import body_points
-        from markovmotion.video.monocular import reference_errors, reference_note
+        from markovmotion.video.monocular import reference_report
 
-        summary["reference"] = reference_errors(
-            body_points(motion), reference, first_frame=first_skip
-        )
-        said = reference_note(
-            reference, summary["frames"], summary["video_fps"], first_skip, max_frames
+        summary["reference"], said = reference_report(
+            body_points(motion), reference, summary["video_fps"], first_skip, max_frames
         )
         later += [said] if said else []
     print_notes(later)

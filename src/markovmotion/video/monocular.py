@@ -589,7 +589,17 @@ def reference_errors(
     ``frames_missing``, unknown joints of the others as ``joints_missing``. The reference's
     frames are numbered in the first camera's video; ``first_frame``: the video frame that is
     the track's first (the camera's ``skip_frames``)."""
-    frames, ref = read_reference(reference)
+    return _errors(points, read_reference(reference), joints, first_frame)
+
+
+def _errors(
+    points: np.ndarray,
+    read: tuple[np.ndarray, np.ndarray],
+    joints: Sequence[str] = BODY_POINTS,
+    first_frame: int = 0,
+) -> dict:
+    """:func:`reference_errors` of a reference already read (:func:`read_reference`)."""
+    frames, ref = read
     frames = frames - first_frame
     keep = (frames >= 0) & (frames < len(points))
     frames, ref = frames[keep], ref[keep]
@@ -636,7 +646,18 @@ def reference_note(
     of the same video at its rate (a 60 fps reference against a 30 fps re-encoding was
     264.7 mm off without a word). None when they match, or when the track was cut by
     ``max_frames`` and the reference goes on."""
-    rows, _ = read_reference(reference)
+    return _note(reference, read_reference(reference)[0], frames, fps, first_frame, max_frames)
+
+
+def _note(
+    reference: str | os.PathLike[str],
+    rows: np.ndarray,
+    frames: int,
+    fps: float,
+    first_frame: int,
+    max_frames: int | None,
+) -> str | None:
+    """:func:`reference_note` of a reference whose frame numbers (``rows``) are read."""
     n = int((rows >= first_frame).sum())
     cut = max_frames is not None and frames >= max_frames
     if n == frames or (cut and n > frames):
@@ -651,6 +672,21 @@ def reference_note(
             f"the video is at {fps:g}: give a reference at the video's rate"
         )
     return line
+
+
+def reference_report(
+    points: np.ndarray,
+    reference: str | os.PathLike[str],
+    fps: float,
+    first_frame: int = 0,
+    max_frames: int | None = None,
+) -> tuple[dict, str | None]:
+    """A track's (F, 19, 3) body ``points`` against a reference CSV, read once: its errors
+    (:func:`reference_errors`) and the note of :func:`reference_note` (None when the rows and
+    the track's frames pair up), as every tracker's summary reports them."""
+    read = read_reference(reference)
+    note = _note(reference, read[0], len(points), fps, first_frame, max_frames)
+    return _errors(points, read, BODY_POINTS, first_frame), note
 
 
 def track_monocular_video(
@@ -700,9 +736,8 @@ def track_monocular_video(
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
-        errors = reference_errors(tr.points, reference, first_frame=cams[0].skip)
+        errors, said = reference_report(tr.points, reference, tr.fps, cams[0].skip, max_frames)
         # flat, as before, and under "reference" as the particle filter's summary has them
         summary.update(errors, reference=errors)
-        said = reference_note(reference, n, tr.fps, cams[0].skip, max_frames)
         summary["notes"] += [said] if said else []
     return tr, summary

@@ -60,8 +60,7 @@ from markovmotion.video.monocular import (
     REFERENCE_JOINTS,
     Landmarks,
     detect_landmarks,
-    reference_errors,
-    reference_note,
+    reference_report,
 )
 from markovmotion.video.render import (
     expected_frames,
@@ -1213,10 +1212,9 @@ def track_triangulated_video(
         "confidence": [round(float(c), 3) for c in conf],
     }
     if reference is not None:
-        errors = reference_errors(tr.points, reference, first_frame=cams[0].skip)
+        errors, said = reference_report(tr.points, reference, tr.fps, cams[0].skip, max_frames)
         # flat, as before, and under "reference" as the particle filter's summary has them
         summary.update(errors, reference=errors)
-        said = reference_note(reference, n, tr.fps, cams[0].skip, max_frames)
         summary["notes"] += [said] if said else []
     return tr, summary
 
