@@ -316,13 +316,18 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     copy = (take.person(1), take.person(0))  # a "model" that answers each person with itself
     result = evaluate_partner(small_partner, [take], "mocap", 30, "map", others={"copy": [copy]})
     responses = [f"multiple_hypotheses_{r}" for r in ("ml", "map", "mean")]
-    for key in ("single_hypothesis", "mean_shape", *responses):
+    for key in ("single_hypothesis", "single_hypothesis_paper", "mean_shape", *responses):
         assert 0 < result[key] < 1000 and 0 < result["placement_mm"][key] < 5000
     assert result["multiple_hypotheses_response"] == "map" and result["sigma"] == DEFAULT_SIGMA
     assert result["multiple_hypotheses"] == result["multiple_hypotheses_map"]
     assert result["copy"] == 0.0 and result["placement_mm"]["copy"] == 0.0
+    # the paper's single hypothesis (§5.1) is the re-synchronised one that never re-enters
+    paper = evaluate_partner(small_partner, [take], "mocap", 30, "map", resync=np.inf)
+    assert paper["single_hypothesis"] == paper["single_hypothesis_paper"]
+    assert paper["single_hypothesis_paper"] == result["single_hypothesis_paper"]
     assert result["unit"] == "mm" and set(result["per_frame_ms"]) == {
         "single_hypothesis",
+        "single_hypothesis_paper",
         "multiple_hypotheses",
         *responses,
     }
@@ -331,8 +336,8 @@ def test_evaluation_reports_every_error_and_the_cli_writes_a_partner(
     # how much each partner jumps, the dual HMM's measure, beside the real partner's: the
     # copy answers with the real partner, so it jumps as much
     jumps = result["jump_p90_mm"]
-    assert set(jumps) == {"mean_shape", "single_hypothesis", "multiple_hypotheses", "copy",
-                          "real", *responses}  # fmt: skip
+    assert set(jumps) == {"mean_shape", "single_hypothesis", "single_hypothesis_paper",
+                          "multiple_hypotheses", "copy", "real", *responses}  # fmt: skip
     steps = np.concatenate([jump_sizes(take.person(p).points) for p in (0, 1)])
     assert jumps["real"] == jumps["copy"] == round(float(np.percentile(steps, 90)), 1)
     assert jumps["multiple_hypotheses"] == jumps["multiple_hypotheses_map"]

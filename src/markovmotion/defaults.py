@@ -63,3 +63,16 @@ DUALHMM_PRESETS: dict[str, dict[str, object]] = {
     "paper": {},
     "new-people": {"roles": NEW_PEOPLE_ROLES, **NEW_PEOPLE},
 }
+
+# The behaviour chain's presets (``chain train/crossval --preset``; models/chain/partner.py).
+#: The chain's partner for people it has never seen (docs/chain.md, "New people"), as
+#: :class:`VirtualPartner` parameters: the person normalisation, fixed on principle as the
+#: dual HMM's, and the shape pulled half way to the training people's mean shape (the
+#: collection's pick by leaving one pair of people out; nested, the folds chose 0.25-0.75).
+#: Learnt in both roles (:data:`NEW_PEOPLE_ROLES`).
+CHAIN_NEW_PEOPLE: dict[str, object] = {"normalise": "person", "shrink": 0.5}
+#: ``chain train/crossval --preset``, as :data:`DUALHMM_PRESETS`.
+CHAIN_PRESETS: dict[str, dict[str, object]] = {
+    "paper": {},
+    "new-people": {"roles": NEW_PEOPLE_ROLES, **CHAIN_NEW_PEOPLE},
+}

@@ -14,17 +14,17 @@ from markovmotion.cli.options import (
     choice,
     choose_option,
     chosen_line,
-    flag,
-    given,
     grid_of,
     guide_for,
     guide_option,
     kind_option,
     normalise_option,
     person_option,
+    preset_option,
     ranged,
     roles_option,
     stopped,
+    with_preset,
 )
 from markovmotion.cli.tables import print_json, print_notes
 from markovmotion.data.index import read_listed_motion
@@ -153,20 +153,7 @@ KIND = kind_option()
 ROLES = roles_option()
 
 
-def preset_flags(values: dict) -> str:
-    """``--roles both --energy 0.99 ...``: option values as the command line writes them."""
-    return " ".join(
-        f"{flag(k)} {format(v, 'g') if isinstance(v, float) else v}" for k, v in values.items()
-    )
-
-
-PRESET = typer.Option(
-    "paper",
-    callback=choice(tuple(DUALHMM_PRESETS)),
-    help="'new-people': the partner for people the model has never seen ("
-    + preset_flags(DUALHMM_PRESETS["new-people"])
-    + "; docs/hmm.md), each replaced by the option if given. 'paper': none.",
-)
+PRESET = preset_option(DUALHMM_PRESETS, "docs/hmm.md")
 
 
 def _split(values: str | None) -> list[str] | None:
@@ -188,24 +175,6 @@ MODEL_OPTIONS = {
         )
     },
 }  # fmt: skip
-
-
-def with_preset(options: dict) -> dict:
-    """A command's options (its ``locals()``) with ``--preset``'s values
-    (:data:`~markovmotion.defaults.DUALHMM_PRESETS`) where the command line left them at their
-    defaults, and those values as ``preset_set``."""
-    from markovmotion.progress import note
-
-    preset = DUALHMM_PRESETS[options["preset"]]
-    set_ = {k: v for k, v in preset.items() if not given(k)}
-    if preset:  # said, so that an error about an option it set names where that came from
-        flags = preset_flags(set_)
-        kept = [flag(k) for k in preset if k not in set_]
-        note(
-            f"--preset {options['preset']}: {flags}"
-            + (f" ({', '.join(kept)} given)" if kept else "")
-        )
-    return {**options, **set_, "preset_set": set_}
 
 
 def new_model(options: dict):
@@ -268,7 +237,7 @@ def train(
 
     check_model_output(out)
     start = time.perf_counter()
-    options = with_preset(locals())
+    options = with_preset(locals(), DUALHMM_PRESETS)
     model = new_model(options)
     grid = grid_of("hmm", choose, options["preset_set"])
     with joblib.parallel_config(n_jobs=jobs or -1):  # loading shows progress; EM is quiet
@@ -635,7 +604,7 @@ def crossval(
 
     from markovmotion.evaluate.hmm import crossval_index
 
-    options = with_preset(locals())
+    options = with_preset(locals(), DUALHMM_PRESETS)
     model = new_model(options)
     grid = grid_of("hmm", choose, options["preset_set"])
     with joblib.parallel_config(n_jobs=jobs or -1):

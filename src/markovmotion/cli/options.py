@@ -404,3 +404,40 @@ def stopped(played: Any, total: int, out: Any) -> None:
         highlight=False,
     )
     raise SystemExit(130)
+
+
+def preset_flags(values: dict) -> str:
+    """``--roles both --energy 0.99 ...``: option values as the command line writes them."""
+    return " ".join(
+        f"{flag(k)} {format(v, 'g') if isinstance(v, float) else v}" for k, v in values.items()
+    )
+
+
+def preset_option(presets: dict[str, dict[str, object]], docs: str) -> Any:
+    """``--preset`` of a family whose ``presets`` (``paper``: none, ``new-people``: ...) are
+    documented in ``docs``: the values are spelt out in its help."""
+    return typer.Option(
+        "paper",
+        callback=choice(tuple(presets)),
+        help="'new-people': the partner for people the model has never seen ("
+        + preset_flags(presets["new-people"])
+        + f"; {docs}), each replaced by the option if given. 'paper': none.",
+    )
+
+
+def with_preset(options: dict, presets: dict[str, dict[str, object]]) -> dict:
+    """A command's options (its ``locals()``) with ``--preset``'s values (of ``presets``)
+    where the command line left them at their defaults, and those values as ``preset_set``;
+    a note says what it set, so that an error about an option it set names where that came
+    from."""
+    from markovmotion.progress import note
+
+    preset = presets[options["preset"]]
+    set_ = {k: v for k, v in preset.items() if not given(k)}
+    if preset:
+        kept = [flag(k) for k in preset if k not in set_]
+        note(
+            f"--preset {options['preset']}: {preset_flags(set_)}"
+            + (f" ({', '.join(kept)} given)" if kept else "")
+        )
+    return {**options, **set_, "preset_set": set_}
