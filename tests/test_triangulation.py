@@ -475,7 +475,8 @@ def test_a_reference_of_another_length_than_the_track_is_said(tmp_path):
     ref.write_text("\n".join(lines) + "\n", encoding="utf-8")
     said = reference_note(ref, 50, 30.0)
     assert said.startswith("note: the reference ref.csv has 100 rows and the track 50 frames")
-    assert "row k is compared with frame k" in said and "would be at 60 fps" in said
+    assert "row k is compared with frame k, its last 50 rows with none" in said
+    assert "if both span the same time, the reference is at 60 fps and the video at 30" in said
     assert reference_note(ref, 100, 60.0) is None
     assert reference_note(ref, 97, 60.0, first_frame=3) is None  # skip_frames 3: 97 rows on
     assert reference_note(ref, 30, 60.0, max_frames=30) is None  # --max-frames 30
@@ -483,6 +484,7 @@ def test_a_reference_of_another_length_than_the_track_is_said(tmp_path):
     assert "has 100 rows and the track 120 frames" in shorter and "fps" not in shorter
     longer = reference_note(ref, 104, 60.0)
     assert "has 100 rows and the track 104 frames" in longer and "fps" not in longer
+    assert "the track's last 4 with none" in longer
 
 
 def test_a_view_of_another_size_is_one_line(real_video, tmp_path, capsys):
@@ -897,7 +899,8 @@ def test_every_track_method_gives_the_reference_errors_under_reference(real_vide
 def test_a_video_with_no_one_in_it_says_so(tmp_path, capsys):
     """Each camera's empty-scene plate as a video: the particle filter reported a pose at
     confidence 0.40 in every frame and triangulation a NaN summary, exit 0 (a new user's
-    trial); both now stop in one line, as ``--method monocular`` did. (With the person gone
+    trial); both now stop in one line, and so does ``--method monocular`` (which had written
+    a track of no frame placed, exit 0: a later trial). (With the person gone
     from some frames only, those frames get confidence 0 and a note: 15 of 40 frames of the
     trial's clip, checked by hand.)"""
     from conftest import empty_scene
@@ -905,7 +908,7 @@ def test_a_video_with_no_one_in_it_says_so(tmp_path, capsys):
     from markovmotion.cli import main
 
     empty_scene(tmp_path, 4)
-    for method, out in (("apf", "x.bvh"), ("triangulate", "x.c3d")):
+    for method, out in (("apf", "x.bvh"), ("triangulate", "x.c3d"), ("monocular", "x.c3d")):
         with pytest.raises(SystemExit) as exit_:
             main(["track", "--video", str(tmp_path), "--method", method, "--particles", "50",
                   "--layers", "2", "--out", str(tmp_path / out)])  # fmt: skip

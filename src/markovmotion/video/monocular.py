@@ -644,8 +644,10 @@ def reference_note(
     the first camera's video, on) are not as many as the track's ``frames`` at ``fps``:
     :func:`reference_errors` pairs them frame by frame, which is right only for a reference
     of the same video at its rate (a 60 fps reference against a 30 fps re-encoding was
-    264.7 mm off without a word). None when they match, or when the track was cut by
-    ``max_frames`` and the reference goes on."""
+    264.7 mm off without a word). A video that ends early looks the same as a reference at
+    another rate, so the rate is offered as an "if", not asserted (a trial's video cut to 40
+    frames had been told to give a 150 fps reference at the video's rate). None when they
+    match, or when the track was cut by ``max_frames`` and the reference goes on."""
     return _note(reference, read_reference(reference)[0], frames, fps, first_frame, max_frames)
 
 
@@ -662,14 +664,20 @@ def _note(
     cut = max_frames is not None and frames >= max_frames
     if n == frames or (cut and n > frames):
         return None
+    left = (
+        f"its last {n - frames} rows with none"
+        if n > frames
+        else f"the track's last {frames - n} with none"
+    )
     line = (
         f"note: the reference {Path(reference).name} has {n} rows and the track {frames} "
-        f"frames: row k is compared with frame k"
+        f"frames: row k is compared with frame k, {left}"
     )
     if not cut and frames > 0 and abs(n / frames - 1.0) > 0.1:
+        # a video cut short and a reference at another rate look alike here: both are said
         line += (
-            f"; over the same time the reference would be at {fps * n / frames:.3g} fps, "
-            f"the video is at {fps:g}: give a reference at the video's rate"
+            f"; if both span the same time, the reference is at {fps * n / frames:.3g} fps and "
+            f"the video at {fps:g}: give a reference at the video's rate"
         )
     return line
 
@@ -720,6 +728,8 @@ def track_monocular_video(
     tr = track_monocular(
         path, cam, float(doc["fps"]), max_frames, stature, left_right=left_right, smooth_s=sigma
     )
+    if not tr.placed.any():  # as the other methods stop (an empty scene, the wrong video)
+        raise MotionFormatError(path, "no person found in this video (no frame placed)")
     n = len(tr.points)
     summary = {
         "method": "monocular",
