@@ -539,3 +539,18 @@ def test_a_composite_says_which_figure_is_the_virtual_partner():
     assert partner_caption("models/shake.npz") == "red: virtual partner (shake.npz)"
     changed = np.abs(shown.astype(int) - frame).max(axis=2) > 0
     assert changed[:20, :150].mean() > 0.5 and not changed[40:].any()  # top left only
+
+
+def test_a_track_that_keeps_starting_again_is_said_to_be_doubtful():
+    """A rendered two-person video tracked unguided restarted the search in 71 of 90 frames
+    and was 1750 mm from the capture without a word (a new user's trial): more than a fifth
+    of the frames restarted gets a note, which offers what the filter did not already use."""
+    from markovmotion.video.multiview import RESTARTS_NOTED, restarts_note
+
+    assert restarts_note(0, 100) == [] and restarts_note(int(RESTARTS_NOTED * 100), 100) == []
+    assert restarts_note(3, 0) == []
+    (line,) = restarts_note(71, 90)
+    assert line.startswith("note: the filter started its search again in 71 of 90 frames")
+    assert "--guide mediapipe" in line
+    (guided,) = restarts_note(71, 90, guided=True)
+    assert "--guide" not in guided and "--method triangulate" in guided
