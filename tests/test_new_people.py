@@ -147,6 +147,45 @@ def test_crossval_leaves_one_pair_of_people_out(people, fits):
     report = evaluation.summarise(results, model)
     assert set(report["per_people"]) == set(groups)
     assert sum(v["frames"] for v in report["per_people"].values()) == report["overall"]["frames"]
+    over = report["overall"]  # every report says which aims for new people it meets
+    share = 1 - over["windowed_mm"] / over["mean_pose_mm"]
+    assert over["aims"]["world_below_mean_pose"] == {
+        "value": round(share, 3),
+        "aim": evaluation.AIMS["world_below_mean_pose"],
+        "met": share >= evaluation.AIMS["world_below_mean_pose"],
+    }
+    assert "gmr" in next(k for k in over["aims"] if k.startswith("body_centred_below_near"))
+
+
+def test_the_aims_for_new_people_are_judged_at_their_bounds():
+    """:func:`evaluate.hmm.aims` from a summary: 30 % and 15 % below the mean pose, below the
+    peers, steps and the hands' gap at most 1.5x the real ones, observer at most 0.70, a live
+    step's p99 under 33 ms; what cannot be judged (no contact, one take) is left out."""
+    summary = {
+        "windowed_mm": 70.0, "mean_pose_mm": 100.0, "nearest_neighbour_mm": 71.0,
+        "body_centred": {"windowed_mm": 86.0, "mean_pose_mm": 100.0, "nearest_neighbour_mm": 80.0},
+        "windowed_jump_p90_mm": 15.0, "real_jump_p90_mm": 10.0,
+        "hand_gap_in_contact_median_mm": {"real": 100.0, "windowed": 151.0, "frames": 9},
+        "observer_accuracy": 0.7, "latency_us": {"median": 100.0, "p99": 33_000.0},
+    }  # fmt: skip
+    found = evaluation.aims(summary)
+    met = {k: v["met"] for k, v in found.items()}
+    assert met == {
+        "world_below_mean_pose": True,  # 30 % exactly
+        "world_below_nearest_neighbour": True,
+        "body_centred_below_mean_pose": False,  # 14 %
+        "body_centred_below_nearest_neighbour": False,
+        "jumps_times_real": True,  # 1.5x exactly
+        "hand_gap_times_real": False,  # 1.51x
+        "observer_at_most": True,
+        "live_step_p99_us": False,  # not under 33 ms
+    }
+    line = evaluation.aims_line(found)
+    assert "world 30 % below the mean pose (aim 30 %) met" in line
+    assert "body-centred 14 % below the mean pose (aim 15 %) NOT met" in line
+    del summary["hand_gap_in_contact_median_mm"]
+    summary["observer_accuracy"] = float("nan")
+    assert not {"hand_gap_times_real", "observer_at_most"} & set(evaluation.aims(summary))
 
 
 def test_both_roles_swaps_a_and_b():

@@ -687,3 +687,11 @@ def _print_table(report: dict) -> None:
         "apart; '-': one take)",
         highlight=False,
     )
+    from markovmotion.evaluate.hmm import aims_line
+
+    for name, r in {"overall": report["overall"], **report["per_label"]}.items():
+        err_console.print(
+            f"aims for a partner for new people (docs/hmm.md), {name}, windowed: "
+            + aims_line(r["aims"]),
+            highlight=False,
+        )
