@@ -481,3 +481,29 @@ def test_a_marker_never_seen_is_left_out_of_every_take_whatever_its_case():
     b = Markers(tuple(n.lower() for n in names), positions, 30.0, "b")
     kept = seen_in_every([a, b])
     assert kept[0].names == names[:4] and kept[1].names == tuple(n.lower() for n in names[:4])
+
+
+def test_unseen_markers_in_a_take_are_left_out_of_its_errors_not_a_crash(model, marker_takes):
+    """A held-out take with points unseen (NaN: occlusion) in A and in B: a new user's
+    evaluation died in the observer's logistic regression after every fold had run (and its
+    errors would have been NaN). B's unseen frames are left out of every measure, A's are
+    answered as respond answers them (the last seen frame held), and the numbers are those
+    of the seen frames."""
+    from markovmotion.evaluate.hmm import summarise
+
+    a, b = (m.copy() for m in marker_takes[2])
+    clean = evaluate_pair(model, a, b, "clean", "handshake")
+    b.positions[40:50, 0] = np.nan  # one marker of B unseen for ten frames (at 120 fps)
+    a.positions[100:120] = np.nan  # all of A unseen
+    res = evaluate_pair(model, a, b, "take", "handshake")
+    seen = np.isfinite(model.body_positions(model._rate(b))).all(axis=(1, 2))
+    assert 0 < (~seen).sum() < 10 and len(res.errors["windowed"]) == seen.sum()
+    for key in ("windowed", "mean_pose", "nearest_neighbour", "known_motion"):
+        assert np.isfinite(res.errors[key]).all() and np.isfinite(res.pose_errors[key]).all()
+    assert np.isfinite(res.jumps["real"]).all() and len(res.jumps["real"]) < len(
+        clean.jumps["real"]
+    )
+    # where B is seen and A was before, nothing moved
+    np.testing.assert_allclose(res.pose_errors["mean_pose"][:5], clean.pose_errors["mean_pose"][:5])
+    report = summarise([res, clean], model)["overall"]
+    assert all(np.isfinite(report[k]) for k in ("windowed_mm", "mean_pose_mm", "observer_accuracy"))

@@ -236,7 +236,7 @@ def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
     person. Its error is about how far below the mean pose a perfect partner of that kind
     could come (Bütepage markers, leave one pair out, the new-people options: 24 %
     body-centred in handshakes, 28 % in waves; docs/hmm.md, "New people")."""
-    return truth - truth.mean(axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
+    return truth - np.nanmean(truth, axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
 
 
 #: The partners whose world error is split into place and the rest (:func:`place_split`).
@@ -273,7 +273,7 @@ def evaluate_pair(
     # the baselines see A as the partner does (a skeleton lifted to a sensor model's height,
     # DualHMM.a_in) and are placed as the windowed partner is, brought down by the same lift
     seen, lift = model.a_in(a)
-    origin, yaw = model.placing(seen, lift=lift)
+    origin, yaw = model.placing(model.filled(seen), lift=lift)  # A unseen: as respond places B
     xa, _ = model.features_a(seen)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     if baselines.gmr is not None:
@@ -290,35 +290,48 @@ def evaluate_pair(
     for method in ("standard", "windowed"):
         generated[method] = generated[f"{own}/{method}"]
     truth, truth_pose = model.body_positions(b), model.body_positions(b, body_centred=True)
+    # B's frames with a point unseen (NaN) are left out of every measure, said once
+    seen = np.isfinite(truth).all(axis=(1, 2)) & np.isfinite(truth_pose).all(axis=(1, 2))
+    if not seen.all():
+        note(f"{name}: {int((~seen).sum())} of {len(seen)} frames of B have a point unseen: "
+             "left out of the errors")  # fmt: skip
     res = PairResult(name, label, model.fps)
-    res.jumps["real"] = jump_sizes(truth)
+    res.jumps["real"] = _finite(jump_sizes(truth))
     where = {k: model.body_positions(m) for k, m in generated.items()}  # once per output
     for k, m in generated.items():
-        res.errors[k] = trial_errors(where[k], truth)
-        res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)
+        res.errors[k] = trial_errors(where[k], truth)[seen]
+        res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)[seen]
         res.jumps[k] = jump_sizes(where[k])
     placed = baselines.mean_world(origin, yaw)
-    res.errors["mean_pose"] = trial_errors(placed, truth)
+    res.errors["mean_pose"] = trial_errors(placed, truth)[seen]
     for key, points in zip(PLACED, (where["windowed"], placed), strict=True):
         for part, err in place_split(points, truth).items():
-            res.places[f"{key}_{part}"] = err
+            res.places[f"{key}_{part}"] = err[seen]
     mean_pose = np.broadcast_to(baselines.mean_pose, truth_pose.shape)
     if lift is not None:  # the training people's heights are the sensor's: down by the lift
         mean_pose = mean_pose - np.outer(lift, UP)[:, None]
-    res.pose_errors["mean_pose"] = trial_errors(mean_pose, truth_pose)
-    res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)
-    res.pose_errors["known_motion"] = trial_errors(known_motion(mean_pose, truth_pose), truth_pose)
+    res.pose_errors["mean_pose"] = trial_errors(mean_pose, truth_pose)[seen]
+    res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)[seen]
+    res.pose_errors["known_motion"] = trial_errors(known_motion(mean_pose, truth_pose), truth_pose)[
+        seen
+    ]
     where_a = model.body_positions(a)
-    for key, points in (("real", truth), ("windowed", where["windowed"])):
-        res.windows[key] = observer_windows(where_a, points, origin, yaw)
+    real, win = (observer_windows(where_a, p, origin, yaw) for p in (truth, where["windowed"]))
+    whole = np.isfinite(real).all(axis=1) & np.isfinite(win).all(axis=1)  # A or B unseen
+    res.windows = {"real": real[whole], "windowed": win[whole]}
     gaps = hand_gaps(model, where_a, truth, where)
     if gaps is not None:
         res.hand_gaps = gaps
     lag = model.window - 1
     shown = where["windowed"][: len(truth) - lag]
-    res.errors["windowed_as_shown"] = trial_errors(shown, truth[lag:])
+    res.errors["windowed_as_shown"] = _finite(trial_errors(shown, truth[lag:]))
     res.latencies_us = step_latencies(model, xa)
     return res
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """``values`` without NaN (frames, or steps between frames, where a point is unseen)."""
+    return values[np.isfinite(values)]
 
 
 def plot_pair(result: PairResult, path: str | os.PathLike[str]) -> Path:

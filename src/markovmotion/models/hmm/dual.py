@@ -910,6 +910,12 @@ class DualHMM(Model):
             return first.place(self.input_markers(x).positions)
         return self.ground(x)
 
+    @staticmethod
+    def filled(motion: Motion | Markers) -> Motion | Markers:
+        """``motion`` with its frames that have a point unseen (NaN) filled as :meth:`respond`
+        fills A's (the last seen frame held): what B is placed through there."""
+        return _fill_missing(motion, ~finite_frames(motion))
+
     def placing(
         self, x: Motion | Markers, method: str = "windowed", lift: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
