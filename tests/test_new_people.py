@@ -253,6 +253,21 @@ def test_regression_output_on_its_training_take_beats_the_mean_pose(regression, 
         assert res.pose_errors[method].mean() < res.pose_errors["mean_pose"].mean()
 
 
+def test_takes_with_their_markers_in_another_order_learn_the_same_average_body(people):
+    """The person normalisation puts B's training frames on the average body marker by
+    marker: a take whose file lists its markers in another order is averaged by name (it
+    had been averaged by position, HEAD with L_HAND: a new user's collection of mixed orders
+    answered with a head 150-200 mm above the torso, the real people's 310-410)."""
+    pairs = [(a, b) for _, a, b in people[:3]]
+    order = list(reversed(pairs[1][0].names))
+    mixed = [pairs[0], (pairs[1][0].select(order), pairs[1][1].select(order)), pairs[2]]
+    kw = {"n_states": 3, "n_iter": 3, "normalise": "person", "frame": "heading"}
+    same = DualHMM(**kw).fit(pairs)
+    other = DualHMM(**kw).fit(mixed)
+    assert other.marker_names_b_ == same.marker_names_b_
+    np.testing.assert_allclose(other.markers_b_, same.markers_b_, atol=1e-3)
+
+
 def test_regression_output_needs_markers(people):
     from conftest import make_motion
 

@@ -611,7 +611,8 @@ class DualHMM(Model):
             )
         if self.place_scale == "size":
             b_rel = self._fit_place_size(first, a_list, b_list, b_rel)
-        if self.normalise == "person":
+        if self.normalise == "person":  # averaged marker by marker: by name, not position
+            b_rel = [b.select(b_rel[0].names) for b in b_rel]
             moved = on_average_body([b.positions for b in b_rel])
             b_rel = [Markers(b.names, p, b.fps, b.name) for b, p in zip(b_rel, moved, strict=True)]
         self.pipeline_a_ = FeaturePipeline([first, PCA(self.energy), *self._centring()])
