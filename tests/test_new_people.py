@@ -664,6 +664,16 @@ def test_evaluate_says_up_front_what_is_wrong_with_a_test_index(mocap, tmp_path,
     assert "1 file(s) that are not there: buetepage/shaking/nobody.c3d" in error(
         "--test", str(gone)
     )
+    # a row of another label lacking its partner's row is not the wave model's problem (it
+    # had stopped every evaluate on that index)
+    real_waves = [r for r in csv.DictReader(open(mocap.root / "INDEX.csv"))
+                  if r["label"] == "wave" and r["source"] == "buetepage"]  # fmt: skip
+    mixed = index(tmp_path / "mixed", [*real_waves, rows[0]])
+    kept = tmp_path / "kept.npz"
+    main(["dualhmm", "train", "--labels", "wave", "--kind", "markers", "--states", "3",
+          "--n-iter", "1", "--test-people", "pair3", "--out", str(kept)])  # fmt: skip
+    main(["dualhmm", "evaluate", "--model", str(kept), "--test", str(mixed), "--json"])
+    assert set(json.loads(capsys.readouterr().out)["per_people"]) == {"pair3"}
     err = error("--test", str(tmp_path / "nowhere"))
     assert "no INDEX.csv at" in err and "docs/data.md" in err
     cut = tmp_path / "cut.npz"

@@ -712,7 +712,9 @@ def evaluation_pairs(
     learnt = list(getattr(model, "labels_", None) or [])
     wanted = list(labels or learnt) or None
     index = evaluation_index(model, test)
-    there = sorted({a.label for a, _ in index.pairs()})
+    # the labels of its two-person takes, without pairing them (a row of another label
+    # lacking its partner's row is that label's problem, said when it is asked for)
+    there = sorted({e.label for e in index.query(category="interaction") if e.partner_file})
 
     def unlabelled(asked: str) -> DataNotFoundError:
         return DataNotFoundError(
