@@ -325,6 +325,9 @@ def test_train_holds_out_the_test_trials_or_none(mocap, tmp_path, capsys):
     last = sorted({a.subject for a, _ in pairs})[-1]
     kept = sum(a.subject != last for a, _ in pairs)
     assert learnt("--test-trials", "none", "--test-people", last) == kept
+    # alone, it replaces the collection's split: every other pair's take is learnt (the
+    # split had held out other people's last takes too, and evaluate answered them as new)
+    assert learnt("--test-people", last) == kept
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--test-people", "nobody"])
     assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err

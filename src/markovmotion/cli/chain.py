@@ -146,7 +146,8 @@ def _training_takes(
     :func:`~markovmotion.data.kinds.choose_kind` says what it leaves out), or tracked
     silhouette takes. ``test_trials``: the trials held out (``"none"``: every take is
     learnt); by default the collection's split (:func:`held_out_pairs`). ``test_people``:
-    pairs of people (INDEX.csv's ``subject``) whose takes are held out too."""
+    pairs of people (INDEX.csv's ``subject``) whose takes are held out (then, without
+    ``test_trials``, they alone)."""
     if source == "mocap":
         from markovmotion.data.kinds import choose_kind
         from markovmotion.evaluate.takes import index_record, take_names
@@ -158,8 +159,10 @@ def _training_takes(
         # select_pairs refuses a mistyped trial, which would otherwise leak into training
         listed = select_pairs(index, labels, held or None, held_out=False)
         pairs, _ = choose_kind(listed, kind, "two-person takes", lambda p: p[0], KINDS)
-        train = held_out_pairs(pairs)[0] if test_trials is None else pairs
         people = [p.strip() for p in (test_people or "").split(",") if p.strip()]
+        # held-out people replace the collection's split, as dualhmm train --test-people does
+        # (both had held out other people's last takes too, and evaluate mixed them in)
+        train = held_out_pairs(pairs)[0] if test_trials is None and not people else pairs
         away = people_out(index, train, people)
         train = [p for p in train if p not in away]
         if not train:
@@ -225,7 +228,8 @@ def train(
     test_people: str = typer.Option(
         None,
         help="mocap: comma-separated pairs of people (INDEX.csv's subject) held out for "
-        "testing (not learnt), for evaluate --test on their takes.",
+        "testing (not learnt; the other people's takes are all learnt unless --test-trials "
+        "says otherwise), for evaluate on their takes.",
     ),
 ) -> None:
     """Learn a behaviour chain from the training takes (held-out trials excluded): 3-D
