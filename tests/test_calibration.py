@@ -290,3 +290,24 @@ def test_a_wrong_unit_or_up_axis_is_said(real_video, tmp_path, capsys):
               "--force", *extra])  # fmt: skip
         err = capsys.readouterr().err
         assert ("note:" not in err) if says is None else (says in err), (extra, err)
+
+
+def test_a_calibration_of_six_cameras_is_read(real_video, tmp_path):
+    """A Pose2Sim file of six cameras had been refused ("1 to 4 are read"); a seventh is
+    still refused (defaults.MAX_CAMERAS). The real four cameras, the first two again."""
+    truth, _ = load_cameras(real_video)
+    for n in (6, 7):
+        calib = tmp_path / f"Calib{n}.toml"
+        calib.write_text(_toml([truth[k % 4] for k in range(n)]))
+        videos = []
+        for k in range(n):
+            video = tmp_path / f"v{n}" / f"cam{k}.mp4"
+            video.parent.mkdir(exist_ok=True)
+            video.symlink_to(real_video / f"cam{k % 4}.mp4")
+            videos.append(video)
+        if n == 6:
+            main(["video", "cameras", str(calib), *map(str, videos)])
+            assert len(load_cameras(videos[0].parent)[0]) == 6
+        else:
+            with pytest.raises(MotionFormatError, match="7 cameras .*: 1 to 6 are read"):
+                cameras_from_toml(calib, videos)

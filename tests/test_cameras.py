@@ -143,3 +143,27 @@ def test_every_command_says_the_camera_files_notes_anew(capsys):
     main(["data", "list", "--category", "exercise"])
     assert not progress.said("note: a camera note")
     capsys.readouterr()
+
+
+def _cams(folder) -> list[dict]:
+    return json.loads((folder / "cameras.json").read_text(encoding="utf-8"))["cameras"]
+
+
+def test_up_to_six_cameras_are_read(real_copy, capsys):
+    """A fifth and sixth camera had been refused ("1 to 4 cameras") though five views track
+    fine; seven are refused, the number given said: beyond six, making left and right agree
+    across the views takes minutes per second of video (defaults.MAX_CAMERAS)."""
+    from markovmotion.defaults import MAX_CAMERAS
+
+    first = _cams(real_copy)
+    for n in (5, 6, 7):
+        extra = [dict(first[k % 4], name=f"cam{k}") for k in range(4, n)]
+        _edit(real_copy, lambda d, extra=extra: d.update(cameras=first + extra))
+        if n <= MAX_CAMERAS:
+            assert len(load_cameras(real_copy)[0]) == n
+        else:
+            with pytest.raises(MotionFormatError, match="1 to 6 cameras, not 7"):
+                load_cameras(real_copy)
+    with pytest.raises(SystemExit) as stop:
+        main(["track", "--video", str(real_copy), "--views", "7"])
+    assert stop.value.code == 2 and "--views" in capsys.readouterr().err

@@ -76,3 +76,10 @@ CHAIN_PRESETS: dict[str, dict[str, object]] = {
     "paper": {},
     "new-people": {"roles": NEW_PEOPLE_ROLES, **CHAIN_NEW_PEOPLE},
 }
+
+# Multi-view video (video/cameras.py, the command line's --views).
+#: Most cameras a camera file may hold. Making MediaPipe's left and right agree across the
+#: views tries every labelling of them (2^(V-1)), each triangulated robustly over every
+#: subset of views (2^V): 200 synthetic frames took 6 s at 4 views, 25 s at 5 and 170 s at
+#: 6, and would take about an hour at 8 (``video.triangulation.views_sides``).
+MAX_CAMERAS = 6

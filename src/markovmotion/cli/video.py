@@ -17,6 +17,7 @@ from markovmotion.cli.options import (
     ranged,
 )
 from markovmotion.cli.tables import print_json, print_notes
+from markovmotion.defaults import MAX_CAMERAS
 from markovmotion.progress import err_console
 
 app = typer.Typer(
@@ -29,7 +30,9 @@ app = typer.Typer(
 def render(
     take: Path = typer.Argument(..., help="Person A's motion (BVH or ASF/AMC)."),
     out: Path = typer.Option(..., help="Folder for camK.mp4, camK_background.png, cameras.json."),
-    views: int = ranged("count", 3, min=1, max=4, help="Cameras around the capture volume."),
+    views: int = ranged(
+        "count", 3, min=1, max=MAX_CAMERAS, help="Cameras around the capture volume."
+    ),
     seconds: float = ranged("seconds", None, help="Only this much of the take."),
     start: float = ranged(
         "time_constant", None, help="Start this far into the take (s; 0: its start)."
@@ -160,7 +163,7 @@ def track(
     json_out: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     particles: int = ranged("count", 200, min=10, max=5000, help="Particles per layer."),
     layers: int = ranged("count", 10, min=1, max=50, help="Annealing layers (1: plain PF)."),
-    views: int = ranged("count", None, min=1, max=4, help="Use only the first cameras."),
+    views: int = ranged("count", None, min=1, max=MAX_CAMERAS, help="Use only the first cameras."),
     max_frames: int = ranged("count", None, max=1_000_000, help="Only the first frames."),
     data: Path = typer.Option(None, help="Motion capture for the body model (default: README)."),
     seed: int = ranged("seed", 0, help="Random seed."),

@@ -42,11 +42,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from markovmotion.defaults import MAX_CAMERAS
 from markovmotion.errors import MotionFormatError
 from markovmotion.progress import note
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
-    MAX_CAMERAS,
     CalibratedCamera,
     read_distortion,
     read_matrix,

@@ -37,13 +37,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from markovmotion.defaults import MAX_CAMERAS
 from markovmotion.errors import MotionFormatError
 from markovmotion.io import MOTION_SUFFIXES
 from markovmotion.io.files import atomic_write, base_suffix
 from markovmotion.progress import say
 
 CAMERAS_FILE = "cameras.json"
-MAX_CAMERAS = 4
 MAX_SIDE = 4096
 MAX_JSON_BYTES = 1_000_000
 #: How many lens distortion coefficients OpenCV takes (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1-s4 [tx ty]]]]).
@@ -322,7 +322,10 @@ def load_cameras(
         raise MotionFormatError(path, f"not a JSON camera file ({exc})") from None
     cams = doc.get("cameras") if isinstance(doc, dict) else None
     if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
-        raise MotionFormatError(path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras")
+        given = f", not {len(cams)}" if isinstance(cams, list) else ""
+        raise MotionFormatError(
+            path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras{given}"
+        )
     fps = doc.get("fps")
     if fps is not None and (
         isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000)

@@ -2,7 +2,7 @@
 
 :func:`render_multiview` renders a take as the person the tracker sees: the
 body model's flesh (:data:`~markovmotion.video.body_model.BODY_SHAPE`) on
-the take's body points, seen by 1 to 4 calibrated cameras spaced around the
+the take's body points, seen by 1 to 6 calibrated cameras spaced around the
 capture volume (Deutscher et al. used three), over a static textured
 background with sensor noise; person A alone (B masked) or both. It writes
 one video per camera and ``cameras.json``.
