@@ -7,6 +7,7 @@ import itertools
 import json
 
 import cv2
+import numpy as np
 import pytest
 
 from markovmotion.cli import main
@@ -167,3 +168,12 @@ def test_up_to_six_cameras_are_read(real_copy, capsys):
     with pytest.raises(SystemExit) as stop:
         main(["track", "--video", str(real_copy), "--views", "7"])
     assert stop.value.code == 2 and "--views" in capsys.readouterr().err
+
+
+def test_an_image_folders_frames_are_read_by_their_numbers(tmp_path):
+    """Frames named frame_1 ... frame_12 (no leading zeros) had been read as frame_1,
+    frame_10, frame_11, frame_12, frame_2 ... (106.9 mm from the reference for 79.5)."""
+    for k in range(1, 13):
+        cv2.imwrite(str(tmp_path / f"frame_{k}.png"), np.full((16, 16, 3), 10 * k, np.uint8))
+    got = [int(f[0, 0, 0]) for f in read_frames(tmp_path)]
+    assert got == [10 * k for k in range(1, 13)]

@@ -54,7 +54,7 @@ from markovmotion.video.cameras import (
     save_cameras,
     valid_camera,
 )
-from markovmotion.video.render import video_fps
+from markovmotion.video.render import natural_key, video_fps
 
 #: The calibration's up axis to the project's world (Y up, mm): rows are the project's X,
 #: Y, Z in the calibration's axes (a rotation, so handedness is kept).
@@ -170,11 +170,7 @@ def cameras_from_qca(
         raise MotionFormatError(
             path, f"{len(found)} video cameras (cameras/camera): 1 to {MAX_CAMERAS} are read"
         )
-    found.sort(
-        key=lambda c: [
-            int(x) if x.isdigit() else x.lower() for x in re.split(r"(\d+)", c.get("serial", ""))
-        ]
-    )
+    found.sort(key=lambda c: natural_key(c.get("serial", "")))
     if len(videos) != len(found):
         raise MotionFormatError(
             path, f"{len(found)} video cameras but {len(videos)} videos: give one video per camera"
