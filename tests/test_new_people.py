@@ -781,3 +781,34 @@ def test_the_new_people_preset_sets_the_recommended_options_unless_given(mocap, 
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--preset", "new-poeple", "--out", str(tmp_path / "x.npz")])
     assert exc.value.code == 2 and "new-poeple" in capsys.readouterr().err
+
+
+def test_heights_lifted_places_b_by_as_height_whatever_the_vertical_origin(people, capsys):
+    """Markers from another vertical origin (a sensor 300 mm higher, another lab's floor):
+    with ``heights="lifted"`` A is lifted to the training people's height and B comes back
+    down as much, so B moves with A exactly; with the default B stays at the training
+    capture's heights and a note says A stands far off."""
+    pairs = [(a, b) for _, a, b in people]
+    a = pairs[-1][0]
+    up = a.copy()
+    up.positions[..., 1] += 300.0
+    lifted = DualHMM(n_states=3, n_iter=3, heights="lifted").fit(pairs[:-1])
+    for method in ("standard", "windowed"):
+        moved = lifted.respond(up, method).positions - lifted.respond(a, method).positions
+        np.testing.assert_allclose(
+            moved, np.broadcast_to([0.0, 300.0, 0.0], moved.shape), atol=1e-6
+        )
+    up = lifted._rate(up)  # frame by frame online, the same frames
+    partner = lifted.partner()
+    shown = [partner.step(up.trim(t, t + 1)) for t in range(up.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    streamed = np.concatenate([s.positions for s in shown])
+    np.testing.assert_allclose(streamed, lifted.respond(up, "windowed").positions, atol=1e-6)
+    capsys.readouterr()
+    capture = DualHMM(n_states=3, n_iter=3).fit(pairs[:-1])
+    capture.respond(a)
+    assert "--heights lifted" not in capsys.readouterr().err
+    capture.respond(up)
+    assert "mm above the training people's" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="heights must be one of"):
+        DualHMM(heights="floor").fit(pairs[:-1])

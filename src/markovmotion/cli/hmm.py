@@ -122,6 +122,13 @@ PLACE_SCALE = typer.Option(
     "size, measured by A's markers, with B of the average size ('size'; markers; docs/hmm.md, "
     "'B's place and the pair's size').",
 )
+HEIGHTS = typer.Option(
+    "capture",
+    callback=choice(("capture", "lifted")),
+    help="A marker A at the heights it comes with, as the training capture's ('capture'), or "
+    "lifted to the training people's height, B moved down as much ('lifted': markers with "
+    "another vertical origin; docs/hmm.md, 'Markers as input').",
+)
 FPS = ranged("fps", 30.0, help="Model frame rate (takes are resampled).")
 WINDOW = ranged("window", 10, help="Windowed-Viterbi slice length.")
 INITIAL = typer.Option(
@@ -170,7 +177,7 @@ MODEL_OPTIONS = {
             "mode", "observation", "candidates", "placement_window", "place_memory", "blend_window",
             "trellis",
             "points", "energy", "frame", "markers", "fps", "window", "initial", "n_iter",
-            "normalise", "output", "contact_weight", "place_scale",
+            "normalise", "output", "contact_weight", "place_scale", "heights",
             "covariance_type", "var_floor",
         )
     },
@@ -217,6 +224,7 @@ def train(
     output: str = OUTPUT,
     contact_weight: float = CONTACT_WEIGHT,
     place_scale: str = PLACE_SCALE,
+    heights: str = HEIGHTS,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,
@@ -583,6 +591,7 @@ def crossval(
     output: str = OUTPUT,
     contact_weight: float = CONTACT_WEIGHT,
     place_scale: str = PLACE_SCALE,
+    heights: str = HEIGHTS,
     fps: float = FPS,
     window: int = WINDOW,
     initial: str = INITIAL,

@@ -496,6 +496,7 @@ def describe(model: DualHMM) -> dict:
         "output": model.output,
         "contact_weight": model.contact_weight,
         "place_scale": getattr(model, "place_scale", "none"),
+        "heights": getattr(model, "heights", "capture"),
     }
     if hasattr(model, "train_a_"):
         out.update(dims_a=int(model.train_a_.shape[1]), dims_b=int(model.train_b_.shape[1]))

@@ -103,7 +103,7 @@ from markovmotion.models.hmm.trellis import (
     smooth_place,
     successors,
 )
-from markovmotion.progress import track
+from markovmotion.progress import note, track
 from markovmotion.state import (
     StateError,
     check_count,
@@ -123,6 +123,11 @@ FRAMES = ("auto", "heading", "world")
 NORMALISE = ("none", "person")
 OUTPUTS = ("frames", "regression")
 PLACE_SCALES = ("none", "size")
+#: Where a marker model's A stands up and down (``DualHMM(heights=...)``).
+HEIGHTS = ("capture", "lifted")
+#: A marker A whose mean centroid height is further than this (mm) from the training
+#: people's gets a note (another vertical origin?): the training people span about 200 mm.
+HEIGHT_NOTE_MM = 250.0
 #: The ground plane's axes (y is up).
 #: The learnt parts of ``output="regression"`` (:func:`state_regressions`).
 _REGRESSION = ("reg_means_a_", "reg_means_b_", "reg_gains_")
@@ -297,6 +302,17 @@ class DualHMM(Model):
             (:func:`~markovmotion.features.person.size_scale`, online) and B of the average
             size. On the Bütepage pairs the separation over the pair's summed radius varies
             less than the separation (docs/hmm.md, "B's place and the pair's size").
+        heights: ``"capture"`` (the default) or ``"lifted"`` (a C3D marker model; our
+            addition): where A stands up and down. ``"capture"`` takes A's markers at the
+            heights they come with, as the training capture's (right for the same sensor:
+            on the Bütepage pairs a person's centroid height varies by 33 mm across people,
+            the partners' difference by 38); ``"lifted"`` lifts every A, as a skeleton is
+            always lifted, to the training people's mean centroid height by the causal
+            running mean of its own (:class:`~markovmotion.features.markers.Lift`) and
+            moves B's answer down as much: for markers whose vertical origin is another
+            (another lab's floor, a sensor at another height), where B would otherwise
+            stand as far off in height. A marker A further than :data:`HEIGHT_NOTE_MM` from
+            the training height with ``"capture"`` gets a note saying so.
         var_floor: each state's variance along PCA feature j is kept at or above this
             fraction of feature j's variance over the training frames (and at least
             ``GaussianHMM``'s absolute ``min_covar``); :class:`GaussianHMM`. The default 0.3
@@ -345,6 +361,7 @@ class DualHMM(Model):
         output: str = "frames",
         contact_weight: float = 0.0,
         place_scale: str = "none",
+        heights: str = "capture",
         n_iter: int = 50,
         tol: float = 1e-2,
         var_floor: float = 0.3,
@@ -371,6 +388,7 @@ class DualHMM(Model):
         self.output = output
         self.contact_weight = contact_weight
         self.place_scale = place_scale
+        self.heights = heights
         self.n_iter = n_iter
         self.tol = tol
         self.var_floor = var_floor
@@ -405,6 +423,8 @@ class DualHMM(Model):
             raise ValueError(f"output must be one of {OUTPUTS}, got {self.output!r}")
         if self.place_scale not in PLACE_SCALES:
             raise ValueError(f"place_scale must be one of {PLACE_SCALES}, got {self.place_scale!r}")
+        if self.heights not in HEIGHTS:
+            raise ValueError(f"heights must be one of {HEIGHTS}, got {self.heights!r}")
         counts = ("n_states", "window", "candidates", "placement_window", "blend_window", "n_iter")
         for name in counts:
             value = getattr(self, name)
@@ -739,8 +759,23 @@ class DualHMM(Model):
     def lifts(self, x: Motion | Markers) -> bool:
         """Whether A's points are lifted to the training people's height (:meth:`lift`): a
         skeleton given to a model learnt from C3D markers, whose vertical origin is the
-        sensor's, not the floor."""
-        return self.uses_markers and not self.markers and isinstance(x, Motion)
+        sensor's, not the floor; with ``heights="lifted"`` markers too."""
+        if not self.uses_markers or self.markers:
+            return False
+        return isinstance(x, Motion) or getattr(self, "heights", "capture") == "lifted"
+
+    def height_note(self, a: Markers) -> None:
+        """A note when marker A (the model's markers, not lifted) stands further than
+        :data:`HEIGHT_NOTE_MM` above or below the training people (``heights`` says why)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames with nothing seen
+            off = float(np.nanmean(a.positions[..., 1])) - self.lift().height
+        if abs(off) > HEIGHT_NOTE_MM:
+            note(
+                f"A's markers stand {abs(off):.0f} mm {'above' if off > 0 else 'below'} the "
+                "training people's (another vertical origin?): B is placed at the training "
+                "capture's heights; train with --heights lifted to place B by A's height"
+            )
 
     def lift(self) -> Lift:
         """:class:`~markovmotion.features.markers.Lift` to the training people's mean
@@ -1020,6 +1055,8 @@ class DualHMM(Model):
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         self.check_input(motion_a)
         motion_a, lift = self.a_in(motion_a)
+        if lift is None and self.uses_markers and not self.markers:
+            self.height_note(motion_a)
         xa, missing = self.features_a(motion_a)
         log_b = self.lambda_a_.log_frameprob(xa)
         log_b[missing] = 0.0
