@@ -470,6 +470,13 @@ def test_the_demo_on_a_users_own_walks_runs_what_it_can_and_says_what_it_skipped
     err = capsys.readouterr().err
     skipped = [ln for ln in err.splitlines() if ln.startswith("note: skipped on")]
     assert len(skipped) == len(STEPS) - 2 and all("mine/INDEX.csv" in ln for ln in skipped)
+    from rich.console import Console
+
+    from markovmotion.data import MocapIndex
+
+    with pytest.raises(DataNotFoundError) as no_exercise:  # not "labelled None"
+        vlmm_contours(tmp_path / "c", MocapIndex.load(mine), Console())
+    assert str(no_exercise.value).startswith("exercise takes, at least 2: 0 in")
     (mine / "INDEX.csv").write_text(rows[0] + "\n")
     with pytest.raises(DataNotFoundError, match="no step of the demo.*the first: A captured"):
         run_demo(tmp_path / "none", mine)

@@ -113,7 +113,9 @@ def vlmm_contours(out: Path, index: MocapIndex, console: Console) -> list[Path]:
     train, _ = held_out_last(
         required(
             index.query(category="exercise", label=label),
-            f"exercise takes labelled {label}, at least 2",
+            f"exercise takes labelled {label}, at least 2"
+            if label
+            else "exercise takes, at least 2",
             index,
             2,
         )
