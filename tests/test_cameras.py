@@ -177,3 +177,23 @@ def test_an_image_folders_frames_are_read_by_their_numbers(tmp_path):
         cv2.imwrite(str(tmp_path / f"frame_{k}.png"), np.full((16, 16, 3), 10 * k, np.uint8))
     got = [int(f[0, 0, 0]) for f in read_frames(tmp_path)]
     assert got == [10 * k for k in range(1, 13)]
+
+
+def test_the_videos_are_looked_for_in_the_folder_given(real_copy, tmp_path):
+    """``--video DIR --cameras OTHER/cameras.json`` had looked for the videos beside the
+    camera file alone: now in DIR first, then there; the error names both places."""
+    from markovmotion.video.cameras import camera_file, camera_videos
+
+    other = tmp_path / "other"
+    other.mkdir()
+    (real_copy / "cameras.json").rename(other / "cameras.json")
+    where = camera_file(real_copy, other / "cameras.json")
+    cams, _ = load_cameras(where)
+    assert camera_videos(where, cams) == [(real_copy / f"cam{k}.mp4").resolve() for k in range(4)]
+    (other / "cam3.mp4").symlink_to(REAL / "cam3.mp4")  # beside the file: still DIR's first
+    assert camera_videos(where, cams)[3] == (real_copy / "cam3.mp4").resolve()
+    (real_copy / "cam2.mp4").unlink()
+    with pytest.raises(MotionFormatError) as exc:
+        camera_videos(where, cams)
+    assert str(exc.value).startswith(f"{real_copy / 'cam2.mp4'}: no video for camera cam2")
+    assert f"here nor beside the camera file ({other / 'cam2.mp4'})" in str(exc.value)

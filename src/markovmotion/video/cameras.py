@@ -14,8 +14,9 @@ camera. ``cameras.json`` lies beside the videos::
                   "R": [[...], [...], [...]], "t": [tx, ty, tz],
                   "distortion": [0, 0, 0, 0, 0]}, ...]}
 
-``video`` is relative to the file; so is the optional ``background``, an
-image of the empty scene (else the tracker estimates it from the video). The optional
+``video`` is relative to the file (or, when the command is given the videos' folder apart
+from the file, to that folder first); so is the optional ``background``, an image of the
+empty scene (else the tracker estimates it from the video). The optional
 ``skip_frames`` of a camera is how many frames of its video come before the cameras'
 shared first frame (cameras started one after another; ``markovmotion video sync``
 measures and writes it); every reader of the video with its camera skips them. Without
@@ -256,9 +257,30 @@ def lone_video(video: str | os.PathLike[str]) -> bool:
     return video.is_file() and video.suffix.lower() != ".json"
 
 
+class CameraFile(type(Path())):  # type: ignore[misc]  # PosixPath or WindowsPath
+    """The path of a camera file given apart from the folder of its videos (``--video DIR
+    --cameras OTHER/cameras.json``), with that folder as ``videos``: :func:`camera_videos`
+    looks there first, then beside the file. A path, so that every reader passes it on as
+    it did the file's own path (the videos had been looked for beside the file alone)."""
+
+    #: The folder ``--video`` named (None on a path made from this one: its parent, ...).
+    videos: Path | None = None
+
+
+def video_folders(path: str | os.PathLike[str]) -> list[Path]:
+    """Where the videos of the camera file ``path`` are looked for, in order: the folder a
+    :class:`CameraFile` carries, then the file's own folder (the folder ``path`` if one)."""
+    own = Path(path) if Path(path).is_dir() else Path(path).parent
+    given = getattr(path, "videos", None)
+    if given is not None and Path(given).resolve() != own.resolve():
+        return [Path(given), own]
+    return [own]
+
+
 def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None) -> Path:
-    """The camera file of a video: ``cameras`` if given; else ``cameras.json`` in the folder
-    ``video`` or beside the video file ``video``.
+    """The camera file of a video: ``cameras`` if given (with the folder ``video``, if one,
+    as where its videos are looked for first: :class:`CameraFile`); else ``cameras.json``
+    in the folder ``video`` or beside the video file ``video``.
 
     Raises:
         MotionFormatError: ``video`` does not exist (named, rather than its camera file).
@@ -267,7 +289,11 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
     if not video.exists():
         raise MotionFormatError(video, "no such video file or folder")
     if cameras is not None:
-        return Path(cameras)
+        if not video.is_dir():
+            return Path(cameras)
+        found = CameraFile(cameras)
+        found.videos = video
+        return found
     if lone_video(video):
         return video.parent / CAMERAS_FILE
     return video
@@ -312,6 +338,7 @@ def load_cameras(
             distortion coefficients OpenCV does not take; no ``fps`` and no rate the
             videos agree on.
     """
+    folders = video_folders(path)
     path = Path(path)
     if path.is_dir():
         path = path / CAMERAS_FILE
@@ -359,9 +386,9 @@ def load_cameras(
         valid_camera(path, where, out[-1])
     lines: list[str] = []
     if fps is None:
-        fps = _rate_of_videos(path, out, lines)
+        fps = _rate_of_videos(path, folders, out, lines)
     else:
-        lines += _rate_notes(path.parent, out, float(fps))
+        lines += _rate_notes(folders, out, float(fps))
     doc["fps"] = float(fps)
     lines += centre_notes(out)
     say(lines, notes, path.resolve())
@@ -378,41 +405,48 @@ def _header_rate(video: str, mtime_ns: int) -> float:
     return float(own) if own and own > 0 else 0.0
 
 
-def _header_rates(folder: Path, cameras: list[CalibratedCamera]) -> dict[str, float]:
-    """The own frame rate (0: unknown) of each camera's video file found beside the camera
-    file, by the video's name (an image folder has none; a missing video is left to
-    :func:`camera_videos` to name)."""
+def _find(folders: Sequence[Path], name: str) -> Path | None:
+    """The file or folder ``name`` in the first of ``folders`` that has it (None: none)."""
+    return next((f / name for f in folders if (f / name).exists()), None)
+
+
+def _header_rates(folders: Sequence[Path], cameras: list[CalibratedCamera]) -> dict[str, float]:
+    """The own frame rate (0: unknown) of each camera's video file found (in ``folders``,
+    :func:`video_folders`), by the video's name (an image folder has none; a missing video
+    is left to :func:`camera_videos` to name)."""
     out = {}
     for c in cameras:
-        video = folder / c.video if c.video else None
+        video = _find(folders, c.video) if c.video else None
         if video is not None and video.is_file():
             out[video.name] = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
-        elif video is not None and video.exists():
+        elif video is not None:
             out[video.name] = 0.0
     return out
 
 
-def _rate_notes(folder: Path, cameras: list[CalibratedCamera], fps: float) -> list[str]:
-    """A note for each camera's video (beside the camera file) whose own frame rate is not the
+def _rate_notes(folders: Sequence[Path], cameras: list[CalibratedCamera], fps: float) -> list[str]:
+    """A note for each camera's video whose own frame rate is not the
     camera file's ``fps``, which is the one used: a video re-encoded at 30 fps under a file
     saying 60 was tracked at twice its speed, and paired with a reference frame by frame,
     without a word."""
     return [
         f"note: {name} is {own:g} fps by its own header, the camera file says {fps:g}: "
         "the camera file's rate is used (set its fps if the video's is right)"
-        for name, own in _header_rates(folder, cameras).items()
+        for name, own in _header_rates(folders, cameras).items()
         if own > 0 and abs(own - fps) > 0.01 * fps
     ]
 
 
-def _rate_of_videos(path: Path, cameras: list[CalibratedCamera], notes: list[str]) -> float:
+def _rate_of_videos(
+    path: Path, folders: Sequence[Path], cameras: list[CalibratedCamera], notes: list[str]
+) -> float:
     """The frame rate of a camera file without ``fps``: the one its videos' own headers agree
     on (within 1 %), said in ``notes``. It had been 25 without a word: the real 60 fps video
     was then tracked and smoothed at 25.
 
     Raises:
         MotionFormatError: no video gives a rate (image folders), or they disagree."""
-    rates = _header_rates(path.parent, cameras)
+    rates = _header_rates(folders, cameras)
     known = {name: r for name, r in rates.items() if r > 0}
     if not known:
         raise MotionFormatError(
@@ -462,10 +496,10 @@ def centre_notes(cameras: Sequence[CalibratedCamera]) -> list[str]:
 def camera_videos(
     path: str | os.PathLike[str], cameras: list[CalibratedCamera], what: str = "video"
 ) -> list[Path | None]:
-    """The ``video`` (or ``background``) file of each camera, relative to ``cameras.json``'s folder
-    (None for a camera without a background image)."""
-    path = Path(path)
-    folder = path if path.is_dir() else path.parent
+    """The ``video`` (or ``background``) file of each camera, relative to the folder
+    ``--video`` named if it was given apart from the camera file (:class:`CameraFile`),
+    else to ``cameras.json``'s folder (None for a camera without a background image)."""
+    folders = video_folders(path)
     out: list[Path | None] = []
     for c in cameras:
         name = getattr(c, what)
@@ -473,10 +507,19 @@ def camera_videos(
             if what != "video":
                 out.append(None)
                 continue
-            raise MotionFormatError(folder / CAMERAS_FILE, f"camera {c.name} names no video")
-        v = (folder / name).resolve()
-        if not v.exists():
-            raise MotionFormatError(v, f"no {what} for camera {c.name}")
+            raise MotionFormatError(folders[-1] / CAMERAS_FILE, f"camera {c.name} names no video")
+        found = _find(folders, name)
+        if found is None:
+            if len(folders) == 1:
+                raise MotionFormatError(
+                    (folders[0] / name).resolve(), f"no {what} for camera {c.name}"
+                )
+            raise MotionFormatError(
+                (folders[0] / name).resolve(),
+                f"no {what} for camera {c.name}, here nor beside the camera file "
+                f"({(folders[1] / name).resolve()})",
+            )
+        v = found.resolve()
         if not (v.is_file() or v.is_dir()):  # a device or a pipe would never end
             raise MotionFormatError(v, f"the {what} of camera {c.name} is not a regular file")
         out.append(v)
