@@ -385,8 +385,14 @@ def _respond_markers(
         if rate is not None:
             markers.fps = float(rate)
     model.check_input(markers)
-    write_c3d(model.respond(markers, person, **options), out)
-    err_console.print(f"wrote {out}", highlight=False)
+    partner = model.respond(markers, person, **options)
+    write_c3d(partner, out)
+    # at the model's rate, which may not be the input's (said, as dualhmm respond says it)
+    err_console.print(
+        f"wrote {out} ({len(partner.positions)} frames at {partner.fps:g} fps; the input: "
+        f"{markers.fps:g} fps)",
+        highlight=False,
+    )
 
 
 @app.command()
