@@ -629,14 +629,14 @@ def _report(report: dict, written: list[Path], json_out: bool) -> None:
         print_json(report, indent=2)
     else:
         _print_table(report)
-    for key in (
-        "test_files",
-        "left_out_training_files",
-        "left_out_other_kind",
-        "left_out_other_skeleton",
+    for key, what in (
+        ("test_files", "test files"),
+        ("left_out_training_files", "left out (training takes)"),
+        ("left_out_other_kind", "left out (another kind of take)"),
+        ("left_out_other_skeleton", "left out (without the model's joints or markers)"),
     ):
         if report.get(key) and not json_out:
-            err_console.print(f"{key.replace('_', ' ')}: {', '.join(report[key])}", highlight=False)
+            err_console.print(f"{what}: {', '.join(report[key])}", highlight=False)
     for p in written:
         err_console.print(f"wrote {p}", highlight=False)
 
