@@ -424,3 +424,18 @@ def test_the_webcam_trackers_causal_left_right_is_the_offline_one_on_real_camera
             if got is not None:
                 np.testing.assert_allclose(got.pixels, offline[t])
                 assert np.allclose(kept.pixels, lm.pixels[t])
+
+
+def test_a_person_small_in_the_image_is_said():
+    """One camera at half size (the person 80-95 px tall) was 336 mm from the reference
+    against 148 at full size (160-190 px) without a word: the summary gives the person's
+    height in pixels and a note below :data:`SMALL_PERSON_PX`."""
+    from markovmotion.video.monocular import SMALL_PERSON_PX, person_pixels, small_person_note
+
+    pixels = np.full((4, 33, 2), np.nan)
+    pixels[:3, :, 1] = np.linspace(100.0, 190.0, 33)  # 90 px tall in three frames
+    assert person_pixels(pixels) == pytest.approx(90.0)
+    assert person_pixels(np.full((2, 33, 2), np.nan)) is None
+    (line,) = small_person_note(90.0, "cam0")
+    assert "90 px tall in cam0's image" in line
+    assert small_person_note(SMALL_PERSON_PX, "cam0") == small_person_note(None, "cam0") == []

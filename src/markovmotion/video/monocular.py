@@ -51,6 +51,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -682,6 +683,33 @@ def _note(
     return line
 
 
+#: A person shorter than this in the image (px, MediaPipe's landmarks' median extent
+#: top to bottom) gets a note: on the real video at half size (80-95 px) one camera was
+#: 336 mm from the reference against 148 at full size (160-190 px).
+SMALL_PERSON_PX = 120.0
+
+
+def person_pixels(pixels: np.ndarray) -> float | None:
+    """The person's median height in the image (px) over the frames MediaPipe found them
+    in: the extent of the (F, 33, 2) landmark ``pixels`` top to bottom (None: none found)."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        extent = np.nanmax(pixels[..., 1], axis=1) - np.nanmin(pixels[..., 1], axis=1)
+        tall = float(np.nanmedian(extent))
+    return tall if np.isfinite(tall) else None
+
+
+def small_person_note(tall: float | None, camera: str) -> list[str]:
+    """One note when the person stands under :data:`SMALL_PERSON_PX` tall in ``camera``."""
+    if tall is None or tall >= SMALL_PERSON_PX:
+        return []
+    return [
+        f"note: the person is {tall:.0f} px tall in {camera}'s image: MediaPipe's landmarks, "
+        f"and the depth one camera takes from them, are coarse below about "
+        f"{SMALL_PERSON_PX:.0f} px (a larger video, or the person nearer the camera)"
+    ]
+
+
 def reference_report(
     points: np.ndarray,
     reference: str | os.PathLike[str],
@@ -730,6 +758,7 @@ def track_monocular_video(
     )
     if not tr.placed.any():  # as the other methods stop (an empty scene, the wrong video)
         raise MotionFormatError(path, "no person found in this video (no frame placed)")
+    tall = person_pixels(tr.landmarks.pixels)
     n = len(tr.points)
     summary = {
         "method": "monocular",
@@ -742,7 +771,8 @@ def track_monocular_video(
         "left_right": left_right,
         "smoothing_s": round(sigma, 4),
         "smoothing_chosen_by": "fixed: chosen on rendered kinds" if smooth is None else "--smooth",
-        "notes": [*notes, *tr.notes],
+        "person_px": None if tall is None else round(tall, 1),
+        "notes": [*notes, *tr.notes, *small_person_note(tall, cam.name)],
         "confidence": [round(float(c), 3) for c in tr.confidence],
     }
     if reference is not None:
