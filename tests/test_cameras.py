@@ -170,6 +170,89 @@ def test_up_to_six_cameras_are_read(real_copy, capsys):
     assert stop.value.code == 2 and "--views" in capsys.readouterr().err
 
 
+def _inverted(doc: dict, cameras=range(4)) -> None:
+    """Each named camera's R and t turned into its pose in the world (camera to world)."""
+    for k in cameras:
+        c = doc["cameras"][k]
+        r, t = np.array(c["R"]), np.array(c["t"])
+        c["R"], c["t"] = r.T.tolist(), (-r.T @ t).tolist()
+
+
+def test_cameras_given_as_their_poses_in_the_world_are_named(real_copy, capsys):
+    """The real cameras with R and t camera to world had been "no person found" by
+    triangulation and 2800 mm from the reference at exit 0 by the particle filter: now one
+    line saying so (exit 2), for two cameras too; the real ones say nothing."""
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    assert notes == []
+    saved = json.loads((real_copy / "cameras.json").read_text(encoding="utf-8"))
+    _edit(real_copy, lambda d: _inverted(d))
+    with pytest.raises(MotionFormatError, match="R and t look like camera-to-world") as exc:
+        load_cameras(real_copy)
+    assert "wants world-to-camera (x_cam = R x_world + t)" in str(exc.value)
+    with pytest.raises(SystemExit) as stop:
+        main(["track", "--video", str(real_copy), "--method", "triangulate"])
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and len(err.splitlines()) == 1 and "camera-to-world" in err
+    _edit(real_copy, lambda d: (d.update(saved), _inverted(d, (1, 2))))  # two of them
+    _edit(real_copy, lambda d: d.update(cameras=d["cameras"][1:3]))
+    with pytest.raises(MotionFormatError, match="R and t look like camera-to-world"):
+        load_cameras(real_copy)
+
+
+def test_the_camera_files_units_are_read(real_copy, capsys):
+    """``"units": "m"`` had been ignored (t in metres read as mm: 1448 mm from the reference,
+    no note); now m and cm are scaled to mm, anything else refused in one line, and cameras
+    a few mm apart (t in m, no units) or below the floor get a note, as `video cameras`
+    gives of a calibration."""
+    truth, _ = load_cameras(real_copy)
+    for units, scale in (("m", 1e-3), ("cm", 0.1)):
+        _edit(real_copy, lambda d, u=units, s=scale: (
+            d.update(units=u), [c.update(t=[x * s for x in c["t"]]) for c in d["cameras"]]
+        ))  # fmt: skip
+        got, doc = load_cameras(real_copy)
+        assert all(np.allclose(a.t, b.t) for a, b in zip(truth, got, strict=True)), units
+        _edit(real_copy, lambda d, s=scale: [
+            c.update(t=[x / s for x in c["t"]]) for c in d["cameras"]
+        ])  # fmt: skip
+    _edit(real_copy, lambda d: d.update(units="inch"))
+    with pytest.raises(MotionFormatError, match='\'units\' is "inch": give "mm"'):
+        load_cameras(real_copy)
+    _edit(real_copy, lambda d: (d.pop("units"), [
+        c.update(t=[x / 1000 for x in c["t"]]) for c in d["cameras"]
+    ]))  # fmt: skip
+    notes: list[str] = []
+    new_command()
+    load_cameras(real_copy, notes)
+    assert len(notes) == 1 and "the cameras stand at most 7 mm from one another" in notes[0]
+    assert '(t read in mm: no "units")' in notes[0]
+    _edit(real_copy, lambda d: [c.update(t=[x * 1000 for x in c["t"]]) for c in d["cameras"]])
+    lowered = load_cameras(real_copy)[0][1]  # cam1 3 m lower, aimed alike
+    _edit(real_copy, lambda d: d["cameras"][1].update(
+        t=(lowered.t + lowered.R @ [0.0, 3000.0, 0.0]).tolist()
+    ))  # fmt: skip
+    notes.clear()
+    load_cameras(real_copy, notes)
+    assert any("cam1 below the floor (world Y = 0)" in n for n in notes), notes
+
+
+def test_unknown_keys_of_a_camera_file_are_named(real_copy):
+    """A lens under "distorsion", a plate under "backgroud" had been dropped without a word
+    (the lens: 79.5 mm for 74.5): one note naming them, where, the key meant and the known
+    ones."""
+    _edit(real_copy, lambda d: (
+        d["cameras"][2].update(distorsion=[0.1, 0, 0, 0]), d["cameras"][1].update(backgroud="x"),
+        d.update(comment="mine"),
+    ))  # fmt: skip
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    assert len(notes) == 1, notes
+    assert '"distorsion" in cameras[2] (meant "distortion"?)' in notes[0]
+    assert '"backgroud" in cameras[1] (meant "background"?)' in notes[0]
+    assert '"comment" in top level' in notes[0]
+    assert "per camera name, video, width, height, K, R, t, distortion" in notes[0]
+
+
 def test_an_image_folders_frames_are_read_by_their_numbers(tmp_path):
     """Frames named frame_1 ... frame_12 (no leading zeros) had been read as frame_1,
     frame_10, frame_11, frame_12, frame_2 ... (106.9 mm from the reference for 79.5)."""
@@ -177,6 +260,19 @@ def test_an_image_folders_frames_are_read_by_their_numbers(tmp_path):
         cv2.imwrite(str(tmp_path / f"frame_{k}.png"), np.full((16, 16, 3), 10 * k, np.uint8))
     got = [int(f[0, 0, 0]) for f in read_frames(tmp_path)]
     assert got == [10 * k for k in range(1, 13)]
+
+
+def test_a_calibration_given_as_the_camera_file_says_how_to_convert_it(tmp_path):
+    """``--cameras Calib.toml`` had been a bare JSON error."""
+    (tmp_path / "Calib.toml").write_text('[cam_01]\nname = "cam_01"\nmatrix = [[1, 0, 0]]\n')
+    (tmp_path / "Calib.qca.txt").write_text('<?xml version="1.0"?><calibration/>')
+    for name in ("Calib.toml", "Calib.qca.txt"):
+        with pytest.raises(MotionFormatError) as exc:
+            load_cameras(tmp_path / name)
+        assert f"convert it with `markovmotion video cameras {name} VIDEO...`" in str(exc.value)
+    (tmp_path / "c.json").write_text("{not json")
+    with pytest.raises(MotionFormatError, match="not a JSON camera file"):
+        load_cameras(tmp_path / "c.json")
 
 
 def test_the_videos_are_looked_for_in_the_folder_given(real_copy, tmp_path):
@@ -197,3 +293,16 @@ def test_the_videos_are_looked_for_in_the_folder_given(real_copy, tmp_path):
         camera_videos(where, cams)
     assert str(exc.value).startswith(f"{real_copy / 'cam2.mp4'}: no video for camera cam2")
     assert f"here nor beside the camera file ({other / 'cam2.mp4'})" in str(exc.value)
+
+
+def test_a_size_written_as_a_float_is_read_and_a_missing_one_named(real_copy):
+    """``"width": 272.0`` (as Pose2Sim writes sizes) and a missing width had both been
+    "width and height must be 16 to 4096"."""
+    _edit(real_copy, lambda d: [c.update(width=272.0, height=480.0) for c in d["cameras"]])
+    assert load_cameras(real_copy)[0][0].width == 272
+    _edit(real_copy, lambda d: d["cameras"][1].pop("height"))
+    with pytest.raises(MotionFormatError, match=r"cameras\[1\] has no height"):
+        load_cameras(real_copy)
+    _edit(real_copy, lambda d: d["cameras"][1].update(height=480.5))
+    with pytest.raises(MotionFormatError, match=r"cameras\[1\].height must be a whole number"):
+        load_cameras(real_copy)

@@ -48,6 +48,7 @@ from markovmotion.progress import note
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
     CalibratedCamera,
+    placement,
     read_distortion,
     read_matrix,
     read_small_text,
@@ -292,26 +293,19 @@ def check_order(
         )
 
 
-#: Cameras that see a person from this close to one another (mm, the widest pair) or this
-#: far, or that stand below the floor, are more likely a wrong ``--units`` or ``--up``.
-CAMERA_SPREAD_MM = (200.0, 100_000.0)
-
-
 def check_placement(cameras: list, up: str, units: str) -> None:
     """Notes when the cameras' places look like a wrong ``--units`` (the widest pair of
     cameras closer than a person's width, or further than 100 m, apart) or ``--up`` (a
-    camera below the floor, world Y = 0): a file in metres read as mm put the cameras a few
-    mm from one another, and a Z-up file read as Y-up laid the person on their side, both
-    tracked at confidence 0.93 without a word."""
-    centres = np.array([-c.R.T @ c.t for c in cameras])
-    spread = max((float(np.linalg.norm(a - b)) for a in centres for b in centres), default=0.0)
-    low, high = CAMERA_SPREAD_MM
-    if len(cameras) > 1 and not low <= spread <= high:
+    camera below the floor, world Y = 0; :func:`~markovmotion.video.cameras.placement`): a
+    file in metres read as mm put the cameras a few mm from one another, and a Z-up file
+    read as Y-up laid the person on their side, both tracked at confidence 0.93 without a
+    word."""
+    spread, below = placement(cameras)
+    if spread is not None:
         note(
             f"the cameras stand at most {spread:.0f} mm from one another (read with --units "
             f"{units}): is that the calibration's unit?"
         )
-    below = [c.name for c, x in zip(cameras, centres, strict=True) if x[1] < 0]
     if below:
         note(
             f"{', '.join(below)} below the floor (world Y = 0, up read as --up {up}): is that "

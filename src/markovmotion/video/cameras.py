@@ -14,9 +14,11 @@ camera. ``cameras.json`` lies beside the videos::
                   "R": [[...], [...], [...]], "t": [tx, ty, tz],
                   "distortion": [0, 0, 0, 0, 0]}, ...]}
 
-``video`` is relative to the file (or, when the command is given the videos' folder apart
-from the file, to that folder first); so is the optional ``background``, an image of the
-empty scene (else the tracker estimates it from the video). The optional
+``units`` is the unit of ``t``: "mm" (the default), "cm" or "m"; ``R`` and ``t`` take
+world points to the camera (not the camera's pose in the world: such a file is recognised,
+:func:`convention_problem`). ``video`` is relative to the file (or, when the command is
+given the videos' folder apart from the file, to that folder first); so is the optional
+``background``, an image of the empty scene (else the tracker estimates it from the video). The optional
 ``skip_frames`` of a camera is how many frames of its video come before the cameras'
 shared first frame (cameras started one after another; ``markovmotion video sync``
 measures and writes it); every reader of the video with its camera skips them. Without
@@ -27,6 +29,7 @@ file and the field.
 
 from __future__ import annotations
 
+import difflib
 import functools
 import json
 import math
@@ -325,18 +328,21 @@ def load_cameras(
     path: str | os.PathLike[str], notes: list[str] | None = None
 ) -> tuple[list[CalibratedCamera], dict]:
     """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document,
-    whose ``fps`` is the file's or, without one, the rate the videos' own headers agree on.
+    whose ``fps`` is the file's or, without one, the rate the videos' own headers agree on;
+    each camera's ``t`` in mm whatever the file's ``units``.
 
-    What may be wrong with a file that reads (a video's header giving another rate, no
-    ``fps``, a principal point far from the image's middle) is said in notes, printed once
-    per command (:func:`say`: a command reads its camera file more than once) and added to
-    ``notes`` if given, for a summary's ``notes``.
+    What may be wrong with a file that reads (keys it does not know, a video's header giving
+    another rate, no ``fps``, a principal point far from the image's middle, cameras
+    placed as if in another unit or below the floor, R and t that look like the cameras'
+    poses) is said in notes, printed once per command (:func:`say`: a command reads its
+    camera file more than once) and added to ``notes`` if given, for a summary's ``notes``.
 
     Raises:
-        MotionFormatError: no such file, not JSON, or a camera without valid
-            size, intrinsics, an orthonormal rotation, a translation, or with
-            distortion coefficients OpenCV does not take; no ``fps`` and no rate the
-            videos agree on.
+        MotionFormatError: no such file, not JSON (a calibration file given instead is
+            named as one), another ``units`` than mm, cm or m, or a camera without valid
+            size, intrinsics, an orthonormal rotation, a translation, or with distortion
+            coefficients OpenCV does not take; no ``fps`` and no rate the videos agree
+            on; R and t that are surely the cameras' poses.
     """
     folders = video_folders(path)
     path = Path(path)
@@ -346,29 +352,33 @@ def load_cameras(
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise MotionFormatError(path, f"not a JSON camera file ({exc})") from None
+        raise MotionFormatError(path, _not_json(path, text, exc)) from None
     cams = doc.get("cameras") if isinstance(doc, dict) else None
     if not isinstance(cams, list) or not 1 <= len(cams) <= MAX_CAMERAS:
         given = f", not {len(cams)}" if isinstance(cams, list) else ""
         raise MotionFormatError(
             path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras{given}"
         )
+    say(unknown_key_notes(path, doc), notes, path.resolve())  # a typo'd key before its error
     fps = doc.get("fps")
     if fps is not None and (
         isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000)
     ):
         raise MotionFormatError(path, "'fps' must be a number above 0 and at most 1000")
+    units = doc.get("units", "mm")
+    if not isinstance(units, str) or units not in CAMERA_UNITS:
+        raise MotionFormatError(
+            path, f'\'units\' is {json.dumps(units)}: give "mm" (the default), "cm" or "m"'
+        )
     out = []
     for i, c in enumerate(cams):
         where = f"cameras[{i}]"
         if not isinstance(c, dict):
             raise MotionFormatError(path, f"{where} must be an object")
-        w, h = c.get("width"), c.get("height")
-        if not all(isinstance(v, int) for v in (w, h)):
-            raise MotionFormatError(path, f"{where}: width and height must be 16 to {MAX_SIDE}")
+        w, h = (_side(path, where, c, key) for key in ("width", "height"))
         k = read_matrix(path, f"{where}.K", c.get("K"), (3, 3))
         r = read_matrix(path, f"{where}.R", c.get("R"), (3, 3))
-        t = read_matrix(path, f"{where}.t", c.get("t"), (3,))
+        t = read_matrix(path, f"{where}.t", c.get("t"), (3,)) * CAMERA_UNITS[units]
         dist = read_distortion(path, f"{where}.distortion", c.get("distortion", []))
         video = c.get("video", "")
         if not isinstance(video, str) or len(video) > 255:
@@ -384,15 +394,177 @@ def load_cameras(
             )
         out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist, skip))
         valid_camera(path, where, out[-1])
-    lines: list[str] = []
+    problem, unambiguous = convention_problem(out)
+    if problem and unambiguous:
+        raise MotionFormatError(path, problem)
+    lines: list[str] = [f"note: {path.name}: {problem}"] if problem else []
     if fps is None:
         fps = _rate_of_videos(path, folders, out, lines)
     else:
         lines += _rate_notes(folders, out, float(fps))
     doc["fps"] = float(fps)
     lines += centre_notes(out)
+    if not problem:  # cameras the wrong way round are placed anywhere
+        said = f'its "units": "{units}"' if "units" in doc else 'no "units"'
+        lines += _placement_notes(path, out, f"t read in {units}: {said}")
     say(lines, notes, path.resolve())
     return out, doc
+
+
+#: The ``units`` a camera file's ``t`` may be in, and each one's millimetres.
+CAMERA_UNITS: dict[str, float] = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+#: The keys a camera file's top level and each of its cameras may hold (``video render``
+#: and ``video cameras`` write ``source``, ``rendered``, ``start_frame``, ``people``, ``up``).
+TOP_KEYS = ("units", "fps", "cameras", "source", "rendered", "start_frame", "people", "up")
+CAMERA_KEYS = (
+    "name", "video", "width", "height", "K", "R", "t", "distortion", "background",
+    "skip_frames",
+)  # fmt: skip
+
+
+def _side(path: Path, where: str, camera: dict, key: str) -> int:
+    """A camera's ``width`` or ``height``: a whole number, also as a float (Pose2Sim writes
+    ``1088.0``); one line when it is missing or not whole (the range: :func:`valid_camera`)."""
+    value = camera.get(key)
+    if value is None:
+        raise MotionFormatError(path, f"{where} has no {key} (its images' size in pixels)")
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise MotionFormatError(
+            path, f"{where}.{key} must be a whole number of pixels, 16 to {MAX_SIDE}"
+        )
+    return value
+
+
+def _not_json(path: Path, text: str, exc: json.JSONDecodeError) -> str:
+    """Why a camera file is not JSON: a Pose2Sim / Anipose TOML or a Qualisys calibration
+    given in its place (``--cameras Calib.toml``) is named, with the command that converts
+    it; anything else gets the JSON error."""
+    head = text.lstrip()[:200]
+    name = path.name.lower()
+    if name.endswith((".qca.txt", ".qca")) or head.startswith("<"):
+        kind = "a Qualisys calibration (.qca.txt)"
+    elif name.endswith(".toml") or (head.startswith("[") and "matrix" in text):
+        kind = "a Pose2Sim / Anipose calibration (TOML)"
+    else:
+        return f"not a JSON camera file ({exc})"
+    return (
+        f"is {kind}, not a camera file (cameras.json): convert it with `markovmotion video "
+        f"cameras {path.name} VIDEO...` (one video per camera, in its order)"
+    )
+
+
+def unknown_key_notes(path: Path, doc: dict) -> list[str]:
+    """One note naming the keys of a camera file that nothing reads, with the known ones:
+    a lens under ``"distorsion"`` or a plate under ``"backgroud"`` had been dropped without
+    a word (79.5 mm for 74.5, the background learnt)."""
+    found: dict[str, list[str]] = {}
+    for key in doc:
+        if key not in TOP_KEYS:
+            found.setdefault(key, []).append("top level")
+    for i, c in enumerate(doc["cameras"]):
+        for key in c if isinstance(c, dict) else ():
+            if key not in CAMERA_KEYS:
+                found.setdefault(key, []).append(f"cameras[{i}]")
+    if not found:
+        return []
+    listed = []
+    for key, where in found.items():
+        known = TOP_KEYS if where == ["top level"] else CAMERA_KEYS
+        near = difflib.get_close_matches(key, known, n=1, cutoff=0.75)
+        more = ", ..." if len(where) > 3 else ""
+        hint = f' (meant "{near[0]}"?)' if near else ""
+        listed.append(f'"{key}" in {", ".join(where[:3])}{more}{hint}')
+    return [
+        f"note: {path.name}: unknown keys, ignored: {'; '.join(listed)}. Known: "
+        f"{', '.join(TOP_KEYS)}; per camera {', '.join(CAMERA_KEYS)}"
+    ]
+
+
+def aim_point(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
+    """The point (3,) mm nearest every camera's optical axis (least squares), where the
+    cameras are aimed; None when the axes are (nearly) parallel. As
+    ``triangulation.capture_centre``, here because that module takes seconds to import."""
+    a, b = np.zeros((3, 3)), np.zeros(3)
+    for c in cameras:
+        m = np.eye(3) - np.outer(c.R[2], c.R[2])  # R's third row: the optical axis
+        a += m
+        b += m @ c.centre
+    if np.linalg.cond(a) > 1e6:
+        return None
+    return np.linalg.solve(a, b)
+
+
+def _aimed(cameras: Sequence[CalibratedCamera]) -> int:
+    """How many cameras have the point they are aimed at (:func:`aim_point`) in front, within
+    about 60 degrees of their axis (0 without such a point)."""
+    point = aim_point(cameras)
+    if point is None:
+        return 0
+    aimed = 0
+    for c in cameras:
+        ahead = c.R @ point + c.t
+        aimed += bool(ahead[2] > 0.5 * np.linalg.norm(ahead))
+    return aimed
+
+
+def convention_problem(cameras: Sequence[CalibratedCamera]) -> tuple[str, bool]:
+    """What to say of cameras whose ``R`` and ``t`` look like their poses in the world
+    (camera to world) rather than world to camera, and whether it is unambiguous: with each
+    inverted (``R^T``, ``-R^T t``) the point their optical axes meet lies ahead of every
+    one, as given it does not (unambiguous: ahead of at most half of them). The real video's
+    cameras so inverted had been "no person found" (triangulation) or tracked 2800 mm from
+    the reference at exit 0. ("", False) for cameras that look right, or for one camera."""
+    n = len(cameras)
+    if n < 2:
+        return "", False
+    given = _aimed(cameras)
+    inverted = _aimed([replace(c, R=c.R.T, t=-c.R.T @ c.t) for c in cameras])
+    if not given < inverted == n:
+        return "", False
+    return (
+        f"R and t look like camera-to-world (the point the cameras' axes meet lies ahead "
+        f"of {given} of the {n} cameras; with R and t inverted, of {inverted}): cameras.json "
+        "wants world-to-camera (x_cam = R x_world + t)",
+        given <= n / 2,
+    )
+
+
+#: Cameras that see a person from this close to one another (mm, the widest pair) or this
+#: far are more likely in another unit than said (:func:`placement`).
+CAMERA_SPREAD_MM = (200.0, 100_000.0)
+
+
+def placement(cameras: Sequence[CalibratedCamera]) -> tuple[float | None, list[str]]:
+    """How far apart the widest pair of cameras stand (mm) when that is outside
+    :data:`CAMERA_SPREAD_MM` (else None), and the cameras below the floor (world Y < 0):
+    what a wrong unit or up axis looks like (a file in metres read as mm put the cameras a
+    few mm from one another)."""
+    centres = np.array([c.centre for c in cameras])
+    spread = max((float(np.linalg.norm(a - b)) for a in centres for b in centres), default=0.0)
+    low, high = CAMERA_SPREAD_MM
+    odd = spread if len(cameras) > 1 and not low <= spread <= high else None
+    return odd, [c.name for c, x in zip(cameras, centres, strict=True) if x[1] < 0]
+
+
+def _placement_notes(path: Path, cameras: Sequence[CalibratedCamera], units: str) -> list[str]:
+    """:func:`placement` of a camera file's cameras, as notes (``units``: how ``t`` was
+    read; ``video cameras`` says it of a calibration it converts, and a hand-written file
+    had been read without it)."""
+    spread, below = placement(cameras)
+    out = []
+    if spread is not None:
+        out.append(
+            f"note: {path.name}: the cameras stand at most {spread:.0f} mm from one another "
+            f"({units}): is that the unit of its t?"
+        )
+    if below:
+        out.append(
+            f"note: {path.name}: {', '.join(below)} below the floor (world Y = 0): is its "
+            "world Y up?"
+        )
+    return out
 
 
 @functools.lru_cache(maxsize=64)
