@@ -482,10 +482,10 @@ def unknown_key_notes(path: Path, doc: dict) -> list[str]:
     ]
 
 
-def aim_point(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
-    """The point (3,) mm nearest every camera's optical axis (least squares), where the
-    cameras are aimed; None when the axes are (nearly) parallel. As
-    ``triangulation.capture_centre``, here because that module takes seconds to import."""
+def capture_centre(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
+    """The point (3,) mm nearest every camera's optical axis (least squares): where the
+    cameras are aimed, the middle of the capture volume; None when the axes are (nearly)
+    parallel."""
     a, b = np.zeros((3, 3)), np.zeros(3)
     for c in cameras:
         m = np.eye(3) - np.outer(c.R[2], c.R[2])  # R's third row: the optical axis
@@ -497,9 +497,9 @@ def aim_point(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
 
 
 def _aimed(cameras: Sequence[CalibratedCamera]) -> int:
-    """How many cameras have the point they are aimed at (:func:`aim_point`) in front, within
+    """How many cameras have the point they are aimed at (:func:`capture_centre`) in front, within
     about 60 degrees of their axis (0 without such a point)."""
-    point = aim_point(cameras)
+    point = capture_centre(cameras)
     if point is None:
         return 0
     aimed = 0

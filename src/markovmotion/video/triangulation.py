@@ -52,7 +52,7 @@ import numpy as np
 from markovmotion.errors import MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS
 from markovmotion.video.body_model import BodyModel
-from markovmotion.video.cameras import CalibratedCamera, lone_video
+from markovmotion.video.cameras import CalibratedCamera, capture_centre, lone_video
 from markovmotion.video.monocular import (
     LANDMARK_WEIGHTS,
     LANDMARKS,
@@ -427,21 +427,6 @@ PERSON_CENTRE_COST = 1.0
 #: MediaPipe's left/right landmark stems whose midpoints (with the nose) are the same whether
 #: a view mirrors the body or not: what :func:`one_person` compares across the views.
 MIDLINE_STEMS: tuple[str, ...] = ("ear", "shoulder", "elbow", "wrist", "hip", "knee", "ankle")
-
-
-def capture_centre(cameras: Sequence[CalibratedCamera]) -> np.ndarray | None:
-    """The point (3,) mm nearest every camera's optical axis (least squares): where the
-    cameras are aimed, the middle of the capture volume; None when the axes are (nearly)
-    parallel."""
-    a, b = np.zeros((3, 3)), np.zeros(3)
-    for c in cameras:
-        axis = c.R[2]  # the optical axis in the world (R's third row)
-        m = np.eye(3) - np.outer(axis, axis)
-        a += m
-        b += m @ (-c.R.T @ c.t)
-    if np.linalg.cond(a) > 1e6:
-        return None
-    return np.linalg.solve(a, b)
 
 
 #: ``track --person``: the person named is the one nearest the ray through its pixel over the
