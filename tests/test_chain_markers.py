@@ -597,3 +597,21 @@ def test_the_chains_new_people_preset_sets_its_options_unless_given(tmp_path, ca
         "world_mm",
         "body_centred_mm",
     }
+
+
+def test_evaluate_reports_each_pair_of_people(mocap, tmp_path, capsys):
+    """``chain evaluate`` on takes of several pairs of people reports each pair as well
+    (``per_people``, as dualhmm evaluate does), the pairs' frame-weighted means being the
+    whole's (the same seed answers a take alike alone or among others)."""
+    pairs = mocap.pairs("handshake", kind="markers")
+    last = sorted({a.trial for a, _ in pairs})[-1]
+    out = tmp_path / "m.npz"
+    main(["chain", "train", "--labels", "handshake", "--kind", "markers", "--prototypes", "4",
+          "--behaviours", "4", "--epochs", "1", "--test-trials", last, "--out", str(out)])  # fmt: skip
+    main(["chain", "evaluate", "--model", str(out), "--hypotheses", "4", "--json"])
+    report = json.loads(capsys.readouterr().out)
+    people = {a.subject for a, _ in pairs if a.trial == last}
+    assert set(report["per_people"]) == people and len(people) > 1
+    for key in ("multiple_hypotheses", "mean_shape", "single_hypothesis_paper"):
+        pooled = sum(r[key] * r["frames"] for r in report["per_people"].values())
+        assert pooled / report["frames"] == pytest.approx(report[key], rel=1e-9)

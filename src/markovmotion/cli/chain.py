@@ -455,6 +455,9 @@ def evaluate(
     if dual is not None:
         for person, part in enumerate(result["by_real_person"]):
             _print_errors(part, f"{title}, person {'AB'[person]} real", response)
+    for who, part in result["per_people"].items():
+        n = len(part["takes"])
+        _print_errors(part, f"people {who}: {n} take{'s' * (n != 1)} ({part['unit']})", response)
     err_console.print(f"test takes: {', '.join(result['takes'])}", highlight=False)
     left = result["left_out_training_files"]
     if left:

@@ -191,7 +191,9 @@ def evaluate_model(
     takes: Sequence[TwoPeople] | None = None,
 ) -> dict:
     """:func:`evaluate_partner` on :func:`test_set`'s takes, with its ``test_files`` and
-    ``left_out_training_files``; ``dual_hmm`` (motion capture) is measured alongside."""
+    ``left_out_training_files``, and ``per_people`` (the same for each pair of people,
+    INDEX.csv's ``subject``, when the takes come from two or more); ``dual_hmm`` (motion
+    capture) is measured alongside."""
     chosen = test_set(model, test, labels, takes)
     others = None
     if dual_hmm is not None:
@@ -201,6 +203,16 @@ def evaluate_model(
     result = evaluate_partner(
         model, chosen.takes, model.source, n_hypotheses, response, seed, others, sigma, resync
     )
+    # per pair of people (INDEX.csv's subject), as dualhmm evaluate reports: each pair's takes
+    # answered again on their own (the same seed, so a pair alone gets the same answers)
+    people = [a.subject for a, _ in chosen.pairs] if chosen.pairs else []
+    result["per_people"] = {}
+    for who in sorted(set(people) - {""}) if len(set(people)) > 1 else []:
+        mine = [i for i, p in enumerate(people) if p == who]
+        result["per_people"][who] = evaluate_partner(
+            model, [chosen.takes[i] for i in mine], model.source, n_hypotheses, response, seed,
+            {k: [v[i] for i in mine] for k, v in (others or {}).items()}, sigma, resync,
+        )  # fmt: skip
     return {**result, **chosen.report}
 
 
