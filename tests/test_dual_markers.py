@@ -378,7 +378,8 @@ def test_cli_trains_on_c3d_pairs_of_an_index_and_responds_with_c3d(marker_takes,
 
 
 def test_place_split_separates_where_b_stands_from_its_pose():
-    from markovmotion.evaluate.hmm import place_split, trial_errors
+    from markovmotion.evaluate.hmm import place_split
+    from markovmotion.evaluate.vlmm import trial_errors
 
     rng = np.random.default_rng(5)
     truth = rng.normal(size=(30, 6, 3)) * 100
@@ -394,7 +395,8 @@ def test_place_split_separates_where_b_stands_from_its_pose():
 
 
 def test_known_motion_is_the_real_motion_about_the_mean_pose():
-    from markovmotion.evaluate.hmm import known_motion, trial_errors
+    from markovmotion.evaluate.hmm import known_motion
+    from markovmotion.evaluate.vlmm import trial_errors
 
     rng = np.random.default_rng(3)
     truth = rng.normal(size=(40, 5, 3)) * 30 + rng.normal(size=(1, 5, 3)) * 200
@@ -486,20 +488,29 @@ def test_a_marker_never_seen_is_left_out_of_every_take_whatever_its_case():
 def test_unseen_markers_in_a_take_are_left_out_of_its_errors_not_a_crash(model, marker_takes):
     """A held-out take with points unseen (NaN: occlusion) in A and in B: a new user's
     evaluation died in the observer's logistic regression after every fold had run (and its
-    errors would have been NaN). B's unseen frames are left out of every measure, A's are
-    answered as respond answers them (the last seen frame held), and the numbers are those
-    of the seen frames."""
-    from markovmotion.evaluate.hmm import summarise
+    errors would have been NaN). Each frame's errors are over B's points seen in it, a frame
+    with none is left out, and A's unseen frames are answered as respond answers them (the
+    last seen frame held)."""
+    from markovmotion.evaluate.hmm import Baselines, summarise
 
     a, b = (m.copy() for m in marker_takes[2])
     clean = evaluate_pair(model, a, b, "clean", "handshake")
-    b.positions[40:50, 0] = np.nan  # one marker of B unseen for ten frames (at 120 fps)
+    b.positions[40:60, 0] = np.nan  # one marker of B unseen for 20 frames (at 120 fps)
+    b.positions[200:240] = np.nan  # all of B unseen
     a.positions[100:120] = np.nan  # all of A unseen
     res = evaluate_pair(model, a, b, "take", "handshake")
-    seen = np.isfinite(model.body_positions(model._rate(b))).all(axis=(1, 2))
-    assert 0 < (~seen).sum() < 10 and len(res.errors["windowed"]) == seen.sum()
+    truth = model.body_positions(model._rate(b), body_centred=True)
+    some = np.isfinite(truth).any(axis=(1, 2))
+    part = some & ~np.isfinite(truth).all(axis=(1, 2))
+    assert 0 < (~some).sum() < 20 and part.any() and len(res.errors["windowed"]) == some.sum()
     for key in ("windowed", "mean_pose", "nearest_neighbour", "known_motion"):
         assert np.isfinite(res.errors[key]).all() and np.isfinite(res.pose_errors[key]).all()
+    f = np.flatnonzero(part)[0]  # a frame with a marker unseen: the others' mean error
+    seen = np.isfinite(truth[f]).all(axis=1)
+    mean_pose = Baselines(model).mean_pose
+    expected = np.linalg.norm(mean_pose[seen] - truth[f, seen], axis=1).mean()
+    got = res.pose_errors["mean_pose"][np.searchsorted(np.flatnonzero(some), f)]
+    assert got == pytest.approx(expected)
     assert np.isfinite(res.jumps["real"]).all() and len(res.jumps["real"]) < len(
         clean.jumps["real"]
     )

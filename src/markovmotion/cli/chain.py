@@ -149,7 +149,7 @@ def _training_takes(
     pairs of people (INDEX.csv's ``subject``) whose takes are held out (then, without
     ``test_trials``, they alone)."""
     if source == "mocap":
-        from markovmotion.data.kinds import choose_kind
+        from markovmotion.data.kinds import choose_kind, recorded
         from markovmotion.evaluate.takes import index_record, take_names
         from markovmotion.models.chain.partner import KINDS
 
@@ -178,9 +178,15 @@ def _training_takes(
             for e in (a, b)
         ]
         record = {"data_index": index_record(index), "held_out_files": held}
+        loaded = [index.load_pair(a, b) for a, b in track(train, "reading takes")]
+        seen = recorded(train, loaded)  # a person never seen: said, left out
+        if not seen:
+            raise DataNotFoundError(
+                f"no two-person take labelled {label!r} in {index.root / 'INDEX.csv'} records "
+                "both people"
+            )
         return [
-            (names[(a, b)], a.label, a.subject, *index.load_pair(a, b))
-            for a, b in track(train, "reading takes")
+            (names[train[i]], train[i][0].label, train[i][0].subject, *loaded[i]) for i in seen
         ], record
     from markovmotion.video.dataset import silhouette_takes
 

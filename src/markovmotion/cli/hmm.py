@@ -633,7 +633,7 @@ def _report(report: dict, written: list[Path], json_out: bool) -> None:
         ("test_files", "test files"),
         ("left_out_training_files", "left out (training takes)"),
         ("left_out_other_kind", "left out (another kind of take)"),
-        ("left_out_other_skeleton", "left out (without the model's joints or markers)"),
+        ("left_out_other_skeleton", "left out (not the model's joints or markers, or unseen)"),
     ):
         if report.get(key) and not json_out:
             err_console.print(f"{what}: {', '.join(report[key])}", highlight=False)
@@ -683,7 +683,7 @@ def _print_table(report: dict) -> None:
             t = trellis.get("paper")
             cells.append(f"{t['standard_mm']:.1f}/{t['windowed_mm']:.1f}" if t else "-")
         cells += [
-            *(f"{r[c]:.1f}" for c in jumps),
+            *("-" if r[c] is None else f"{r[c]:.1f}" for c in jumps),
             f"{gap['real']:.0f}/{gap['windowed']:.0f}" if gap else "-",
             f"{seen:.2f}" if isinstance(seen, float) and np.isfinite(seen) else "-",
             f"{lat['median']:.0f}/{lat['p99']:.0f}",

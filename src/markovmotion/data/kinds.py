@@ -20,6 +20,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
+import numpy as np
+
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry
@@ -162,3 +164,33 @@ def largest_group(
             f"{describe_set(key(takes[best[0]]))} (the largest group); left out {sets}"
         )
     return best, left
+
+
+def never_seen(pair: tuple[Entry, Entry], take: tuple[Motion | Markers, ...]) -> list[str]:
+    """The files of a two-person take whose person is never seen (markers NaN throughout)."""
+    return [
+        e.file
+        for e, m in zip(pair, take, strict=True)
+        if isinstance(m, Markers) and not np.isfinite(m.positions).any()
+    ]
+
+
+def recorded(
+    pairs: Sequence[tuple[Entry, Entry]], takes: Sequence[tuple[Motion | Markers, ...]]
+) -> list[int]:
+    """Indices of the two-person ``takes`` (of ``pairs``) in which each person has a sample
+    recorded; the others, a person never seen (a C3D file whose markers are NaN in every
+    frame), are named in one note. A learner refuses such a take (nothing of the person to
+    learn), which had stopped a whole cross-validation in a traceback."""
+    keep, gone = [], []
+    for i, (pair, take) in enumerate(zip(pairs, takes, strict=True)):
+        empty = never_seen(pair, take)
+        gone += empty
+        if not empty:
+            keep.append(i)
+    if gone:
+        note(
+            "left out the two-person takes of a person never seen (every sample NaN): "
+            + names(gone)
+        )
+    return keep

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,7 +48,7 @@ from sklearn.neighbors import NearestNeighbors
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import UP, Motion
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
-from markovmotion.data.kinds import choose_kind, largest_group
+from markovmotion.data.kinds import choose_kind, largest_group, never_seen, recorded
 from markovmotion.data.splits import people_out, select_pairs
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate import choose
@@ -61,7 +62,6 @@ from markovmotion.evaluate.takes import (
     take_names,
     test_takes,
 )
-from markovmotion.evaluate.vlmm import trial_errors
 from markovmotion.features.markers import turn_about_up
 from markovmotion.models.hmm.contact import CONTACT_MM, right_hand
 from markovmotion.models.hmm.dual import DualHMM
@@ -236,7 +236,9 @@ def known_motion(mean: np.ndarray, truth: np.ndarray) -> np.ndarray:
     person. Its error is about how far below the mean pose a perfect partner of that kind
     could come (Bütepage markers, leave one pair out, the new-people options: 24 %
     body-centred in handshakes, 28 % in waves; docs/hmm.md, "New people")."""
-    return truth - np.nanmean(truth, axis=0) + np.mean(np.broadcast_to(mean, truth.shape), axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a point never seen: NaN throughout
+        return truth - np.nanmean(truth, axis=0) + np.mean(np.broadcast_to(mean, truth.shape), 0)
 
 
 #: The partners whose world error is split into place and the rest (:func:`place_split`).
@@ -249,10 +251,13 @@ def place_split(generated: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarra
     once moved so that its centroid is the real B's (the error of its pose and heading
     alone). On new people most of the world error is the place: a pair stands where it
     chooses, which the other person's motion tells little of (docs/hmm.md, "New people")."""
-    shift = truth.mean(axis=1, keepdims=True) - generated.mean(axis=1, keepdims=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with no point seen: NaN
+        mine = np.where(np.isfinite(truth), generated, np.nan)  # the same points as the truth's
+        shift = np.nanmean(truth, axis=1, keepdims=True) - np.nanmean(mine, axis=1, keepdims=True)
     return {
         "centroid": np.linalg.norm(shift[:, 0], axis=-1),
-        "at_true_place": trial_errors(generated + shift, truth),
+        "at_true_place": seen_errors(generated + shift, truth),
     }
 
 
@@ -290,29 +295,32 @@ def evaluate_pair(
     for method in ("standard", "windowed"):
         generated[method] = generated[f"{own}/{method}"]
     truth, truth_pose = model.body_positions(b), model.body_positions(b, body_centred=True)
-    # B's frames with a point unseen (NaN) are left out of every measure, said once
-    seen = np.isfinite(truth).all(axis=(1, 2)) & np.isfinite(truth_pose).all(axis=(1, 2))
-    if not seen.all():
-        note(f"{name}: {int((~seen).sum())} of {len(seen)} frames of B have a point unseen: "
-             "left out of the errors")  # fmt: skip
+    # B's points unseen (NaN, occluded) are left out of every measure: a frame's errors are
+    # over the points seen in it, a frame with none is left out; said once per take
+    seen = np.isfinite(truth).any(axis=(1, 2)) & np.isfinite(truth_pose).any(axis=(1, 2))
+    if not np.isfinite(truth).all():
+        unseen = int((~np.isfinite(truth).all(axis=(1, 2))).sum())
+        note(f"{name}: {unseen} of {len(seen)} frames of B have a point unseen: each frame's "
+             f"errors are over the points seen ({int((~seen).sum())} frames with none: left "
+             "out)")  # fmt: skip
     res = PairResult(name, label, model.fps)
     res.jumps["real"] = _finite(jump_sizes(truth))
     where = {k: model.body_positions(m) for k, m in generated.items()}  # once per output
     for k, m in generated.items():
-        res.errors[k] = trial_errors(where[k], truth)[seen]
-        res.pose_errors[k] = trial_errors(model.body_positions(m, True), truth_pose)[seen]
+        res.errors[k] = seen_errors(where[k], truth)[seen]
+        res.pose_errors[k] = seen_errors(model.body_positions(m, True), truth_pose)[seen]
         res.jumps[k] = jump_sizes(where[k])
     placed = baselines.mean_world(origin, yaw)
-    res.errors["mean_pose"] = trial_errors(placed, truth)[seen]
+    res.errors["mean_pose"] = seen_errors(placed, truth)[seen]
     for key, points in zip(PLACED, (where["windowed"], placed), strict=True):
         for part, err in place_split(points, truth).items():
             res.places[f"{key}_{part}"] = err[seen]
     mean_pose = np.broadcast_to(baselines.mean_pose, truth_pose.shape)
     if lift is not None:  # the training people's heights are the sensor's: down by the lift
         mean_pose = mean_pose - np.outer(lift, UP)[:, None]
-    res.pose_errors["mean_pose"] = trial_errors(mean_pose, truth_pose)[seen]
-    res.errors["known_motion"] = trial_errors(known_motion(placed, truth), truth)[seen]
-    res.pose_errors["known_motion"] = trial_errors(known_motion(mean_pose, truth_pose), truth_pose)[
+    res.pose_errors["mean_pose"] = seen_errors(mean_pose, truth_pose)[seen]
+    res.errors["known_motion"] = seen_errors(known_motion(placed, truth), truth)[seen]
+    res.pose_errors["known_motion"] = seen_errors(known_motion(mean_pose, truth_pose), truth_pose)[
         seen
     ]
     where_a = model.body_positions(a)
@@ -324,9 +332,18 @@ def evaluate_pair(
         res.hand_gaps = gaps
     lag = model.window - 1
     shown = where["windowed"][: len(truth) - lag]
-    res.errors["windowed_as_shown"] = _finite(trial_errors(shown, truth[lag:]))
+    res.errors["windowed_as_shown"] = _finite(seen_errors(shown, truth[lag:]))
     res.latencies_us = step_latencies(model, xa)
     return res
+
+
+def seen_errors(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(F,) mean distance (mm) over the points of ``truth`` (F, P, 3) seen in each frame
+    (the mean over every point where all are seen; NaN where none is)."""
+    dist = np.linalg.norm(predicted - truth, axis=-1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with no point seen: NaN
+        return np.nanmean(dist, axis=-1)
 
 
 def _finite(values: np.ndarray) -> np.ndarray:
@@ -413,7 +430,8 @@ def aims_line(found: dict) -> str:
         v, aim, met = a["value"], a["aim"], "met" if a["met"] else "NOT met"
         if name.endswith("below_mean_pose"):
             what = name.removesuffix("_below_mean_pose").replace("_", "-")
-            return f"{what} {100 * v:.0f} % below the mean pose (aim {100 * aim:.0f} %) {met}"
+            side = "below" if v >= 0 else "above"
+            return f"{what} {100 * abs(v):.0f} % {side} the mean pose (aim {100 * aim:.0f} % below) {met}"
         if "_below_" in name:
             what, peers = name.split("_below_")
             peers = peers.replace("nearest_neighbour", "nearest neighbour").replace("gmr", "GMR")
@@ -475,8 +493,9 @@ def _jumps(results: Sequence[PairResult], keys: Sequence[str]) -> dict:
     for k in keys:
         steps = np.concatenate([r.jumps[k] for r in results])
         name = k.split("/")[-1]
-        out[f"{name}_jump_p90_mm"] = jump_p90([steps])
-        out[f"{name}_jump_over_100mm"] = round(float((steps > JUMP_MM).mean()), 4)
+        out[f"{name}_jump_p90_mm"] = jump_p90([steps])  # None without a step (B unseen)
+        over = round(float((steps > JUMP_MM).mean()), 4) if len(steps) else None
+        out[f"{name}_jump_over_100mm"] = over
     return out
 
 
@@ -573,8 +592,8 @@ def choose_settings(
         held = [takes[i] for i in test]
         for _, _, a, b in choose.both_roles(held) if roles == "both" else held:
             truth = fold.body_positions(fold._rate(b))
-            error += float(trial_errors(fold.body_positions(fold.respond(a, method)), truth).sum())
-            frames += len(truth)
+            per_frame = _finite(seen_errors(fold.body_positions(fold.respond(a, method)), truth))
+            error, frames = error + float(per_frame.sum()), frames + len(per_frame)
         return error, frames
 
     return choose.choose_settings(grid, groups, fit, score, GENERATION_ONLY)
@@ -638,6 +657,12 @@ def load_pairs(
     says what it left out). Returns the pairs kept and their (A, B) takes."""
     pairs, _ = choose_kind(pairs, kind, "two-person takes", entry=lambda p: p[0])
     takes = [index.load_pair(a, b) for a, b in track(pairs, "loading takes")]
+    seen = recorded(pairs, takes)
+    if pairs and not seen:
+        raise DataNotFoundError(
+            f"no two-person take of {index.root / INDEX_NAME} records both people"
+        )
+    pairs, takes = [pairs[i] for i in seen], [takes[i] for i in seen]
     keep, _ = largest_group(
         takes, [a.file for a, _ in pairs], "two-person takes (person B)", key=lambda t: t[1]
     )
@@ -771,10 +796,13 @@ def pairs_that_fit(
 ) -> Iterator[tuple[Entry, Entry, Motion, Motion]]:
     """The takes of ``pairs`` loaded, those whose person A the model can answer and whose
     person B it can be compared with; the files of the others (A or B on a skeleton without
-    the model's body points, or without its markers) go to ``other_skeleton``, the one that
-    does not fit with why (``file (markers not found: R_HAND)``)."""
+    the model's body points, or without its markers, or never seen) go to ``other_skeleton``,
+    the one that does not fit with why (``file (markers not found: R_HAND)``)."""
     for ea, eb in pairs:
         a, b = index.load_pair(ea, eb)
+        if empty := never_seen((ea, eb), (a, b)):  # nothing to answer or compare with
+            other_skeleton += [f"{f} (never seen: every sample NaN)" for f in empty]
+            continue
         try:
             model.check_input(a, ea.path)
         except SkeletonMismatchError as exc:
@@ -811,8 +839,8 @@ def evaluate_model(
             plots.append(plot_pair(res, Path(plot_dir) / f"{res.name}_error.png"))
     if not results:
         raise DataNotFoundError(
-            f"no two-person take of {index.root / INDEX_NAME} has person A on the model's "
-            f"skeleton: {', '.join(incompatible)}"
+            f"no two-person take of {index.root / INDEX_NAME} can be answered by the model "
+            f"and compared: {', '.join(incompatible)}"
         )
     report = summarise(results, model)
     report.update(TestTakes(kept, takes.left_out, takes.other_kind).report())

@@ -16,6 +16,7 @@ in the default collection: a model of a user's own collection is evaluated on it
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,7 +153,10 @@ def jump_sizes(points: np.ndarray) -> np.ndarray:
     """(F - 1,) how far the median body point moves between consecutive frames (mm), from
     positions (F, P, 3): a cut between two unrelated poses is a large step. Both partner
     families report how much their partner jumps by it, beside the real partner's."""
-    return np.median(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1)
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=-1)
+    with warnings.catch_warnings():  # points unseen (NaN) left out; none seen: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(steps, axis=1)
 
 
 def jump_p90(steps: Sequence[np.ndarray]) -> float | None:

@@ -103,7 +103,7 @@ from markovmotion.models.hmm.trellis import (
     smooth_place,
     successors,
 )
-from markovmotion.progress import note, track
+from markovmotion.progress import note, say, track
 from markovmotion.state import (
     StateError,
     check_count,
@@ -464,7 +464,13 @@ class DualHMM(Model):
         if self.output == "regression" and not markers_in:
             raise SkeletonMismatchError(
                 "output 'regression' generates B's markers: train on markers (C3D takes, or "
-                "virtual markers placed on skeletons: markers=N, --markers N)"
+                "virtual markers placed on skeletons: markers=N, --markers N), or give "
+                "--output frames (--preset new-people sets regression)"
+            )
+        if self.heights == "lifted" and (self.markers or not markers_in):
+            note(
+                "heights 'lifted' moves a C3D marker model's A: a model of skeletons or of "
+                "virtual markers places B by A's own floor (nothing to lift)"
             )
         if self.place_scale == "size" and not markers_in:
             raise SkeletonMismatchError(
@@ -770,11 +776,15 @@ class DualHMM(Model):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # frames with nothing seen
             off = float(np.nanmean(a.positions[..., 1])) - self.lift().height
-        if abs(off) > HEIGHT_NOTE_MM:
-            note(
-                f"A's markers stand {abs(off):.0f} mm {'above' if off > 0 else 'below'} the "
-                "training people's (another vertical origin?): B is placed at the training "
-                "capture's heights; train with --heights lifted to place B by A's height"
+        if abs(off) > HEIGHT_NOTE_MM:  # once a command (respond per method, per take)
+            say(
+                [
+                    "note: A's markers stand more than "
+                    f"{HEIGHT_NOTE_MM:.0f} mm above or below the training people's (another "
+                    "vertical origin?): B is placed at the training capture's heights; train "
+                    "with --heights lifted to place B by A's height"
+                ],
+                about=id(self),
             )
 
     def lift(self) -> Lift:
