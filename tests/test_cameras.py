@@ -168,6 +168,20 @@ def test_up_to_six_cameras_are_read(real_copy, capsys):
     with pytest.raises(SystemExit) as stop:
         main(["track", "--video", str(real_copy), "--views", "7"])
     assert stop.value.code == 2 and "--views" in capsys.readouterr().err
+    # the copies above are one camera each with their originals: said (a trial's 6-camera
+    # file with two pasted twice had no word)
+    extra = [dict(first[k], name=f"cam{k + 4}") for k in range(2)]
+    _edit(real_copy, lambda d: d.update(cameras=first + extra))
+    new_command()
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    assert any("cam0 and cam4; cam1 and cam5 are one camera" in n for n in notes)
+    # more views asked for than the file has: said, not run on fewer silently
+    _edit(real_copy, lambda d: d.update(cameras=first))
+    new_command()
+    main(["track", "--video", str(real_copy), "--views", "6", "--method", "triangulate",
+          "--max-frames", "2", "--json"])  # fmt: skip
+    assert "--views 6: the camera file has 4, all used" in capsys.readouterr().err
 
 
 def _inverted(doc: dict, cameras=range(4)) -> None:

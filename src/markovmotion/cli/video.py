@@ -254,6 +254,10 @@ def track(
             camera_videos(where, cams)
     if lone_video(video):  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
+    if views is not None and not cams:
+        cams, _ = load_cameras(camera_file(video, cameras))
+    if views is not None and views > len(cams):  # it had run on fewer without a word
+        print_notes([f"note: --views {views}: the camera file has {len(cams)}, all used"])
     if method == "apf":
         guided, note = guide_for(guide, doc, min(len(cams), views or len(cams)))
     check_person(person, cams[:views] if views else cams, method == "triangulate" or guided)

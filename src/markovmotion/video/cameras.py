@@ -564,6 +564,14 @@ def _placement_notes(path: Path, cameras: Sequence[CalibratedCamera], units: str
             f"note: {path.name}: {', '.join(below)} below the floor (world Y = 0): is its "
             "world Y up?"
         )
+    twins = [
+        f"{a.name} and {b.name}"
+        for i, a in enumerate(cameras)
+        for b in cameras[i + 1 :]
+        if np.allclose(a.R, b.R, atol=1e-6) and np.linalg.norm(a.centre - b.centre) < 1.0
+    ]
+    if twins:  # a camera copied and not edited: one view counted twice, no depth from it
+        out.append(f"note: {path.name}: {'; '.join(twins)} are one camera (the same R and t)")
     return out
 
 
