@@ -589,6 +589,7 @@ def _print_errors(result: dict, title: str, response: str) -> None:
     """One table row per partner; ``*`` marks the response reported as multiple_hypotheses."""
     table = Table(title=title, caption=f"* multiple_hypotheses ({response} response)")
     placement = result.get("placement_mm")
+    fmt = ".1f" if result.get("unit") == "mm" else ".4g"  # mm to 0.1, as every table; fractions
     ms = result.get("per_frame_ms")
     jumps = result.get("jump_p90_mm")
     for col in (
@@ -605,9 +606,9 @@ def _print_errors(result: dict, title: str, response: str) -> None:
     for key, value in result.items():
         if not isinstance(value, float) or key in ("multiple_hypotheses", "sigma", "resync"):
             continue
-        row = [f"{key} *" if key == f"multiple_hypotheses_{response}" else key, f"{value:.4g}"]
+        row = [f"{key} *" if key == f"multiple_hypotheses_{response}" else key, f"{value:{fmt}}"]
         if placement:
-            row.append(f"{placement[key]:.4g}")
+            row.append(f"{placement[key]:{fmt}}")
         if jumps:
             row.append(_mm(jumps.get(key)))
         if ms:
