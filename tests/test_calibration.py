@@ -234,19 +234,26 @@ def test_a_video_stretched_to_another_width_is_said(real_video, tmp_path, capsys
     assert got[0].K[1, 1] == pytest.approx(truth[0].K[1, 1], rel=1e-3)
 
 
-def test_a_lone_video_the_camera_file_does_not_name_is_said_to_be_the_first(capsys):
+def test_a_lone_video_the_camera_file_does_not_name_is_said_to_be_the_first(tmp_path, capsys):
     """A user's ``--video myclip.mp4 --cameras cameras.json`` of four cameras was tracked
     through the first camera's calibration without a word (510 mm at confidence 0.95 for
-    cam1's footage): now a note names the camera taken."""
+    cam1's footage): now a note names the camera taken. A file that is no video at all (a
+    README) is that one line, not the note and then the error."""
     from markovmotion.data.index import data_root
+    from markovmotion.errors import MotionFormatError
     from markovmotion.video.cameras import camera_of_video, load_cameras
 
-    cams, _ = load_cameras(data_root().parent / "video" / "pose2sim_balancing")
+    real = data_root().parent / "video" / "pose2sim_balancing"
+    cams, _ = load_cameras(real)
     assert camera_of_video(cams, "somewhere/cam2.mp4") == 2
     assert capsys.readouterr().err == ""
-    assert camera_of_video(cams, "myclip.mp4") == 0
+    (tmp_path / "myclip.mp4").symlink_to(real / "cam1.mp4")
+    assert camera_of_video(cams, tmp_path / "myclip.mp4") == 0
     err = capsys.readouterr().err
     assert "myclip.mp4 is not a video the camera file names" in err and "cam0.mp4" in err
+    with pytest.raises(MotionFormatError, match="cannot read this video"):
+        camera_of_video(cams, real / "README.md")
+    assert capsys.readouterr().err == ""
 
 
 def test_a_video_at_another_rate_than_the_camera_file_is_said(tmp_path, capsys):

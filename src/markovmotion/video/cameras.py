@@ -310,6 +310,12 @@ def camera_of_video(
     first's calibration is far off at full confidence)."""
     name = Path(video).name
     found = next((k for k, c in enumerate(cameras) if Path(c.video).name == name), None)
+    if found is None:  # not a video at all (a README given as --video): that, not a note first
+        capture = cv2.VideoCapture(str(video))
+        readable = capture.isOpened() and capture.read()[0]
+        capture.release()
+        if not readable:
+            raise MotionFormatError(video, "cannot read this video")
     if found is None and len(cameras) > 1:
         listed = ", ".join(Path(c.video).name for c in cameras)
         say(
