@@ -48,7 +48,7 @@ from markovmotion.progress import note
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
     CalibratedCamera,
-    placement,
+    placement_notes,
     read_distortion,
     read_matrix,
     read_small_text,
@@ -296,21 +296,15 @@ def check_order(
 def check_placement(cameras: list, up: str, units: str) -> None:
     """Notes when the cameras' places look like a wrong ``--units`` (the widest pair of
     cameras closer than a person's width, or further than 100 m, apart) or ``--up`` (a
-    camera below the floor, world Y = 0; :func:`~markovmotion.video.cameras.placement`): a
-    file in metres read as mm put the cameras a few mm from one another, and a Z-up file
+    camera below the floor, world Y = 0; :func:`~markovmotion.video.cameras.placement_notes`):
+    a file in metres read as mm put the cameras a few mm from one another, and a Z-up file
     read as Y-up laid the person on their side, both tracked at confidence 0.93 without a
     word."""
-    spread, below = placement(cameras)
-    if spread is not None:
-        note(
-            f"the cameras stand at most {spread:.0f} mm from one another (read with --units "
-            f"{units}): is that the calibration's unit?"
-        )
-    if below:
-        note(
-            f"{', '.join(below)} below the floor (world Y = 0, up read as --up {up}): is that "
-            "the calibration's up axis?"
-        )
+    for line in placement_notes(
+        cameras, f"read with --units {units}", "is that the calibration's unit?",
+        f", up read as --up {up}", "is that the calibration's up axis?",
+    ):  # fmt: skip
+        note(line)
 
 
 def import_calibration(

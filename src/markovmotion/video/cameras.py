@@ -412,7 +412,9 @@ def load_cameras(
     lines += centre_notes(out)
     if not problem:  # cameras the wrong way round are placed anywhere
         said = f'its "units": "{units}"' if "units" in doc else 'no "units"'
-        lines += _placement_notes(path, out, f"t read in {units}: {said}")
+        placed = placement_notes(out, f"t read in {units}: {said}", "is that the unit of its t?",
+                                 "", "is its world Y up?")  # fmt: skip
+        lines += [f"note: {path.name}: {line}" for line in placed] + _twin_notes(path, out)
     say(lines, notes, path.resolve())
     return out, doc
 
@@ -554,31 +556,43 @@ def placement(cameras: Sequence[CalibratedCamera]) -> tuple[float | None, list[s
     return odd, [c.name for c, x in zip(cameras, centres, strict=True) if x[1] < 0]
 
 
-def _placement_notes(path: Path, cameras: Sequence[CalibratedCamera], units: str) -> list[str]:
-    """:func:`placement` of a camera file's cameras, as notes (``units``: how ``t`` was
-    read; ``video cameras`` says it of a calibration it converts, and a hand-written file
-    had been read without it)."""
+def placement_notes(
+    cameras: Sequence[CalibratedCamera],
+    units_read: str,
+    unit_asked: str,
+    up_read: str,
+    up_asked: str,
+) -> list[str]:
+    """:func:`placement` as notes (without the ``note:`` prefix), for a camera file read by
+    every command and for a calibration ``video cameras`` converts: ``units_read`` and
+    ``up_read`` say how ``t`` and the up axis were read, ``unit_asked`` and ``up_asked`` what
+    to check (a hand-written file in metres had been read as mm without a word)."""
     spread, below = placement(cameras)
     out = []
     if spread is not None:
         out.append(
-            f"note: {path.name}: the cameras stand at most {spread:.0f} mm from one another "
-            f"({units}): is that the unit of its t?"
+            f"the cameras stand at most {spread:.0f} mm from one another ({units_read}): "
+            f"{unit_asked}"
         )
     if below:
-        out.append(
-            f"note: {path.name}: {', '.join(below)} below the floor (world Y = 0): is its "
-            "world Y up?"
-        )
+        out.append(f"{', '.join(below)} below the floor (world Y = 0{up_read}): {up_asked}")
+    return out
+
+
+def _twin_notes(path: Path, cameras: Sequence[CalibratedCamera]) -> list[str]:
+    """A note naming cameras with the same R and t: a camera copied and not edited (one
+    view counted twice, no depth from it)."""
     twins = [
         f"{a.name} and {b.name}"
         for i, a in enumerate(cameras)
         for b in cameras[i + 1 :]
         if np.allclose(a.R, b.R, atol=1e-6) and np.linalg.norm(a.centre - b.centre) < 1.0
     ]
-    if twins:  # a camera copied and not edited: one view counted twice, no depth from it
-        out.append(f"note: {path.name}: {'; '.join(twins)} are one camera (the same R and t)")
-    return out
+    return (
+        [f"note: {path.name}: {'; '.join(twins)} are one camera (the same R and t)"]
+        if twins
+        else []
+    )
 
 
 @functools.lru_cache(maxsize=64)
