@@ -37,6 +37,20 @@ def pelvis_centred(
     return pos - pos[:, root : root + 1]
 
 
+def place_rows(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """(F, D + 2) places as rows a mean can average: the origin (F, D), then the heading's
+    cosine and sine. :func:`mean_place` reads an average of them back; every averaged place
+    (the dual HMM's A, whole and online, the chain's partner) goes through the two."""
+    yaw = np.asarray(yaw, dtype=float)
+    return np.column_stack([origin, np.cos(yaw), np.sin(yaw)])
+
+
+def mean_place(mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The place of averaged :func:`place_rows` (..., D + 2): the origins' mean and the
+    heading as the direction of the mean unit vector (an angle's mean would jump at +-pi)."""
+    return mean[..., :-2], np.arctan2(mean[..., -1], mean[..., -2])
+
+
 def ground_travel(origin: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """(F, 3) per-frame travel in the body's own frame: sideways and forward step (mm), turn (rad).
 

@@ -29,6 +29,7 @@ from markovmotion.core.skeleton import Skeleton
 from markovmotion.defaults import DEFAULT_PLACE_WINDOW, DEFAULT_PROTOTYPES
 from markovmotion.errors import MarkovMotionError, SkeletonMismatchError
 from markovmotion.features.base import FeaturePipeline
+from markovmotion.features.body_motion import mean_place, place_rows
 from markovmotion.features.joint_shape import (
     JointShape,
     Person,
@@ -540,7 +541,7 @@ class PlaceAverage:
 
     def __init__(self, window: int = 1):
         self.window = int(window)
-        self._rows: deque = deque(maxlen=max(self.window, 1))  # [x, z, cos, sin]
+        self._rows: deque = deque(maxlen=max(self.window, 1))  # place_rows: x, z, cos, sin
 
     def __call__(self, partner: Person) -> Person:
         """``partner``'s frames, which follow those given before, about the averaged place."""
@@ -549,11 +550,11 @@ class PlaceAverage:
         points = np.empty_like(partner.points)
         reference = partner.reference.copy()
         heading = np.empty_like(partner.heading)
+        rows = place_rows(partner.reference[:, [0, 2]], partner.heading)  # on the floor
         for t in range(partner.n_frames):  # frame by frame, as online
             ref, yaw = partner.reference[t], partner.heading[t]
-            self._rows.append(np.array([ref[0], ref[2], np.cos(yaw), np.sin(yaw)]))
-            mean = np.mean(np.asarray(self._rows), axis=0)
-            reference[t, [0, 2]], heading[t] = mean[:2], np.arctan2(mean[3], mean[2])
+            self._rows.append(rows[t])
+            reference[t, [0, 2]], heading[t] = mean_place(np.mean(np.asarray(self._rows), axis=0))
             body = rotate_yaw(partner.points[t] - ref, -yaw)  # in the partner's own frame
             points[t] = reference[t] + rotate_yaw(body, heading[t])
         return Person(points, reference, partner.height, heading)

@@ -27,6 +27,7 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.features import BodyMotion
+from markovmotion.features.body_motion import mean_place, place_rows
 from markovmotion.features.markers import Lift, MarkerFeatures
 from markovmotion.features.person import OnlineCentre, OnlineSizeScale, RunningCentre, body_radius
 from markovmotion.models.base import finite_frames
@@ -98,8 +99,9 @@ class Partner:
         self._half = min(model.placement_window // 2, self.lag)
         self._before = max(self._half, int(getattr(model, "place_memory", 0)))
         # where A stood in the slice's frames and the ``before`` (place_memory) before them:
-        # a ring of rows origin (3), yaw, cos yaw, sin yaw
-        self._places = np.zeros((window + self._before, 6))
+        # a ring of place_rows (origin (3), cos yaw, sin yaw) and of the yaws themselves
+        self._places = np.zeros((window + self._before, 5))
+        self._yaws = np.zeros(window + self._before)
         self._places_in = 0
         self._seen_a = False  # whether A has been seen (a place of A's own has come in)
         self._shown_count = 0
@@ -153,10 +155,12 @@ class Partner:
         after A appeared (a partner 1.9 m off at A's first frame, 145 mm off 8 s later)."""
         if seen and not self._seen_a:
             self._seen_a = True
-            self._places[:] = [*place[0], place[1], math.cos(place[1]), math.sin(place[1])]
-        row = self._places[self._places_in % len(self._places)]
-        row[:3], row[3] = place
-        row[4], row[5] = math.cos(place[1]), math.sin(place[1])
+            self._places[:] = place_rows(np.asarray(place[0])[None], [place[1]])
+            self._yaws[:] = place[1]
+        i = self._places_in % len(self._places)
+        row = self._places[i]  # place_rows's layout, by hand: the live step's hot path
+        row[:3], row[3], row[4] = place[0], math.cos(place[1]), math.sin(place[1])
+        self._yaws[i] = place[1]
         if self._contact is not None:  # A's points unseen until _see_points says otherwise
             self._a_points[self._places_in % len(self._places)] = np.nan
         self._places_in += 1
@@ -395,10 +399,11 @@ class Partner:
         lo = max(frame - self._before, self._places_in - ring, 0)
         hi = min(frame + self._half, self._places_in - 1)
         if hi == lo:
-            row = self._places[frame % ring]
-            return row[:3].copy(), float(row[3])
-        mean = self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
-        return mean[:3], math.atan2(mean[5], mean[4])
+            return self._places[frame % ring, :3].copy(), float(self._yaws[frame % ring])
+        origin, yaw = mean_place(
+            self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
+        )
+        return origin, float(yaw)
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:
         """B's frame ``shown`` (training frame, root, rotations) placed by A's place for it."""

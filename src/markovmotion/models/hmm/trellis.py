@@ -62,6 +62,7 @@ import numpy as np
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
+from markovmotion.features.body_motion import mean_place, place_rows
 
 #: The trellis costs: ``"path"`` (a lowest-error path, ours) and ``"paper"`` (§3.2 as printed).
 TRELLISES = ("path", "paper")
@@ -232,9 +233,7 @@ def smooth_place(
     before = half if before is None else before
     if (half <= 0 and before <= 0) or len(yaw) < 2:
         return origin, yaw
-    values = np.column_stack([origin, np.cos(yaw), np.sin(yaw)])
-    mean = _window_mean(values, np.arange(len(yaw)), half, before)
-    return mean[:, :3], np.arctan2(mean[:, 4], mean[:, 3])
+    return mean_place(_window_mean(place_rows(origin, yaw), np.arange(len(yaw)), half, before))
 
 
 def successors(lengths: Sequence[int]) -> np.ndarray:
