@@ -200,19 +200,11 @@ def evaluate_model(
         if chosen.index is None or chosen.pairs is None:
             raise ValueError("a dual HMM is compared on 3-D partners: give a mocap model")
         others = dual_hmm_partners(dual_hmm, chosen.index, chosen.pairs, chosen.takes, model)
+    people = [a.subject for a, _ in chosen.pairs] if chosen.pairs else None
     result = evaluate_partner(
-        model, chosen.takes, model.source, n_hypotheses, response, seed, others, sigma, resync
-    )
-    # per pair of people (INDEX.csv's subject), as dualhmm evaluate reports: each pair's takes
-    # answered again on their own (the same seed, so a pair alone gets the same answers)
-    people = [a.subject for a, _ in chosen.pairs] if chosen.pairs else []
-    result["per_people"] = {}
-    for who in sorted(set(people) - {""}) if len(set(people)) > 1 else []:
-        mine = [i for i, p in enumerate(people) if p == who]
-        result["per_people"][who] = evaluate_partner(
-            model, [chosen.takes[i] for i in mine], model.source, n_hypotheses, response, seed,
-            {k: [v[i] for i in mine] for k, v in (others or {}).items()}, sigma, resync,
-        )  # fmt: skip
+        model, chosen.takes, model.source, n_hypotheses, response, seed, others, sigma, resync,
+        people=people,
+    )  # fmt: skip
     return {**result, **chosen.report}
 
 
@@ -303,6 +295,7 @@ def evaluate_partner(
     sigma: float = DEFAULT_SIGMA,
     resync: float = DEFAULT_RESYNC,
     steps: dict[str, list[list[np.ndarray]]] | None = None,
+    people: Sequence[str] | None = None,
 ) -> dict:
     """Errors of the single- and multiple-hypothesis partners and of the mean-shape baseline.
 
@@ -323,6 +316,10 @@ def evaluate_partner(
     (:func:`markovmotion.evaluate.takes.jump_sizes`, the dual HMM's ``*_jump_p90_mm``),
     with ``real`` the real partner's. ``steps``, if given (a dict), is filled with those
     steps: per partner (and ``real``), a list of arrays for each real person (0, 1).
+
+    ``people``: who each take's pair of people are (INDEX.csv's ``subject``); when they are
+    two or more pairs, ``per_people`` has the same report for each pair's takes, from the
+    same answers (each take is answered once).
 
     In silhouette takes person 0 and 1 are two identities (not left and right):
     the model matches the real person to either half (eq. 18); the baseline
@@ -349,15 +346,15 @@ def evaluate_partner(
             for r in RESPONSES
         },
     }
-    # sums[name][real person] of frame-weighted errors, and the frames they cover
+    # sums[name][take, real person] of frame-weighted errors, and the frames they cover
     baselines = ["mean_shape"] if source == "mocap" else ["mean_shape", "mean_shape_true_side"]
     names = [*baselines, *methods, *others]
-    sums = {k: [0.0, 0.0] for k in names}
-    placed = {k: [0.0, 0.0] for k in names}
-    frames = {k: [0, 0] for k in names}
+    sums = {k: np.zeros((len(takes), 2)) for k in names}
+    placed = {k: np.zeros((len(takes), 2)) for k in names}
+    frames = {k: np.zeros((len(takes), 2), dtype=int) for k in names}
     seconds = {k: 0.0 for k in methods}
-    steps = {} if steps is None else steps
-    steps.update({k: [[], []] for k in (*names, REAL)})  # frame steps (mm), per real person
+    # frame steps (mm) per partner (and the real one), take and real person (None: no partner)
+    moves: dict[str, list[list]] = {k: [[None, None] for _ in takes] for k in (*names, REAL)}
     jobs = [(i, take, person) for i, take in enumerate(takes) for person in (0, 1)]
     with threadpool_limits(1):  # per-frame times on one core, as for real-time use
         for i, take, person in track(jobs, "virtual partners"):
@@ -381,48 +378,70 @@ def evaluate_partner(
                 if pred is None:
                     continue
                 err, place = _errors(model, source, pred, truth)
-                sums[name][person] += err * take.n_frames
-                placed[name][person] += (place or 0.0) * take.n_frames
-                frames[name][person] += take.n_frames
-                steps[name][person].append(jump_sizes(pred.points))
-            steps[REAL][person].append(jump_sizes(truth.points))
-    total = sum(t.n_frames for t in takes)
-    both = [k for k in names if sum(frames[k]) == 2 * total]
+                sums[name][i, person] = err * take.n_frames
+                placed[name][i, person] = (place or 0.0) * take.n_frames
+                frames[name][i, person] = take.n_frames
+                moves[name][i][person] = jump_sizes(pred.points)
+            moves[REAL][i][person] = jump_sizes(truth.points)
+    if steps is not None:
+        steps.update(
+            {k: [[m[p] for m in v if m[p] is not None] for p in (0, 1)] for k, v in moves.items()}
+        )
 
-    def table(errors: dict[str, list[float]], people: tuple[int, ...], keys: list[str]) -> dict:
+    def report(which: list[int]) -> dict:
+        """The report over the takes ``which``."""
+        total = sum(takes[i].n_frames for i in which)
+
+        def table(errors: dict[str, np.ndarray], people: tuple[int, ...], keys: list[str]) -> dict:
+            return {
+                k: float(errors[k][which][:, people].sum() / frames[k][which][:, people].sum())
+                for k in keys
+            }
+
+        def section(people: tuple[int, ...], keys: list[str]) -> dict:
+            out = table(sums, people, keys)
+            out["multiple_hypotheses"] = out[f"multiple_hypotheses_{response}"]
+            if source == "mocap":
+                place = table(placed, people, keys)
+                place["multiple_hypotheses"] = place[f"multiple_hypotheses_{response}"]
+                out["placement_mm"] = place
+                jumps = {
+                    k: jump_p90(
+                        [m for i in which for p in people if (m := moves[k][i][p]) is not None]
+                    )
+                    for k in (*keys, REAL)
+                }
+                jumps["multiple_hypotheses"] = jumps[f"multiple_hypotheses_{response}"]
+                out["jump_p90_mm"] = jumps
+            return out
+
+        mine = {k: frames[k][which] for k in names}
         return {
-            k: float(sum(errors[k][p] for p in people) / sum(frames[k][p] for p in people))
-            for k in keys
+            "unit": "mm" if source == "mocap" else "fraction of body height",
+            **section((0, 1), [k for k in names if mine[k].sum() == 2 * total]),
+            "multiple_hypotheses_response": response,
+            "by_real_person": [
+                section((p,), [k for k in names if mine[k][:, p].sum()]) for p in (0, 1)
+            ],
+            "source": source,
+            "hypotheses": n_hypotheses,
+            "sigma": sigma,
+            "resync": resync if np.isfinite(resync) else None,
+            "takes": [takes[i].name for i in which],
+            "frames": 2 * total,
         }
 
-    def section(people: tuple[int, ...], keys: list[str]) -> dict:
-        out = table(sums, people, keys)
-        out["multiple_hypotheses"] = out[f"multiple_hypotheses_{response}"]
-        if source == "mocap":
-            place = table(placed, people, keys)
-            place["multiple_hypotheses"] = place[f"multiple_hypotheses_{response}"]
-            out["placement_mm"] = place
-            jumps = {k: jump_p90([s for p in people for s in steps[k][p]]) for k in keys}
-            jumps["multiple_hypotheses"] = jumps[f"multiple_hypotheses_{response}"]
-            jumps[REAL] = jump_p90([s for p in people for s in steps[REAL][p]])
-            out["jump_p90_mm"] = jumps
-        return out
-
+    result = report(list(range(len(takes))))
+    total = sum(t.n_frames for t in takes)
     per_frame_ms = {k: 1000.0 * s / (2 * total) for k, s in seconds.items()}
     per_frame_ms["multiple_hypotheses"] = per_frame_ms[f"multiple_hypotheses_{response}"]
-    return {
-        "unit": "mm" if source == "mocap" else "fraction of body height",
-        **section((0, 1), both),
-        "multiple_hypotheses_response": response,
-        "per_frame_ms": per_frame_ms,
-        "by_real_person": [section((p,), [k for k in names if frames[k][p]]) for p in (0, 1)],
-        "source": source,
-        "hypotheses": n_hypotheses,
-        "sigma": sigma,
-        "resync": resync if np.isfinite(resync) else None,
-        "takes": [t.name for t in takes],
-        "frames": 2 * total,
+    result["per_frame_ms"] = per_frame_ms
+    groups = sorted(set(people or []) - {""})
+    result["per_people"] = {
+        who: report([i for i, p in enumerate(people or []) if p == who])
+        for who in (groups if len(set(people or [])) > 1 else [])
     }
+    return result
 
 
 # ------------------------------------------------------------------ new people: crossval
