@@ -547,9 +547,34 @@ def test_train_holds_out_pairs_of_people_and_evaluate_answers_them(mocap, tmp_pa
     assert list(report["per_people"]) == [held]
     assert report["overall"]["pairs"] == sum(a.subject == held for a, _ in pairs)
     assert not report["left_out_training_files"]
+    assert report["people_trained_on"] == []  # new people: nothing said
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--test-people", "nobody", "--out", str(tmp_path / "x.npz")])
     assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err
+
+
+def test_evaluate_says_when_its_test_people_are_people_the_model_learnt(mocap, tmp_path, capsys):
+    """Holding out one recording of each pair (``--test-trials``) tests people the model learnt
+    other takes of: both families' evaluations list them (``people_trained_on``) and say so
+    beside their tables, as the aims for new people are about people never seen."""
+    from markovmotion.cli import main
+
+    pairs = mocap.pairs("handshake", kind="markers")
+    last = sorted({a.trial for a, _ in pairs})[-1]
+    people = sorted({a.subject for a, _ in pairs if a.trial == last})
+    hmm, chain = tmp_path / "h.npz", tmp_path / "c.npz"
+    main(["dualhmm", "train", "--labels", "handshake", "--kind", "markers", "--states", "3",
+          "--n-iter", "2", "--test-trials", last, "--out", str(hmm)])  # fmt: skip
+    main(["chain", "train", "--labels", "handshake", "--kind", "markers", "--prototypes", "4",
+          "--behaviours", "4", "--epochs", "1", "--test-trials", last, "--out", str(chain)])  # fmt: skip
+    for family, model in (("dualhmm", hmm), ("chain", chain)):
+        capsys.readouterr()
+        extra = ["--hypotheses", "4"] if family == "chain" else []
+        main([family, "evaluate", "--model", str(model), *extra, "--json"])
+        assert _strict_json(capsys.readouterr().out)["people_trained_on"] == people
+        main([family, "evaluate", "--model", str(model), *extra])
+        err = " ".join(capsys.readouterr().err.split())
+        assert f"other takes of the test takes' people {', '.join(people)}" in err
 
 
 def test_nested_crossval_reports_each_folds_pick(tmp_path, capsys):

@@ -25,7 +25,7 @@ from markovmotion.cli.options import (
     stopped,
     with_preset,
 )
-from markovmotion.cli.tables import print_json, print_table
+from markovmotion.cli.tables import print_json, print_table, say_people_trained_on
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed_motion
 from markovmotion.data.splits import held_out_pairs, people_out, select_pairs
@@ -465,6 +465,7 @@ def evaluate(
         n = len(part["takes"])
         _print_errors(part, f"people {who}: {n} take{'s' * (n != 1)} ({part['unit']})", response)
     err_console.print(f"test takes: {', '.join(result['takes'])}", highlight=False)
+    say_people_trained_on(result)
     left = result["left_out_training_files"]
     if left:
         err_console.print(f"left out (training takes): {', '.join(left)}", highlight=False)

@@ -26,7 +26,7 @@ from markovmotion.cli.options import (
     stopped,
     with_preset,
 )
-from markovmotion.cli.tables import print_json, print_notes
+from markovmotion.cli.tables import print_json, print_notes, say_people_trained_on
 from markovmotion.data.index import read_listed_motion
 from markovmotion.defaults import DUALHMM_PRESETS
 from markovmotion.persist import check_model_output
@@ -698,6 +698,7 @@ def _print_table(report: dict) -> None:
     )
     from markovmotion.evaluate.hmm import aims_line
 
+    say_people_trained_on(report)
     for name, r in {"overall": report["overall"], **report["per_label"]}.items():
         err_console.print(
             f"aims for a partner for new people (docs/hmm.md), {name}, windowed: "

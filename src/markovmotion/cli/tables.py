@@ -75,3 +75,17 @@ def print_notes(lines: list[str]) -> None:
     for line in lines:
         if not said(line):
             err_console.print(line, highlight=False)
+
+
+def say_people_trained_on(report: dict) -> None:
+    """A note when an evaluation's test people are people the model learnt other takes of
+    (``people_trained_on``): its numbers, and the aims for new people, are then not about
+    people it has never seen."""
+    seen = report.get("people_trained_on")
+    if seen:
+        from markovmotion.progress import note
+
+        note(
+            f"the model learnt other takes of the test takes' people {', '.join(seen)}: these "
+            "are not people it has never seen (train with --test-people to hold them out)"
+        )

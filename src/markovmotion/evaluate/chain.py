@@ -57,6 +57,7 @@ from markovmotion.evaluate.takes import (
     evaluation_index,
     jump_p90,
     jump_sizes,
+    people_trained_on,
     take_names,
     test_takes,
 )
@@ -191,9 +192,10 @@ def evaluate_model(
     takes: Sequence[TwoPeople] | None = None,
 ) -> dict:
     """:func:`evaluate_partner` on :func:`test_set`'s takes, with its ``test_files`` and
-    ``left_out_training_files``, and ``per_people`` (the same for each pair of people,
-    INDEX.csv's ``subject``, when the takes come from two or more); ``dual_hmm`` (motion
-    capture) is measured alongside."""
+    ``left_out_training_files``, ``per_people`` (the same for each pair of people,
+    INDEX.csv's ``subject``, when the takes come from two or more) and (motion capture)
+    ``people_trained_on`` (those pairs the model learnt other takes of); ``dual_hmm``
+    (motion capture) is measured alongside."""
     chosen = test_set(model, test, labels, takes)
     others = None
     if dual_hmm is not None:
@@ -205,6 +207,8 @@ def evaluate_model(
         model, chosen.takes, model.source, n_hypotheses, response, seed, others, sigma, resync,
         people=people,
     )  # fmt: skip
+    if chosen.index is not None and chosen.pairs:
+        result["people_trained_on"] = people_trained_on(model, chosen.index, chosen.pairs)
     return {**result, **chosen.report}
 
 

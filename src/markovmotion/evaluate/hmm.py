@@ -59,6 +59,7 @@ from markovmotion.evaluate.takes import (
     index_record,
     jump_p90,
     jump_sizes,
+    people_trained_on,
     take_names,
     test_takes,
 )
@@ -824,8 +825,10 @@ def evaluate_model(
     plot_dir: str | os.PathLike[str] | None = None,
 ) -> tuple[dict, list[Path]]:
     """``dualhmm evaluate``: the evaluation JSON (:func:`summarise`, with ``test_files``,
-    ``left_out_training_files`` and ``left_out_other_skeleton``, takes whose person A has
-    another skeleton) on the takes of :func:`evaluation_pairs`, and the plots written."""
+    ``left_out_training_files``, ``left_out_other_skeleton``, takes whose person A has
+    another skeleton, and ``people_trained_on``, the test takes' pairs of people the model
+    learnt other takes of: :func:`~markovmotion.evaluate.takes.people_trained_on`) on the
+    takes of :func:`evaluation_pairs`, and the plots written."""
     index, takes = evaluation_pairs(model, test, labels, trials)
     baselines = Baselines(model)
     results, plots, kept, incompatible = [], [], [], []
@@ -845,6 +848,7 @@ def evaluate_model(
     report = summarise(results, model)
     report.update(TestTakes(kept, takes.left_out, takes.other_kind).report())
     report["left_out_other_skeleton"] = incompatible
+    report["people_trained_on"] = people_trained_on(model, index, kept)
     return report, plots
 
 

@@ -107,6 +107,24 @@ def test_takes(
     return TestTakes(keep, left)
 
 
+def people_trained_on(
+    model: Model, index: MocapIndex, takes: Iterable[tuple[Entry, Entry]]
+) -> list[str]:
+    """The pairs of people (INDEX.csv's ``subject``) of two-person ``takes`` of whom ``model``
+    learnt other takes (by content hash, among ``index``'s files): an evaluation of them is
+    not one on people the model has never seen, which the aims for new people ask for."""
+    people = {a.subject for a, _ in takes if a.subject}
+    if not people or not training_hashes(model):
+        return []
+    return sorted(
+        {
+            e.subject
+            for e in index
+            if e.subject in people and e.path.is_file() and trained_on(model, e)
+        }
+    )
+
+
 def take_names(pairs: Iterable[tuple[Entry, Entry]]) -> dict[tuple[Entry, Entry], str]:
     """Each two-person take's name in every family's reports (per-take rows, plots), ``A+B``
     by file stem; the label first when two takes share stems (the Bütepage handshakes and
