@@ -264,14 +264,19 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     """``data check`` reads every take whole and names, per row: a file not found, a
     truncated file, frames other than listed, a partner not listed or not naming this take
     back, a row listed twice (errors, exit 1); a pair of two lengths, two-person takes
-    without subject (notes). The collection itself has none (exit 0)."""
+    without subject, a frame rate the file states that INDEX.csv contradicts (notes). The
+    collection itself has no error (exit 0); its only notes are the rates its index corrects
+    (CMU's salsa conversions say 120 fps in their headers for 60)."""
     import gzip
     import shutil
 
     from markovmotion.cli import main
 
     main(["data", "check", "--json"])
-    assert json.loads(capsys.readouterr().out)["findings"] == []
+    findings = json.loads(capsys.readouterr().out)["findings"]
+    assert {f["level"] for f in findings} <= {"note"}
+    assert all("fps, INDEX.csv" in f["problem"] for f in findings)
+    assert {mocap.find(f["file"]).fps for f in findings} <= {60.0}
 
     pair = next(p for p in mocap.pairs("handshake", kind="markers"))
     walk = mocap.query(source="bandai")[0]
@@ -282,6 +287,7 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     a, b, w = (Path(e.file).name for e in (*pair, walk))
     text = gzip.decompress((own / w).read_bytes()).decode().splitlines(keepends=True)
     (own / "cut.bvh").write_text("".join(text[:-5]))  # five frames short of its header
+    shutil.copyfile(pair[0].path, own / "fast.c3d")  # a 30 fps capture listed at 120
     header = "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
     rows = [
         f"{a},mine,,1,interaction,handshake,{b},30,{pair[0].frames},",
@@ -290,6 +296,7 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
         f"{w},mine,,,style_walk,active,,30,{walk.frames},",
         f"cut.bvh,mine,,,style_walk,active,,30,{walk.frames},",
         "nowhere.bvh,mine,,,walk,normal,,30,10,",
+        f"fast.c3d,mine,,,misc,misc,,120,{pair[0].frames},",
     ]
     (own / "INDEX.csv").write_text(header + "\n".join(rows) + "\n")
     with pytest.raises(SystemExit) as exit_:
@@ -308,6 +315,14 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     assert (b, "error", "partner_file gone.c3d is not listed") in found
     assert (a, "error", f"its partner {b} names gone.c3d back") in found
     assert (a, "note", "no subject") in found
+    assert ("fast.c3d", "note", "the file says 30 fps, INDEX.csv 120") in found
+    from markovmotion.data.index import read_listed
+
+    assert read_listed(own / "fast.c3d").fps == 120.0  # by path, as every command reads it
+    assert "the file says 30 fps, INDEX.csv 120: read at INDEX.csv's rate" in " ".join(
+        capsys.readouterr().err.split()
+    )
+    assert read_listed(own / "fast.c3d", fps=25).fps == 25.0  # an fps given wins
     assert report["errors"] == sum(f["level"] == "error" for f in report["findings"]) == 6
 
 

@@ -27,7 +27,7 @@ from markovmotion.cli.options import (
 )
 from markovmotion.cli.tables import print_json, print_table, say_people_trained_on
 from markovmotion.data import MocapIndex
-from markovmotion.data.index import read_listed_motion
+from markovmotion.data.index import read_listed, read_listed_motion
 from markovmotion.data.splits import held_out_pairs, people_out, select_pairs
 from markovmotion.defaults import (
     CHAIN_PRESETS,
@@ -374,22 +374,15 @@ def _respond_markers(
     """``chain respond`` with a marker model: C3D in (a file of the collection at INDEX.csv's
     rate unless ``fps`` says), or a skeleton whose body points the markers name, the
     partner's markers to a C3D file."""
-    from markovmotion.data.index import listed_entry
-    from markovmotion.io.c3d import check_c3d_output, read_c3d, write_c3d
+    from markovmotion.io.c3d import check_c3d_output, write_c3d
 
     if realtime:
         raise typer.BadParameter("--realtime streams skeletons: a marker model answers whole takes")
     if base_suffix(out) != ".c3d":
         raise MarkovMotionError(f"{out}: the model was trained on markers: it writes .c3d files")
     check_c3d_output(out)
-    if base_suffix(input) != ".c3d":  # a skeleton: its body points by the markers' names
-        markers = read_listed_motion(input, fps)
-    else:
-        markers = read_c3d(input)
-        entry = listed_entry(input) if fps is None else None
-        rate = fps if fps is not None else entry.fps if entry is not None else None
-        if rate is not None:
-            markers.fps = float(rate)
+    # a skeleton: its body points by the markers' names
+    markers = read_listed(input, fps)
     model.check_input(markers)
     partner = model.respond(markers, person, **options)
     write_c3d(partner, out)

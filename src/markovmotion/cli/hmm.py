@@ -27,7 +27,7 @@ from markovmotion.cli.options import (
     with_preset,
 )
 from markovmotion.cli.tables import print_json, print_notes, say_people_trained_on
-from markovmotion.data.index import read_listed_motion
+from markovmotion.data.index import read_listed
 from markovmotion.defaults import DUALHMM_PRESETS
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -297,15 +297,11 @@ def read_stream(path: Path, fps: float | None = None):
     collection is read as INDEX.csv says (true frame rate, CMU's reference frame dropped)
     unless ``fps`` overrides the file's rate.
     """
-    from markovmotion.io.c3d import read_c3d
-    from markovmotion.io.files import base_suffix
+    from markovmotion.core.markers import Markers
 
-    if base_suffix(path) == ".c3d":  # markers: unseen samples are NaN, their frames missing
-        markers = read_c3d(path)
-        if fps is not None:
-            markers.fps = float(fps)
-        return markers, ~markers.visible().all(axis=1)
-    motion = read_listed_motion(path, fps=fps)
+    motion = read_listed(path, fps)
+    if isinstance(motion, Markers):  # markers: unseen samples are NaN, their frames missing
+        return motion, ~motion.visible().all(axis=1)
     return motion, np.zeros(motion.n_frames, dtype=bool)
 
 

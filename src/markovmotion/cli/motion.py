@@ -11,7 +11,7 @@ from rich.table import Table
 
 from markovmotion.cli.options import ranged
 from markovmotion.cli.tables import print_table
-from markovmotion.data.index import read_listed_motion
+from markovmotion.data.index import read_listed, read_listed_motion
 from markovmotion.io import write_motion
 from markovmotion.io.files import base_suffix
 
@@ -27,9 +27,7 @@ def info(
     """Describe a motion file: skeleton, frames, frame rate, extent."""
     console = Console()
     if base_suffix(file) == ".c3d":
-        from markovmotion.io.c3d import read_c3d
-
-        markers = read_c3d(file)
+        markers = read_listed(file, fps)
         console.print(markers.summary())
         return
     motion = read_listed_motion(file, fps=fps)

@@ -8,8 +8,7 @@ import typer
 from rich.console import Console
 
 from markovmotion.cli.options import ranged
-from markovmotion.data.index import read_listed_motion
-from markovmotion.io.files import base_suffix
+from markovmotion.data.index import read_listed
 
 
 def render(
@@ -35,15 +34,7 @@ def render(
     check_output(out)
     items = []
     for path in inputs:
-        if base_suffix(path) == ".c3d":
-            from markovmotion.io.c3d import read_c3d
-
-            markers = read_c3d(path)
-            if data_fps:
-                markers.fps = data_fps
-            items.append(markers)
-        else:
-            items.append(read_listed_motion(path, fps=data_fps))
+        items.append(read_listed(path, data_fps or None))
     render(items, out, side_by_side=side_by_side, fps=fps, max_seconds=max_seconds, title=title)
     Console(stderr=True).print(f"wrote {out}")
 

@@ -12,10 +12,10 @@ from markovmotion.cli.options import choice, kind_option, ranged, split_labels
 from markovmotion.cli.tables import print_json, print_table
 from markovmotion.core.markers import Markers, find_markers
 from markovmotion.data import MocapIndex
-from markovmotion.data.index import read_listed_motion
+from markovmotion.data.index import read_listed, read_listed_motion
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
 from markovmotion.io import check_motion_output, write_c3d, write_motion
-from markovmotion.io.c3d import check_c3d_output, read_c3d
+from markovmotion.io.c3d import check_c3d_output
 from markovmotion.io.files import base_suffix
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -297,9 +297,7 @@ def predict(
     if behaviour.skeleton_ is None:  # learnt from C3D markers
         if base_suffix(input) != ".c3d":
             raise SkeletonMismatchError(f"{input}: the model learnt markers: give a C3D file")
-        motion = read_c3d(input)
-        if fps is not None:
-            motion.fps = fps
+        motion = read_listed(input, fps)
         if not behaviour.fits(motion):
             missing = sorted(find_markers(motion.names, behaviour.marker_names)[1])
             raise SkeletonMismatchError(f"{input}: markers not found: {', '.join(missing)}")

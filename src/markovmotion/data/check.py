@@ -12,7 +12,9 @@ here, not in the tenth fold), and
   frames (a pair is cut to the shorter when loaded: said as a note);
 * a two-person take without ``subject`` cannot be held out by people (a note: cross-validation
   then leaves one take out at a time);
-* a file listed twice is an error.
+* a file listed twice is an error;
+* a frame rate the file states (BVH, C3D) that INDEX.csv's ``fps`` contradicts is a note
+  (INDEX.csv's is read).
 
 Our own, not a schema library's: the checks are about the files, not the CSV's types, which
 :meth:`~markovmotion.data.index.MocapIndex.load` already refuses with the line.
@@ -23,7 +25,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import asdict, dataclass
 
-from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.index import Entry, MocapIndex, rate_disagrees
 from markovmotion.errors import MarkovMotionError
 from markovmotion.io import base_suffix, read_motion
 from markovmotion.io.c3d import read_c3d
@@ -45,15 +47,24 @@ class Finding:
         return asdict(self)
 
 
-def file_frames(entry: Entry) -> int:
-    """The number of frames in ``entry``'s file, read whole (CMU's reference frame counted).
+def file_frames(entry: Entry) -> tuple[int, float | None]:
+    """The number of frames in ``entry``'s file, read whole (CMU's reference frame counted),
+    and the frame rate the file states (None: ASF/AMC states none).
 
     Raises:
         MarkovMotionError: the file cannot be read (named, with the problem).
     """
-    if base_suffix(entry.file) == ".c3d":
-        return read_c3d(entry.path).n_frames
-    return read_motion(entry.path, fps=entry.fps).n_frames
+    suffix = base_suffix(entry.file)
+    if suffix == ".c3d":
+        markers = read_c3d(entry.path)
+        return markers.n_frames, markers.fps
+    if suffix == ".bvh":
+        try:
+            motion = read_motion(entry.path)  # the header's rate
+            return motion.n_frames, motion.fps
+        except MarkovMotionError:  # e.g. a Frame Time of 0: the index's rate is read
+            pass
+    return read_motion(entry.path, fps=entry.fps).n_frames, None
 
 
 def check_index(index: MocapIndex) -> list[Finding]:
@@ -69,7 +80,8 @@ def check_index(index: MocapIndex) -> list[Finding]:
             found.append(Finding(e.file, "error", "file not found"))
             continue
         try:
-            frames[e.file] = n = file_frames(e)
+            n, rate = file_frames(e)
+            frames[e.file] = n
         except MarkovMotionError as exc:  # the problem and line: the row names the file
             line = getattr(exc, "line", None)
             what = getattr(exc, "problem", str(exc)) + (f" (line {line})" if line else "")
@@ -77,6 +89,9 @@ def check_index(index: MocapIndex) -> list[Finding]:
             continue
         if e.frames and n != e.frames:
             found.append(Finding(e.file, "error", f"{n} frames in the file, {e.frames} listed"))
+        differs = None if rate is None else rate_disagrees(e, rate)
+        if differs:
+            found.append(Finding(e.file, "note", differs.removeprefix(f"{e.file}: ")))
     for e in index.entries:
         found += _pair_findings(e, listed, frames)
     return found

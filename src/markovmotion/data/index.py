@@ -21,6 +21,7 @@ from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionForm
 from markovmotion.io import read_c3d, read_motion
 from markovmotion.io.files import base_suffix, read_text
 from markovmotion.limits import MAX_FRAMES, check_rate, exceeded, max_frames
+from markovmotion.progress import say
 
 ENV_VAR = "MARKOVMOTION_DATA"
 INDEX_NAME = "INDEX.csv"
@@ -332,8 +333,40 @@ def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -
     return entry.read() if entry is not None else read_motion(path, fps=fps)
 
 
+def read_listed(path: str | os.PathLike[str], fps: float | None = None) -> Motion | Markers:
+    """:func:`read_listed_motion`, or for a C3D file its markers: at ``fps`` if given, else
+    at INDEX.csv's rate when an index lists the file (:func:`listed_entry`), else the
+    file's own; every command that reads a file by path reads it so."""
+    if base_suffix(path) != ".c3d":
+        return read_listed_motion(path, fps)
+    entry = None if fps is not None else listed_entry(path)
+    if entry is not None:
+        return _read_markers(entry)
+    markers = read_c3d(path)
+    if fps is not None:
+        markers.fps = float(fps)
+    return markers
+
+
+def rate_disagrees(entry: Entry, file_fps: float) -> str | None:
+    """What to say when ``entry``'s file states a frame rate ``file_fps`` that INDEX.csv's
+    ``fps`` contradicts (by more than 1 %), else None. INDEX.csv's rate is the one read (a
+    header may be wrong: CMU's salsa conversions say 120 fps for 60); a lab's index copied
+    with another capture's rate would read every take slowed down or sped up."""
+    if abs(file_fps - entry.fps) <= 0.01 * entry.fps:
+        return None
+    return (
+        f"{entry.file}: the file says {file_fps:g} fps, INDEX.csv {entry.fps:g}: read at "
+        "INDEX.csv's rate (correct whichever is wrong)"
+    )
+
+
 def _read_markers(entry: Entry) -> Markers:
-    """A C3D entry's markers at INDEX.csv's frame rate."""
+    """A C3D entry's markers at INDEX.csv's frame rate (a note when the file says another:
+    :func:`rate_disagrees`)."""
     markers = read_c3d(entry.path)
+    differs = rate_disagrees(entry, markers.fps)
+    if differs:
+        say([f"note: {differs}"], about=entry.path)
     markers.fps = entry.fps
     return markers
