@@ -5,6 +5,7 @@ the collection's real markers-only handshakes (Bütepage: several pairs of peopl
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -874,3 +875,30 @@ def test_a_person_never_seen_in_a_take_leaves_the_take_out_not_the_command(mocap
     main(["dualhmm", "evaluate", "--model", str(tmp_path / "m.npz"), "--test", str(tmp_path)])
     out, err = capsys.readouterr()
     assert "never seen: every sample NaN" in err and f"people {rows[0]['subject']}" in out
+
+
+def test_an_index_as_excel_writes_it_and_takes_shorter_than_the_observers_window(
+    mocap, tmp_path, capsys
+):
+    """A user's INDEX.csv with a byte order mark and a space after each comma (as Excel and
+    hand-written files have them) is read as the plain one, and takes of 20 frames, shorter
+    than the observer's 1 s window, are evaluated (the observer has no window of them)."""
+    from markovmotion.cli import main
+    from markovmotion.io.c3d import read_c3d, write_c3d
+
+    model = tmp_path / "m.npz"
+    main(["dualhmm", "train", "--labels", "wave", "--kind", "markers", "--states", "3",
+          "--n-iter", "1", "--out", str(model)])  # fmt: skip
+    pair = next(p for p in mocap.pairs("wave", kind="markers"))
+    own = tmp_path / "own"
+    own.mkdir()
+    for e in pair:
+        write_c3d(read_c3d(e.path).trim(0, 20), own / Path(e.file).name)
+    a, b = (Path(e.file).name for e in pair)
+    lines = ["file, source, subject, trial, category, label, partner_file, fps"]
+    lines += [f"{x}, mine, pair 9, 1, interaction, wave, {y}, 30" for x, y in ((a, b), (b, a))]
+    (own / "INDEX.csv").write_bytes(b"\xef\xbb\xbf" + "\r\n".join(lines).encode() + b"\r\n")
+    capsys.readouterr()
+    main(["dualhmm", "evaluate", "--model", str(model), "--test", str(own), "--json"])
+    report = _strict_json(capsys.readouterr().out)
+    assert report["overall"]["frames"] == 20 and list(report["per_people"]) == ["pair 9"]

@@ -165,14 +165,17 @@ class MocapIndex:
     def _parse(cls, root: Path, csv_path: Path, text: str) -> MocapIndex:
         """The entries of ``text`` (INDEX.csv read within the limits of :mod:`markovmotion.limits`)."""
         with io.StringIO(text, newline="") as fh:
-            reader = csv.DictReader(fh)
-            missing = [
-                c
-                for c in ("file", "category", "label", "fps")
-                if c not in (reader.fieldnames or [])
-            ]
+            reader = csv.DictReader(fh, skipinitialspace=True)  # "file, source, ..." too
+            header = [name.strip() for name in reader.fieldnames or []]
+            reader.fieldnames = header
+            missing = [c for c in ("file", "category", "label", "fps") if c not in header]
             if missing:
-                raise MotionFormatError(csv_path, f"missing columns: {', '.join(missing)}", 1)
+                raise MotionFormatError(
+                    csv_path,
+                    f"missing columns: {', '.join(missing)} (its first line reads "
+                    f"{', '.join(header)[:200] or 'nothing'})",
+                    1,
+                )
             entries = []
             cap = max_frames()
             for line, row in enumerate(reader, start=2):

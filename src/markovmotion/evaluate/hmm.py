@@ -173,7 +173,7 @@ def observer_windows(
     both = turn_about_up(both, -yaw)
     starts = range(0, len(both) - WINDOW + 1, HOP)
     rows = [_motion_in(both[s : s + WINDOW : EVERY]).ravel() for s in starts]
-    return np.array(rows).reshape(len(rows), -1)
+    return np.array(rows).reshape(len(rows), len(range(0, WINDOW, EVERY)) * both[0].size)
 
 
 def _motion_in(window: np.ndarray) -> np.ndarray:

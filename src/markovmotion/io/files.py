@@ -112,7 +112,7 @@ def read_text(path: str | os.PathLike[str]) -> str:
     """
     raw = read_bytes(path)
     try:
-        return raw.decode("utf-8")
+        return raw.decode("utf-8-sig")  # a byte order mark (Excel's "CSV UTF-8") dropped
     except UnicodeDecodeError:
         try:
             return raw.decode("latin-1")
