@@ -385,6 +385,46 @@ def test_respond_triangulate_needs_every_camera(real_video, partner_models, tmp_
     assert "5 frames in 4 views, triangulated" in capsys.readouterr().err
 
 
+def _frame_folders(real_video, folder, frames: int = 3):
+    """The real cameras with each camera's video a folder of ``frames`` PNG frames
+    (``camK/frame_N.png``, its cameras.json naming the folders), as a new user made them."""
+    import itertools
+
+    import cv2
+
+    doc = json.loads((real_video / "cameras.json").read_text(encoding="utf-8"))
+    for k, camera in enumerate(doc["cameras"]):
+        (folder / f"cam{k}").mkdir(parents=True)
+        for i, f in enumerate(itertools.islice(read_frames(real_video / f"cam{k}.mp4"), frames)):
+            cv2.imwrite(str(folder / f"cam{k}" / f"frame_{i}.png"), f[..., ::-1])
+        camera["video"] = f"cam{k}"
+    (folder / "cameras.json").write_text(json.dumps(doc), encoding="utf-8")
+    return folder
+
+
+def test_a_folder_of_one_cameras_frames_is_that_cameras_video(
+    real_video, partner_models, tmp_path, capsys
+):
+    """``--video FRAMES/cam2 --cameras FRAMES/cameras.json`` had been taken for the folder of
+    every camera and camera 0's video tracked in its place, without a word (without
+    ``--cameras``: "no camera file" in the frames' folder). A folder of image frames is one
+    camera's video, the camera whose ``video`` names it, as a video file is."""
+    folder = _frame_folders(real_video, tmp_path / "frames")
+    cam2 = str(folder / "cam2")
+    for cameras in (["--cameras", str(folder / "cameras.json")], []):
+        main(["track", "--video", cam2, "--method", "monocular", "--max-frames", "3", "--json",
+              *cameras])  # fmt: skip
+        assert json.loads(capsys.readouterr().out)["camera"] == "cam2", cameras
+    main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video", cam2,
+          "--cameras", str(folder / "cameras.json"), "--method", "monocular", "--max-frames",
+          "3", "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert "3 frames in camera 2 " in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # one camera's frames: not every camera's
+        main(["track", "--video", cam2, "--method", "triangulate"])
+    assert exc.value.code == 2
+    assert "needs the folder of every camera" in capsys.readouterr().err
+
+
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():
     from markovmotion.core.motion import Motion
     from markovmotion.features.body_points import POINT_SKELETON

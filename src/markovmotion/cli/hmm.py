@@ -447,16 +447,14 @@ def _respond_video(
         )
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
-    if not video.is_file():
+    lone = lone_video(video)  # one camera's video file or folder of frames
+    if not lone:
         camera_videos(where, cams)  # a missing video: fail before the work
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)
     guided, note = False, None
     if method == "apf" and not realtime:
-        lone = lone_video(video)
         guided, note = guide_for(guide, doc, 1 if lone else len(cams))
-    check_person(
-        person, cams if not video.is_file() else cams[:1], guided or method == "triangulate"
-    )
+    check_person(person, cams[:1] if lone else cams, guided or method == "triangulate")
     if note:
         err_console.print(note, highlight=False)
     if getattr(DualHMM.load(model), "frame_", "heading") == "world":

@@ -250,7 +250,7 @@ def track(
         where = camera_file(video, cameras)
         cams, doc = load_cameras(where)
         first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
-        if not video.is_file():
+        if not lone_video(video):
             camera_videos(where, cams)
     if lone_video(video):  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]

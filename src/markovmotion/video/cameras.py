@@ -46,6 +46,7 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.io import MOTION_SUFFIXES
 from markovmotion.io.files import atomic_write, base_suffix
 from markovmotion.progress import say
+from markovmotion.video.render import FRAME_SUFFIXES
 
 CAMERAS_FILE = "cameras.json"
 MAX_SIDE = 4096
@@ -253,10 +254,35 @@ def read_distortion(path: Path, where: str, value: object) -> tuple[float, ...]:
     return tuple(a.tolist()) if a.any() else ()
 
 
+#: Suffixes of video files, which a folder of one camera's image frames does not hold
+#: (:func:`frames_folder`).
+VIDEO_SUFFIXES = (
+    ".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".mpg", ".mpeg", ".wmv", ".flv", ".ts",
+    ".mts", ".y4m", ".ogv",
+)  # fmt: skip
+
+
+def frames_folder(folder: str | os.PathLike[str]) -> bool:
+    """Whether ``folder`` is one camera's video as a folder of image frames: it holds PNG or
+    JPEG images, and no ``cameras.json``, subfolder or video file (the folder of every
+    camera holds those, beside its background images)."""
+    folder = Path(folder)
+    if not folder.is_dir() or (folder / CAMERAS_FILE).exists():
+        return False
+    entries = list(folder.iterdir())
+    if any(p.is_dir() or p.suffix.lower() in VIDEO_SUFFIXES for p in entries):
+        return False
+    return any(p.suffix.lower() in FRAME_SUFFIXES for p in entries)
+
+
 def lone_video(video: str | os.PathLike[str]) -> bool:
-    """Whether ``--video`` names one camera's video file (not the folder of every camera, nor
-    their ``cameras.json``)."""
+    """Whether ``--video`` names one camera's video: a file (not the folder of every camera,
+    nor their ``cameras.json``), or a folder of its image frames (:func:`frames_folder`;
+    such a folder had been taken for the folder of every camera, and camera 0's video
+    tracked in its place)."""
     video = Path(video)
+    if video.is_dir():
+        return frames_folder(video)
     return video.is_file() and video.suffix.lower() != ".json"
 
 
@@ -292,7 +318,7 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
     if not video.exists():
         raise MotionFormatError(video, "no such video file or folder")
     if cameras is not None:
-        if not video.is_dir():
+        if not video.is_dir() or lone_video(video):
             return Path(cameras)
         found = CameraFile(cameras)
         found.videos = video
@@ -305,12 +331,13 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
 def camera_of_video(
     cameras: list[CalibratedCamera], video: str | os.PathLike[str], notes: list[str] | None = None
 ) -> int:
-    """Which camera a lone video file is: the one naming it, else the first (said in a note,
-    :func:`say`, when there are several: a video of another camera tracked through the
-    first's calibration is far off at full confidence)."""
+    """Which camera a lone video (a file, or a folder of image frames: :func:`lone_video`)
+    is: the one naming it, else the first (said in a note, :func:`say`, when there are
+    several: a video of another camera tracked through the first's calibration is far off at
+    full confidence)."""
     name = Path(video).name
     found = next((k for k, c in enumerate(cameras) if Path(c.video).name == name), None)
-    if found is None:  # not a video at all (a README given as --video): that, not a note first
+    if found is None and Path(video).is_file():  # a README given as --video: that, not a note
         capture = cv2.VideoCapture(str(video))
         readable = capture.isOpened() and capture.read()[0]
         capture.release()

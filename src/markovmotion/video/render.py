@@ -402,14 +402,22 @@ def natural_key(name: str) -> list:
     return [int(x) if x.isdigit() else x.lower() for x in re.split(r"(\d+)", name)]
 
 
+#: The suffixes of the images a folder of frames holds (any case).
+FRAME_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def frame_files(path: str | os.PathLike[str]) -> list[Path]:
+    """The image frames of the folder ``path``, in the order of the numbers in their names
+    (:func:`natural_key`); [] for a folder without any."""
+    files = (p for p in Path(path).iterdir() if p.suffix.lower() in FRAME_SUFFIXES)
+    return sorted(files, key=lambda p: natural_key(p.name))
+
+
 def _decoded(path: Path, skip: int = 0) -> Iterator[np.ndarray]:
     """RGB frames from frame ``skip`` on; the frames before are passed over unconverted
     (a video's are decoded, ``grab``, as they must be; an image folder's are not read)."""
     if path.is_dir():
-        files = sorted(
-            (p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg")),
-            key=lambda p: natural_key(p.name),
-        )
+        files = frame_files(path)
         if not files:
             raise MotionFormatError(path, "no PNG or JPEG frames in this folder")
         for f in files[skip:]:
@@ -444,7 +452,7 @@ def frame_count(path: str | os.PathLike[str], decode: bool = True) -> int:
     ``decode``) counted by decoding, else 0."""
     path = Path(path)
     if path.is_dir():
-        return sum(1 for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+        return len(frame_files(path))
     cap = cv2.VideoCapture(str(path))
     n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
     cap.release()
