@@ -141,3 +141,41 @@ def test_a_capture_longer_than_a_uint16_reads_back_and_the_value_limit_holds(tmp
     monkeypatch.setenv("MARKOVMOTION_MAX_VALUES", str(n * 2 * 3 - 1))
     with pytest.raises(MotionFormatError, match="70000 frames x 2 points"):
         read_c3d(tmp_path / "long.c3d")
+
+
+def _standing(n_frames: int = 40, seed: int = 1) -> np.ndarray:
+    """A person's four markers in a Y-up lab (mm): the head's two 1.7 m high, C7 1.45 m, a toe
+    on the floor, swaying a little."""
+    rng = np.random.default_rng(seed)
+    body = np.array([[-60, 1700, 80], [60, 1700, 80], [0, 1450, -50], [-100, 30, 100]], float)
+    return body + rng.normal(0, 15, (n_frames, 4, 3))
+
+
+def test_a_y_up_file_without_screen_axes_is_read_upright(tmp_path, capsys):
+    """Without POINT:X_SCREEN/Y_SCREEN a lab is taken as Z up; a Y-up capture that left them
+    out (its head level with the body read so, above it read Y up) is read with Y up, said
+    in a note; with its screen axes given, a file is read as they say, whatever its head."""
+    lab = _standing()
+    write_c3d(tmp_path / "yup.c3d", lab)  # no screen axes
+    markers = read_c3d(tmp_path / "yup.c3d")
+    np.testing.assert_allclose(markers.positions, lab, atol=1e-3)  # Y up: our axes
+    assert "read with Y up" in " ".join(capsys.readouterr().err.split())
+    write_c3d(tmp_path / "zup.c3d", lab, screen=("+X", "+Z"))  # said to be Z up: so read
+    turned = read_c3d(tmp_path / "zup.c3d").positions
+    np.testing.assert_allclose(turned[..., 1], lab[..., 2], atol=1e-3)
+    zup = np.stack([lab[..., 0], -lab[..., 2], lab[..., 1]], axis=-1)  # the same person, Z up
+    write_c3d(tmp_path / "lab.c3d", zup)
+    np.testing.assert_allclose(read_c3d(tmp_path / "lab.c3d").positions, lab, atol=1e-3)
+    assert "read with Y up" not in capsys.readouterr().err
+
+
+def test_samples_at_the_origin_are_gaps(tmp_path, capsys):
+    """A sample at exactly (0, 0, 0), how some software writes a gap, is unseen (NaN) like a
+    sample with a negative residual, and counted in a note."""
+    lab = lab_positions()
+    lab[3:6, 1] = 0.0
+    write_c3d(tmp_path / "gaps.c3d", lab, occluded=(10, 2))
+    markers = read_c3d(tmp_path / "gaps.c3d")
+    assert np.isnan(markers.positions[3:6, 1]).all() and np.isnan(markers.positions[10, 2]).all()
+    assert markers.visible().sum() == lab.shape[0] * lab.shape[1] - 4
+    assert "3 samples at exactly (0, 0, 0) read as unseen" in capsys.readouterr().err

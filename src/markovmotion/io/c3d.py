@@ -9,7 +9,13 @@ screen; they become our X and Y, and Z is X x Y (right-handed). Without them
 the lab is taken as Z up with X to the right (``+X``, ``+Z``), so a lab point
 (x, y, z) becomes (x, z, -y): a -90 degree turn about X.
 
-Samples the file marks invalid (negative residual, or NaN coordinates) are NaN.
+A file without ``POINT:X_SCREEN``/``Y_SCREEN`` whose head markers (labels naming the head)
+are not above the body read Z up but are read Y up is read with Y up (``+X``, ``+Y``),
+said in a note: a Y-up lab that left the screen axes out had otherwise put every person
+on their back, silently.
+
+Samples the file marks invalid (negative residual, or NaN coordinates) are NaN, and so are
+samples at exactly (0, 0, 0), how some software writes a gap (counted in a note).
 
 Writing (:func:`write_c3d`): float32 coordinates in mm, ``POINT:X_SCREEN`` =
 ``+X`` and ``POINT:Y_SCREEN`` = ``+Y`` (so our axes are the file's and a
@@ -39,6 +45,7 @@ from markovmotion.limits import (
     max_frames,
     max_values,
 )
+from markovmotion.progress import say
 
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 DEFAULT_SCREEN = ("+X", "+Z")
@@ -112,10 +119,8 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
                 raise MotionFormatError(path, exceeded(MAX_VALUES, found))
             names = _labels(reader, n_points)
             unit = (_string(reader, "POINT:UNITS") or "mm").lower()
-            screen = (
-                _string(reader, "POINT:X_SCREEN") or DEFAULT_SCREEN[0],
-                _string(reader, "POINT:Y_SCREEN") or DEFAULT_SCREEN[1],
-            )
+            given = (_string(reader, "POINT:X_SCREEN"), _string(reader, "POINT:Y_SCREEN"))
+            screen = (given[0] or DEFAULT_SCREEN[0], given[1] or DEFAULT_SCREEN[1])
             frames = [
                 points[:, :4].astype(float)
                 for _, points, _ in reader.read_frames(copy=False, analog_transform=False)
@@ -141,10 +146,47 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     if unit not in UNIT_TO_MM:
         raise MotionFormatError(path, f"unknown POINT:UNITS {unit!r}; expected mm, cm or m")
     data = np.stack(frames)
+    lab = data[..., :3] * UNIT_TO_MM[unit]
+    gaps = np.all(data[..., :3] == 0, axis=-1) & ~(data[..., 3] < 0)
+    lab[(data[..., 3] < 0) | gaps] = np.nan
+    notes = []
+    if gaps.any():
+        notes.append(f"{int(gaps.sum())} samples at exactly (0, 0, 0) read as unseen (a gap)")
+    if not any(given) and not _head_above(lab, names, screen) >= HEAD_ABOVE_MM:
+        if _head_above(lab, names, YUP_SCREEN) >= HEAD_ABOVE_MM:
+            screen = YUP_SCREEN
+            notes.append(
+                "no POINT:X_SCREEN/Y_SCREEN, and the head is not above the body with Z up "
+                "but is with Y up: read with Y up"
+            )
     with np.errstate(all="ignore"):
-        positions = data[..., :3] * UNIT_TO_MM[unit] @ lab_to_y_up(path, *screen).T
-    positions[data[..., 3] < 0] = np.nan
+        positions = lab @ lab_to_y_up(path, *screen).T
+    if notes:
+        say([f"note: {os.path.basename(path)}: {n}" for n in notes], about=path)
     return Markers(names, positions, float(rate), name=os.path.basename(path), source=path)
+
+
+#: The screen axes of a Y-up lab (X right, Y up), as :func:`write_c3d` writes them.
+YUP_SCREEN = ("+X", "+Y")
+
+#: How far (mm) a person's head markers stand above their markers' centroid, at least, for
+#: a reading of the axes to be upright (the collection's upper bodies: 214-335 mm read
+#: right, -191 to +10 read Z up from a Y-up lab).
+HEAD_ABOVE_MM = 100.0
+
+
+def _head_above(lab: np.ndarray, names: tuple[str, ...], screen: tuple[str, str]) -> float:
+    """The median over frames of how far (mm) the markers labelled as the head (``HEAD``,
+    Plug-in Gait's ``LFHD``/``RBHD``...) stand above the markers' centroid, read with
+    ``screen``; NaN without such markers."""
+    bare = [n.rsplit(":", 1)[-1].casefold() for n in names]
+    head = [i for i, n in enumerate(bare) if "head" in n or n.endswith(("fhd", "bhd"))]
+    if not head or len(head) == len(names):
+        return float("nan")
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # frames with no head marker seen: NaN
+        up = lab @ lab_to_y_up("", *screen)[1]
+        return float(np.nanmedian(np.nanmean(up[:, head], axis=1) - np.nanmean(up, axis=1)))
 
 
 #: Longest marker label C3D's ``POINT:LABELS`` holds.
