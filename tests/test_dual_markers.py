@@ -469,6 +469,27 @@ def test_markers_are_found_whatever_the_case_of_their_labels(marker_takes):
     np.testing.assert_array_equal(model.respond(relabelled).positions, model.respond(a).positions)
 
 
+def test_labels_with_a_subjects_prefix_are_the_markers_and_a_refusal_shows_the_takes_labels(
+    marker_takes,
+):
+    """Vicon's ``Subject:Marker`` labels (``P1:R_HAND``) are the model's markers when one label
+    alone matches without its prefix: answered exactly as the original; a take lacking
+    markers is refused naming them and showing the labels it has."""
+    from markovmotion.core.markers import find_markers
+    from markovmotion.errors import MarkovMotionError
+
+    assert find_markers(("P1:HEAD", "P2:HEAD", "P1:TOE"), ["HEAD", "TOE"]) == ([2], ["HEAD"])
+    model = DualHMM(n_states=4, n_iter=3).fit(marker_takes[:2])
+    a = marker_takes[2][0]
+    prefixed = Markers(tuple(f"P1:{n}" for n in a.names), a.positions, a.fps, a.name)
+    np.testing.assert_array_equal(model.respond(prefixed).positions, model.respond(a).positions)
+    other = Markers(tuple(f"X{k}" for k in range(len(a.names))), a.positions, a.fps, "odd")
+    with pytest.raises(MarkovMotionError) as exc:
+        model.check_input(other)
+    assert f"markers not found: {a.names[0]}" in str(exc.value)
+    assert "(the take has X0, X1, X2" in str(exc.value)
+
+
 def test_a_marker_never_seen_is_left_out_of_every_take_whatever_its_case():
     """One take labels its markers in capitals, the other in lower case and never sees
     ``rwra``: ``RWRA`` is left out of both (it had been left out of one only, and the two

@@ -280,7 +280,8 @@ def train(
     seconds = sum(t[3].duration if isinstance(t, tuple) else t.n_frames / t.fps for t in takes)
     both = " in both roles" if extras.get("roles") == "both" else ""
     err_console.print(
-        f"wrote {out}: {len(takes)} takes{both}, {seconds:.0f} s at {model.fps_:g} fps, "
+        f"wrote {out}: {len(takes)} take{'s' * (len(takes) != 1)}{both}, {seconds:.0f} s at "
+        f"{model.fps_:g} fps, "
         f"{ch.state_prototypes_.shape} state prototypes, "
         f"{len(ch.behaviour_prototypes_) + 1}-state chain",
         highlight=False,

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from markovmotion.cli.options import choice, kind_option, ranged, split_labels
 from markovmotion.cli.tables import print_json, print_table
-from markovmotion.core.markers import Markers, find_markers
+from markovmotion.core.markers import Markers, find_markers, not_found
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed, read_listed_motion
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
@@ -300,7 +300,7 @@ def predict(
         motion = read_listed(input, fps)
         if not behaviour.fits(motion):
             missing = sorted(find_markers(motion.names, behaviour.marker_names)[1])
-            raise SkeletonMismatchError(f"{input}: markers not found: {', '.join(missing)}")
+            raise SkeletonMismatchError(f"{input}: {not_found(motion.names, missing)}")
     else:
         if base_suffix(input) == ".c3d":
             raise SkeletonMismatchError(

@@ -128,17 +128,30 @@ def find_markers(have: tuple[str, ...], wanted: tuple[str, ...] | list[str]) -> 
     """(indices into ``have`` of each of ``wanted``, those of ``wanted`` not found). A name
     is found as it is, else by its letters whatever their case when exactly one of
     ``have`` matches so (``R_Hand`` is ``R_HAND``: capture software and people's labelling
-    differ in case, and one label differing only in case would otherwise refuse a take)."""
+    differ in case, and one label differing only in case would otherwise refuse a take),
+    else so without a subject's prefix (``P1:R_HAND``, Vicon's ``Subject:Marker``) when
+    exactly one label matches so."""
     exact = {n: i for i, n in enumerate(have)}
     folded: dict[str, list[int]] = {}
+    bare: dict[str, list[int]] = {}
     for i, n in enumerate(have):
         folded.setdefault(n.casefold(), []).append(i)
+        bare.setdefault(n.rsplit(":", 1)[-1].strip().casefold(), []).append(i)
     idx, missing = [], []
     for n in wanted:
         if n in exact:
             idx.append(exact[n])
         elif len(alike := folded.get(n.casefold(), [])) == 1:
             idx.append(alike[0])
+        elif len(alike := bare.get(n.casefold(), [])) == 1:
+            idx.append(alike[0])
         else:
             missing.append(n)
     return idx, missing
+
+
+def not_found(have: tuple[str, ...] | list[str], missing: list[str] | tuple[str, ...]) -> str:
+    """``markers not found: ...``, with the labels the take has (its first eight): a take
+    labelled another way shows how at once."""
+    shown = ", ".join(have[:8]) + (f" and {len(have) - 8} more" if len(have) > 8 else "")
+    return f"markers not found: {', '.join(missing)} (the take has {shown or 'none'})"

@@ -47,7 +47,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers, not_found
 from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import MarkersNotFoundError, MotionFormatError, SkeletonMismatchError
@@ -482,12 +482,13 @@ class MarkerFeatures(FeatureStep):
         a ValueError, naming those lacking)."""
         if list(markers.names) == self.names_:
             return markers
-        try:
-            return markers.select(self.names_)
-        except KeyError as exc:
+        missing = find_markers(markers.names, self.names_)[1]
+        if missing:  # the take's own labels said beside: a take labelled another way shows how
             raise MarkersNotFoundError(
-                f"{markers.name or 'markers'}: {exc.args[0]}", reason=exc.args[0]
-            ) from None
+                f"{markers.name or 'markers'}: {not_found(markers.names, missing)}",
+                reason=f"markers not found: {', '.join(missing)}",
+            )
+        return markers.select(self.names_)
 
     def place(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where a person stands and faces per frame, from their markers (F, M, 3) (in

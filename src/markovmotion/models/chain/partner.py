@@ -23,7 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from markovmotion.algorithms.kinematics import fit_rotations
-from markovmotion.core.markers import Markers, find_markers
+from markovmotion.core.markers import Markers, find_markers, not_found
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.defaults import DEFAULT_PLACE_WINDOW, DEFAULT_PROTOTYPES
@@ -386,9 +386,7 @@ class VirtualPartner(Model):
                 )
             missing = find_markers(motion.names, self.markers_)[1]
             if missing:
-                raise SkeletonMismatchError(
-                    f"{where}: lacks the model's markers {', '.join(missing)}"
-                )
+                raise SkeletonMismatchError(f"{where}: {not_found(motion.names, missing)}")
             return
         try:
             joints = shape_joints(motion.skeleton, self.shape_names)
