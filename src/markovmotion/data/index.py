@@ -360,7 +360,7 @@ def rate_disagrees(entry: Entry, file_fps: float) -> str | None:
         return None
     return (
         f"{entry.file}: the file says {file_fps:g} fps, INDEX.csv {entry.fps:g}: read at "
-        "INDEX.csv's rate (correct whichever is wrong)"
+        "INDEX.csv's rate (the index is trusted: correct it if it is the one wrong)"
     )
 
 
