@@ -320,3 +320,49 @@ def test_a_size_written_as_a_float_is_read_and_a_missing_one_named(real_copy):
     _edit(real_copy, lambda d: d["cameras"][1].update(height=480.5))
     with pytest.raises(MotionFormatError, match=r"cameras\[1\].height must be a whole number"):
         load_cameras(real_copy)
+
+
+def test_two_cameras_naming_one_video_are_refused_and_renumbered_videos_said(real_copy, capsys):
+    """cam3 naming cam2.mp4 (a camera copied, its video not edited) had been tracked, one
+    view through two calibrations, with only a note on the view the others disagreed with:
+    now one line naming both cameras and the video, exit 2. A camera file whose cameras and
+    videos are numbered apart (camera cam1 dropped, the videos renumbered: cam2 with
+    cam1.mp4) gets a note, as ``video cameras`` checks its videos' order; names numbered
+    from 1 over videos from 0 (one shift for all) do not."""
+    _edit(real_copy, lambda d: d["cameras"][3].update(video="cam2.mp4"))
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_copy), "--method", "triangulate"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "cameras cam2 and cam3 both name the video cam2.mp4" in err
+    _edit(real_copy, lambda d: d["cameras"][3].update(video="./cam3.mp4"))
+    _edit(real_copy, lambda d: d["cameras"][2].update(video="cam3.mp4"))  # the same file
+    with pytest.raises(MotionFormatError, match="cameras cam2 and cam3 both name"):
+        load_cameras(real_copy)
+
+    def renumbered(doc: dict) -> None:
+        doc["cameras"] = [c for c in doc["cameras"] if c["name"] != "cam1"]
+        for k, c in enumerate(doc["cameras"]):
+            c["video"] = f"cam{k}.mp4"
+
+    _edit(real_copy, renumbered)
+    new_command()
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    said = [n for n in notes if "numbers" in n]
+    assert said == [
+        "note: cameras.json: the cameras' numbers are not their videos' (cam2 with cam1.mp4, "
+        "cam3 with cam2.mp4): is each video its camera's? (each camera is tracked with the "
+        "video it names)"
+    ]
+
+    def from_one(doc: dict) -> None:
+        for k, c in enumerate(doc["cameras"]):
+            c["name"], c["video"] = f"int_cam0{k + 1}_img", f"cam{k}.mp4"
+
+    _edit(real_copy, from_one)
+    new_command()
+    notes = []
+    load_cameras(real_copy, notes)
+    assert not [n for n in notes if "numbers" in n], notes

@@ -542,6 +542,31 @@ def test_a_camera_that_alone_sees_the_person_for_a_while_is_not_named():
     assert lone_views(views, triangulate_views(views)) == []
 
 
+@pytest.mark.parametrize("n_views", [3, 4])
+def test_of_three_views_the_one_that_disagrees_is_not_blamed(n_views):
+    """Of three views, two cameras each given another camera's video can agree with one
+    another, and the one right camera had been asked whether its video was its own (a new
+    user's renumbered videos: "is cam0.mp4 this camera's video"). With three views or fewer
+    the note says that the view disagrees with the others, not which side is wrong; with
+    more, the others' agreement names the view, as before."""
+    from markovmotion.video.triangulation import ViewLandmarks, lone_views, triangulate_views
+
+    rng = np.random.default_rng(0)
+    cams = ring_of_cameras(np.array([0.0, 900.0, 0.0]), 3500.0, n_views, (272, 480))
+    truth = rng.uniform([-300, 100, -300], [300, 1700, 300], (60, 33, 3))
+    pixels = np.stack([c.project(truth)[0] for c in cams])
+    pixels[0] = cams[0].project(truth[::-1] + [400.0, 0.0, 0.0])[0]  # another moment's video
+    views = ViewLandmarks(cams, pixels, np.ones((n_views, 60, 33)))
+    notes = lone_views(views, triangulate_views(views))
+    assert len(notes) == 1 and notes[0].startswith("note: cam0"), notes
+    if n_views == 3:
+        assert "cam0 disagrees with the other views" in notes[0]
+        assert "either its video (cam0.mp4) or theirs is not the camera's" in notes[0]
+        assert "is cam0.mp4 this camera's video" not in notes[0]
+    else:
+        assert "is cam0.mp4 this camera's video" in notes[0]
+
+
 def test_the_guided_filter_says_whom_it_followed(real_video, capsys):
     """The guided particle filter's summary says whom MediaPipe followed, as the
     triangulation's does; a pixel with no one at it is said on stderr, with --json too."""

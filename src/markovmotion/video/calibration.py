@@ -34,7 +34,6 @@ about x. :func:`calibration_cameras` picks the reader by the file's first charac
 from __future__ import annotations
 
 import os
-import re
 import tomllib
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -48,6 +47,7 @@ from markovmotion.progress import note
 from markovmotion.video.cameras import (
     CAMERAS_FILE,
     CalibratedCamera,
+    one_number,
     placement_notes,
     read_distortion,
     read_matrix,
@@ -261,12 +261,6 @@ def calibration_cameras(
     return cameras_from_toml(path, videos, up, units)
 
 
-def _one_number(text: str) -> int | None:
-    """The one whole number in ``text`` (``int_cam02_img`` gives 2), else None."""
-    found = re.findall(r"\d+", text)
-    return int(found[0]) if len(found) == 1 else None
-
-
 def check_order(
     names: list[str], videos: list[Path], calibration: str | os.PathLike[str] = "calibration"
 ) -> None:
@@ -278,8 +272,8 @@ def check_order(
 
     Raises:
         MotionFormatError: the order that matches, in one line."""
-    cams = [_one_number(n) for n in names]
-    vids = [_one_number(Path(v).stem) for v in videos]
+    cams = [one_number(n) for n in names]
+    vids = [one_number(Path(v).stem) for v in videos]
     if None in cams or None in vids or len(set(cams)) != len(cams) or sorted(cams) != sorted(vids):
         return
     if cams != vids:

@@ -34,6 +34,7 @@ import functools
 import json
 import math
 import os
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -427,6 +428,7 @@ def load_cameras(
             )
         out.append(CalibratedCamera(k, r, t, w, h, str(name)[:64], video, bg, dist, skip))
         valid_camera(path, where, out[-1])
+    _check_own_videos(path, out)
     problem, unambiguous = convention_problem(out)
     if problem and unambiguous:
         raise MotionFormatError(path, problem)
@@ -442,6 +444,7 @@ def load_cameras(
         placed = placement_notes(out, f"t read in {units}: {said}", "is that the unit of its t?",
                                  "", "is its world Y up?")  # fmt: skip
         lines += [f"note: {path.name}: {line}" for line in placed] + _twin_notes(path, out)
+    lines += _numbering_notes(path, out)
     say(lines, notes, path.resolve())
     return out, doc
 
@@ -620,6 +623,55 @@ def _twin_notes(path: Path, cameras: Sequence[CalibratedCamera]) -> list[str]:
         if twins
         else []
     )
+
+
+def _check_own_videos(path: Path, cameras: Sequence[CalibratedCamera]) -> None:
+    """Refuse two cameras naming the same video (a camera copied and its video not edited):
+    one view would be tracked through two calibrations, and the camera whose video it is not
+    gave nothing but disagreement, without a word but a note on that view."""
+    seen: dict[str, CalibratedCamera] = {}
+    for c in cameras:
+        if not c.video:
+            continue  # named by camera_videos
+        key = os.path.normpath(c.video)
+        if key in seen:
+            raise MotionFormatError(
+                path,
+                f"cameras {seen[key].name} and {c.name} both name the video {c.video}: "
+                "each camera needs its own",
+            )
+        seen[key] = c
+
+
+def one_number(text: str) -> int | None:
+    """The one whole number in ``text`` (``int_cam02_img`` gives 2), else None."""
+    found = re.findall(r"\d+", text)
+    return int(found[0]) if len(found) == 1 else None
+
+
+def _numbering_notes(path: Path, cameras: Sequence[CalibratedCamera]) -> list[str]:
+    """A note when every camera's name and its video's file name hold one number, and the
+    videos' numbers are not the cameras' (nor the cameras' shifted by one constant, as 1-based
+    names over 0-based videos): ``cam2`` with ``cam1.mp4``, as a user who dropped a camera
+    and renumbered its videos made it, each camera then paired with another's video (the
+    check ``video cameras`` makes of its videos' order, :func:`~markovmotion.video.
+    calibration.check_order`). A note, not an error: a camera file pairs each camera with
+    its video by hand, and a user who found two videos swapped puts them right so."""
+    names = [one_number(c.name) for c in cameras]
+    videos = [one_number(Path(c.video).stem) for c in cameras]
+    if len(cameras) < 2 or None in names or None in videos or len(set(names)) < len(names):
+        return []
+    if len({v - n for n, v in zip(names, videos, strict=True)}) == 1:
+        return []
+    odd = [
+        f"{c.name} with {Path(c.video).name}"
+        for c, n, v in zip(cameras, names, videos, strict=True)
+        if n != v
+    ]
+    return [
+        f"note: {path.name}: the cameras' numbers are not their videos' ({', '.join(odd)}): "
+        "is each video its camera's? (each camera is tracked with the video it names)"
+    ]
 
 
 @functools.lru_cache(maxsize=64)

@@ -744,7 +744,10 @@ def lone_views(found: ViewLandmarks, tri: Triangulated) -> list[str]:
     of them. A video given for the wrong camera (a calibration names its cameras by serial
     number, and ``video cameras`` takes the videos in its order) or a camera calibrated
     wrong looks so: on the real video with two videos swapped, the only word had been that
-    186 camera frames showed "no one or someone else"."""
+    186 camera frames showed "no one or someone else". Of three views or fewer, the two
+    that agree may be the wrong ones (two cameras each given the next camera's video agree
+    with one another, and the one right camera was blamed): the note then says which view
+    disagrees, not which is wrong."""
     seen = found.visibility >= MIN_VISIBILITY  # (V, F, 33)
     # a landmark counts where another view saw it too: one no other camera sees (the person
     # out of their fields) can never be triangulated, and says nothing of this camera
@@ -756,7 +759,16 @@ def lone_views(found: ViewLandmarks, tri: Triangulated) -> list[str]:
         others = np.delete(share, v)
         if shared[v].sum() < 100 or not len(others) or others.max() < AGREEING_VIEWS:
             continue
-        if share[v] < LONE_VIEW:
+        if share[v] < LONE_VIEW and len(found.cameras) <= 3:
+            video = f" ({Path(cam.video).name})" if cam.video else ""
+            notes.append(
+                f"note: {cam.name} disagrees with the other views (they agreed with "
+                f"{share[v]:.0%} of the person's landmarks MediaPipe saw in it, with up to "
+                f"{others.max():.0%} of another view's): either its video{video} or theirs is "
+                "not the camera's, or a calibration is wrong (`video cameras` takes the videos "
+                "in the calibration's camera order)"
+            )
+        elif share[v] < LONE_VIEW:
             video = Path(cam.video).name or "its video"
             notes.append(
                 f"note: {cam.name}: the other views agreed with {share[v]:.0%} of the person's "
