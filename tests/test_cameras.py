@@ -366,3 +366,37 @@ def test_two_cameras_naming_one_video_are_refused_and_renumbered_videos_said(rea
     notes = []
     load_cameras(real_copy, notes)
     assert not [n for n in notes if "numbers" in n], notes
+
+
+def test_a_gap_in_a_frame_folders_numbering_is_said(real_copy, capsys):
+    """frame_50.png missing of frame_0 ... frame_99 had been read without a word, every
+    frame after it shown one frame early: a note names the camera, the numbers missing and
+    the numbering's range. Frames numbered by two, or whole, get none."""
+    frames = real_copy / "frames1"
+    frames.mkdir()
+    image = np.zeros((16, 16, 3), np.uint8)
+    for k in [*range(0, 50), *range(51, 60), *range(63, 100)]:
+        cv2.imwrite(str(frames / f"frame_{k}.png"), image)
+    _edit(real_copy, lambda d: d["cameras"][1].update(video="frames1"))
+    new_command()
+    notes: list[str] = []
+    load_cameras(real_copy, notes)
+    assert notes == [
+        "note: cam1: frames 50, 60-62 missing from its numbering (0-99): the frames after "
+        "are up to 4 early"
+    ]
+    assert capsys.readouterr().err.count("missing from its numbering") == 1
+    for k in (50, 60, 61, 62):
+        cv2.imwrite(str(frames / f"frame_{k}.png"), image)
+    for k in range(1, 100, 2):  # every other frame: numbered by two, nothing missing
+        (frames / f"frame_{k}.png").unlink()
+    new_command()
+    notes = []
+    load_cameras(real_copy, notes)
+    assert notes == []
+    (frames / "frame_2.png").unlink()
+    new_command()
+    load_cameras(real_copy, notes)
+    assert notes == [
+        "note: cam1: frames 2 missing from its numbering (0-98): the frames after are one early"
+    ]

@@ -47,7 +47,7 @@ from markovmotion.errors import MotionFormatError
 from markovmotion.io import MOTION_SUFFIXES
 from markovmotion.io.files import atomic_write, base_suffix
 from markovmotion.progress import say
-from markovmotion.video.render import FRAME_SUFFIXES
+from markovmotion.video.render import FRAME_SUFFIXES, missing_frames_note
 
 CAMERAS_FILE = "cameras.json"
 MAX_SIDE = 4096
@@ -438,7 +438,7 @@ def load_cameras(
     else:
         lines += _rate_notes(folders, out, float(fps))
     doc["fps"] = float(fps)
-    lines += centre_notes(out)
+    lines += centre_notes(out) + _numbering_gap_notes(folders, out)
     if not problem:  # cameras the wrong way round are placed anywhere
         said = f'its "units": "{units}"' if "units" in doc else 'no "units"'
         placed = placement_notes(out, f"t read in {units}: {said}", "is that the unit of its t?",
@@ -745,6 +745,18 @@ def _rate_of_videos(
         f'headers ({names}); add "fps" to it if that is not the rate they were filmed at'
     )
     return first
+
+
+def _numbering_gap_notes(folders: Sequence[Path], cameras: list[CalibratedCamera]) -> list[str]:
+    """A note for each camera whose video is a folder of frames with numbers missing from
+    their numbering (:func:`~markovmotion.video.render.missing_frames_note`)."""
+    out = []
+    for c in cameras:
+        video = _find(folders, c.video) if c.video else None
+        if video is not None and video.is_dir():
+            said = missing_frames_note(c.name, video)
+            out += [said] if said else []
+    return out
 
 
 #: A principal point further from the image's middle than this share of its width or

@@ -14,6 +14,7 @@ paper. :func:`read_frames` reads either back.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterable, Iterator, Sequence
@@ -411,6 +412,48 @@ def frame_files(path: str | os.PathLike[str]) -> list[Path]:
     (:func:`natural_key`); [] for a folder without any."""
     files = (p for p in Path(path).iterdir() if p.suffix.lower() in FRAME_SUFFIXES)
     return sorted(files, key=lambda p: natural_key(p.name))
+
+
+def missing_frames(files: Sequence[Path]) -> tuple[list[int], int, int]:
+    """The numbers missing from a folder's frames ``files`` (:func:`frame_files`), each
+    numbered by the last number in its name, counting by their common step (``frame_0``,
+    ``frame_2`` ... is not missing the odd ones), and the first and last number; ([], 0, 0)
+    when a name holds no number or two hold the same one (a numbering not to judge). The
+    frames are read in order, so the ones after a missing number are shown one frame early:
+    a folder without ``frame_50.png`` was tracked so without a word."""
+    numbers = []
+    for f in files:
+        found = re.findall(r"\d+", f.stem)
+        if not found:
+            return [], 0, 0
+        numbers.append(int(found[-1]))
+    if len(numbers) < 2 or len(set(numbers)) < len(numbers):
+        return [], 0, 0
+    numbers.sort()
+    step = math.gcd(*(b - a for a, b in zip(numbers, numbers[1:], strict=False)))
+    missing = sorted(set(range(numbers[0], numbers[-1] + 1, step)) - set(numbers))
+    return missing, numbers[0], numbers[-1]
+
+
+def missing_frames_note(name: str, folder: str | os.PathLike[str]) -> str | None:
+    """A note naming the camera ``name``, the numbers missing from the frames of its
+    ``folder`` (:func:`missing_frames`) and its numbering's range; None when none is."""
+    missing, first, last = missing_frames(frame_files(folder))
+    if not missing:
+        return None
+    runs: list[list[int]] = []
+    for k in missing:
+        if runs and k == runs[-1][-1] + 1:
+            runs[-1].append(k)
+        else:
+            runs.append([k])
+    listed = ", ".join(f"{r[0]}" if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs[:8])
+    more = f", ... ({len(missing)} in all)" if len(runs) > 8 else ""
+    early = "one" if len(missing) == 1 else f"up to {len(missing)}"
+    return (
+        f"note: {name}: frames {listed}{more} missing from its numbering ({first}-{last}): "
+        f"the frames after are {early} early"
+    )
 
 
 def _decoded(path: Path, skip: int = 0) -> Iterator[np.ndarray]:
