@@ -425,6 +425,63 @@ def test_a_folder_of_one_cameras_frames_is_that_cameras_video(
     assert "needs the folder of every camera" in capsys.readouterr().err
 
 
+def test_an_output_that_cannot_be_written_is_refused_before_the_tracking(
+    real_video, partner_models, tmp_path, capsys, monkeypatch
+):
+    """``--out /sys/a.c3d`` (or a folder, or a path under a file) had been found after all
+    the tracking (11 s); ``dualhmm respond --video --out /sys/c.mp4`` then printed FFmpeg's
+    lines and its command around "Broken pipe", and an existing folder as ``--out`` was
+    named by the temporary file. Now one line naming the output, exit 2, before any
+    tracking; the mp4 writer and ``atomic_write`` name it too."""
+    import markovmotion.video.composite as composite
+    import markovmotion.video.monocular as monocular
+    import markovmotion.video.multiview as multiview
+    import markovmotion.video.triangulation as triangulation
+    from markovmotion.io.files import atomic_write
+    from markovmotion.viz.video import write_mp4
+
+    def never(*args, **kwargs):
+        raise AssertionError("tracked before the output was checked")
+
+    for module, name in ((monocular, "track_monocular_video"), (monocular, "track_monocular"),
+                         (triangulation, "track_triangulated_video"), (multiview, "track_take"),
+                         (composite, "track_take")):  # fmt: skip
+        monkeypatch.setattr(module, name, never)
+    (tmp_path / "a_folder.c3d").mkdir()
+    (tmp_path / "a_folder.mp4").mkdir()
+    (tmp_path / "a_file").write_text("")
+    video = str(real_video / "cam0.mp4")
+    cases = [
+        (["track", "--video", video, "--method", "monocular"], "/proc/a.c3d",
+         "cannot write into the folder /proc"),
+        (["track", "--video", str(real_video), "--method", "triangulate"],
+         str(tmp_path / "a_folder.c3d"), "is a folder"),
+        (["track", "--video", video], str(tmp_path / "a_file" / "x" / "a.bvh"),
+         f"cannot write: {tmp_path / 'a_file'} is a file, not a folder"),
+        (["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video", video,
+          "--method", "monocular"], "/sys/c.mp4", "cannot write into the folder /sys"),
+        (["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video", video],
+         str(tmp_path / "a_folder.mp4"), "is a folder"),
+    ]  # fmt: skip
+    for args, out, said in cases:
+        with pytest.raises(SystemExit) as exc:
+            main([*args, "--out", out])
+        assert exc.value.code == 2, args
+        err = capsys.readouterr().err
+        lines = [line for line in err.splitlines() if not line.startswith("note:")]
+        assert len(lines) == 1 and lines[0].startswith(f"error: {out}: {said}"), err
+        assert ".tmp" not in err and "Traceback" not in err
+    frame = np.zeros((16, 16, 3), np.uint8)
+    with pytest.raises(OSError, match="cannot write into the folder /sys") as exc:
+        write_mp4([frame] * 3, "/sys/c.mp4", 10.0)
+    assert exc.value.filename == "/sys/c.mp4"
+    with pytest.raises(IsADirectoryError, match="is a folder") as exc:
+        with atomic_write(tmp_path / "a_folder.c3d") as fh:
+            fh.write("x")
+    assert exc.value.filename == str(tmp_path / "a_folder.c3d")
+    assert [p.name for p in tmp_path.iterdir() if ".tmp" in p.name] == []
+
+
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():
     from markovmotion.core.motion import Motion
     from markovmotion.features.body_points import POINT_SKELETON

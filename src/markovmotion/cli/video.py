@@ -282,10 +282,12 @@ def track(
         return
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
+    from markovmotion.io.files import check_writable
     from markovmotion.video.multiview import default_body_model, track_take
 
     if out is not None:
         check_motion_output(out)
+        check_writable(out)  # before the tracking, not after
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     size = _body_size(body_size)
@@ -437,6 +439,10 @@ def _track_landmarks(
 
     if out is not None and out.suffix.lower() != ".c3d":
         raise MotionFormatError(out, f"{method} tracking writes markers: use a .c3d name")
+    if out is not None:
+        from markovmotion.io.files import check_writable
+
+        check_writable(out)  # before the tracking, not after
     if reference is not None and not reference.is_file():
         raise MotionFormatError(reference, "no such reference file")
     if method == "triangulate":

@@ -120,6 +120,46 @@ def read_text(path: str | os.PathLike[str]) -> str:
             raise MotionFormatError(path, "not a text file") from None
 
 
+def _not_a_folder(path: Path) -> None:
+    """Raise an :class:`OSError` naming the output ``path`` when it is an existing folder
+    (the rename had failed naming the temporary file: ".out.mp4.1d07fb674826.tmp.mp4: Is a
+    directory")."""
+    if path.is_dir():
+        raise OSError(errno.EISDIR, "is a folder", str(path))
+
+
+def _cannot_write(path: Path, exc: OSError) -> OSError:
+    """The error of an output ``path`` whose folder could not be made or take a new file:
+    naming the output, not the folder or temporary file that failed."""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        problem = f"cannot write: {exc.filename} is a file, not a folder"
+    else:
+        problem = f"cannot write into the folder {path.parent} ({exc.strerror})"
+    return OSError(exc.errno, problem, str(path))
+
+
+def check_writable(path: str | os.PathLike[str]) -> None:
+    """Raise the :class:`OSError` writing ``path`` would raise (one line naming it: a folder,
+    a file where a folder above it should be, a folder that takes no new file), before the
+    work that makes what goes there: a file is made and removed in the nearest folder of
+    ``path`` that exists (what the writers do; permissions alone do not say, root is
+    refused by /sys and /proc all the same). An unwritable ``--out`` had been found after
+    all the tracking."""
+    path = Path(path)
+    _not_a_folder(path)
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        if not folder.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, "not a folder", str(folder))
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
 @contextmanager
 def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO]:
     """Write ``path`` through a temporary file in the same folder, renamed on success.
@@ -128,15 +168,12 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO]:
     Paths ending in ``.gz`` are gzip-compressed (text or binary as ``mode`` says).
     """
     path = Path(path)
+    _not_a_folder(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:  # name the output, not the folder or temporary file that failed
-        if isinstance(exc, FileExistsError):
-            problem = f"cannot write: {exc.filename} is a file, not a folder"
-        else:
-            problem = f"cannot write into the folder {path.parent} ({exc.strerror})"
-        raise OSError(exc.errno, problem, str(path)) from None
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
     _live(tmp)
     try:
         with os.fdopen(fd, "wb") as raw:
@@ -166,7 +203,11 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     usual permissions. On failure nothing is left behind.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _not_a_folder(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
     tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp{path.suffix}")
     _live(tmp)
     try:

@@ -25,6 +25,7 @@ from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.errors import MotionFormatError, SkeletonMismatchError
 from markovmotion.features.body_points import BODY_POINTS, body_points
+from markovmotion.io.files import check_writable
 from markovmotion.video.annealed_particle_filter import (
     AnnealedParticleFilter,
     no_one,
@@ -182,6 +183,7 @@ def respond_in_video(
             raise ValueError("live, the camera to draw into is given (view)")
         return _respond_live(model, video, out, body, cameras, view, particles, layers, max_frames)
     dual = _load_partner_model(model)
+    check_writable(out)  # before the tracking, not after
     where = camera_file(video, cameras)
     cams, _ = load_cameras(where)
     single = lone_video(video)
@@ -243,6 +245,7 @@ def respond_mediapipe(
     if tracker not in ("monocular", "triangulate"):
         raise ValueError(f"tracker must be monocular or triangulate, got {tracker!r}")
     dual = _load_partner_model(model)
+    check_writable(out)  # before the tracking, not after
     where = camera_file(video, cameras)
     cams, doc = load_cameras(where)
     if lone_video(video):  # one camera's video
@@ -329,6 +332,7 @@ def _track_live(
     from markovmotion.models.online import concatenate
 
     dual = _load_partner_model(model)
+    check_writable(out)  # before the tracking, not after
     mv = open_video(video, cameras, None, max_frames)  # before the clock
     if lone_video(video):
         view = 0

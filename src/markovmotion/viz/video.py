@@ -8,13 +8,14 @@ import it cheaply.
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from markovmotion.io.files import atomic_path
+from markovmotion.io.files import atomic_path, check_writable
 
 #: ffmpeg's input pixel format by the number of channels of a frame.
 PIXEL_FORMATS = {3: "rgb24", 4: "rgba"}
@@ -37,6 +38,7 @@ def write_mp4(
     import imageio_ffmpeg
 
     path = Path(path)
+    check_writable(path)  # one line naming it, not ffmpeg's lines and a broken pipe
     frames = iter(frames)
     first = next(frames)
     with atomic_path(path) as tmp:
@@ -57,11 +59,18 @@ def write_mp4(
             writer.send(np.ascontiguousarray(first))
             for f in frames:
                 writer.send(np.ascontiguousarray(f))
-        except BaseException:  # an error or a signal: stop ffmpeg now, not when collected
+        except BaseException as exc:  # an error or a signal: stop ffmpeg now, not when collected
             try:
                 writer.throw(SystemExit(1))  # imageio-ffmpeg kills ffmpeg on SystemExit
             except BaseException:
                 pass
+            if isinstance(exc, OSError) and exc.filename is None:  # ffmpeg's pipe, many lines
+                said = (str(exc).splitlines() or ["it stopped"])[0]
+                raise OSError(
+                    errno.EPIPE, f"ffmpeg could not write it ({said})", str(path)
+                ) from None
             raise
         writer.close()
+        if not tmp.exists():  # ffmpeg said why on stderr, and gave up
+            raise OSError(errno.EIO, "ffmpeg wrote nothing", str(path))
     return path
