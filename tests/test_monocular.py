@@ -287,14 +287,14 @@ def test_respond_monocular_draws_the_partner_into_the_real_video(
     ]
     assert sum(c.sum() for c in changed) > 500  # B drawn (the rest: compression noise)
     err = capsys.readouterr().err
-    assert "12 frames in camera 1 alone (12 placed" in err
+    assert "12 frames in camera 1 (cam1) (12 placed" in err
     assert ("--frame heading" in err) == (frame == "world")
 
 
 @pytest.mark.parametrize(
     ("method", "said"),
     [
-        ("monocular", "12 frames in camera 0 alone"),
+        ("monocular", "12 frames in camera 0 (cam0)"),
         ("triangulate", "12 frames in 4 views, triangulated"),
     ],
 )
@@ -480,6 +480,26 @@ def test_an_output_that_cannot_be_written_is_refused_before_the_tracking(
             fh.write("x")
     assert exc.value.filename == str(tmp_path / "a_folder.c3d")
     assert [p.name for p in tmp_path.iterdir() if ".tmp" in p.name] == []
+
+
+def test_respond_composites_into_any_camera_of_six(real_copy, partner_models, tmp_path, capsys):
+    """``--view`` had stopped at 3 though a camera file holds up to 6 cameras (MAX_CAMERAS):
+    camera 4 of five is taken, and named by its name as well as its number."""
+    from markovmotion.defaults import MAX_CAMERAS
+
+    doc = json.loads((real_copy / "cameras.json").read_text(encoding="utf-8"))
+    doc["cameras"].append({**doc["cameras"][3], "name": "side", "video": "cam4.mp4"})
+    (real_copy / "cameras.json").write_text(json.dumps(doc), encoding="utf-8")
+    (real_copy / "cam4.mp4").symlink_to((real_copy / "cam3.mp4").resolve())
+    main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+          str(real_copy), "--method", "monocular", "--view", "4", "--max-frames", "3",
+          "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert "tracked A over 3 frames in camera 4 (side) (3 placed" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+              str(real_copy), "--view", str(MAX_CAMERAS), "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert exc.value.code == 2
+    assert f"from 0 to {MAX_CAMERAS - 1}, got {MAX_CAMERAS}" in capsys.readouterr().err
 
 
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():

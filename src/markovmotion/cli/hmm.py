@@ -28,7 +28,7 @@ from markovmotion.cli.options import (
 )
 from markovmotion.cli.tables import print_json, print_notes, say_people_trained_on
 from markovmotion.data.index import read_listed
-from markovmotion.defaults import DUALHMM_PRESETS
+from markovmotion.defaults import DUALHMM_PRESETS, MAX_CAMERAS
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
 
@@ -324,7 +324,9 @@ def respond(
         "and draw B into it.",
     ),
     cameras: Path = typer.Option(None, help="Camera file of --video (default: its cameras.json)."),
-    view: int = ranged("count", 0, min=0, max=3, help="Camera whose video is composited."),
+    view: int = ranged(
+        "count", 0, min=0, max=MAX_CAMERAS - 1, help="Camera whose video is composited."
+    ),
     particles: int = ranged("count", 200, min=10, max=5000, help="Tracker particles per layer."),
     layers: int = ranged("count", 10, min=1, max=50, help="Tracker annealing layers."),
     max_frames: int = ranged("count", None, max=1_000_000, help="Only the first video frames."),
@@ -470,8 +472,9 @@ def _respond_video(
             method, person,
         )  # fmt: skip
         print_notes(summary["notes"])
+        named = f" ({summary['camera']})" if summary.get("camera") else " alone"
         where = (
-            f"camera {summary['view']} alone"
+            f"camera {summary['view']}{named}"
             if method == "monocular"
             else f"{summary['views']} views, triangulated"
         )

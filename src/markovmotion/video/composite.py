@@ -297,6 +297,7 @@ def respond_mediapipe(
         "partner_frames": b.n_frames,
         "out": str(written),
         "view": view,
+        "camera": cams[view].name,
         **extra,
         "notes": extra["notes"] + framing_notes(cams, view, b),
     }
