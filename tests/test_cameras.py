@@ -62,10 +62,10 @@ def test_a_camera_file_without_fps_takes_the_rate_its_videos_agree_on(real_copy,
     assert 'no "fps"' in err and "cam0.mp4 60, cam1.mp4 30" in err and 'add "fps"' in err
     for k in range(4):  # folders of images: no header, no rate
         (real_copy / f"cam{k}.mp4").unlink()
-    folder = real_copy / "frames"
-    folder.mkdir()
-    cv2.imwrite(str(folder / "000.png"), cv2.cvtColor(frames[0], cv2.COLOR_RGB2BGR))
-    _edit(real_copy, lambda d: [c.update(video="frames") for c in d["cameras"]])
+        folder = real_copy / f"frames{k}"
+        folder.mkdir()
+        cv2.imwrite(str(folder / "000.png"), cv2.cvtColor(frames[0], cv2.COLOR_RGB2BGR))
+    _edit(real_copy, lambda d: [c.update(video=f"frames{k}") for k, c in enumerate(d["cameras"])])
     with pytest.raises(MotionFormatError, match='no video\'s header gives one: add "fps"'):
         load_cameras(real_copy)
 
@@ -158,7 +158,7 @@ def test_up_to_six_cameras_are_read(real_copy, capsys):
 
     first = _cams(real_copy)
     for n in (5, 6, 7):
-        extra = [dict(first[k % 4], name=f"cam{k}") for k in range(4, n)]
+        extra = [dict(first[k % 4], name=f"cam{k}", video=f"cam{k}.mp4") for k in range(4, n)]
         _edit(real_copy, lambda d, extra=extra: d.update(cameras=first + extra))
         if n <= MAX_CAMERAS:
             assert len(load_cameras(real_copy)[0]) == n
@@ -169,8 +169,8 @@ def test_up_to_six_cameras_are_read(real_copy, capsys):
         main(["track", "--video", str(real_copy), "--views", "7"])
     assert stop.value.code == 2 and "--views" in capsys.readouterr().err
     # the copies above are one camera each with their originals: said (a trial's 6-camera
-    # file with two pasted twice had no word)
-    extra = [dict(first[k], name=f"cam{k + 4}") for k in range(2)]
+    # file with two pasted twice had no word; pasted with their videos too, they are refused)
+    extra = [dict(first[k], name=f"cam{k + 4}", video=f"cam{k + 4}.mp4") for k in range(2)]
     _edit(real_copy, lambda d: d.update(cameras=first + extra))
     new_command()
     notes: list[str] = []
