@@ -400,3 +400,21 @@ def test_a_gap_in_a_frame_folders_numbering_is_said(real_copy, capsys):
     assert notes == [
         "note: cam1: frames 2 missing from its numbering (0-98): the frames after are one early"
     ]
+
+
+def test_one_cameras_video_at_another_rate_than_the_others_is_refused(real_copy, capsys):
+    """cam1 re-encoded at 30 fps among videos at 60 (the camera file saying 60) had been
+    tracked with a note advising to "set its fps", which no rate of the file puts right for
+    every view (they are paired frame by frame): one line naming the video and both rates,
+    exit 2. Videos that agree with one another but not with the file keep their note."""
+    frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
+    _replace(real_copy / "cam1.mp4", frames, 30.0)
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(real_copy), "--method", "triangulate"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "cam1.mp4 is 30 fps by its own header, the other views 60: resample it to 60" in err
+    _edit(real_copy, lambda d: d.update(fps=30.0))  # the file agreeing with the odd one
+    with pytest.raises(MotionFormatError, match="cam1.mp4 is 30 fps .* the other views 60"):
+        load_cameras(real_copy)

@@ -436,7 +436,7 @@ def load_cameras(
     if fps is None:
         fps = _rate_of_videos(path, folders, out, lines)
     else:
-        lines += _rate_notes(folders, out, float(fps))
+        lines += _rate_notes(path, folders, out, float(fps))
     doc["fps"] = float(fps)
     lines += centre_notes(out) + _numbering_gap_notes(folders, out)
     if not problem:  # cameras the wrong way round are placed anywhere
@@ -703,16 +703,41 @@ def _header_rates(folders: Sequence[Path], cameras: list[CalibratedCamera]) -> d
     return out
 
 
-def _rate_notes(folders: Sequence[Path], cameras: list[CalibratedCamera], fps: float) -> list[str]:
-    """A note for each camera's video whose own frame rate is not the
-    camera file's ``fps``, which is the one used: a video re-encoded at 30 fps under a file
-    saying 60 was tracked at twice its speed, and paired with a reference frame by frame,
-    without a word."""
+def _rate_notes(
+    path: Path, folders: Sequence[Path], cameras: list[CalibratedCamera], fps: float
+) -> list[str]:
+    """A note for each camera's video whose own frame rate is not the camera file's ``fps``,
+    which is the one used, when the videos agree with one another (within 1 %): a video
+    re-encoded at 30 fps under a file saying 60 was tracked at twice its speed, and paired
+    with a reference frame by frame, without a word.
+
+    Raises:
+        MotionFormatError: the videos' own rates disagree (one camera's video re-encoded at
+            30 fps among others at 60): the views are paired frame by frame, so no ``fps``
+            of the file is right for all of them (the note had advised setting it); the
+            odd videos, their rates and the others' rate, to resample them to."""
+    known = {name: own for name, own in _header_rates(folders, cameras).items() if own > 0}
+
+    def near(a: float, b: float) -> bool:
+        return abs(a - b) <= 0.01 * b
+
+    rates = list(known.values())
+    if any(not near(r, rates[0]) for r in rates):
+        # the others' rate: the one most videos have (of as many, the file's)
+        groups = [[r for r in rates if near(r, q)] for q in rates]
+        usual = max(groups, key=lambda g: (len(g), near(g[0], fps)))[0]
+        odd = [f"{name} is {r:g} fps" for name, r in known.items() if not near(r, usual)]
+        whose, it = ("its", "it") if len(odd) == 1 else ("their", "them")
+        raise MotionFormatError(
+            path,
+            f"{', '.join(odd)} by {whose} own header, the other views {usual:g}: resample "
+            f"{it} to {usual:g} (the views are paired frame by frame)",
+        )
     return [
         f"note: {name} is {own:g} fps by its own header, the camera file says {fps:g}: "
         "the camera file's rate is used (set its fps if the video's is right)"
-        for name, own in _header_rates(folders, cameras).items()
-        if own > 0 and abs(own - fps) > 0.01 * fps
+        for name, own in known.items()
+        if not near(own, fps)
     ]
 
 
