@@ -418,3 +418,19 @@ def test_one_cameras_video_at_another_rate_than_the_others_is_refused(real_copy,
     _edit(real_copy, lambda d: d.update(fps=30.0))  # the file agreeing with the odd one
     with pytest.raises(MotionFormatError, match="cam1.mp4 is 30 fps .* the other views 60"):
         load_cameras(real_copy)
+
+
+def test_a_track_cut_by_a_short_video_offers_no_reference_rate(real_copy, capsys):
+    """cam2 cut to 3 frames stops the particle filter there (said); the reference's note had
+    then guessed "if both span the same time, the reference is at 2e+03 fps", a rate that
+    is no one's: the rows and frames are given, the guess not, as when --max-frames cut it."""
+    reference = REAL / "reference_mediapipe_triangulated_mm.csv"
+    _replace(real_copy / "cam2.mp4", list(itertools.islice(read_frames(REAL / "cam2.mp4"), 3)), 60)
+    main(["track", "--video", str(real_copy), "--particles", "10", "--layers", "1", "--guide",
+          "none", "--reference", str(reference), "--json"])  # fmt: skip
+    run = capsys.readouterr()
+    assert "if both span the same time" not in run.err
+    summary = json.loads(run.out)
+    said = [n for n in summary["notes"] if "the reference" in n]
+    assert len(said) == 1 and "has 100 rows and the track 3 frames" in said[0], said
+    assert summary["frames"] == 3 and summary["ended_early"] == ["cam2.mp4"]

@@ -350,8 +350,9 @@ def track(
         from markovmotion.video.monocular import reference_report
 
         summary["reference"], said = reference_report(
-            body_points(motion), reference, summary["video_fps"], first_skip, max_frames
-        )
+            body_points(motion), reference, summary["video_fps"], first_skip, max_frames,
+            cut_short=bool(summary["ended_early"]),
+        )  # fmt: skip
         later += [said] if said else []
     print_notes(later)
     summary["notes"] += later

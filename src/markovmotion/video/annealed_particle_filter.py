@@ -759,6 +759,8 @@ class TrackResult:
     background_notes: list[str] = field(default_factory=list)
     #: One line when a camera's video ended before the others' (the track stops there).
     video_notes: list[str] = field(default_factory=list)
+    #: The videos that ended before the others, cutting the track (their names).
+    ended_early: list[str] = field(default_factory=list)
     #: Frames MediaPipe found turned front to back (searched again), and those left so.
     flips: int = 0
     flipped: int = 0
@@ -783,12 +785,13 @@ def multiview_frames(
     max_frames: int | None = None,
     cameras: Sequence[CalibratedCamera] | None = None,
     notes: list[str] | None = None,
+    ended_early: list[str] | None = None,
 ) -> Iterator[list[np.ndarray]]:
     """One frame per camera at a time, until the shortest video ends (undistorted by their
     ``cameras``, :func:`~markovmotion.video.render.read_frames`); a video that ends before
     the others is said in ``notes`` (:func:`~markovmotion.video.render.shortest_note`), with
     its header's count if that is more (:func:`~markovmotion.video.render.header_shortfall`:
-    damaged in the middle)."""
+    damaged in the middle), and its name added to ``ended_early`` (it cut the frames)."""
     cams = list(cameras) if cameras is not None else [None] * len(videos)
     readers = [read_frames(v, c) for v, c in zip(videos, cams, strict=True)]
     n = 0
@@ -806,6 +809,10 @@ def multiview_frames(
             )
             if note is not None and notes is not None:
                 notes.append(note)
+            if ended_early is not None and n < max(lengths):
+                ended_early += [
+                    Path(v).name for v, k in zip(videos, lengths, strict=True) if k == n
+                ]
             return
         n += 1
         yield frames
@@ -827,6 +834,8 @@ class MultiviewVideo:
     #: The camera file's notes (:func:`~markovmotion.video.cameras.load_cameras`), and one
     #: line when a camera's video ended before the others' (filled as the frames are read).
     video_notes: list[str] = field(default_factory=list)
+    #: The videos that ended before the others and so cut the frames (filled as they are read).
+    ended_early: list[str] = field(default_factory=list)
 
     def features_of(self, frames: list[np.ndarray], index: int, seed: int = 0) -> ViewFeatures:
         """The features of one frame per camera (checked against the cameras' sizes)."""
@@ -889,10 +898,11 @@ def open_video(
             backgrounds.append(estimate_background(v, camera=c))
             why = "" if not learn_background else " (MediaPipe not installed)"
             notes.append(f"{c.name}: median background, not checked for the person{why}")
-    frames = multiview_frames(videos, max_frames, cameras, ended)
+    short: list[str] = []
+    frames = multiview_frames(videos, max_frames, cameras, ended, short)
     return MultiviewVideo(
         cameras, float(doc["fps"]), doc, backgrounds, frames, cams_path, list(videos), notes,
-        ended,
+        ended, short,
     )  # fmt: skip
 
 
@@ -1018,6 +1028,7 @@ def track_video(
     result = track_features(mv.features(seed), apf, total, mv.source)
     result.background_notes = mv.background_notes
     result.video_notes = [*mv.video_notes, *result.video_notes]
+    result.ended_early = mv.ended_early
     result.guide_seconds = guided.seconds if guided is not None else 0.0
     if guided is not None:
         result.guide_seen = float((guided.weights > 0).any(axis=-1).mean())

@@ -640,6 +640,7 @@ def reference_note(
     fps: float,
     first_frame: int = 0,
     max_frames: int | None = None,
+    cut_short: bool = False,
 ) -> str | None:
     """One line when a reference's rows (from the track's first frame, ``first_frame`` of
     the first camera's video, on) are not as many as the track's ``frames`` at ``fps``:
@@ -647,9 +648,13 @@ def reference_note(
     of the same video at its rate (a 60 fps reference against a 30 fps re-encoding was
     264.7 mm off without a word). A video that ends early looks the same as a reference at
     another rate, so the rate is offered as an "if", not asserted (a trial's video cut to 40
-    frames had been told to give a 150 fps reference at the video's rate). None when they
-    match, or when the track was cut by ``max_frames`` and the reference goes on."""
-    return _note(reference, read_reference(reference)[0], frames, fps, first_frame, max_frames)
+    frames had been told to give a 150 fps reference at the video's rate), and not at all
+    when ``cut_short`` (one view's video ended before the others and cut the track: the
+    particle filter said so; a camera cut to 70 frames had been offered an 85.7 fps
+    reference). None when they match, or when the track was cut by ``max_frames`` and the
+    reference goes on."""
+    rows = read_reference(reference)[0]
+    return _note(reference, rows, frames, fps, first_frame, max_frames, cut_short)
 
 
 def _note(
@@ -659,6 +664,7 @@ def _note(
     fps: float,
     first_frame: int,
     max_frames: int | None,
+    cut_short: bool = False,
 ) -> str | None:
     """:func:`reference_note` of a reference whose frame numbers (``rows``) are read."""
     n = int((rows >= first_frame).sum())
@@ -674,7 +680,7 @@ def _note(
         f"note: the reference {Path(reference).name} has {n} rows and the track {frames} "
         f"frames: row k is compared with frame k, {left}"
     )
-    if not cut and frames > 0 and abs(n / frames - 1.0) > 0.1:
+    if not cut and not cut_short and frames > 0 and abs(n / frames - 1.0) > 0.1:
         # a video cut short and a reference at another rate look alike here: both are said
         line += (
             f"; if both span the same time, the reference is at {fps * n / frames:.3g} fps and "
@@ -716,12 +722,14 @@ def reference_report(
     fps: float,
     first_frame: int = 0,
     max_frames: int | None = None,
+    cut_short: bool = False,
 ) -> tuple[dict, str | None]:
     """A track's (F, 19, 3) body ``points`` against a reference CSV, read once: its errors
     (:func:`reference_errors`) and the note of :func:`reference_note` (None when the rows and
-    the track's frames pair up), as every tracker's summary reports them."""
+    the track's frames pair up; ``cut_short``: a view's video ended first and cut the track),
+    as every tracker's summary reports them."""
     read = read_reference(reference)
-    note = _note(reference, read[0], len(points), fps, first_frame, max_frames)
+    note = _note(reference, read[0], len(points), fps, first_frame, max_frames, cut_short)
     return _errors(points, read, BODY_POINTS, first_frame), note
 
 

@@ -493,6 +493,7 @@ def track_take(
             else {}
         ),
         "confidence": [round(float(c), 3) for c in result.confidence],
+        "ended_early": result.ended_early,
         "background": result.background_notes,
         "notes": [
             *result.video_notes,
