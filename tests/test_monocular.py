@@ -502,6 +502,29 @@ def test_respond_composites_into_any_camera_of_six(real_copy, partner_models, tm
     assert f"from 0 to {MAX_CAMERAS - 1}, got {MAX_CAMERAS}" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("frame", ["heading", "world"])
+def test_serve_says_a_partner_placing_b_by_its_rooms_axes(
+    partner_models, tmp_path, capsys, monkeypatch, frame
+):
+    """``serve --partner`` with a dual HMM of frame 'world' (as ``--frame auto`` may pick)
+    had said nothing at start-up, where ``dualhmm respond --video`` says it places B along
+    its capture room's axes: the same note now (the server itself stubbed out)."""
+    import markovmotion.web.server as server
+
+    class Stopped:
+        def run(self, sockets):
+            return None
+
+    monkeypatch.setattr(server, "uvicorn_server", lambda app: Stopped())
+    (tmp_path / "lib").mkdir()
+    main(["serve", "--library", str(tmp_path / "lib"), "--port", "0", "--partner",
+          str(partner_models[frame])])  # fmt: skip
+    err = capsys.readouterr().err
+    said = f"{partner_models[frame]} places B along its capture room's axes from A"
+    assert (said in err) == (frame == "world"), err
+    assert ("train it with --frame heading" in err) == (frame == "world")
+
+
 def test_composite_hides_the_partner_behind_the_person_and_not_where_none_is_found():
     from markovmotion.core.motion import Motion
     from markovmotion.features.body_points import POINT_SKELETON

@@ -26,7 +26,12 @@ from markovmotion.cli.options import (
     stopped,
     with_preset,
 )
-from markovmotion.cli.tables import print_json, print_notes, say_people_trained_on
+from markovmotion.cli.tables import (
+    print_json,
+    print_notes,
+    say_people_trained_on,
+    world_frame_note,
+)
 from markovmotion.data.index import read_listed
 from markovmotion.defaults import DUALHMM_PRESETS, MAX_CAMERAS
 from markovmotion.persist import check_model_output
@@ -459,13 +464,7 @@ def _respond_video(
     check_person(person, cams[:1] if lone else cams, guided or method == "triangulate")
     if note:
         err_console.print(note, highlight=False)
-    if getattr(DualHMM.load(model), "frame_", "heading") == "world":
-        err_console.print(
-            f"[yellow]note:[/] {model} places B along its capture room's axes from A "
-            "(frame 'world'), which mean nothing in this video's world: train it with "
-            "--frame heading to place B by where A faces",
-            highlight=False,
-        )
+    world_frame_note(DualHMM.load(model), model, "this video's world")
     if method != "apf":
         summary = respond_mediapipe(
             model, video, out, cameras, view, max_frames, "standard" if standard else "windowed",

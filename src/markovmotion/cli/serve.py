@@ -81,6 +81,11 @@ def serve(
         drop_late=drop_late,
     )
     app = options.build()  # here first, so that a bad option is one line before any worker
+    if partner is not None:  # the model is good: built above
+        from markovmotion.cli.tables import world_frame_note
+        from markovmotion.models import Model
+
+        world_frame_note(Model.load(partner), partner, "a webcam's world (the camera page)")
     port = sock.getsockname()[1]
     url = f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
     lines = [f"markovmotion serving {app.state.library.root} at {url}"]

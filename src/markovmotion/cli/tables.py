@@ -77,6 +77,20 @@ def print_notes(lines: list[str]) -> None:
             err_console.print(line, highlight=False)
 
 
+def world_frame_note(model: object, name: object, world: str) -> None:
+    """A note (stderr) when ``model`` is a dual HMM placing B along its capture room's axes
+    (``frame_`` 'world', as ``--frame auto`` picks for some takes), named ``name``, answering
+    in ``world``, where those axes mean nothing: ``dualhmm respond --video`` and ``serve
+    --partner`` say it alike (serve had said nothing)."""
+    from markovmotion.progress import note
+
+    if getattr(model, "frame_", "heading") == "world":
+        note(
+            f"{name} places B along its capture room's axes from A (frame 'world'), which "
+            f"mean nothing in {world}: train it with --frame heading to place B by where A faces"
+        )
+
+
 def say_people_trained_on(report: dict) -> None:
     """A note when an evaluation's test people are people the model learnt other takes of
     (``people_trained_on``): its numbers, and the aims for new people, are then not about
