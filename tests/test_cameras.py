@@ -434,3 +434,21 @@ def test_a_track_cut_by_a_short_video_offers_no_reference_rate(real_copy, capsys
     said = [n for n in summary["notes"] if "the reference" in n]
     assert len(said) == 1 and "has 100 rows and the track 3 frames" in said[0], said
     assert summary["frames"] == 3 and summary["ended_early"] == ["cam2.mp4"]
+
+
+def test_a_damaged_frame_and_a_reflected_r_are_one_plain_line(real_copy, tmp_path, capfd):
+    """A damaged PNG frame had its one line preceded by OpenCV's own "[ERROR:0@3.671] global
+    grfmt_png.cpp ... IHDR chunk shall be first"; an R with determinant -1 was "not a
+    rotation matrix" without saying why (it is orthonormal: a reflection)."""
+    cv2.imwrite(str(tmp_path / "frame_0.png"), np.zeros((16, 16, 3), np.uint8))
+    (tmp_path / "frame_1.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    with pytest.raises(MotionFormatError, match="frame_1.png: not an image"):
+        list(read_frames(tmp_path))
+    err = capfd.readouterr().err
+    assert "grfmt_png" not in err and "[ERROR" not in err, err
+    flip = np.diag([1.0, 1.0, -1.0])
+    _edit(real_copy, lambda d: d["cameras"][2].update(R=(flip @ d["cameras"][2]["R"]).tolist()))
+    with pytest.raises(MotionFormatError) as exc:
+        load_cameras(real_copy)
+    said = "cameras[2].R is not a rotation matrix (a reflection: determinant -1)"
+    assert str(exc.value).endswith(said)

@@ -237,8 +237,12 @@ def valid_camera(path: Path, where: str, camera: CalibratedCamera) -> None:
     k, r = camera.K, camera.R
     if not (k[0, 0] > 0 and k[1, 1] > 0) or not np.allclose(k[2], [0, 0, 1]):
         raise MotionFormatError(path, f"{where}.K: focal lengths must be positive, last row 0 0 1")
-    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4):
         raise MotionFormatError(path, f"{where}.R is not a rotation matrix")
+    if np.linalg.det(r) < 0:
+        raise MotionFormatError(
+            path, f"{where}.R is not a rotation matrix (a reflection: determinant -1)"
+        )
 
 
 def read_distortion(path: Path, where: str, value: object) -> tuple[float, ...]:

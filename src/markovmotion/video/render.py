@@ -456,6 +456,20 @@ def missing_frames_note(name: str, folder: str | os.PathLike[str]) -> str | None
     )
 
 
+def _quiet_imread(path: Path) -> np.ndarray | None:
+    """``cv2.imread`` (BGR) with OpenCV's own log silenced: a damaged frame's "[ERROR:0@3.7]
+    global grfmt_png.cpp ... IHDR chunk shall be first" had come before the one line that
+    names it."""
+    from cv2.utils import logging as cv_log
+
+    level = cv_log.getLogLevel()
+    cv_log.setLogLevel(cv_log.LOG_LEVEL_SILENT)
+    try:
+        return cv2.imread(str(path), cv2.IMREAD_COLOR)
+    finally:
+        cv_log.setLogLevel(level)
+
+
 def _decoded(path: Path, skip: int = 0) -> Iterator[np.ndarray]:
     """RGB frames from frame ``skip`` on; the frames before are passed over unconverted
     (a video's are decoded, ``grab``, as they must be; an image folder's are not read)."""
@@ -464,7 +478,7 @@ def _decoded(path: Path, skip: int = 0) -> Iterator[np.ndarray]:
         if not files:
             raise MotionFormatError(path, "no PNG or JPEG frames in this folder")
         for f in files[skip:]:
-            img = cv2.imread(str(f), cv2.IMREAD_COLOR)
+            img = _quiet_imread(f)
             if img is None:
                 raise MotionFormatError(f, "not an image")
             yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
