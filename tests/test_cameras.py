@@ -27,6 +27,14 @@ def _edit(folder, change) -> dict:
     return doc
 
 
+def _triangulate_refused(folder, capsys) -> str:
+    """``track --method triangulate`` on ``folder`` exits 2; its stderr, stripped."""
+    with pytest.raises(SystemExit) as exc:
+        main(["track", "--video", str(folder), "--method", "triangulate"])
+    assert exc.value.code == 2
+    return capsys.readouterr().err.strip()
+
+
 def _replace(link, frames, fps: float) -> None:
     """A linked video replaced by a video of its own (the link removed first: never written
     through into the shared data)."""
@@ -54,10 +62,7 @@ def test_a_camera_file_without_fps_takes_the_rate_its_videos_agree_on(real_copy,
     assert run.err.count('no "fps"') == 1, run.err  # said once, though read three times
     frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
     _replace(real_copy / "cam1.mp4", frames, 30.0)
-    with pytest.raises(SystemExit) as exc:
-        main(["track", "--video", str(real_copy), "--method", "triangulate"])
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
+    err = _triangulate_refused(real_copy, capsys)
     assert len(err.splitlines()) == 1 and "cameras.json" in err, err
     assert 'no "fps"' in err and "cam0.mp4 60, cam1.mp4 30" in err and 'add "fps"' in err
     for k in range(4):  # folders of images: no header, no rate
@@ -330,10 +335,7 @@ def test_two_cameras_naming_one_video_are_refused_and_renumbered_videos_said(rea
     cam1.mp4) gets a note, as ``video cameras`` checks its videos' order; names numbered
     from 1 over videos from 0 (one shift for all) do not."""
     _edit(real_copy, lambda d: d["cameras"][3].update(video="cam2.mp4"))
-    with pytest.raises(SystemExit) as exc:
-        main(["track", "--video", str(real_copy), "--method", "triangulate"])
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
+    err = _triangulate_refused(real_copy, capsys)
     assert len(err.splitlines()) == 1, err
     assert "cameras cam2 and cam3 both name the video cam2.mp4" in err
     _edit(real_copy, lambda d: d["cameras"][3].update(video="./cam3.mp4"))
@@ -409,10 +411,7 @@ def test_one_cameras_video_at_another_rate_than_the_others_is_refused(real_copy,
     exit 2. Videos that agree with one another but not with the file keep their note."""
     frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
     _replace(real_copy / "cam1.mp4", frames, 30.0)
-    with pytest.raises(SystemExit) as exc:
-        main(["track", "--video", str(real_copy), "--method", "triangulate"])
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
+    err = _triangulate_refused(real_copy, capsys)
     assert len(err.splitlines()) == 1, err
     assert "cam1.mp4 is 30 fps by its own header, the other views 60: resample it to 60" in err
     _edit(real_copy, lambda d: d.update(fps=30.0))  # the file agreeing with the odd one
