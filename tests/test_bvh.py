@@ -136,7 +136,14 @@ def test_a_body_in_another_unit_is_named_and_read_in_it_by_auto(
     """A CMU take written in metres, inches or mm (Blender writes metres): read as cm (the
     default) it is not a person's size and a warning names the unit that makes it one;
     ``auto``, given or from the environment, reads it in that unit, the same motion."""
-    from markovmotion.io.bvh import UNIT_ENV, read_bvh, read_bvh_skeleton, rest_span, write_bvh
+    from markovmotion.io.bvh import (
+        BODY_SPAN_MM,
+        UNIT_ENV,
+        read_bvh,
+        read_bvh_skeleton,
+        rest_span,
+        write_bvh,
+    )
 
     take = next(e for e in mocap.query(source="cmu") if e.file.endswith(".bvh.gz"))
     motion = read_bvh(take.path, length_unit="cm")
@@ -146,7 +153,8 @@ def test_a_body_in_another_unit_is_named_and_read_in_it_by_auto(
     with caplog.at_level("WARNING", logger="markovmotion"):
         as_cm = read_bvh(path)
     assert f"in {unit} it spans" in caplog.text and f"{UNIT_ENV}={unit}" in caplog.text
-    assert not 700 <= rest_span(as_cm.skeleton) <= 2600
+    low, high = BODY_SPAN_MM
+    assert not low <= rest_span(as_cm.skeleton) <= high
     for auto in (read_bvh(path, length_unit="auto"), read_bvh(path, length_unit=unit)):
         assert np.allclose(auto.positions(), motion.positions(), atol=1e-3)
     monkeypatch.setenv(UNIT_ENV, "auto")
@@ -155,6 +163,24 @@ def test_a_body_in_another_unit_is_named_and_read_in_it_by_auto(
     monkeypatch.setenv(UNIT_ENV, "furlong")
     with pytest.raises(ValueError, match=f"{UNIT_ENV}='furlong' is not a length unit"):
         read_bvh(path)
+
+
+def test_a_walker_with_the_arms_out_in_inches_is_not_taken_for_a_person_in_cm(
+    mocap, tmp_path, caplog
+):
+    """A Bandai walker (rest pose arms out, 1.84 m across) written in inches spans 723 mm read
+    in cm: it had passed for a person (the walker learnt 553 mm tall); now the warning names
+    inches, and ``auto`` reads the same motion."""
+    from markovmotion.io.bvh import read_bvh, write_bvh
+
+    take = next(e for e in mocap.query(source="bandai"))
+    motion = read_bvh(take.path, length_unit="cm")
+    write_bvh(motion, tmp_path / "walk.bvh", length_unit="inch")
+    with caplog.at_level("WARNING", logger="markovmotion"):
+        read_bvh(tmp_path / "walk.bvh", length_unit="cm")
+    assert "in inch it spans" in caplog.text
+    auto = read_bvh(tmp_path / "walk.bvh", length_unit="auto")
+    assert np.allclose(auto.positions(), motion.positions(), atol=1e-3)
 
 
 def test_no_take_of_the_collection_and_no_small_tree_is_taken_for_another_unit(mocap):

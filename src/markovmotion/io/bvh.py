@@ -55,7 +55,9 @@ UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "inch": 25.4}
 UNIT_ENV = "MARKOVMOTION_BVH_UNIT"
 #: A person's rest pose spans this much (mm, its largest extent): a child of about a metre
 #: to a tall adult with the arms out. Wider than any take of the collection (about 1,500-1,900).
-BODY_SPAN_MM = (700.0, 2600.0)
+#: Not below 900: a person in inches read as centimetres spans 1/2.54 of their size (a 1.84 m
+#: arm span gave 723 mm, passed for a person, and the walker was learnt 553 mm tall).
+BODY_SPAN_MM = (900.0, 2600.0)
 #: Fewer joints are not taken for a whole body (a hand, a tool, a test's small tree).
 BODY_JOINTS = 15
 
