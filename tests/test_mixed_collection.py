@@ -260,13 +260,14 @@ def test_a_file_listed_in_an_index_above_it_is_read_as_that_index_says(mocap, tm
     )
 
 
-def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, capsys):
+def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, capsys, caplog):
     """``data check`` reads every take whole and names, per row: a file not found, a
     truncated file, frames other than listed, a partner not listed or not naming this take
     back, a row listed twice (errors, exit 1); a pair of two lengths, two-person takes
     without subject, a frame rate the file states that INDEX.csv contradicts (notes). The
     collection itself has no error (exit 0); its only notes are the rates its index corrects
     (CMU's salsa conversions say 120 fps in their headers for 60)."""
+    import dataclasses
     import gzip
     import shutil
 
@@ -288,6 +289,10 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     text = gzip.decompress((own / w).read_bytes()).decode().splitlines(keepends=True)
     (own / "cut.bvh").write_text("".join(text[:-5]))  # five frames short of its header
     shutil.copyfile(pair[0].path, own / "fast.c3d")  # a 30 fps capture listed at 120
+    from markovmotion.io.bvh import read_bvh, write_bvh
+
+    write_bvh(read_bvh(walk.path), own / "in_mm.bvh", length_unit="mm")  # read in cm: a note
+    (own / "folder").mkdir()
     header = "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
     rows = [
         f"{a},mine,,1,interaction,handshake,{b},30,{pair[0].frames},",
@@ -297,6 +302,8 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
         f"cut.bvh,mine,,,style_walk,active,,30,{walk.frames},",
         "nowhere.bvh,mine,,,walk,normal,,30,10,",
         f"fast.c3d,mine,,,misc,misc,,120,{pair[0].frames},",
+        f"in_mm.bvh,mine,,,style_walk,active,,30,{walk.frames},",
+        "folder,mine,,,walk,normal,,30,10,",
     ]
     (own / "INDEX.csv").write_text(header + "\n".join(rows) + "\n")
     with pytest.raises(SystemExit) as exit_:
@@ -316,14 +323,21 @@ def test_data_check_finds_what_is_wrong_with_a_users_index(mocap, tmp_path, caps
     assert (a, "error", f"its partner {b} names gone.c3d back") in found
     assert (a, "note", "no subject") in found
     assert ("fast.c3d", "note", "the file says 30 fps, INDEX.csv 120") in found
-    from markovmotion.data.index import read_listed
+    assert ("folder", "error", "is a folder, not a motion file") in found
+    unit = [f for f in report["findings"] if f["file"] == "in_mm.bvh"]
+    assert [f["level"] for f in unit] == ["note"] and "spans" in unit[0]["problem"]
+    from markovmotion.data.index import MocapIndex, read_listed
 
-    assert read_listed(own / "fast.c3d").fps == 120.0  # by path, as every command reads it
-    assert "the file says 30 fps, INDEX.csv 120: read at INDEX.csv's rate" in " ".join(
-        capsys.readouterr().err.split()
-    )
+    with caplog.at_level("WARNING", logger="markovmotion"):
+        assert read_listed(own / "fast.c3d").fps == 120.0  # by path, as every command reads it
+        walk = MocapIndex.load(own).find(w)
+        slow = dataclasses.replace(walk, fps=60.0)  # a BVH at 30 fps listed at 60
+        assert slow.read().fps == 60.0 and walk.read().fps == 30.0
+    said = " ".join(caplog.text.split())
+    assert "fast.c3d: the file says 30 fps, INDEX.csv 120: read at INDEX.csv's rate" in said
+    assert f"{w}: the file says 30 fps, INDEX.csv 60" in said and said.count(w) == 1
     assert read_listed(own / "fast.c3d", fps=25).fps == 25.0  # an fps given wins
-    assert report["errors"] == sum(f["level"] == "error" for f in report["findings"]) == 6
+    assert report["errors"] == sum(f["level"] == "error" for f in report["findings"]) == 7
 
 
 def test_a_skeletons_difference_says_how_many_more_joints_differ(mocap):

@@ -14,7 +14,8 @@ here, not in the tenth fold), and
   then leaves one take out at a time);
 * a file listed twice is an error;
 * a frame rate the file states (BVH, C3D) that INDEX.csv's ``fps`` contradicts is a note
-  (INDEX.csv's is read).
+  (INDEX.csv's is read), and so is what reading a file warns of (a skeleton in another
+  length unit than it is read in).
 
 Our own, not a schema library's: the checks are about the files, not the CSV's types, which
 :meth:`~markovmotion.data.index.MocapIndex.load` already refuses with the line.
@@ -22,7 +23,10 @@ Our own, not a schema library's: the checks are about the files, not the CSV's t
 
 from __future__ import annotations
 
+import logging
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 from markovmotion.data.index import Entry, MocapIndex, rate_disagrees
@@ -45,6 +49,25 @@ class Finding:
 
     def to_dict(self) -> dict[str, str]:
         return asdict(self)
+
+
+@contextmanager
+def _warnings_caught() -> Iterator[list[str]]:
+    """The library's log warnings while reading a file, as messages (not printed as notes as
+    well: the findings list them, and the summary counts them)."""
+    logger = logging.getLogger("markovmotion")
+    caught: list[str] = []
+
+    class Catch(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            caught.append(record.getMessage())
+
+    handler, propagate, others = Catch(logging.WARNING), logger.propagate, logger.handlers[:]
+    logger.handlers, logger.propagate = [handler], False
+    try:
+        yield caught
+    finally:
+        logger.handlers, logger.propagate = others, propagate
 
 
 def file_frames(entry: Entry) -> tuple[int, float | None]:
@@ -77,11 +100,14 @@ def check_index(index: MocapIndex) -> list[Finding]:
     frames: dict[str, int] = {}
     for e in track(index.entries, "reading every take"):
         if not e.path.is_file():
-            found.append(Finding(e.file, "error", "file not found"))
+            problem = "is a folder, not a motion file" if e.path.is_dir() else "file not found"
+            found.append(Finding(e.file, "error", problem))
             continue
         try:
-            n, rate = file_frames(e)
+            with _warnings_caught() as caught:  # what reading it warns of (a unit): a note
+                n, rate = file_frames(e)
             frames[e.file] = n
+            found += [Finding(e.file, "note", w.removeprefix(f"{e.path}: ")) for w in caught]
         except MarkovMotionError as exc:  # the problem and line: the row names the file
             line = getattr(exc, "line", None)
             what = getattr(exc, "problem", str(exc)) + (f" (line {line})" if line else "")

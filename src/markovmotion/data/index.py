@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import functools
 import io
+import logging
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
@@ -21,7 +22,8 @@ from markovmotion.errors import DataNotFoundError, MarkovMotionError, MotionForm
 from markovmotion.io import read_c3d, read_motion
 from markovmotion.io.files import base_suffix, read_text
 from markovmotion.limits import MAX_FRAMES, check_rate, exceeded, max_frames
-from markovmotion.progress import say
+
+log = logging.getLogger(__name__)
 
 ENV_VAR = "MARKOVMOTION_DATA"
 INDEX_NAME = "INDEX.csv"
@@ -139,8 +141,19 @@ class Entry:
         return int(self.has_reference_frame)
 
     def read(self) -> Motion:
-        """The motion at its true frame rate, without CMU's reference frame."""
-        motion = read_motion(self.path, fps=self.fps)
+        """The motion at its true frame rate (INDEX.csv's; a BVH header that says another is
+        noted, :func:`rate_disagrees`), without CMU's reference frame."""
+        motion = None
+        if base_suffix(self.file) == ".bvh":  # the header's rate, to compare
+            try:
+                motion = read_motion(self.path)
+            except MotionFormatError:  # e.g. a Frame Time of 0: read at the index's rate
+                pass
+        if motion is None:
+            motion = read_motion(self.path, fps=self.fps)
+        else:
+            note_rate(self, motion.fps)
+            motion.fps = self.fps
         return motion.trim(self.first_frame) if motion.n_frames > 1 else motion
 
 
@@ -351,25 +364,35 @@ def read_listed(path: str | os.PathLike[str], fps: float | None = None) -> Motio
     return markers
 
 
+#: What is said of a file whose own frame rate INDEX.csv contradicts (file, its rate, the
+#: index's): by every reader once per command (:func:`note_rate`) and by ``data check``.
+RATE_NOTE = (
+    "%s: the file says %g fps, INDEX.csv %g: read at INDEX.csv's rate (the index is trusted: "
+    "correct it if it is the one wrong)"
+)
+
+
 def rate_disagrees(entry: Entry, file_fps: float) -> str | None:
-    """What to say when ``entry``'s file states a frame rate ``file_fps`` that INDEX.csv's
-    ``fps`` contradicts (by more than 1 %), else None. INDEX.csv's rate is the one read (a
-    header may be wrong: CMU's salsa conversions say 120 fps for 60); a lab's index copied
-    with another capture's rate would read every take slowed down or sped up."""
+    """:data:`RATE_NOTE` when ``entry``'s file states a frame rate ``file_fps`` that
+    INDEX.csv's ``fps`` contradicts (by more than 1 %), else None. INDEX.csv's rate is the one
+    read (a header may be wrong: CMU's salsa conversions say 120 fps for 60); a lab's index
+    copied with another capture's rate would read every take slowed down or sped up."""
     if abs(file_fps - entry.fps) <= 0.01 * entry.fps:
         return None
-    return (
-        f"{entry.file}: the file says {file_fps:g} fps, INDEX.csv {entry.fps:g}: read at "
-        "INDEX.csv's rate (the index is trusted: correct it if it is the one wrong)"
-    )
+    return RATE_NOTE % (entry.file, file_fps, entry.fps)
+
+
+def note_rate(entry: Entry, file_fps: float) -> None:
+    """:func:`rate_disagrees` as a log warning: a note once per command, with its count
+    (:class:`~markovmotion.progress.NoteOnce`)."""
+    if rate_disagrees(entry, file_fps):
+        log.warning(RATE_NOTE, entry.file, file_fps, entry.fps)
 
 
 def _read_markers(entry: Entry) -> Markers:
     """A C3D entry's markers at INDEX.csv's frame rate (a note when the file says another:
     :func:`rate_disagrees`)."""
     markers = read_c3d(entry.path)
-    differs = rate_disagrees(entry, markers.fps)
-    if differs:
-        say([f"note: {differs}"], about=entry.path)
+    note_rate(entry, markers.fps)
     markers.fps = entry.fps
     return markers
