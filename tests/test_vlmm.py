@@ -541,6 +541,61 @@ def test_a_markers_model_observes_any_skeleton_with_the_13_points(mocap):
     assert not rotations.fits(walk) and "joints differ" in rotations.why_not(walk)
 
 
+def test_evaluate_names_the_takes_too_short_for_the_horizons(
+    tmp_path, mocap, behaviour_model, capsys, recwarn
+):
+    """Test takes shorter than the horizons: all of them shorter than the shortest is one
+    line naming them, exit 2, no plot (it printed tables of NaN, NumPy's "Mean of empty
+    slice" and an empty plot, exit 0); some horizons out of reach is a note naming them
+    and the takes, those horizons "-" (null in JSON), no NumPy warning either way."""
+    from markovmotion.cli import main
+    from markovmotion.io import write_motion
+
+    dance = mocap.load_motion(mocap.find("cmu/bvh/indian_14.bvh.gz"))
+    model = tmp_path / "m.npz"
+    behaviour_model.save(model)  # 15 fps
+
+    def index(folder, takes):
+        folder.mkdir()
+        lines = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+        for name, motion in takes:
+            write_motion(motion, folder / name)
+            lines.append(f"{name},lab,s1,1,exercise,indian_dance,,{motion.fps:g},"
+                         f"{motion.n_frames},short")  # fmt: skip
+        (folder / "INDEX.csv").write_text("\n".join(lines) + "\n")
+        return str(folder)
+
+    short = dance.resample(15.0).trim(0, 4)  # 4 frames at 15 fps: 0.2 s
+    plot = tmp_path / "et.png"
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "evaluate", "--model", str(model), "--test",
+              index(tmp_path / "short", [("short.bvh", short)]), "--samples", "2",
+              "--plot", str(plot), "--json"])  # fmt: skip
+    out = capsys.readouterr()
+    assert info.value.code == 2 and out.out == "" and not plot.exists()
+    assert out.err.strip() == (
+        "error: short.bvh: 4 frames, shorter than the 0.5 s horizon: nothing to evaluate"
+    )
+    medium = dance.resample(15.0).trim(0, 20)  # 19 frames after the first: 0.5 and 1 s
+    shorter = dance.resample(15.0).trim(20, 30)  # 0.5 s only
+    main(["vlmm", "evaluate", "--model", str(model), "--test",
+          index(tmp_path / "medium", [("medium.bvh", medium), ("shorter.bvh", shorter)]),
+          "--samples", "2", "--stride", "3", "--json"])  # fmt: skip
+    out = capsys.readouterr()
+    result = json.loads(out.out)
+    assert result["E_T_mm.vlmm.0.5"] > 0 and result["E_T_mm.vlmm.1"] > 0
+    assert result["E_T_mm.vlmm.2"] is None and result["E_T_mm.zero_velocity.3"] is None
+    notes = [line for line in out.err.splitlines() if line.startswith("note: ")]
+    assert notes == [
+        "note: no test take is as long as the 2 and 3 s horizons (the longest, medium.bvh, "
+        "has 20 frames): E_T not measured there",
+        "note: shorter than some horizons, which are measured on the other takes only: "
+        "shorter.bvh (10 frames: 1 s)",
+    ]
+    assert result["notes"] == [n.removeprefix("note: ") for n in notes]
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
 def test_the_take_held_out_is_one_of_the_skeleton_learnt(tmp_path, mocap, capsys):
     """An index whose last take of a label is on another skeleton: that take is left out as
     of another skeleton, and the last take on the skeleton learnt is the one held out (it

@@ -18,7 +18,7 @@ from markovmotion.io import check_motion_output, write_c3d, write_motion
 from markovmotion.io.c3d import check_c3d_output
 from markovmotion.io.files import base_suffix
 from markovmotion.persist import check_model_output
-from markovmotion.progress import err_console
+from markovmotion.progress import err_console, note
 
 app = typer.Typer(
     help="Variable-length Markov models of behaviour (VLMM paper): prototypes, a VLMM over "
@@ -422,6 +422,8 @@ def evaluate(
             f"left out (another skeleton): {', '.join(e.file for e in result.other_skeleton)}",
             highlight=False,
         )
+    for line in result.notes:  # takes too short for some horizons
+        note(line)
     if plot:
         result.plot(plot)
         err_console.print(f"wrote {plot}")
@@ -435,9 +437,10 @@ def evaluate(
     table.add_column("model")
     for s in result.seconds:
         table.add_column(f"{s:g} s", justify="right")
-    for name, c in result.curves.items():
-        fmt = ".1f" if space == "mm" else ".4f"
-        table.add_row(name, *(f"{c.at(s):{fmt}}" for s in result.seconds))
+    fmt = ".1f" if space == "mm" else ".4f"
+    for name, c in result.curves.items():  # "-": no take as long as the horizon (a note)
+        cells = (c.at(s) for s in result.seconds)
+        table.add_row(name, *(f"{v:{fmt}}" if np.isfinite(v) else "-" for v in cells))
     print_table(table)
 
 

@@ -63,10 +63,12 @@ class HorizonCurve:
     @classmethod
     def from_errors(cls, name: str, fps: float, errors: np.ndarray) -> HorizonCurve:
         """From per-trial errors (n_trials, H), NaN where t + T is past the sequence (eq. 9)."""
-        count = np.sum(~np.isnan(errors), axis=0)
-        with np.errstate(invalid="ignore"):
-            mean = np.nanmean(errors, axis=0) if len(errors) else np.full(errors.shape[1], np.nan)
-            mad = np.nanmean(np.abs(errors - mean), axis=0) if len(errors) else mean
+        valid = ~np.isnan(errors)
+        count = valid.sum(axis=0)
+        some = np.maximum(count, 1)  # a horizon without a trial is NaN, without NumPy's warning
+        mean = np.where(count > 0, np.where(valid, errors, 0.0).sum(axis=0) / some, np.nan)
+        spread = np.where(valid, np.abs(np.where(valid, errors, 0.0) - mean), 0.0)
+        mad = np.where(count > 0, spread.sum(axis=0) / some, np.nan)
         return cls(name, fps, mean, mad, count)
 
     def at(self, seconds: float) -> float:
@@ -248,6 +250,7 @@ class VlmmEvaluation:
     stride: int
     other_skeleton: list[Entry] = field(default_factory=list)
     space: str = "mm"
+    notes: list[str] = field(default_factory=list)
 
     @property
     def seconds(self) -> list[float]:
@@ -261,12 +264,7 @@ class VlmmEvaluation:
         fps = next(iter(self.curves.values())).fps if self.curves else None
         if fps is None:
             return sum(m.n_frames for m in self.motions)
-        return sum(
-            m.n_frames  # as Motion.resample: a take at the model's rate is kept as it is
-            if np.isclose(m.fps, fps)
-            else int(np.floor((m.n_frames - 1) * fps / m.fps + 1e-9)) + 1
-            for m in self.motions
-        )
+        return sum(frames_at(m, fps) for m in self.motions)
 
     def result(self) -> dict[str, Any]:
         """The JSON of ``vlmm evaluate --json``: ``E_T_mm.<model>.<seconds>`` in mm (or
@@ -282,6 +280,8 @@ class VlmmEvaluation:
         out.update(self.takes.report())
         if self.other_skeleton:
             out["left_out_other_skeleton"] = [e.file for e in self.other_skeleton]
+        if self.notes:
+            out["notes"] = list(self.notes)
         return out
 
     def plot(self, path: str | os.PathLike[str]) -> None:
@@ -302,6 +302,74 @@ class VlmmEvaluation:
             f"{every}; {self.samples} samples each)",
             "mean joint error E_T (mm)" if self.space == "mm" else "E_T, configuration (eq. 9)",
         )
+
+
+def frames_at(motion: Motion, fps: float) -> int:
+    """Frames of ``motion`` at ``fps``, as :meth:`Motion.resample` gives them (a take at
+    that rate is kept as it is)."""
+    if np.isclose(motion.fps, fps):
+        return motion.n_frames
+    return int(np.floor((motion.n_frames - 1) * fps / motion.fps + 1e-9)) + 1
+
+
+def _listed(items: Sequence[str], shown: int = 5) -> str:
+    more = f" and {len(items) - shown} more" if len(items) > shown else ""
+    return ", ".join(items[:shown]) + more
+
+
+def _horizons(seconds: Sequence[float]) -> str:
+    words = [f"{s:g}" for s in seconds]
+    joined = words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+    return f"the {joined} s horizon{'s' if len(words) > 1 else ''}"
+
+
+def horizon_notes(
+    files: Sequence[str], motions: Sequence[Motion], fps: float, seconds: Sequence[float]
+) -> list[str]:
+    """Notes on the reported horizons (``seconds``) some test takes are too short for: a
+    trial at T needs the frame T after the first (eq. 9), so a take of F frames at ``fps``
+    measures horizons up to F - 1 frames.
+
+    Raises:
+        DataNotFoundError: every take is shorter than the shortest horizon (nothing to
+            evaluate; it had printed tables of NaN and an empty plot).
+    """
+    reach = [frames_at(m, fps) - 1 for m in motions]
+
+    def frames(i: int) -> str:
+        return f"{motions[i].n_frames} frame{'s' if motions[i].n_frames != 1 else ''}"
+
+    def short(s: float) -> list[int]:
+        return [i for i, r in enumerate(reach) if r < int(round(s * fps))]
+
+    first = min(seconds)
+    if len(short(first)) == len(motions):
+        if len(motions) == 1:
+            what = f"{files[0]}: {frames(0)}, shorter than"
+        else:
+            takes = _listed([f"{files[i]} ({frames(i)})" for i in range(len(files))])
+            what = f"{takes}: every test take is shorter than"
+        raise DataNotFoundError(f"{what} {_horizons([first])}: nothing to evaluate")
+    notes = []
+    unmeasured = [s for s in seconds if len(short(s)) == len(motions)]
+    if unmeasured:
+        longest = int(np.argmax(reach))
+        notes.append(
+            f"no test take is as long as {_horizons(unmeasured)} (the longest, "
+            f"{files[longest]}, has {frames(longest)}): E_T not measured there"
+        )
+    measured = [s for s in seconds if s not in unmeasured]
+    partly = [
+        f"{files[i]} ({frames(i)}: {', '.join(f'{s:g}' for s in measured if i in short(s))} s)"
+        for i in range(len(motions))
+        if any(i in short(s) for s in measured)
+    ]
+    if partly:
+        notes.append(
+            "shorter than some horizons, which are measured on the other takes only: "
+            + _listed(partly)
+        )
+    return notes
 
 
 def candidate_takes(
@@ -363,7 +431,9 @@ def evaluate_model(
     marker positions) or ``"configuration"`` (eq. 9 on C in [0, 1]^d, :class:`ConfigurationSpace`).
 
     Raises:
-        DataNotFoundError: no take fits, or every one that does is a training take.
+        DataNotFoundError: no take fits, every one that does is a training take, or every
+            one is shorter than the shortest reported horizon (:func:`horizon_notes`, whose
+            notes on takes too short for some horizons the result keeps in ``notes``).
         SkeletonMismatchError: none of the remaining takes has the model's skeleton.
     """
     structured = isinstance(model, StructuredBehaviourModel)
@@ -386,6 +456,8 @@ def evaluate_model(
             + f" ({other[0].file}: {base.why_not(first)})"
         )
     takes = TestTakes(kept, takes.left_out)
+    seconds = [s for s in REPORT_SECONDS if s <= horizon] or [horizon]
+    notes = horizon_notes([e.file for e in kept], motions, base.fps, seconds)
     features = base.observe(motions)
     predictors: dict[str, Any] = {
         "vlmm": base,
@@ -408,4 +480,4 @@ def evaluate_model(
                 measured, features, n_frames, base.fps, samples, stride, seed=seed, name=name
             )
         curves[name] = by_model[id(p)]
-    return VlmmEvaluation(curves, takes, motions, horizon, samples, stride, other, space)
+    return VlmmEvaluation(curves, takes, motions, horizon, samples, stride, other, space, notes)
