@@ -417,6 +417,57 @@ def test_evaluate_on_another_index_leaves_training_walks_out(mocap, small_model,
     assert "trained on" in err and "a.bvh.gz" in err
 
 
+def test_a_walk_without_steps_is_left_out_in_a_note(mocap, small_model, tmp_path, capsys):
+    """A take with fewer than two heel strikes (10 frames) had stopped ``gait adapt`` and
+    ``gait evaluate`` ("error: short.bvh: no steps found") though the other walks have
+    dozens of steps: it is left out in a note naming it, as a walk of another skeleton is,
+    and only walks with no step at all are one line, exit 2."""
+    import json
+
+    from markovmotion.io import write_motion
+
+    model = tmp_path / "avg.npz"
+    small_model.save(model)
+    elderly = mocap.find("bandai/dataset-2/walk_elderly_001.bvh.gz")
+    short = tmp_path / "short.bvh"
+    write_motion(mocap.load_motion(elderly).trim(0, 10), short)
+    adapted = tmp_path / "elderly.npz"
+    main(
+        ["gait", "adapt", "--model", str(model), "--style-data", elderly.path]
+        + ["--style-data", str(short), "--label", "elderly", "--steps", "6", "--out", str(adapted)]
+    )
+    err = capsys.readouterr().err
+    assert "note: walks without steps (fewer than two heel strikes) left out: short.bvh (10 " in err
+    assert "of 1 walk: walk_elderly_001.bvh.gz" in err and adapted.is_file()
+    with pytest.raises(SystemExit) as exc:
+        main(
+            ["gait", "adapt", "--model", str(model), "--style-data", str(short)]
+            + ["--label", "elderly", "--out", str(tmp_path / "none.npz")]
+        )
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1
+    assert err.startswith("error: short.bvh (10 frames): no steps found")
+    # gait evaluate --test: the short walk among the test walks is left out, named
+    normal_train, normal_test = held_out_every(gait_entries(mocap, "normal"))
+    test = _write_index(tmp_path / "mine", [("new.bvh.gz", normal_test[0])])
+    write_motion(mocap.load_motion(normal_test[1]).trim(0, 10), tmp_path / "mine" / "short.bvh")
+    with open(test, "a") as fh:
+        fh.write("short.bvh,mine,,,walk,normal,,30,10,\n")
+    ref = [(f"bandai/dataset-2/{e.file.split('/')[-1]}", e) for e in normal_train[3:6]]
+    data = _write_index(tmp_path / "ref", ref + [(f"bandai/dataset-2/e{k}.bvh.gz", e)
+                        for k, e in enumerate(gait_entries(mocap, "elderly")[:3])])  # fmt: skip
+    main(
+        ["gait", "evaluate", "--model", str(model), "--test", str(test), "--data", str(data)]
+        + ["--json", "--walks", "2", "--walk-steps", "6", "--components", "0"]
+        + ["--bootstrap", "100"]
+    )
+    out = capsys.readouterr()
+    assert json.loads(out.out)["test_files"] == ["new.bvh.gz"]
+    assert "note: test walks without steps (fewer than two heel strikes) left out: short.bvh" in (
+        out.err
+    )
+
+
 def test_evaluate_on_walks_of_another_skeleton_says_what_differs(
     mocap, small_model, tmp_path, capsys
 ):

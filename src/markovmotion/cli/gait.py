@@ -56,13 +56,15 @@ def train(
     """Train an average walk HSMM on neutral walks (gait paper §5.1.2)."""
     import joblib
 
-    from markovmotion.models.gait.synthesizer import GaitSynthesizer
+    from markovmotion.models.gait.synthesizer import GaitSynthesizer, walks_with_steps
 
     if wat not in ("none", "take", "dataset"):
         raise typer.BadParameter("--wat must be none, take or dataset")
     check_model_output(out)
     folders: list[str] = []
     motions = load_walks(data, label, split, subset, folders)
+    stepped = walks_with_steps(motions)  # a take without steps left out in a note
+    motions, folders = [motions[i] for i in stepped], [folders[i] for i in stepped]
     model = GaitSynthesizer(
         n_iter=n_iter, mdl_factor=mdl_factor, wat="unit" if wat == "dataset" else wat
     )
@@ -109,7 +111,7 @@ def adapt(
 ) -> None:
     """Adapt the average model to a style from a few steps (CSMAPLR/CMLLR + MAP, §5.1.3)."""
     from markovmotion.models.gait.adaptation import METHODS, STRUCTURES
-    from markovmotion.models.gait.synthesizer import GaitSynthesizer
+    from markovmotion.models.gait.synthesizer import GaitSynthesizer, walks_with_steps
 
     if method not in METHODS:
         raise typer.BadParameter(f"--method must be one of {', '.join(METHODS)}")
@@ -118,6 +120,7 @@ def adapt(
     check_model_output(out)
     average = GaitSynthesizer.load(model)
     motions = load_walks(style_data, label, split, subset)
+    motions = [motions[i] for i in walks_with_steps(motions)]  # without steps: in a note
     if scratch:
         result = average.scratch(motions, label, steps)
     else:

@@ -77,7 +77,7 @@ from markovmotion.features import ExpMaps, FeaturePipeline, JointPositions
 from markovmotion.features.gait import SIDES, align_walk, detect_steps, foot_slide
 from markovmotion.features.reference_pose import ReferencePose
 from markovmotion.models.base import Model, file_sha256, training_hashes
-from markovmotion.models.gait.synthesizer import KIND, GaitSynthesizer
+from markovmotion.models.gait.synthesizer import KIND, GaitSynthesizer, walks_with_steps
 from markovmotion.persist import load_npz
 from markovmotion.progress import track
 
@@ -713,6 +713,13 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
     return TestTakes(kept, chosen.left_out), motions
 
 
+def _with_steps(walks: list[tuple[Entry, Motion]], what: str) -> list[tuple[Entry, Motion]]:
+    """The (entry, walk) pairs whose walk has steps; the others named in a note
+    (:func:`~markovmotion.models.gait.synthesizer.walks_with_steps`): one such take had
+    stopped the evaluation of the rest."""
+    return [walks[i] for i in walks_with_steps([m for _, m in walks], what)]
+
+
 def evaluate_models(
     models: Models,
     test: str | os.PathLike[str] | None = None,
@@ -765,9 +772,11 @@ def evaluate_models(
                 f"the models were trained on held-out takes ({', '.join(leaked[:3])}); "
                 "train them on the training split, or evaluate with a test index"
             )
-        takes = TestTakes(held_out)
-        for e in track(held_out, "reading test walks"):
-            test_motions.setdefault(e.label, []).append(index.load_motion(e))
+        read = [(e, index.load_motion(e)) for e in track(held_out, "reading test walks")]
+        read = _with_steps(read, "held-out walks")
+        takes = TestTakes([e for e, _ in read])
+        for e, m in read:
+            test_motions.setdefault(e.label, []).append(m)
     else:
         found, motions = walks_to_test(models, MocapIndex.load(test))
         learnt = {file_sha256(e.path) for e in train}
@@ -783,17 +792,19 @@ def evaluate_models(
                 f"that they did not train on teaches the style classifier: "
                 f"{', '.join(by_classifier)}"
             )
+        kept = _with_steps(kept, "test walks")
         takes = TestTakes([e for e, _ in kept], found.left_out)
         for e, m in kept:
             test_motions.setdefault(e.label, []).append(m)
-        missing = sorted(set(test_motions) - {e.label for e in train})
-        if missing:
-            raise DataNotFoundError(
-                f"no training walks of {', '.join(missing)} in {index.root / 'INDEX.csv'} "
-                "for the style classifier"
-            )
-    for e in track(train, "reading training walks"):
-        train_motions.setdefault(e.label, []).append(index.load_motion(e))
+    read = [(e, index.load_motion(e)) for e in track(train, "reading training walks")]
+    for e, m in _with_steps(read, "training walks"):
+        train_motions.setdefault(e.label, []).append(m)
+    missing = sorted(set(test_motions) - set(train_motions))
+    if missing:
+        raise DataNotFoundError(
+            f"no training walks of {', '.join(missing)} in {index.root / 'INDEX.csv'} "
+            "for the style classifier"
+        )
     ev = Evaluation.prepare(
         train_motions,
         test_motions,

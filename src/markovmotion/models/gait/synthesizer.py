@@ -43,6 +43,7 @@ from markovmotion.limits import MAX_STEPS, check_length, max_values
 from markovmotion.models.base import Model
 from markovmotion.models.gait.adaptation import adapt, walker_adaptive_training
 from markovmotion.models.gait.hsmm import DUR_VAR_FLOOR, HSMM
+from markovmotion.progress import note
 from markovmotion.state import (
     StateError,
     check_positive,
@@ -167,6 +168,27 @@ def walk_set(
         floors.append(np.median(pos[:, feet, 1].min(axis=1)))
     out.floor = float(np.median(floors)) if floors else 0.0
     return out
+
+
+def walks_with_steps(motions: Sequence[Motion], what: str = "walks") -> list[int]:
+    """Indices of the walks in which steps are found (two heel strikes or more; :func:`walk_set`
+    refuses the others); the others are named in one note, as walks of another skeleton are,
+    so that one short take does not stop the rest.
+
+    Raises:
+        DataNotFoundError: no walk has a step (one line naming them).
+    """
+    kept, left = [], []
+    for i, m in enumerate(motions):
+        (kept if detect_steps(align_walk(m)).n_steps >= 1 else left).append(i)
+    if not left:
+        return kept
+    shown = [f"{motions[i].name or f'walk {i}'} ({motions[i].n_frames} frames)" for i in left]
+    named = ", ".join(shown[:5]) + (f" and {len(shown) - 5} more" if len(shown) > 5 else "")
+    if not kept:
+        raise DataNotFoundError(f"{named}: no steps found (fewer than two heel strikes)")
+    note(f"{what} without steps (fewer than two heel strikes) left out: {named}")
+    return kept
 
 
 def walk_contexts(n_steps: int, first_side: str = "R") -> tuple[np.ndarray, tuple[str, ...]]:
