@@ -468,6 +468,43 @@ def test_a_walk_without_steps_is_left_out_in_a_note(mocap, small_model, tmp_path
     )
 
 
+def test_a_model_of_a_style_without_test_walks_is_named_not_dropped(
+    mocap, small_model, tmp_path, capsys
+):
+    """``gait evaluate --models DIR`` had silently ignored an adapted model whose style has
+    no held-out walk (a style of one take, used to adapt): a note names its file and why;
+    no model left to evaluate is one line, exit 2."""
+    elderly = gait_entries(mocap, "elderly")[0]
+    models = tmp_path / "models"
+    models.mkdir()
+    small_model.save(models / "average.npz")
+    small_model.adapt([mocap.load_motion(elderly)], "elderly", 6).save(
+        models / "adapted-elderly.npz"
+    )
+    normal_train, _ = held_out_every(gait_entries(mocap, "normal"))
+    data = _write_index(
+        tmp_path / "ref",
+        [(f"bandai/dataset-2/{e.file.split('/')[-1]}", e) for e in normal_train[3:7]]
+        + [(f"bandai/dataset-2/{elderly.file.split('/')[-1]}", elderly)],
+    )
+    args = ["--data", str(data), "--walks", "2", "--walk-steps", "6", "--bootstrap", "100"]
+    args += ["--components", "0"]  # auto: cross-validation by take, and elderly has one
+    main(["gait", "evaluate", "--models", str(models), *args, "--json"])
+    err = capsys.readouterr().err
+    assert (
+        "note: adapted-elderly.npz: no held-out walk of style elderly (1 take, used to adapt; "
+        "every 4th take of a style is held out): not evaluated"
+    ) in err
+    (models / "average.npz").unlink()
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "evaluate", "--models", str(models), *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and err[-1] == (
+        "error: no model left to evaluate: the held-out walks are of normal only"
+    )
+    assert [line for line in err[:-1] if not line.startswith("note: ")] == []
+
+
 def test_evaluate_on_walks_of_another_skeleton_says_what_differs(
     mocap, small_model, tmp_path, capsys
 ):

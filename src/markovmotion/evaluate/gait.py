@@ -68,7 +68,8 @@ from markovmotion.algorithms.dtw import dtw_distance, dtw_path
 from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
-from markovmotion.data.splits import held_out_every
+from markovmotion.data.kinds import counted
+from markovmotion.data.splits import TEST_EVERY, held_out_every
 from markovmotion.data.walks import gait_entries
 from markovmotion.errors import DataNotFoundError, ModelFormatError
 from markovmotion.evaluate.perceptual import efficiency
@@ -79,7 +80,7 @@ from markovmotion.features.reference_pose import ReferencePose
 from markovmotion.models.base import Model, file_sha256, training_hashes
 from markovmotion.models.gait.synthesizer import KIND, GaitSynthesizer, walks_with_steps
 from markovmotion.persist import load_npz
-from markovmotion.progress import track
+from markovmotion.progress import note, track
 
 ROLES = ("adapted", "average", "scratch")
 #: Categories of INDEX.csv rows that are walks.
@@ -630,7 +631,19 @@ class Evaluation:
 
 
 # ------------------------------------------------------------------ ``gait evaluate``
-Models = dict[str, dict[str, GaitSynthesizer]]
+class Models(dict[str, dict[str, GaitSynthesizer]]):
+    """Gait models by role and style (a plain dict of that shape will do), and the file each
+    was read from (``files``, by ``id`` of the model), by which notes name them."""
+
+    def __init__(self, *args: Any, **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        self.files: dict[int, str] = {}
+
+
+def model_name(models: Mapping[str, Mapping[str, GaitSynthesizer]], model: GaitSynthesizer) -> str:
+    """The file ``model`` was read from (:func:`load_models`), else "the <role> <style> model"."""
+    files = getattr(models, "files", {})
+    return files.get(id(model), f"the {model.role_} {model.style_} model")
 
 
 def load_models(path: str | os.PathLike[str]) -> Models:
@@ -641,10 +654,11 @@ def load_models(path: str | os.PathLike[str]) -> Models:
         ModelFormatError: a file given by name that is not a gait model.
     """
     path = Path(path)
-    found: Models = {r: {} for r in ROLES}
+    found = Models({r: {} for r in ROLES})
     if path.is_file():
         model = _load(path)
         found[model.role_][model.style_] = model
+        found.files[id(model)] = path.name
         return found
     if not path.is_dir():
         raise DataNotFoundError(f"{path}: no such gait model or folder of models")
@@ -656,6 +670,7 @@ def load_models(path: str | os.PathLike[str]) -> Models:
         if header.get("kind") == KIND:
             model = _load(file)
             found[model.role_][model.style_] = model
+            found.files[id(model)] = file.name
     if not any(found.values()):
         raise DataNotFoundError(f"{path}: no gait models (.npz) in this folder")
     return found
@@ -711,6 +726,36 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
             f"skeleton ({skeleton.n_joints} joints{why})"
         )
     return TestTakes(kept, chosen.left_out), motions
+
+
+def _why_not_evaluated(
+    model: GaitSynthesizer,
+    style: str,
+    styles: Sequence[str],
+    average: GaitSynthesizer | None,
+    test: str | os.PathLike[str] | None,
+    index: MocapIndex,
+    subset: str | None,
+) -> str:
+    """Why a style model is not among those evaluated: its style is the average model's
+    (not a target), or no test (held-out) walk of its style is left."""
+    if style in styles and average is not None and style == average.style_:
+        return f"style {style} is the average model's own (a class, not a target)"
+    if test is not None:
+        return f"no test walk of style {style} in {Path(test)} (or none with steps)"
+    takes = gait_entries(index, style, subset)
+    if not takes:
+        return f"no walk of style {style} in {index.root / 'INDEX.csv'}"
+    _, held = held_out_every(takes)
+    if held:
+        return f"its held-out walks of style {style} have no steps"
+    own = {Path(f).name for f in model.own_files}
+    used = "used to adapt" if model.role_ == "adapted" else "trained on"
+    how = used if all(Path(e.file).name in own for e in takes) else "in the training split"
+    return (
+        f"no held-out walk of style {style} ({counted(len(takes), 'takes')}, {how}; every "
+        f"{TEST_EVERY}th take of a style is held out)"
+    )
 
 
 def _with_steps(walks: list[tuple[Entry, Motion]], what: str) -> list[tuple[Entry, Motion]]:
@@ -823,6 +868,16 @@ def evaluate_models(
     }
     if average is not None:
         chosen["average"] = {s: [average] for s in targets}
+    for role in ("adapted", "scratch"):  # a model left out is said, not dropped silently
+        for style, model in models[role].items():
+            if style not in targets:
+                why = _why_not_evaluated(model, style, ev.styles, average, test, index, subset)
+                note(f"{model_name(models, model)}: {why}: not evaluated")
+    if not ks and not any(chosen.values()):
+        raise DataNotFoundError(
+            f"no model left to evaluate: the {'test' if test else 'held-out'} walks are of "
+            f"{', '.join(ev.styles)} only"
+        )
     work = sum(map(len, chosen.values())) + 3 * len(ks) * len(targets)
 
     def advance(what: str) -> None:
