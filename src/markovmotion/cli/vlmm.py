@@ -308,7 +308,7 @@ def predict(
             )
         motion = read_listed_motion(input, fps=fps)
         if not behaviour.fits(motion):  # its skeleton, or (markers) its body points by name
-            why = behaviour.why_not(motion).removeprefix("(").removesuffix(")")
+            why = behaviour.why_not(motion, "the input").removeprefix("(").removesuffix(")")
             raise SkeletonMismatchError(f"{input}: the input's skeleton does not match ({why})")
     result = behaviour.predict(motion, horizon, np.random.default_rng(seed), stochastic=stochastic)
     _write(result, out)

@@ -103,17 +103,41 @@ class Skeleton:
     def same_topology(self, other: Skeleton) -> bool:
         return self.names == other.names and np.array_equal(self.parents, other.parents)
 
-    def difference(self, other: Skeleton) -> str | None:
-        """What tells ``other`` from this skeleton, in a few words (``(27 joints, expected 57;
-        joints differ: Chest, ...)``), or None when it has the same joints in the same tree."""
+    def difference(self, other: Skeleton, ours: str = "expected", theirs: str = "it") -> str | None:
+        """What tells ``other`` from this skeleton, in a few words, each side named: ``ours``
+        this skeleton's, ``theirs`` the other (``(27 joints, the model's 27; the model's joints
+        Chest, Foot_L, ... (and 17 more) are not in the input, which has mixamorig:Spine2,
+        ... instead)``; it had listed both sides' names as one "joints differ"), or None when
+        it has the same joints in the same tree. End sites, named after their joint, are
+        listed only when nothing else differs."""
         if self.same_topology(other):
             return None
-        missing = sorted(set(self.names) ^ set(other.names))
-        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
-        detail = (
-            f"joints differ: {', '.join(missing[:5])}{more}" if missing else "joint order differs"
-        )
-        return f"({other.n_joints} joints, expected {self.n_joints}; {detail})"
+
+        def only(a: Skeleton, b: Skeleton, end_sites: bool) -> list[str]:
+            there = set(b.names)
+            return [
+                n for j, n in enumerate(a.names) if n not in there and a.end_site[j] == end_sites
+            ]
+
+        missing, extra = only(self, other, False), only(other, self, False)
+        if not missing and not extra:
+            missing, extra = only(self, other, True), only(other, self, True)
+
+        def listed(names: list[str]) -> str:
+            more = f" (and {len(names) - 5} more)" if len(names) > 5 else ""
+            return ", ".join(names[:5]) + more
+
+        one = len(missing) == 1
+        absent = f"{ours} joint{'' if one else 's'} {listed(missing)} {'is' if one else 'are'} not"
+        if missing and extra:
+            detail = f"{absent} in {theirs}, which has {listed(extra)} instead"
+        elif missing:
+            detail = f"{absent} in {theirs}"
+        elif extra:
+            detail = f"{theirs} also has {'joint' if len(extra) == 1 else 'joints'} {listed(extra)}"
+        else:
+            detail = "joint order differs"
+        return f"({other.n_joints} joints, {ours} {self.n_joints}; {detail})"
 
     def check_compatible(self, other: Skeleton, what: str = "motion") -> None:
         """Raise :class:`SkeletonMismatchError` unless ``other`` has the same joints."""

@@ -715,7 +715,7 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
     why = ""
     for e in track(chosen.takes, "reading test walks"):
         motion = index.load_motion(e)
-        if (differs := skeleton.difference(motion.skeleton)) is not None:
+        if (differs := skeleton.difference(motion.skeleton, "the models'", e.file)) is not None:
             why = why or f"; {e.file}: {differs}"
             continue
         kept.append(e)

@@ -339,8 +339,9 @@ class BehaviourModel(Model):
         steps = getattr(getattr(self, "pipeline_", None), "steps", None)
         return bool(steps) and getattr(steps[0], "points", None) is not None
 
-    def why_not(self, take: Motion | Markers) -> str:
-        """Why :meth:`fits` refuses ``take``, in a few words naming what differs."""
+    def why_not(self, take: Motion | Markers, what: str = "the take") -> str:
+        """Why :meth:`fits` refuses ``take`` (called ``what``), in a few words naming what
+        differs."""
         if self._from_markers():
             if not isinstance(take, Markers):
                 return "a skeleton, and the model learnt markers"
@@ -353,7 +354,7 @@ class BehaviourModel(Model):
                 body_point_index(take.skeleton, MARKER_POINTS, "its skeleton")
             except SkeletonMismatchError as exc:
                 return str(exc)
-        return self.skeleton_.difference(take.skeleton) or "fits"
+        return self.skeleton_.difference(take.skeleton, "the model's", what) or "fits"
 
     @property
     def marker_names(self) -> tuple[str, ...]:

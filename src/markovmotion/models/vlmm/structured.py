@@ -475,9 +475,9 @@ class StructuredBehaviourModel(Model):
         """Whether the model can observe ``take`` (:meth:`BehaviourModel.fits`)."""
         return self.prototype_model_.fits(take)
 
-    def why_not(self, take) -> str:
+    def why_not(self, take, what: str = "the take") -> str:
         """Why :meth:`fits` refuses ``take`` (the prototype model's words)."""
-        return self.prototype_model_.why_not(take)
+        return self.prototype_model_.why_not(take, what)
 
     def observe(self, motions: Sequence[Motion]) -> list[np.ndarray]:
         return self.prototype_model_.observe(motions)
