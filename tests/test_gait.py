@@ -151,6 +151,11 @@ def test_adapt_and_synthesize_commands(small_model, mocap, tmp_path, capsys):
     )
     assert GaitSynthesizer.load(adapted).role_ == "adapted"
     assert "of 1 walk: walk_elderly_001.bvh.gz" in capsys.readouterr().err  # names what it used
+    main(
+        ["gait", "adapt", "--model", str(model), "--style-data", str(style)]
+        + ["--label", "elderly", "--steps", "1", "--out", str(tmp_path / "one.npz")]
+    )
+    assert "model from 1 step of 1 walk: " in capsys.readouterr().err  # it said "1 steps"
     out = tmp_path / "walk.bvh"
     main(
         ["gait", "synthesize", "--model", str(adapted), "--steps", "6", "--no-gv"]
@@ -248,7 +253,7 @@ def test_adaptation_steps_come_from_the_first_takes(normal_walks, small_model):
         adaptation_takes(normal_walks[:3], [11, 12, 12], 36)
     data = small_model.walk_set(normal_walks[:1])
     assert data.first_steps(5).n_steps == 5
-    with pytest.raises(DataNotFoundError, match=r"50 steps asked, only \d+ found in 1 walks"):
+    with pytest.raises(DataNotFoundError, match=r"50 steps asked, only \d+ found in 1 walk$"):
         data.first_steps(50)
 
 

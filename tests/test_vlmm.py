@@ -556,6 +556,25 @@ def test_a_renamed_skeleton_says_which_joint_names_are_the_models(
     assert "_end" not in err
 
 
+def test_one_take_is_said_in_the_singular(tmp_path, mocap, capsys):
+    """``vlmm train`` on one take said "trained on 1 takes"; ``generate`` and ``evaluate``
+    count the same way."""
+    from markovmotion.cli import main
+
+    dance, other = mocap.query(category="exercise", label="indian_dance")[:2]
+    index = copied_index(tmp_path / "one", [("a.bvh.gz", dance)])
+    test = copied_index(tmp_path / "test", [("b.bvh.gz", other)])
+    model = tmp_path / "m.npz"
+    main(["vlmm", "train", "--data", index, "--no-hold-out", "--prototypes", "10",
+          "--max-memory", "2", "--fps", "10", "--out", str(model)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "trained on 1 take (" in err and "1 takes" not in err
+    main(["vlmm", "evaluate", "--model", str(model), "--test", test, "--samples", "1",
+          "--stride", "50", "--horizon", "1"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert "1 prediction per frame" in " ".join(out.split())
+
+
 def test_a_markers_model_observes_any_skeleton_with_the_13_points(mocap):
     """A ``configuration="markers"`` model learnt from CMU dances finds its 13 body points by
     name on a Bandai walk's skeleton (another topology) and predicts it; a skeleton model

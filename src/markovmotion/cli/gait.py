@@ -10,6 +10,7 @@ from rich.table import Table
 
 from markovmotion.cli.options import ranged
 from markovmotion.cli.tables import print_json, print_table
+from markovmotion.data.kinds import counted
 from markovmotion.data.walks import SPLITS, load_walks
 from markovmotion.io import write_motion
 from markovmotion.persist import check_model_output
@@ -73,7 +74,7 @@ def train(
     model.save(out)
     h = model.hsmm_
     err_console.print(
-        f"wrote {out}: {len(motions)} walks, {model.n_steps_} steps, "
+        f"wrote {out}: {counted(len(motions), 'walks')}, {counted(model.n_steps_, 'steps')}, "
         f"{len(h.means_)} output and {len(h.dur_means_)} duration densities, "
         f"log-likelihood {h.log_likelihood_[-1]:.1f} per frame"
     )
@@ -136,9 +137,8 @@ def adapt(
         )
     result.save(out)
     err_console.print(
-        f"wrote {out}: {result.role_} {label} model from {result.n_steps_} steps "
-        f"of {len(result.own_files)} walk{'s' if len(result.own_files) != 1 else ''}: "
-        + ", ".join(result.own_files),
+        f"wrote {out}: {result.role_} {label} model from {counted(result.n_steps_, 'steps')} "
+        f"of {counted(len(result.own_files), 'walks')}: " + ", ".join(result.own_files),
         highlight=False,
     )
 
@@ -170,7 +170,8 @@ def synthesize(
     )
     write_motion(motion, out)
     err_console.print(
-        f"wrote {out}: {synth.style_} walk, {steps} steps, {motion.n_frames} frames "
+        f"wrote {out}: {synth.style_} walk, {counted(steps, 'steps')}, "
+        f"{counted(motion.n_frames, 'frames')} "
         f"at {motion.fps:g} fps"
     )
 
@@ -360,8 +361,10 @@ def evaluate(
     left = result["left_out_training_files"]
     print_table(
         _table(
-            f"gait models in {models}: {real['walks']} {'test' if test else 'held-out'} walks, "
-            f"{real['steps']} steps; classifier on {real['classifier']['components'] or 'all'} "
+            f"gait models in {models}: "
+            f"{counted(real['walks'], 'test walks' if test else 'held-out walks')}, "
+            f"{counted(real['steps'], 'steps')}; classifier on "
+            f"{real['classifier']['components'] or 'all'} "
             "components",
             columns,
         )
@@ -403,5 +406,5 @@ def steps_(
             mean,
             str(s.dropped),
         )
-    table.caption = f"{total} steps in {len(motions)} walks"
+    table.caption = f"{counted(total, 'steps')} in {counted(len(motions), 'walks')}"
     print_table(table)

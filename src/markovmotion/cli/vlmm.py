@@ -13,6 +13,7 @@ from markovmotion.cli.tables import print_json, print_table
 from markovmotion.core.markers import Markers, find_markers, not_found
 from markovmotion.data import MocapIndex
 from markovmotion.data.index import read_listed, read_listed_motion
+from markovmotion.data.kinds import counted
 from markovmotion.errors import MarkovMotionError, MotionFormatError, SkeletonMismatchError
 from markovmotion.io import check_motion_output, write_c3d, write_motion
 from markovmotion.io.c3d import check_c3d_output
@@ -38,7 +39,10 @@ def _memory_table(title: str, vlmm) -> Table:
     for n, (a, b) in enumerate(zip(hist, tree, strict=True)):
         if a:
             table.add_row(str(n), str(a), str(b))
-    table.caption = f"{vlmm.n_states} states, {int(vlmm.in_suffix_tree_.sum())} memories"
+    table.caption = (
+        f"{counted(vlmm.n_states, 'states')}, "
+        f"{counted(int(vlmm.in_suffix_tree_.sum()), 'memories')}"
+    )
     return table
 
 
@@ -169,8 +173,8 @@ def train(
         model.save(out, data_index=index_record(MocapIndex.load(data)))
         base = model.prototype_model_ if structured else model
         err_console.print(
-            f"trained on {len(takes.train)} tracked takes "
-            f"({sum(t.n_frames for t in takes.train)} frames at {base.fps:g} fps), "
+            f"trained on {counted(len(takes.train), 'tracked takes')} "
+            f"({counted(sum(t.n_frames for t in takes.train), 'frames')} at {base.fps:g} fps), "
             f"{len(base.train_tokens_)} prototype tokens, scale {model.contour_scale_:.1f} px; "
             f"held out: {', '.join(e.file for e in takes.test_entries) or 'none'}",
             highlight=False,
@@ -192,7 +196,8 @@ def train(
     model.save(out, data_index=index_record(index))  # where evaluate finds its held-out takes
     base = model.prototype_model_ if structured else model
     err_console.print(
-        f"trained on {len(run.used)} takes ({sum(m.n_frames for m in run.motions)} frames at "
+        f"trained on {counted(len(run.used), 'takes')} "
+        f"({counted(sum(m.n_frames for m in run.motions), 'frames')} at "
         f"{fps:g} fps), {len(base.train_tokens_)} prototype tokens; held out: "
         f"{', '.join(e.file for e in run.held_out) or 'none'}",
         highlight=False,
@@ -246,7 +251,7 @@ def generate(
             fps=behaviour.fps,
         )
         err_console.print(
-            f"wrote {out}: {len(routines[0])} frames at {behaviour.fps:g} fps, "
+            f"wrote {out}: {counted(len(routines[0]), 'frames')} at {behaviour.fps:g} fps, "
             f"N = {behaviour.max_memory} and N = 1"
         )
         return
@@ -254,7 +259,7 @@ def generate(
     _check_output(behaviour, out)
     motion = behaviour.generate(seconds, np.random.default_rng(seed), stochastic=stochastic)
     _write(motion, out)
-    err_console.print(f"wrote {out}: {motion.n_frames} frames at {motion.fps:g} fps")
+    err_console.print(f"wrote {out}: {counted(motion.n_frames, 'frames')} at {motion.fps:g} fps")
 
 
 @app.command()
@@ -314,7 +319,8 @@ def predict(
     _write(result, out)
     observed = result.n_frames - int(round(horizon * behaviour.fps))
     err_console.print(
-        f"wrote {out}: {observed} observed frames then {result.n_frames - observed} predicted, "
+        f"wrote {out}: {counted(observed, 'observed frames')} then "
+        f"{result.n_frames - observed} predicted, "
         f"at {result.fps:g} fps"
     )
     if animation is not None:
@@ -432,7 +438,7 @@ def evaluate(
         return
     table = Table(
         title=f"E_T ({'mm' if space == 'mm' else 'configuration space'}) on {', '.join(m.name for m in result.motions)}, "
-        f"{samples} predictions per frame, stride {stride}"
+        f"{counted(samples, 'predictions')} per frame, stride {stride}"
     )
     table.add_column("model")
     for s in result.seconds:
@@ -476,7 +482,8 @@ def _evaluate_contours(
             list(curves.values()),
             plot,
             ylabel=f"E_T ({unit})",
-            title=f"contour VLMM on {len(entries)} held-out takes ({samples} samples{every})",
+            title=f"contour VLMM on {counted(len(entries), 'held-out takes')} "
+            f"({counted(samples, 'samples')}{every})",
         )
         err_console.print(f"wrote {plot}")
     if as_json:

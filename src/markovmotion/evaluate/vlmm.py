@@ -30,6 +30,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry, MocapIndex
+from markovmotion.data.kinds import counted
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
 from markovmotion.evaluate.takes import TestTakes, test_takes
 from markovmotion.models.vlmm.behaviour import BehaviourModel
@@ -298,8 +299,9 @@ class VlmmEvaluation:
         plot_horizon_curves(
             unique,
             path,
-            f"E_T on {len(self.motions)} test takes ({self.n_frames} frames at {fps:g} fps"
-            f"{every}; {self.samples} samples each)",
+            f"E_T on {counted(len(self.motions), 'test takes')} "
+            f"({counted(self.n_frames, 'frames')} at {fps:g} fps"
+            f"{every}; {counted(self.samples, 'samples')} each)",
             "mean joint error E_T (mm)" if self.space == "mm" else "E_T, configuration (eq. 9)",
         )
 

@@ -25,6 +25,7 @@ import numpy as np
 from markovmotion.algorithms.hsmm_recursions import chain_cells
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
+from markovmotion.data.kinds import counted
 from markovmotion.errors import DataNotFoundError, MotionFormatError, SkeletonMismatchError
 from markovmotion.features import ExpMaps, FeaturePipeline, add_deltas
 from markovmotion.features.gait import (
@@ -92,7 +93,8 @@ class WalkSet:
         if n_steps > self.n_steps:
             raise DataNotFoundError(
                 f"{', '.join(self.names[:3])}{', ...' if len(self.names) > 3 else ''}: "
-                f"{n_steps} steps asked, only {self.n_steps} found in {len(self.names)} walks"
+                f"{n_steps} steps asked, only {self.n_steps} found in "
+                f"{counted(len(self.names), 'walks')}"
             )
         out = WalkSet([], [], [], [], self.floor, [])
         left = n_steps
