@@ -307,6 +307,22 @@ def test_step_classifier_separates_two_styles():
     assert Recognition.of(full, test).rate() == 1.0
 
 
+def test_a_style_of_one_walk_among_two_keeps_every_component_and_is_still_recognised():
+    """Of two styles, one with a single walk: no fold by walk trains on both, so the
+    components cannot be chosen by cross-validation (scikit-learn had stopped ``gait
+    evaluate`` with "needs samples of at least 2 classes"); every component is kept and
+    the classifier still tells the styles apart."""
+    from markovmotion.evaluate.gait import Recognition, StyleClassifier
+
+    rng = np.random.default_rng(1)
+    far = {"a": np.zeros(9), "b": np.full(9, 4.0)}
+    walks = fake_walks(rng, far["a"], 4) + fake_walks(rng, far["b"], 1)
+    clf = StyleClassifier().fit(walks, ["a"] * 4 + ["b"])
+    assert clf.n_components_ is None and clf.cv_rates_ == {}
+    test = {s: [fake_walks(rng, c, 3)] for s, c in far.items()}
+    assert Recognition.of(clf, test).rate() == 1.0
+
+
 def test_real_and_synthesized_steps_told_apart_only_when_they_differ():
     from markovmotion.evaluate.gait import real_vs_synthesized
 

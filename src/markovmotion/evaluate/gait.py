@@ -9,7 +9,8 @@ far apart that the regression on all the statistics recognises every real
 held-out step, which leaves no room to tell models apart; with
 ``n_components="auto"`` the classifier keeps the fewest components whose
 recognition of real steps, cross-validated over the training takes (folds by
-take), reaches ``target`` (90 %). Held-out takes play no part in that choice.
+take), reaches ``target`` (90 %); every component when no fold can train on two styles
+(of two, one has a single take). Held-out takes play no part in that choice.
 The full classifier's rates are reported beside.
 
 Reported, per kind of model (adapted, average, from scratch) and per number
@@ -203,10 +204,10 @@ class StyleClassifier(BaseEstimator):
         groups = np.concatenate([[i] * w.n_steps for i, w in enumerate(walks)])
         self.cv_rates_: dict[int, float] = {}
         k = self.n_components
+        folds = walk_folds(min(self.n_folds, len(walks)), y, groups) if k == "auto" else None
         if k == "auto":
-            folds = GroupKFold(min(self.n_folds, len(walks)))
-            k = None
-            for n in range(1, min(x.shape) + 1):
+            k = None  # all, also when no fold trains on two styles (one of two styles one walk)
+            for n in range(1, min(x.shape) + 1) if folds is not None else ():
                 guess = cross_val_predict(self._pipeline(n), x, y, groups=groups, cv=folds)
                 self.cv_rates_[n] = float(np.mean(guess == y))
                 if self.cv_rates_[n] >= self.target:
@@ -249,12 +250,24 @@ def real_vs_synthesized(
     model = make_pipeline(
         StandardScaler(), LogisticRegression(C=C, max_iter=5000, class_weight="balanced")
     )
-    k = min(n_folds, len(synth), len(real))
-    folds: GroupKFold | StratifiedGroupKFold = GroupKFold(k)
-    if any(len(set(y[train])) < 2 for train, _ in folds.split(x, y, groups)):
-        folds = StratifiedGroupKFold(k)  # a fold would train on one kind of walk only
+    folds = walk_folds(min(n_folds, len(synth), len(real)), y, groups)
+    if folds is None:
+        return float("nan")
     guess = cross_val_predict(model, x, y, groups=groups, cv=folds)
     return float(balanced_accuracy_score(y, guess))
+
+
+def walk_folds(
+    k: int, y: np.ndarray, groups: np.ndarray
+) -> GroupKFold | StratifiedGroupKFold | None:
+    """``k`` folds by walk (``groups``) in which every training part holds two classes or
+    more: by walk, else stratified by class; None when none can (of two classes, one has a
+    single walk): a classifier cannot be fitted on one class."""
+    x = np.zeros((len(y), 1))
+    for folds in (GroupKFold(k), StratifiedGroupKFold(k)):
+        if all(len(set(y[train])) > 1 for train, _ in folds.split(x, y, groups)):
+            return folds
+    return None
 
 
 # ------------------------------------------------------------------ rates and intervals
