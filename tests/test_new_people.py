@@ -902,3 +902,52 @@ def test_an_index_as_excel_writes_it_and_takes_shorter_than_the_observers_window
     main(["dualhmm", "evaluate", "--model", str(model), "--test", str(own), "--json"])
     report = _strict_json(capsys.readouterr().out)
     assert report["overall"]["frames"] == 20 and list(report["per_people"]) == ["pair 9"]
+
+
+def test_a_training_take_written_again_another_way_is_still_a_training_take(mocap, tmp_path):
+    """A training take re-saved (a C3D in metres with lower-case labels in another order, a
+    BVH by another writer) has other bytes but the same content (``motion_key``): evaluation
+    leaves it out as a training take (it had been scored as a test take); another take of
+    the same people is not."""
+    import gzip
+    import warnings
+
+    import c3d
+
+    from markovmotion.data.index import MocapIndex
+    from markovmotion.evaluate.takes import trained_on
+    from markovmotion.io.bvh import read_bvh, write_bvh
+    from markovmotion.io.c3d import read_c3d
+    from markovmotion.models.vlmm.behaviour import BehaviourModel
+
+    pairs = mocap.pairs("handshake", kind="markers")
+    (a, b), (other, _) = pairs[0], pairs[1]
+    model = DualHMM(n_states=3, n_iter=1).fit([mocap.load_pair(a, b)])
+    own = tmp_path / "own"
+    own.mkdir()
+    for e, name in ((a, "again.c3d"), (other, "other.c3d")):
+        markers = read_c3d(e.path)
+        order = np.argsort(markers.names)[::-1]
+        writer = c3d.Writer(point_rate=markers.fps, point_scale=-1.0, point_units="m   ")
+        writer.set_point_labels([markers.names[i].lower() for i in order])
+        writer.set_screen_axis("+X", "+Y")
+        for frame in markers.positions[:, order]:
+            points = np.zeros((len(frame), 5), np.float32)
+            points[:, :3] = np.nan_to_num(frame) / 1000.0
+            points[:, 3] = np.where(np.isfinite(frame).all(axis=1), 0.0, -1.0)
+            writer.add_frames((points, np.zeros((0, 0))))
+        with warnings.catch_warnings(), open(own / name, "wb") as fh:
+            warnings.simplefilter("ignore")  # "no analog data"
+            writer.write(fh)
+    walk = mocap.query(source="bandai")[0]
+    vlmm = BehaviourModel(n_prototypes=4).fit([mocap.load_motion(walk)])
+    write_bvh(read_bvh(walk.path), own / "walk.bvh")  # our writer's numbers, not Bandai's
+    rows = ["file,category,label,fps", "again.c3d,interaction,handshake,30",
+            "other.c3d,interaction,handshake,30", f"walk.bvh,walk,x,{walk.fps:g}"]  # fmt: skip
+    (own / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    index = MocapIndex.load(own)
+    assert (own / "again.c3d").read_bytes() != a.path.read_bytes()
+    assert (own / "walk.bvh").read_bytes() != gzip.decompress(walk.path.read_bytes())
+    assert trained_on(model, index.find("again.c3d"))
+    assert not trained_on(model, index.find("other.c3d"))
+    assert trained_on(vlmm, index.find("walk.bvh"))

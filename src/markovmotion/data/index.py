@@ -283,10 +283,8 @@ class MocapIndex:
 
     def load_take(self, entry: Entry) -> Motion | Markers:
         """An entry's motion (:meth:`load_motion`), or for a C3D file its markers at
-        INDEX.csv's rate (unseen samples NaN)."""
-        if base_suffix(entry.file) == ".c3d":
-            return _read_markers(entry)
-        return self.load_motion(entry)
+        INDEX.csv's rate (unseen samples NaN): :func:`read_entry`."""
+        return read_entry(entry)
 
     def load_pair(self, a: Entry, b: Entry) -> tuple[Motion, Motion] | tuple[Markers, Markers]:
         """Both people of a take, at the same frame rate and cut to the same frames: Motions,
@@ -387,6 +385,12 @@ def note_rate(entry: Entry, file_fps: float) -> None:
     (:class:`~markovmotion.progress.NoteOnce`)."""
     if rate_disagrees(entry, file_fps):
         log.warning(RATE_NOTE, entry.file, file_fps, entry.fps)
+
+
+def read_entry(entry: Entry) -> Motion | Markers:
+    """An entry's take as every command reads it: its motion (:meth:`Entry.read`), or for a
+    C3D file its markers at INDEX.csv's rate (unseen samples NaN)."""
+    return _read_markers(entry) if base_suffix(entry.file) == ".c3d" else entry.read()
 
 
 def _read_markers(entry: Entry) -> Markers:

@@ -15,6 +15,7 @@ in the default collection: a model of a user's own collection is evaluated on it
 
 from __future__ import annotations
 
+import functools
 import os
 import warnings
 from collections.abc import Iterable, Sequence
@@ -24,9 +25,9 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex
-from markovmotion.errors import DataNotFoundError
-from markovmotion.models.base import Model, file_sha256, training_hashes
+from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex, read_entry
+from markovmotion.errors import DataNotFoundError, MarkovMotionError
+from markovmotion.models.base import Model, file_sha256, motion_key, training_hashes, training_keys
 from markovmotion.progress import note
 
 T = TypeVar("T", Entry, tuple)
@@ -68,9 +69,31 @@ class TestTakes:
 
 
 def trained_on(model: Model, entry: Entry) -> bool:
-    """Whether the file of ``entry`` has the content of one of the model's training files."""
+    """Whether the file of ``entry`` has the content of one of the model's training files:
+    the same bytes, or the same take written another way (:func:`~markovmotion.models.base.
+    motion_key`: another file format's line endings, rotation order, units or axes)."""
     hashes = training_hashes(model)
-    return bool(hashes) and entry.path.is_file() and file_sha256(entry.path) in hashes
+    if not hashes or not entry.path.is_file():
+        return False
+    if file_sha256(entry.path) in hashes:
+        return True
+    keys = training_keys(model)
+    return bool(keys) and _entry_key(entry) in keys
+
+
+def _entry_key(entry: Entry) -> str | None:
+    """:func:`~markovmotion.models.base.motion_key` of the take ``entry`` (None if it cannot
+    be read: said where it is read), once per file and rate in a command."""
+    st = entry.path.stat()
+    return _key_of(entry, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=1024)
+def _key_of(entry: Entry, mtime_ns: int, size: int) -> str | None:
+    try:
+        return motion_key(read_entry(entry))
+    except MarkovMotionError:
+        return None
 
 
 def test_takes(

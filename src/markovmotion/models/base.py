@@ -417,13 +417,18 @@ def _kinds(kinds: tuple[type, ...]) -> str:
 
 
 def file_record(motion: Motion | Markers) -> dict[str, str]:
-    """Name and content hash of what ``motion`` (or markers) was read from.
+    """Name and content hash of what ``motion`` (or markers) was read from, and
+    :func:`motion_key`, what the take holds whatever file it is written in (``content``).
 
     The SHA-256 of the file's bytes when the motion came from a file (so the
     same take under another path or name is recognised), else of its arrays.
     """
     if motion.source and os.path.isfile(motion.source):
-        return {"file": os.path.basename(motion.source), "sha256": file_sha256(motion.source)}
+        return {
+            "file": os.path.basename(motion.source),
+            "sha256": file_sha256(motion.source),
+            "content": motion_key(motion),
+        }
     digest = hashlib.sha256()
     arrays = (
         (motion.positions,)
@@ -432,7 +437,27 @@ def file_record(motion: Motion | Markers) -> dict[str, str]:
     )
     for arr in arrays:
         digest.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
-    return {"file": motion.name or "(in memory)", "sha256": digest.hexdigest()}
+    return {
+        "file": motion.name or "(in memory)",
+        "sha256": digest.hexdigest(),
+        "content": motion_key(motion),
+    }
+
+
+def motion_key(motion: Motion | Markers) -> str:
+    """A take's content as read (mm, Y up), whatever file holds it: its frame count and the
+    mean and spread of its points (joints by forward kinematics, or markers seen) along each
+    axis, to 1 mm, hashed. The same take written again another way (line endings, rotation
+    order, units, axes, marker labels or order) has the same key; a file's bytes
+    (:func:`file_sha256`) differ, and a training take so re-saved had been evaluated as a
+    test take. Our own: six rounded numbers, so a re-saving's rounding (1e-5 mm) changes the
+    key only for a number within that of a millimetre's edge."""
+    points = motion.positions if isinstance(motion, Markers) else motion.positions()
+    flat = np.asarray(points, dtype=float).reshape(-1, 3)
+    flat = flat[np.isfinite(flat).all(axis=1)]
+    stats = np.r_[flat.mean(axis=0), flat.std(axis=0)] if len(flat) else np.zeros(6)
+    text = f"{motion.n_frames}:" + ",".join(f"{v:.0f}" for v in np.round(stats) + 0.0)
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
 _HASHES: dict[tuple[str, int, int], str] = {}
@@ -454,6 +479,12 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
 def training_hashes(model: Model) -> set[str]:
     """The content hashes of the files ``model`` was trained on."""
     return {rec["sha256"] for rec in getattr(model, "train_files_", [])}
+
+
+def training_keys(model: Model) -> set[str]:
+    """The :func:`motion_key` of each take ``model`` was trained on (none for a model saved
+    before they were recorded)."""
+    return {rec["content"] for rec in getattr(model, "train_files_", []) if rec.get("content")}
 
 
 def flatten(takes: Sequence[Any]) -> list[Motion | Markers]:
