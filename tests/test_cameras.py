@@ -408,12 +408,20 @@ def test_one_cameras_video_at_another_rate_than_the_others_is_refused(real_copy,
     """cam1 re-encoded at 30 fps among videos at 60 (the camera file saying 60) had been
     tracked with a note advising to "set its fps", which no rate of the file puts right for
     every view (they are paired frame by frame): one line naming the video and both rates,
-    exit 2. Videos that agree with one another but not with the file keep their note."""
+    exit 2. Videos that agree with one another but not with the file keep their note. A
+    command that reads one camera's video (``--method monocular`` on cam0) is not stopped by
+    another camera's: that one is a note."""
     frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
     _replace(real_copy / "cam1.mp4", frames, 30.0)
     err = _triangulate_refused(real_copy, capsys)
     assert len(err.splitlines()) == 1, err
     assert "cam1.mp4 is 30 fps by its own header, the other views 60: resample it to 60" in err
+    main(["track", "--video", str(real_copy / "cam0.mp4"), "--method", "monocular",
+          "--max-frames", "3", "--json"])  # fmt: skip
+    err = " ".join(capsys.readouterr().err.split())
+    assert "cam1.mp4 is 30 fps by its own header, the camera file says 60" in err
+    cams, _ = load_cameras(real_copy, paired=False)
+    assert len(cams) == 4
     _edit(real_copy, lambda d: d.update(fps=30.0))  # the file agreeing with the odd one
     with pytest.raises(MotionFormatError, match="cam1.mp4 is 30 fps .* the other views 60"):
         load_cameras(real_copy)

@@ -248,7 +248,7 @@ def track(
     guided, note, cams, first_skip = False, None, [], 0
     if method == "apf" or person is not None:  # a bad camera file, a missing video: first
         where = camera_file(video, cameras)
-        cams, doc = load_cameras(where)
+        cams, doc = load_cameras(where, paired=not lone_video(video))
         first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
         if not lone_video(video):
             camera_videos(where, cams)

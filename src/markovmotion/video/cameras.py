@@ -363,7 +363,7 @@ def camera_of_video(
 
 
 def load_cameras(
-    path: str | os.PathLike[str], notes: list[str] | None = None
+    path: str | os.PathLike[str], notes: list[str] | None = None, paired: bool = True
 ) -> tuple[list[CalibratedCamera], dict]:
     """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document,
     whose ``fps`` is the file's or, without one, the rate the videos' own headers agree on;
@@ -380,7 +380,9 @@ def load_cameras(
             named as one), another ``units`` than mm, cm or m, or a camera without valid
             size, intrinsics, an orthonormal rotation, a translation, or with distortion
             coefficients OpenCV does not take; no ``fps`` and no rate the videos agree
-            on; R and t that are surely the cameras' poses.
+            on; videos at rates of their own (``paired``, for a command that reads the
+            views together; one that reads one camera's video is told in a note); R and t
+            that are surely the cameras' poses.
     """
     folders = video_folders(path)
     path = Path(path)
@@ -440,7 +442,7 @@ def load_cameras(
     if fps is None:
         fps = _rate_of_videos(path, folders, out, lines)
     else:
-        lines += _rate_notes(path, folders, out, float(fps))
+        lines += _rate_notes(path, folders, out, float(fps), paired)
     doc["fps"] = float(fps)
     lines += centre_notes(out) + _numbering_gap_notes(folders, out)
     if not problem:  # cameras the wrong way round are placed anywhere
@@ -708,7 +710,11 @@ def _header_rates(folders: Sequence[Path], cameras: list[CalibratedCamera]) -> d
 
 
 def _rate_notes(
-    path: Path, folders: Sequence[Path], cameras: list[CalibratedCamera], fps: float
+    path: Path,
+    folders: Sequence[Path],
+    cameras: list[CalibratedCamera],
+    fps: float,
+    paired: bool = True,
 ) -> list[str]:
     """A note for each camera's video whose own frame rate is not the camera file's ``fps``,
     which is the one used, when the videos agree with one another (within 1 %): a video
@@ -719,14 +725,16 @@ def _rate_notes(
         MotionFormatError: the videos' own rates disagree (one camera's video re-encoded at
             30 fps among others at 60): the views are paired frame by frame, so no ``fps``
             of the file is right for all of them (the note had advised setting it); the
-            odd videos, their rates and the others' rate, to resample them to."""
+            odd videos, their rates and the others' rate, to resample them to; with
+            ``paired`` False (a command that reads one camera's video) a note for each video
+            off the file's rate instead."""
     known = {name: own for name, own in _header_rates(folders, cameras).items() if own > 0}
 
     def near(a: float, b: float) -> bool:
         return abs(a - b) <= 0.01 * b
 
     rates = list(known.values())
-    if any(not near(r, rates[0]) for r in rates):
+    if paired and any(not near(r, rates[0]) for r in rates):
         # the others' rate: the one most videos have (of as many, the file's)
         groups = [[r for r in rates if near(r, q)] for q in rates]
         usual = max(groups, key=lambda g: (len(g), near(g[0], fps)))[0]

@@ -185,8 +185,8 @@ def respond_in_video(
     dual = _load_partner_model(model)
     check_writable(out)  # before the tracking, not after
     where = camera_file(video, cameras)
-    cams, _ = load_cameras(where)
     single = lone_video(video)
+    cams, _ = load_cameras(where, paired=not single)
     if single:  # one camera's video: that camera
         view = camera_of_video(cams, video)
     if view is not None and not 0 <= view < len(cams):
@@ -247,7 +247,7 @@ def respond_mediapipe(
     dual = _load_partner_model(model)
     check_writable(out)  # before the tracking, not after
     where = camera_file(video, cameras)
-    cams, doc = load_cameras(where)
+    cams, doc = load_cameras(where, paired=tracker == "triangulate" and not lone_video(video))
     if lone_video(video):  # one camera's video
         if tracker == "triangulate":
             raise MotionFormatError(video, "--method triangulate needs the folder of every camera")

@@ -755,7 +755,7 @@ def track_monocular_video(
 
     where = camera_file(video, cameras)
     notes: list[str] = []
-    cams, doc = load_cameras(where, notes)
+    cams, doc = load_cameras(where, notes, paired=False)  # one view: others' rates noted
     if lone_video(video):
         cam, path = cams[camera_of_video(cams, video, notes)], Path(video)
     else:
