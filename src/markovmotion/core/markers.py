@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markovmotion.core.words import first_names
+
 
 @dataclass(eq=False, repr=False)
 class Markers:
@@ -153,5 +155,6 @@ def find_markers(have: tuple[str, ...], wanted: tuple[str, ...] | list[str]) -> 
 def not_found(have: tuple[str, ...] | list[str], missing: list[str] | tuple[str, ...]) -> str:
     """``markers not found: ...``, with the labels the take has (its first eight): a take
     labelled another way shows how at once."""
-    shown = ", ".join(have[:8]) + (f" and {len(have) - 8} more" if len(have) > 8 else "")
-    return f"markers not found: {', '.join(missing)} (the take has {shown or 'none'})"
+    return (
+        f"markers not found: {', '.join(missing)} (the take has {first_names(have, 8) or 'none'})"
+    )

@@ -348,14 +348,14 @@ def read_listed_motion(path: str | os.PathLike[str], fps: float | None = None) -
 
 
 def read_listed(path: str | os.PathLike[str], fps: float | None = None) -> Motion | Markers:
-    """:func:`read_listed_motion`, or for a C3D file its markers: at ``fps`` if given, else
-    at INDEX.csv's rate when an index lists the file (:func:`listed_entry`), else the
-    file's own; every command that reads a file by path reads it so."""
-    if base_suffix(path) != ".c3d":
-        return read_listed_motion(path, fps)
+    """:func:`read_listed_motion`, or for a C3D file its markers: a file an index lists
+    (:func:`listed_entry`) as every command reads it (:func:`read_entry`) unless ``fps`` is
+    given, else the file itself at ``fps`` or its own rate."""
     entry = None if fps is not None else listed_entry(path)
     if entry is not None:
-        return _read_markers(entry)
+        return read_entry(entry)
+    if base_suffix(path) != ".c3d":
+        return read_motion(path, fps=fps)
     markers = read_c3d(path)
     if fps is not None:
         markers.fps = float(fps)

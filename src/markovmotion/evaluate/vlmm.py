@@ -29,6 +29,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from markovmotion.core.motion import Motion
+from markovmotion.core.words import first_names
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.kinds import counted
 from markovmotion.errors import DataNotFoundError, SkeletonMismatchError
@@ -314,11 +315,6 @@ def frames_at(motion: Motion, fps: float) -> int:
     return int(np.floor((motion.n_frames - 1) * fps / motion.fps + 1e-9)) + 1
 
 
-def _listed(items: Sequence[str], shown: int = 5) -> str:
-    more = f" and {len(items) - shown} more" if len(items) > shown else ""
-    return ", ".join(items[:shown]) + more
-
-
 def _horizons(seconds: Sequence[float]) -> str:
     words = [f"{s:g}" for s in seconds]
     joined = words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
@@ -349,7 +345,7 @@ def horizon_notes(
         if len(motions) == 1:
             what = f"{files[0]}: {frames(0)}, shorter than"
         else:
-            takes = _listed([f"{files[i]} ({frames(i)})" for i in range(len(files))])
+            takes = first_names([f"{files[i]} ({frames(i)})" for i in range(len(files))])
             what = f"{takes}: every test take is shorter than"
         raise DataNotFoundError(f"{what} {_horizons([first])}: nothing to evaluate")
     notes = []
@@ -369,7 +365,7 @@ def horizon_notes(
     if partly:
         notes.append(
             "shorter than some horizons, which are measured on the other takes only: "
-            + _listed(partly)
+            + first_names(partly)
         )
     return notes
 

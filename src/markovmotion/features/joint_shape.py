@@ -44,6 +44,7 @@ import numpy as np
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.core.words import first_names
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
@@ -186,9 +187,7 @@ def shape_joints(skeleton: Skeleton, joints: Sequence[str] | None = None) -> lis
     missing = [j for j in names if j not in skeleton.names]
     if missing:
         raise SkeletonMismatchError(
-            f"its skeleton lacks the joints {', '.join(missing[:8])}"
-            + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
-            + " (joints are matched by name)"
+            f"its skeleton lacks the joints {first_names(missing, 8)} (joints are matched by name)"
         )
     return [skeleton.index(j) for j in names]
 

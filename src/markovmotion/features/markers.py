@@ -482,13 +482,14 @@ class MarkerFeatures(FeatureStep):
         a ValueError, naming those lacking)."""
         if list(markers.names) == self.names_:
             return markers
-        missing = find_markers(markers.names, self.names_)[1]
-        if missing:  # the take's own labels said beside: a take labelled another way shows how
+        try:
+            return markers.select(self.names_)
+        except KeyError as exc:  # the take's own labels said beside: how it labels them
+            missing = find_markers(markers.names, self.names_)[1]
             raise MarkersNotFoundError(
                 f"{markers.name or 'markers'}: {not_found(markers.names, missing)}",
-                reason=f"markers not found: {', '.join(missing)}",
-            )
-        return markers.select(self.names_)
+                reason=exc.args[0],
+            ) from None
 
     def place(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where a person stands and faces per frame, from their markers (F, M, 3) (in

@@ -25,6 +25,7 @@ import numpy as np
 from markovmotion.algorithms.hsmm_recursions import chain_cells
 from markovmotion.algorithms.mlpg import global_variance, mlpg, mlpg_gv
 from markovmotion.core.motion import Motion
+from markovmotion.core.words import first_names
 from markovmotion.data.kinds import counted
 from markovmotion.errors import DataNotFoundError, MotionFormatError, SkeletonMismatchError
 from markovmotion.features import ExpMaps, FeaturePipeline, add_deltas
@@ -186,7 +187,7 @@ def walks_with_steps(motions: Sequence[Motion], what: str = "walks") -> list[int
     if not left:
         return kept
     shown = [f"{motions[i].name or f'walk {i}'} ({motions[i].n_frames} frames)" for i in left]
-    named = ", ".join(shown[:5]) + (f" and {len(shown) - 5} more" if len(shown) > 5 else "")
+    named = first_names(shown)
     if not kept:
         raise DataNotFoundError(f"{named}: no steps found (fewer than two heel strikes)")
     note(f"{what} without steps (fewer than two heel strikes) left out: {named}")
