@@ -194,3 +194,23 @@ def test_no_take_of_the_collection_and_no_small_tree_is_taken_for_another_unit(m
     assert [e.file for e in takes if likely_unit(read_bvh_skeleton(e.path, "cm"), "cm")] == []
     toy = Skeleton(("a", "b", "c"), [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, 1, 0]], [()] * 3)
     assert likely_unit(toy, "cm") is None  # 2 mm, or 2 m in metres: not a body either way
+
+
+def test_joint_names_with_spaces_are_read_whole(tmp_path):
+    """3ds Max's Biped writes 'JOINT Bip01 L Thigh': the name is the rest of its line, as
+    Blender reads it (a name's first word alone had made 'Bip01' a joint named twice)."""
+    m = make_motion(n_frames=4)
+    names = tuple(f"Bip01 {n}" for n in m.skeleton.names)
+    sk = m.skeleton
+    biped = type(sk)(names, sk.parents, sk.offsets, sk.channels, sk.end_site)
+    m = type(m)(biped, m.rotations, m.translations, m.fps)
+    path = tmp_path / "biped.bvh"
+    write_motion(m, path)
+    assert "JOINT Bip01 " in path.read_text()
+    back = read_motion(path)
+    assert back.skeleton.names == ("Bip01 hips", "Bip01 lleg", "Bip01 rleg", "Bip01 spine",
+                                   "Bip01 spine_end")  # fmt: skip
+    np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
+    # the brace may follow the name on its line
+    path.write_text(path.read_text().replace("Bip01 ", "Bip01  L\t").replace("\n\t{", " {", 1))
+    assert read_motion(path).skeleton.names[1].startswith("Bip01 L ")

@@ -237,10 +237,14 @@ def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
     def open_joint(parent: int) -> tuple[int, str]:
         nonlocal n_channels
         tok.next("ROOT or JOINT")
+        name_line = tok.line()
         name = tok.next("joint name")
         if name in ("{", "}"):
             tok.back()
             raise tok.error("joint without a name")
+        # a name is the rest of its line (3ds Max's 'Bip01 L Thigh', as Blender reads it)
+        while tok.peek() not in (None, "{", "}") and tok.line() == name_line:
+            name += " " + tok.next("joint name")
         if name in seen:
             tok.back()
             raise tok.error(f"joint name {name!r} used twice")
