@@ -191,6 +191,27 @@ def test_a_binary_websocket_frame_gets_a_close_frame_with_a_reason(server):
     assert "binary" in closed.value.rcvd.reason
 
 
+@pytest.mark.parametrize("endpoint", ["/ws/live", "/ws/camera"])
+@pytest.mark.parametrize(
+    "message",
+    ['{"path": ' + "9" * 5000 + "}", '{"fov": -' + "1" * 4400 + "}", "[" * 100_000],
+    ids=["long-integer", "long-negative-integer", "deep"],
+)
+def test_a_websocket_message_python_cannot_parse_is_a_close_with_a_reason(
+    server, endpoint, message
+):
+    """A number of over 4300 digits is a ValueError of json.loads, not a JSONDecodeError: it
+    was a traceback in the server's log and a connection dropped without a close frame."""
+    with connect(server.replace("http", "ws", 1) + endpoint, max_size=None) as ws:
+        ws.send(message)
+        error = json.loads(ws.recv(timeout=10))
+        assert error["type"] == "error" and error["message"].startswith("the message is not JSON")
+        with pytest.raises(ConnectionClosed) as closed:
+            ws.recv(timeout=10)
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+    assert closed.value.rcvd.reason.startswith("the message is not JSON")
+
+
 def test_a_websocket_from_another_origin_is_refused(server):
     with pytest.raises(Exception, match="403"):
         with connect(server.replace("http", "ws", 1) + "/ws/live", origin="http://evil.example"):

@@ -260,8 +260,10 @@ async def _receive_text(ws: WebSocket) -> str:
 def _parse(text: str) -> dict:
     try:
         msg = json.loads(text)
-    except (json.JSONDecodeError, RecursionError):
+    except json.JSONDecodeError:
         raise _Garbage("the message is not JSON") from None
+    except (RecursionError, ValueError):  # ValueError: an integer of over 4300 digits
+        raise _Garbage("the message is not JSON (nested too deeply or a number too long)") from None
     if not isinstance(msg, dict):
         raise _Garbage("the message is not a JSON object")
     return msg
