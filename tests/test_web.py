@@ -367,6 +367,29 @@ def test_live_session_streams_a_and_the_partner(server):
     assert all(f["latency_ms"] >= 0 for f in frames)
 
 
+@pytest.mark.parametrize(
+    ("request_", "field"),
+    [
+        ({"path": "short.bvh", "loop": "no"}, "loop"),
+        ({"path": "short.bvh", "loop": 0}, "loop"),
+        ({"bvh": "HIERARCHY", "name": {"a": 1}}, "name"),
+        ({"bvh": "HIERARCHY", "name": 5}, "name"),
+        ({"path": 3}, "path"),
+        ({"bvh": ["HIERARCHY"]}, "bvh"),
+    ],
+)
+def test_a_live_request_field_of_the_wrong_type_is_named(server, request_, field):
+    """``"loop": "no"`` had looped A (truthy), and a ``"name"`` object had been shown as
+    Python in the error; each field of the wrong type is now an error naming it."""
+    with connect(ws_url(server)) as ws:
+        ws.send(json.dumps(request_))
+        msg = json.loads(ws.recv(10))
+        assert msg["type"] == "error" and msg["message"].startswith(f"{field}: "), msg
+        with pytest.raises(ConnectionClosed) as closed:
+            ws.recv(10)
+    assert closed.value.rcvd.code == 1008 and closed.value.rcvd.reason.startswith(f"{field}: ")
+
+
 def test_live_session_with_the_dual_hmm(dual_server, dual, site):
     model = DualHMM.load(dual)
     a = read_motion(site / "lib" / "salsa_a.bvh").resample(model.fps)

@@ -269,6 +269,25 @@ def _parse(text: str) -> dict:
     return msg
 
 
+_START_FIELDS = {
+    "path": (str, "a library file's path (a string)"),
+    "bvh": (str, "the BVH file's text (a string)"),
+    "name": (str | None, "the uploaded file's name (a string)"),
+    "loop": (bool, "true or false"),
+}
+
+
+def _start_request(msg: dict) -> dict:
+    """The page's first message, its fields of the right types (:class:`_Garbage` naming the
+    first that is not: ``"loop": "no"`` had looped, a ``"name"`` object was shown as Python)."""
+    for key, (kind, what) in _START_FIELDS.items():
+        if key in msg and not isinstance(msg[key], kind):
+            raise _Garbage(f"{key}: {what}")
+    if "path" not in msg and "bvh" not in msg:
+        raise _Garbage('the first message must hold "path" or "bvh"')
+    return msg
+
+
 def _motion_of(msg: dict, library: MotionLibrary) -> Motion | Markers:
     if isinstance(msg.get("path"), str):
         return library.motion(msg["path"])
@@ -541,7 +560,7 @@ async def live_session(
     frames; ``math.inf`` never drops (every frame stepped and sent, however late)."""
     await ws.accept()
     try:
-        msg = _parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT))
+        msg = _start_request(_parse(await asyncio.wait_for(_receive_text(ws), START_TIMEOUT)))
         if factory is None:
             raise _Garbage("this server has no partner model: start it with --partner MODEL")
         motion, poses_a, partner, step = await asyncio.to_thread(_stream, msg, library, factory)
