@@ -59,6 +59,27 @@ def test_namespaces_and_sides_written_either_way():
     assert body_point_index(sk, ("pelvis", "left_elbow", "right_elbow")).tolist() == [0, 1, 2]
 
 
+def test_3ds_max_biped_names_are_found_behind_their_bip01_prefix():
+    """3ds Max Biped's ``Bip01 L Thigh`` (or ``Bip001_L_Thigh``): every body point is found
+    (none was: 'bip01lthigh' matched no synonym, so the dual HMM, the chain and the VLMM's
+    markers refused a Biped skeleton)."""
+    parts = ["Pelvis", "Spine", "Spine1", "Neck", "Head"]
+    for side in "LR":
+        parts += [f"{side} {p}" for p in ("UpperArm", "Forearm", "Hand")]
+        parts += [f"{side} {p}" for p in ("Thigh", "Calf", "Foot", "Toe0")]
+    for prefix, sep in (("Bip01", " "), ("Bip001", "_")):
+        names = (prefix, *(f"{prefix}{sep}{p.replace(' ', sep)}" for p in parts))
+        sk = Skeleton(names, [-1] + [0] * len(parts), np.zeros((len(names), 3)),
+                      [("Xrotation",)] * len(names))  # fmt: skip
+        found = [names[i] for i in body_point_index(sk)]
+        assert found[:5] == [
+            f"{prefix}{sep}{p}" for p in ("Pelvis", "Spine", "Spine1", "Neck", "Head")
+        ]
+        assert f"{prefix}{sep}L{sep}Calf" in found and f"{prefix}{sep}R{sep}Toe0" in found
+    assert normalise("Bip01 L Forearm") == "lforearm"
+    assert normalise("Biped") == "biped"
+
+
 def test_missing_points_named_in_one_error():
     names = ("Hips", "LeftArm", "LeftForeArm")
     sk = Skeleton(names, [-1, 0, 1], np.zeros((3, 3)), [("Xrotation",)] * 3)

@@ -4,8 +4,8 @@ Different captures name and build their skeletons differently: CMU's salsa
 BVH (``hip``, ``lShldr``, ``lForeArm`` ...), cgspeed's conversion of CMU
 (``Hips``, ``LeftArm``, ``LeftForeArm`` ...), CMU's ASF (``root``,
 ``lhumerus``, ``lradius`` ...), Bandai's (``Hips``, ``UpperArm_L`` ...),
-Mixamo's (``mixamorig:LeftArm``). Models that learn from one person and
-answer another, or evaluation that compares a generated person with a real
+Mixamo's (``mixamorig:LeftArm``), 3ds Max Biped's (``Bip01 L UpperArm``).
+Models that learn from one person and answer another, or evaluation that compares a generated person with a real
 one on another skeleton, need the same points on both: the pelvis, spine,
 head, shoulders, elbows, wrists, hips, knees, ankles and toes
 (:data:`BODY_POINTS`; the VLMM paper's 13 markers are :data:`MARKER_POINTS`).
@@ -13,7 +13,7 @@ head, shoulders, elbows, wrists, hips, knees, ankles and toes
 Each point is a joint's position (a BVH joint sits where its segment
 starts: ``LeftForeArm`` is the elbow). A point is found by the first of its
 synonyms (:data:`SYNONYMS`) that names a joint, compared after
-normalisation: lower case, a namespace prefix (``mixamorig:``) dropped,
+normalisation: lower case, a namespace prefix (``mixamorig:``, ``Bip01 ``) dropped,
 separators dropped, and the side written either way (``left``/``l`` before
 or after the part's name). The synonyms are ordered so that a more
 specific name wins (``LeftArm``, the shoulder joint, before
@@ -43,7 +43,7 @@ _SIDED: dict[str, tuple[str, ...]] = {
     "hip": ("upleg", "upperleg", "thigh", "femur", "hip"),
     "knee": ("leg", "lowerleg", "shin", "tibia", "knee", "calf"),
     "ankle": ("foot", "ankle"),
-    "toe": ("toebase", "toes", "toe", "footend", "toeend"),
+    "toe": ("toebase", "toes", "toe", "toe0", "footend", "toeend"),
 }
 
 #: Points on the body's midline and their names.
@@ -176,8 +176,11 @@ _CACHE: weakref.WeakKeyDictionary[Skeleton, dict[tuple[str, ...], np.ndarray]] =
 
 
 def normalise(name: str) -> str:
-    """A joint name as compared with :data:`SYNONYMS`: lower case, no namespace, no separators."""
-    return re.sub(r"[^a-z0-9]", "", name.rsplit(":", 1)[-1].lower())
+    """A joint name as compared with :data:`SYNONYMS`: lower case, no namespace (Mixamo's
+    ``mixamorig:``, 3ds Max Biped's ``Bip01 ``/``Bip001_``), no separators."""
+    name = name.rsplit(":", 1)[-1].lower()
+    name = re.sub(r"^bip\d+(?=[^a-z0-9])", "", name)
+    return re.sub(r"[^a-z0-9]", "", name)
 
 
 def body_point_index(
