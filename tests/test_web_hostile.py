@@ -9,9 +9,12 @@ measured in a subprocess with ``resource.getrusage``.
 
 from __future__ import annotations
 
+import base64
 import gzip
 import http.client
 import json
+import logging
+import os
 import re
 import socket
 import subprocess
@@ -210,6 +213,52 @@ def test_a_websocket_message_python_cannot_parse_is_a_close_with_a_reason(
             ws.recv(timeout=10)
     assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
     assert closed.value.rcvd.reason.startswith("the message is not JSON")
+
+
+def raw_websocket(url: str, path: str) -> socket.socket:
+    """A WebSocket opened by hand (frames sent as given), past its 101 answer."""
+    parts = urllib.parse.urlsplit(url)
+    sock = socket.create_connection((parts.hostname, parts.port), timeout=10)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(
+        f"GET {path} HTTP/1.1\r\nHost: {parts.hostname}:{parts.port}\r\nUpgrade: websocket\r\n"
+        f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode()
+    )
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(4096)
+    assert head.startswith(b"HTTP/1.1 101"), head[:100]
+    return sock
+
+
+def masked_frame(opcode: int, payload: bytes) -> bytes:
+    """One final client frame (masked) of up to 125 bytes."""
+    mask = os.urandom(4)
+    body = bytes(c ^ mask[i % 4] for i, c in enumerate(payload))
+    return bytes([0x80 | opcode, 0x80 | len(payload)]) + mask + body
+
+
+@pytest.mark.parametrize("endpoint", ["/ws/live", "/ws/camera"])
+def test_a_websocket_text_message_not_utf8_is_closed_and_logged_in_one_line(server, endpoint):
+    """uvicorn logged a traceback ("Invalid UTF-8 sequence received from client.") for each
+    such message: now one line; the connection is closed with 1007 as before."""
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logger = logging.getLogger("uvicorn.error")
+    logger.addHandler(handler)
+    try:
+        sock = raw_websocket(server, endpoint)
+        with sock:
+            sock.sendall(masked_frame(0x1, b'{"path": "\xff\xfe"}'))
+            answer = b""
+            while chunk := sock.recv(4096):
+                answer += chunk
+    finally:
+        logger.removeHandler(handler)
+    assert answer[:1] == b"\x88" and int.from_bytes(answer[2:4], "big") == 1007, answer[:20]
+    assert [r.exc_info for r in records] == [None], [r.getMessage() for r in records]
+    assert "not UTF-8" in records[0].getMessage()
 
 
 def test_a_websocket_from_another_origin_is_refused(server):

@@ -11,6 +11,7 @@ SQLite file, whose writes are serialised by SQLite's lock (``BEGIN IMMEDIATE``).
 from __future__ import annotations
 
 import errno
+import logging
 import multiprocessing
 import os
 import secrets
@@ -78,13 +79,37 @@ def _bind(host: str, port: int, reuse_port: bool, listening: bool) -> socket.soc
     return sock
 
 
+class _ClientUtf8(logging.Filter):
+    """uvicorn's log of a WebSocket text message that is not UTF-8 (a client's fault: it
+    closes that connection with 1007, invalid payload) as one line, not a traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, UnicodeDecodeError) and "UTF-8" in str(record.msg):
+            record.msg, record.args = (
+                "a WebSocket client sent a text message that is not UTF-8: closed (1007)",
+                (),
+            )
+            record.exc_info = record.exc_text = None
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+_CLIENT_UTF8 = _ClientUtf8()
+
+
 def uvicorn_server(app: FastAPI) -> uvicorn.Server:
     """The uvicorn server for ``app`` (``serve`` and :func:`running` alike).
 
     WebSocket compression (permessage-deflate) is off: the live page's frames are
     small and sent 30 times a second per session, and compressing each one took a
-    third of the time spent sending it (py-spy under ``benchmarks/web_load.py``)."""
-    return uvicorn.Server(uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False))
+    third of the time spent sending it (py-spy under ``benchmarks/web_load.py``).
+    A WebSocket text message that is not UTF-8 is logged in one line (:class:`_ClientUtf8`)."""
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", ws_per_message_deflate=False))
+    logger = logging.getLogger("uvicorn.error")
+    if _CLIENT_UTF8 not in logger.filters:
+        logger.addFilter(_CLIENT_UTF8)
+    return server
 
 
 @contextmanager
