@@ -183,7 +183,7 @@ def real_video():
         (["--truth", "x.bvh"], "no such file (--truth)"),
         (["--truth", "cameras.json"], "the rendered take's motion"),
         (["--guide", "mediapipe", "--views", "1"], "at least 2 views"),
-        (["--smooth", "0.05"], "--method triangulate or monocular"),
+        (["--method", "apf", "--smooth", "0.05"], "--method triangulate or monocular"),
         (["--method", "triangulate", "--smooth", "slow"], "auto or SECONDS"),
         (["--method", "triangulate", "--smooth", "-1"], "auto or SECONDS"),
     ],
@@ -940,3 +940,44 @@ def test_a_video_with_no_one_in_it_says_so(tmp_path, capsys):
         assert exit_.value.code == 2, method
         assert "no person found in this video" in capsys.readouterr().err, method
         assert not (tmp_path / out).exists()
+
+
+def test_method_auto_picks_the_most_accurate_tracker_for_what_is_asked(monkeypatch):
+    """``resolve_method``: ``auto`` is MediaPipe triangulated for two views or more and
+    monocular for one; the particle filter when its own options or a skeleton are asked
+    for, or MediaPipe is not installed; a method named is kept."""
+    import markovmotion.video.monocular as monocular
+    from markovmotion.video.multiview import resolve_method
+
+    monkeypatch.setattr(monocular, "mediapipe_installed", lambda: True)
+    chosen, note = resolve_method("auto", 4)
+    assert chosen == "triangulate" and "auto chose triangulate" in note and "4 views" in note
+    assert resolve_method("auto", 1)[0] == "monocular"
+    assert resolve_method("auto", 3, ["particles"]) == ("apf", None)
+    for named in ("apf", "triangulate", "monocular"):
+        assert resolve_method(named, 4) == (named, None)
+    monkeypatch.setattr(monocular, "mediapipe_installed", lambda: False)
+    assert resolve_method("auto", 4) == ("apf", None)
+    with pytest.raises(ValueError, match="method must be one of"):
+        resolve_method("kalman", 2)
+
+
+def test_track_by_default_triangulates_and_a_skeleton_asks_for_the_filter(
+    real_video, tmp_path, capsys
+):
+    """``track`` without ``--method`` on the real 4-view video triangulates MediaPipe (the
+    note and the summary say so); a .bvh ``--out`` or a particle-filter option given makes
+    it the particle filter, which writes the skeleton."""
+    _need_mediapipe()
+    base = ["track", "--video", str(real_video), "--max-frames", "3", "--json"]
+    main(base)
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["method"] == "triangulate" and summary["views"] == 4
+    assert "note: --method auto chose triangulate" in captured.err
+    main([*base, "--particles", "10", "--layers", "1", "--out", str(tmp_path / "a.bvh")])
+    captured = capsys.readouterr()
+    assert "confidence" in json.loads(captured.out) and (tmp_path / "a.bvh").is_file()
+    assert "auto chose" not in captured.err
+    main([*base, "--layers", "1", "--particles", "10"])  # no --out: the filter's option
+    assert "auto chose" not in capsys.readouterr().err

@@ -380,7 +380,7 @@ def test_respond_passes_the_person_named_to_the_tracker(
         main([*args, "--guide", "mediapipe"])
     assert seen == ["0:10,10"]
     capsys.readouterr()
-    for extra in ([], ["--realtime"]):
+    for extra in (["--method", "apf"], ["--realtime"]):  # the filter unguided (rendered video)
         with pytest.raises(SystemExit) as exc:
             main(args + extra)
         assert exc.value.code == 2

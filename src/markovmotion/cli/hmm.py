@@ -18,6 +18,8 @@ from markovmotion.cli.options import (
     guide_for,
     guide_option,
     kind_option,
+    method_for,
+    method_option,
     normalise_option,
     person_option,
     preset_option,
@@ -310,8 +312,14 @@ def read_stream(path: Path, fps: float | None = None):
     return motion, np.zeros(motion.n_frames, dtype=bool)
 
 
+#: ``respond --video``'s options that only the particle filter reads: given (or
+#: ``--realtime``), ``--method auto`` is it.
+FILTER_OPTIONS = ("particles", "layers", "data", "guide", "body_model")
+
+
 @app.command()
 def respond(
+    ctx: typer.Context,
     model: Path = typer.Option(..., help="Dual-HMM model file (.npz)."),
     input: Path = typer.Option(
         None,
@@ -354,13 +362,7 @@ def respond(
         help="True frame rate of the input (default: INDEX.csv's for a file of the collection, else the file's).",
     ),
     animation: Path = typer.Option(None, help="Also animate A and B together (.gif/.mp4)."),
-    method: str = typer.Option(
-        "apf",
-        callback=choice(("apf", "monocular", "triangulate")),
-        help="With --video, how A is tracked: apf (annealed particle filter, all views), "
-        "monocular (MediaPipe Pose in the --view camera alone) or triangulate (MediaPipe Pose "
-        "in every camera, triangulated); both need scripts/install-camera.",
-    ),
+    method: str = method_option("respond"),
     guide: str = guide_option(),
     body_model: str = body_model_option(),
     person: str = person_option(),
@@ -377,8 +379,11 @@ def respond(
         raise typer.BadParameter("--standard needs the whole input: no --window or --realtime")
     if (input is None) == (video is None):
         raise typer.BadParameter("give person A as --input MOTION or as --video VIDEO")
-    if video is None and (method != "apf" or guide not in ("auto", "none") or person):
+    if video is None and (method != "auto" or guide not in ("auto", "none") or person):
         raise typer.BadParameter("--method, --guide and --person are how A is tracked in --video")
+    chose = None
+    if video is not None:
+        method, chose = method_for(ctx, method, video, cameras, None, FILTER_OPTIONS, realtime)
     if guide == "mediapipe" and (method != "apf" or realtime):
         raise typer.BadParameter(
             "guides the particle filter over the whole video: --method apf, no --realtime",
@@ -387,7 +392,7 @@ def respond(
     if video is not None:
         _respond_video(
             model, video, out, cameras, view, particles, layers, max_frames, data, standard,
-            realtime, method, guide, body_model, person,
+            realtime, method, guide, body_model, person, chose,
         )  # fmt: skip
         return
     as_c3d = base_suffix(out) == ".c3d"
@@ -437,10 +442,11 @@ def respond(
 
 def _respond_video(
     model, video, out, cameras, view, particles, layers, max_frames, data, standard, realtime,
-    method, guide="none", body_model="interaction", person=None,
+    method, guide="none", body_model="interaction", person=None, chose=None,
 ):  # fmt: skip
     """``respond --video``: track A, generate B, composite B into the video (live with
-    ``realtime``; A by the monocular front end with ``method="monocular"``)."""
+    ``realtime``; A by MediaPipe with ``method="monocular"`` or ``"triangulate"``);
+    ``chose``: ``--method auto``'s note."""
     from markovmotion.models.hmm.dual import DualHMM
     from markovmotion.video.cameras import camera_file, camera_videos, load_cameras, lone_video
     from markovmotion.video.composite import respond_in_video, respond_mediapipe
@@ -470,7 +476,7 @@ def _respond_video(
             model, video, out, cameras, view, max_frames, "standard" if standard else "windowed",
             method, person,
         )  # fmt: skip
-        print_notes(summary["notes"])
+        print_notes(([chose] if chose else []) + summary["notes"])
         named = f" ({summary['camera']})" if summary.get("camera") else " alone"
         where = (
             f"camera {summary['view']}{named}"

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -441,3 +442,52 @@ def with_preset(options: dict, presets: dict[str, dict[str, object]]) -> dict:
             + (f" ({', '.join(kept)} given)" if kept else "")
         )
     return {**options, **set_, "preset_set": set_}
+
+
+def method_option(command: str) -> Any:
+    """``--method``: how person A is followed in video (``track`` and ``dualhmm respond
+    --video``; :func:`markovmotion.video.multiview.resolve_method`)."""
+    from markovmotion.video.multiview import METHODS
+
+    return typer.Option(
+        "auto",
+        callback=choice(METHODS),
+        help=f"How A is tracked{' in --video' if command == 'respond' else ''}: triangulate "
+        "(MediaPipe Pose in every camera, triangulated; the most accurate, docs/video.md), "
+        "monocular (MediaPipe Pose in one camera, placed by PnP), apf (annealed particle "
+        "filter on the images, all views: a skeleton on the body model) or auto (the "
+        "default: triangulate, or monocular for one view, where scripts/install-camera "
+        "installed MediaPipe; apf for "
+        + ("--realtime, " if command == "respond" else "a .bvh --out, ")
+        + "the filter's own options, or without MediaPipe).",
+    )
+
+
+def method_for(
+    ctx: typer.Context,
+    method: str,
+    video: Path,
+    cameras: Path | None,
+    views: int | None,
+    filter_options: Sequence[str],
+    asked: bool = False,
+) -> tuple[str, str | None]:
+    """``--method`` resolved (:func:`markovmotion.video.multiview.resolve_method`) for the
+    views of ``--video`` tracked (one for a lone video, else the camera file's, at most
+    ``views``), the particle filter's own options (``filter_options``, parameter names)
+    given on the command line or otherwise ``asked`` for, and the note saying what ``auto``
+    chose (for the summary's notes: printed after the work, so that a refusal before it
+    stays one line)."""
+    from markovmotion.video.cameras import camera_file, load_cameras, lone_video
+    from markovmotion.video.multiview import resolve_method
+
+    if method != "auto":
+        return method, None
+    n = 1 if lone_video(video) else len(load_cameras(camera_file(video, cameras), paired=False)[0])
+
+    given = [  # by the source's name: Typer 0.2x carries a click of its own
+        name
+        for name in filter_options
+        if getattr(ctx.get_parameter_source(name), "name", "DEFAULT") != "DEFAULT"
+    ]
+    return resolve_method(method, min(n, views or n), given + (["asked"] if asked else []))

@@ -13,6 +13,8 @@ from markovmotion.cli.options import (
     choice,
     guide_for,
     guide_option,
+    method_for,
+    method_option,
     person_option,
     ranged,
 )
@@ -151,14 +153,26 @@ def register(root: typer.Typer) -> None:
     root.command("track")(track)
 
 
+#: ``track``'s options that only the particle filter reads: given, ``--method auto`` is it.
+FILTER_OPTIONS = (
+    "particles", "layers", "data", "seed", "start", "body_size", "background", "sides", "guide",
+    "body_model",
+)  # fmt: skip
+
+
 def track(
+    ctx: typer.Context,
     video: Path = typer.Option(
         ..., help="Folder with cameras.json and the videos it names, or one camera's video."
     ),
     cameras: Path = typer.Option(
         None, help="Camera file (default: VIDEO/cameras.json); a lone video is its first camera."
     ),
-    out: Path = typer.Option(None, help="Person A's tracked motion (.bvh)."),
+    out: Path = typer.Option(
+        None,
+        help="Person A's tracked motion: .bvh (the particle filter's skeleton) or .c3d "
+        "(MediaPipe's 13 markers, --method triangulate or monocular).",
+    ),
     truth: Path = typer.Option(None, help="The true motion (BVH): report the error in mm."),
     json_out: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     particles: int = ranged("count", 200, min=10, max=5000, help="Particles per layer."),
@@ -170,13 +184,7 @@ def track(
     start: Path = typer.Option(
         None, help="First frame's pose (BVH on the body model's skeleton); default: searched."
     ),
-    method: str = typer.Option(
-        "apf",
-        callback=choice(("apf", "monocular", "triangulate")),
-        help="apf: annealed particle filter (all views); monocular: MediaPipe Pose in one "
-        "camera placed by PnP; triangulate: MediaPipe Pose in every camera, triangulated "
-        "(both need scripts/install-camera; --out is then markers, .c3d).",
-    ),
+    method: str = method_option("track"),
     stature: float = ranged(
         "stature",
         None,
@@ -224,8 +232,16 @@ def track(
         "(a Gaussian's sigma, 0: none).",
     ),
 ) -> None:
-    """Track person A in video: multi-view annealed particle filtering (write A as BVH), or
-    one camera with MediaPipe Pose (``--method monocular``, write the 13 markers as C3D)."""
+    """Track person A in video: MediaPipe Pose in every camera, triangulated, or in one
+    camera placed by PnP (write the 13 markers as C3D), or multi-view annealed particle
+    filtering (write A as BVH); ``--method auto`` picks (:func:`~markovmotion.video.
+    multiview.resolve_method`)."""
+    from markovmotion.io.files import base_suffix
+
+    method, chose = method_for(
+        ctx, method, video, cameras, views, FILTER_OPTIONS,
+        asked=out is not None and base_suffix(out) != ".c3d",
+    )  # fmt: skip
     if method != "apf" and guide == "mediapipe":
         raise typer.BadParameter(
             "guides the particle filter: use it with --method apf", param_hint="--guide"
@@ -278,6 +294,7 @@ def track(
             person,
             smoothing,
             truth,
+            chose,
         )
         return
     from markovmotion.errors import MotionFormatError
@@ -431,9 +448,10 @@ def _track_landmarks(
     person: str | None = None,
     smooth: float | None = None,
     truth: Path | None = None,
+    chose: str | None = None,
 ) -> None:
     """``--method monocular`` (one camera, PnP) or ``triangulate`` (every camera): MediaPipe's
-    body points, written as the 13 markers."""
+    body points, written as the 13 markers; ``chose``: ``--method auto``'s note."""
     from markovmotion.errors import MotionFormatError
     from markovmotion.io.c3d import write_c3d
     from markovmotion.video.monocular import monocular_markers, track_monocular_video
@@ -464,6 +482,9 @@ def _track_landmarks(
         from markovmotion.video.multiview import truth_errors
 
         summary.update(truth_errors(tr.points, tr.fps, truth, video, cameras))
+    summary["method"] = method
+    if chose:
+        summary["notes"] = [chose, *summary["notes"]]
     if out is not None:
         write_c3d(monocular_markers(tr.points, tr.fps, video.name), out)
         err_console.print(f"wrote {out}", highlight=False)

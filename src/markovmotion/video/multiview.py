@@ -398,6 +398,41 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
     return True, None
 
 
+#: How ``track`` and ``dualhmm respond --video`` follow person A (``--method``).
+METHODS = ("auto", "apf", "triangulate", "monocular")
+
+
+def resolve_method(
+    method: str, views: int, filter_asked: Sequence[str] = ()
+) -> tuple[str, str | None]:
+    """``--method`` resolved for the number of ``views`` tracked, with the note to print
+    when ``auto`` chose; ``filter_asked`` names the particle filter's own options given on
+    the command line (``--out A.bvh``, ``--particles``, ``--guide``, ``--realtime``...).
+
+    ``auto`` is the most accurate tracker measured for what is asked (docs/video.md): with
+    MediaPipe installed (``scripts/install-camera``), ``triangulate`` for two views or more
+    (the real 4-view video 79.5 mm from its reference against the guided particle filter's
+    112.8; 11 rendered kinds of motion 61.3 mm against 88.6; 20-23 frames/s against about 3)
+    and ``monocular`` for one (the particle filter is 438.6 mm on one view, mirrored poses;
+    MediaPipe alone 114). The particle filter (``apf``) is kept for what it alone gives:
+    a skeleton on the body model (BVH), the live tracker of ``--realtime``, its own options,
+    and video without MediaPipe installed (said by :func:`resolve_guide`'s note)."""
+    from markovmotion.video.monocular import mediapipe_installed
+
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method != "auto":
+        return method, None
+    if filter_asked or not mediapipe_installed():
+        return "apf", None
+    chosen = "triangulate" if views >= 2 else "monocular"
+    views_said = f"{views} views" if views >= 2 else "one view"
+    return chosen, (
+        f"note: --method auto chose {chosen} (MediaPipe Pose, {views_said}); the particle "
+        "filter's skeleton: --method apf or a .bvh --out"
+    )
+
+
 #: Share of frames whose search started again above which the track is said to be doubtful.
 RESTARTS_NOTED = 0.2
 
