@@ -604,6 +604,30 @@ def test_a_skeleton_is_matched_by_its_joint_names_not_their_count(pair_partner, 
     assert pair_partner.person(a).points.shape[1] == len(learnt)
 
 
+def test_a_skeleton_exported_with_a_namespace_is_the_same_skeleton(pair_partner, mocap):
+    """Mixamo's ``mixamorig:hip`` is ``hip`` (as a marker's ``P1:R_HAND`` is ``R_HAND``): the
+    same take with its joints so named is answered as the take (it was refused, every joint
+    named lacking), and a model learnt with the namespace finds the joints without it."""
+    import dataclasses
+
+    from markovmotion.features.joint_shape import shape_joints
+
+    a, _ = mocap.load_pair(*mocap.pairs(label="salsa")[0])
+    a = a.trim(600, 660)
+    names = tuple(f"mixamorig:{n}" for n in a.skeleton.names)
+    other = dataclasses.replace(a, skeleton=dataclasses.replace(a.skeleton, names=names))
+    pair_partner.check_input(other)
+    np.testing.assert_array_equal(pair_partner.person(other).points, pair_partner.person(a).points)
+    mine = pair_partner.respond(a, n_hypotheses=1)
+    theirs = pair_partner.respond(other, n_hypotheses=1)
+    np.testing.assert_allclose(theirs.positions(), mine.positions())
+    learnt = pair_partner.shape_names
+    assert shape_joints(a.skeleton, [f"mixamorig:{n}" for n in learnt]) == shape_joints(
+        a.skeleton, learnt
+    )
+    assert shape_joints(other.skeleton) == shape_joints(a.skeleton)  # the major joints
+
+
 def test_a_response_holds_its_own_shape_not_the_frames_hypotheses():
     """A response's shape was a row of the frame's (hypotheses, d) array, which it kept
     alive: a 100,000-frame take at 200 hypotheses held every frame's (8 GB for 42,000

@@ -36,12 +36,13 @@ chains them.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.core.words import first_names
@@ -177,19 +178,41 @@ class TwoPeople:
         )
 
 
+_SHAPE_JOINTS: weakref.WeakKeyDictionary[Skeleton, dict[tuple[str, ...], list[int]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
 def shape_joints(skeleton: Skeleton, joints: Sequence[str] | None = None) -> list[int]:
     """Indices of the joints that make a 3-D shape: ``joints`` (by name, in that order), else
     :data:`MAJOR_JOINTS` when the skeleton has them, else all.
 
+    A name is matched as marker labels are (:func:`~markovmotion.core.markers.find_markers`:
+    as it is, else whatever its case, else without a namespace, Mixamo's ``mixamorig:Hips``,
+    when one joint alone matches so), and a learnt name's own namespace is dropped likewise:
+    the same skeleton exported with or without one is the same skeleton.
+
     Raises:
         SkeletonMismatchError: ``joints`` the skeleton lacks, named."""
-    names = joints or (MAJOR_JOINTS if set(MAJOR_JOINTS) <= set(skeleton.names) else skeleton.names)
-    missing = [j for j in names if j not in skeleton.names]
+    have = skeleton.names
+    names = tuple(joints or (MAJOR_JOINTS if not find_markers(have, MAJOR_JOINTS)[1] else have))
+    known = _SHAPE_JOINTS.setdefault(skeleton, {})
+    if names in known:
+        return list(known[names])
+    idx, missing = find_markers(have, names)
+    if missing:  # each name again, a learnt namespace ('mixamorig:Hips') dropped if need be
+        idx, missing = [], []
+        for n in names:
+            hit = find_markers(have, [n])[0] or find_markers(have, [n.rsplit(":", 1)[-1]])[0]
+            idx += hit
+            missing += [] if hit else [n]
     if missing:
         raise SkeletonMismatchError(
-            f"its skeleton lacks the joints {first_names(missing, 8)} (joints are matched by name)"
+            f"its skeleton lacks the joints {first_names(missing, 8)} (joints are matched by "
+            f"name; it has {first_names(have, 8)})"
         )
-    return [skeleton.index(j) for j in names]
+    known[names] = idx
+    return list(idx)
 
 
 def person_from_motion(m: Motion, joints: Sequence[str] | None = None) -> Person:
