@@ -354,3 +354,50 @@ def test_a_skeletons_difference_says_how_many_more_joints_differ(mocap):
     more = f"(and {len(side) - 5} more)"
     assert f"expected joints {', '.join(side[:5])} {more} are not in it" in text
     assert f"which has {', '.join(n.lower() for n in side[:5])} {more} instead" in text
+
+
+def test_markers_labelled_with_each_persons_subject_prefix_are_one_marker_set(
+    mocap, tmp_path: Path, capsys
+):
+    """A Vicon lab labels each person's markers with the person's name (``Anna:R_HAND``,
+    ``Ben:R_HAND``): the takes are one marker set (each person had been a set of their own,
+    all but one pair left out, and then B refused as lacking A's markers), a marker some take
+    never sees is left out of every person's labels, and each family learns them all."""
+    from markovmotion.core.markers import find_markers
+    from markovmotion.data.kinds import same_set
+    from markovmotion.features.markers import seen_in_every
+    from markovmotion.io.c3d import read_c3d, write_c3d
+
+    assert find_markers(("Ben:HEAD", "Ben:R_HAND"), ["Anna:R_HAND", "anna:head"]) == ([1, 0], [])
+    a = Markers(("Anna:HEAD", "Anna:R_HAND"), np.zeros((3, 2, 3)), 30.0, "a")
+    b = Markers(("Ben:r_hand", "Ben:HEAD"), np.zeros((3, 2, 3)), 30.0, "b")
+    b.positions[:, 0] = np.nan  # Ben's right hand never seen
+    assert same_set(a, b) and not same_set(a, Markers(("Ben:HEAD",), np.zeros((3, 1, 3)), 30.0))
+    assert [t.names for t in seen_in_every([a, b])] == [("Anna:HEAD",), ("Ben:HEAD",)]
+
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames"]
+    pairs = mocap.pairs(label=LABEL, kind="markers")[:3]
+    for k, pair in enumerate(pairs):
+        names = [f"take{k}_{p}.c3d" for p in "AB"]
+        for person, (entry, name) in enumerate(zip(pair, names, strict=True)):
+            m = read_c3d(entry.path)
+            who = f"S{k}{'AB'[person]}"
+            write_c3d(
+                Markers(tuple(f"{who}:{n}" for n in m.names), m.positions, m.fps), tmp_path / name
+            )
+            partner = names[1 - person]
+            rows.append(f"{name},lab,{entry.subject},{k},interaction,{LABEL},{partner},30,")
+    (tmp_path / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "m.npz"
+    args = ["--data", str(tmp_path), "--out", str(out)]
+    code, err = _run(
+        ["dualhmm", "train", "--labels", LABEL, "--states", "2", "--n-iter", "2", "--roles", "both"]
+        + args,
+        capsys,
+    )
+    assert code == 0, err
+    assert "marker sets" not in err and len(Model.load(out).train_files_) == 2 * len(pairs)
+    small = ["--prototypes", "4", "--behaviours", "4", "--epochs", "1", "--test-trials", "none"]
+    code, err = _run(["chain", "train", "--label", LABEL, *small, *args], capsys)
+    assert code == 0, err
+    assert "marker sets" not in err and len(Model.load(out).train_files_) == 2 * len(pairs)

@@ -126,26 +126,33 @@ class Markers:
         return "\n".join(lines + [f"{k:<{width}}  {v}" for k, v in rows])
 
 
+def bare_label(name: str) -> str:
+    """A marker label without a subject's prefix (Vicon's ``Subject:Marker``), whatever its
+    case: ``P1:R_Hand`` and ``r_hand`` are ``r_hand``."""
+    return name.rsplit(":", 1)[-1].strip().casefold()
+
+
 def find_markers(have: tuple[str, ...], wanted: tuple[str, ...] | list[str]) -> tuple[list, list]:
     """(indices into ``have`` of each of ``wanted``, those of ``wanted`` not found). A name
     is found as it is, else by its letters whatever their case when exactly one of
     ``have`` matches so (``R_Hand`` is ``R_HAND``: capture software and people's labelling
     differ in case, and one label differing only in case would otherwise refuse a take),
-    else so without a subject's prefix (``P1:R_HAND``, Vicon's ``Subject:Marker``) when
-    exactly one label matches so."""
+    else so without a subject's prefix on either (``P1:R_HAND``, Vicon's
+    ``Subject:Marker``: :func:`bare_label`) when exactly one label matches so (a model
+    learnt on ``Anna:R_HAND`` finds ``Ben:R_HAND``)."""
     exact = {n: i for i, n in enumerate(have)}
     folded: dict[str, list[int]] = {}
     bare: dict[str, list[int]] = {}
     for i, n in enumerate(have):
         folded.setdefault(n.casefold(), []).append(i)
-        bare.setdefault(n.rsplit(":", 1)[-1].strip().casefold(), []).append(i)
+        bare.setdefault(bare_label(n), []).append(i)
     idx, missing = [], []
     for n in wanted:
         if n in exact:
             idx.append(exact[n])
         elif len(alike := folded.get(n.casefold(), [])) == 1:
             idx.append(alike[0])
-        elif len(alike := bare.get(n.casefold(), [])) == 1:
+        elif len(alike := bare.get(bare_label(n), [])) == 1:
             idx.append(alike[0])
         else:
             missing.append(n)

@@ -22,7 +22,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.data.index import Entry
 from markovmotion.errors import DataNotFoundError
@@ -112,13 +112,15 @@ def choose_kind(
 
 def same_set(a: Motion | Markers, b: Motion | Markers) -> bool:
     """Whether two takes can be learnt together: skeletons of one topology, or markers of
-    the same names."""
+    the same names, as markers are matched (:func:`~markovmotion.core.markers.find_markers`:
+    whatever their case, ``P1:R_HAND`` as ``P2:R_HAND``)."""
     if isinstance(a, Markers) or isinstance(b, Markers):
-        return (
-            isinstance(a, Markers)
-            and isinstance(b, Markers)
-            and {n.casefold() for n in a.names} == {n.casefold() for n in b.names}
-        )
+        if not (isinstance(a, Markers) and isinstance(b, Markers)):
+            return False
+        if len(a.names) != len(b.names):
+            return False
+        found, missing = find_markers(b.names, a.names)
+        return not missing and len(set(found)) == len(found)
     return a.skeleton.same_topology(b.skeleton)
 
 

@@ -47,7 +47,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from markovmotion.core.markers import Markers, find_markers, not_found
+from markovmotion.core.markers import Markers, bare_label, find_markers, not_found
 from markovmotion.core.motion import GROUND, Motion
 from markovmotion.core.skeleton import Skeleton
 from markovmotion.errors import MarkersNotFoundError, MotionFormatError, SkeletonMismatchError
@@ -407,11 +407,11 @@ def seen_in_every(takes: Sequence[Markers]) -> list[Markers]:
     """Training takes without the markers some take never sees (one occluded throughout a
     capture, common in real labs), said in one note: a model learns the markers every take
     shows, rather than losing a whole take, or stopping, for one marker of dozens."""
-    never: dict[str, list[str]] = {}  # by label whatever its case, as markers are matched
+    never: dict[str, list[str]] = {}  # by label as markers are matched (case, a prefix)
     shown: dict[str, str] = {}
     for t in takes:
         for m in np.flatnonzero(~t.visible().any(axis=0)):
-            key = t.names[m].casefold()
+            key = bare_label(t.names[m])
             shown.setdefault(key, t.names[m])
             never.setdefault(key, []).append(t.name or "a take")
     if not never:
@@ -420,7 +420,7 @@ def seen_in_every(takes: Sequence[Markers]) -> list[Markers]:
         f"{shown[k]} (never seen in {', '.join(w[:3])})" for k, w in list(never.items())[:5]
     )
     note(f"left out the markers some take never sees: {said}")
-    return [t.select([n for n in t.names if n.casefold() not in never]) for t in takes]
+    return [t.select([n for n in t.names if bare_label(n) not in never]) for t in takes]
 
 
 @register
