@@ -506,6 +506,20 @@ def test_a_marker_never_seen_is_left_out_of_every_take_whatever_its_case():
     assert kept[0].names == names[:4] and kept[1].names == tuple(n.lower() for n in names[:4])
 
 
+def test_a_take_learnt_in_both_roles_is_named_once_where_a_marker_is_never_seen(capsys):
+    """``--roles both`` gives each take twice: the note naming where a marker is never seen
+    names each take once (it had said 'never seen in b.c3d, b.c3d')."""
+    from markovmotion.features.markers import seen_in_every
+
+    rng = np.random.default_rng(0)
+    a = Markers(("HEAD", "RWRA"), rng.normal(size=(20, 2, 3)), 30.0, "a.c3d")
+    b = Markers(("HEAD", "RWRA"), rng.normal(size=(20, 2, 3)), 30.0, "b.c3d")
+    b.positions[:, 1] = np.nan
+    kept = seen_in_every([a, b, b, a])
+    assert [t.names for t in kept] == [("HEAD",)] * 4
+    assert "RWRA (never seen in b.c3d)" in capsys.readouterr().err
+
+
 def test_unseen_markers_in_a_take_are_left_out_of_its_errors_not_a_crash(model, marker_takes):
     """A held-out take with points unseen (NaN: occlusion) in A and in B: a new user's
     evaluation died in the observer's logistic regression after every fold had run (and its

@@ -413,7 +413,9 @@ def seen_in_every(takes: Sequence[Markers]) -> list[Markers]:
         for m in np.flatnonzero(~t.visible().any(axis=0)):
             key = bare_label(t.names[m])
             shown.setdefault(key, t.names[m])
-            never.setdefault(key, []).append(t.name or "a take")
+            takes_of = never.setdefault(key, [])
+            if (t.name or "a take") not in takes_of:  # a take learnt in both roles: once
+                takes_of.append(t.name or "a take")
     if not never:
         return list(takes)
     said = "; ".join(
