@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import re
 
 import numpy as np
 import pytest
@@ -214,3 +215,23 @@ def test_joint_names_with_spaces_are_read_whole(tmp_path):
     # the brace may follow the name on its line
     path.write_text(path.read_text().replace("Bip01 ", "Bip01  L\t").replace("\n\t{", " {", 1))
     assert read_motion(path).skeleton.names[1].startswith("Bip01 L ")
+
+
+def test_a_zero_frame_time_is_read_when_the_true_rate_is_given(tmp_path, capsys):
+    """Some exporters write ``Frame Time: 0``: with the true rate (``fps``, an index's, the
+    command line's ``--fps``) the file is read at it (the header's 0 had refused it whatever
+    rate was given); without one it is one line naming the line and asking for the rate."""
+    from markovmotion.cli import main
+
+    text = _valid_text()
+    path = tmp_path / "zero.bvh"
+    path.write_text(re.sub(r"Frame Time: .*", "Frame Time: 0.0", text))
+    assert read_motion(path, fps=25.0).fps == 25.0
+    line = next(i for i, ln in enumerate(text.splitlines(), 1) if ln.startswith("Frame Time"))
+    with pytest.raises(MotionFormatError, match=f"zero.bvh:{line}: frame time must be positive"):
+        read_motion(path)
+    with pytest.raises(SystemExit) as exc:
+        main(["info", str(path)])
+    assert exc.value.code == 2 and "pass the true frame rate" in capsys.readouterr().err
+    main(["info", str(path), "--fps", "25"])
+    assert "25 fps" in capsys.readouterr().out

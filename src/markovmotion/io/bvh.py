@@ -351,10 +351,6 @@ def _parse_motion_block(
     if n_frames * max(n_channels, 1) > max_values():
         found = f"{n_frames} frames x {n_channels} channels"
         raise MotionFormatError(path, exceeded(MAX_VALUES, found), first_line)
-    if not (np.isfinite(frame_time) and frame_time > 0):
-        raise MotionFormatError(
-            path, f"frame time must be positive, found {frame_time:g}", first_line + 1
-        )
     body = lines[2:]
     while body and not body[-1].strip():
         body.pop()
@@ -593,6 +589,13 @@ def read_bvh_stream(
         )
     if not usable:
         raise MotionFormatError(path, f"values too large to convert from {unit} to mm")
+    if fps is None and not frame_time > 0:  # the true rate given, the header's is not read
+        raise MotionFormatError(
+            path,
+            f"frame time must be positive, found {frame_time:g} (pass the true frame rate "
+            "with fps)",
+            motion_at + 3,
+        )
     if fps is None:
         try:
             fps = check_rate(1.0 / frame_time)
