@@ -39,7 +39,13 @@ from markovmotion.io import read_motion, write_motion
 from markovmotion.io.bvh import bvh_text
 from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.web import create_app, live
-from markovmotion.web.library import MotionLibrary, display_parents
+from markovmotion.web.library import (
+    JSON_CHUNK,
+    MotionLibrary,
+    display_parents,
+    motion_payload,
+)
+from markovmotion.web.library import motion_json as encoded_motion
 from markovmotion.web.live import dual_hmm_partner
 from markovmotion.web.loadtest import MirrorPartner, simulate_evaluators, simulate_live
 from markovmotion.web.server import AppOptions, running, running_workers
@@ -256,6 +262,39 @@ def test_invalid_upload_gets_a_clear_message(server):
         server + "/api/upload", b'{"file": "x"}', {"Content-Type": "application/json"}
     )
     assert status == 415 and "multipart/form-data" in json.loads(data)["detail"]
+
+
+def test_a_long_upload_is_encoded_a_few_frames_at_a_time(site, monkeypatch):
+    """An upload's JSON had been encoded by a JSONResponse in the event loop in one
+    json.dumps (3 s for a 60 MB BVH, which holds the interpreter lock throughout), every
+    other request and live session of the server stopped meanwhile. Now in the upload's
+    worker thread, JSON_CHUNK frames per json.dumps (motion_json), the lock let go between."""
+    motion = make_motion(20_000)
+    floats = motion.n_frames * motion.skeleton.n_joints * 3
+    longest = [0]
+    dumps = json.dumps
+
+    def spy(*args, **kwargs):
+        text = dumps(*args, **kwargs)
+        longest[0] = max(longest[0], len(text))
+        return text
+
+    with running(create_app(site / "lib", admin_token=ADMIN)) as url:
+        monkeypatch.setattr(json, "dumps", spy)
+        status, payload = upload(url, "long.bvh", bvh_text(motion).encode())
+    assert status == 200 and len(payload["positions"]) == floats
+    # a chunk's floats (about 7 characters each), not the take's
+    assert longest[0] < 10 * JSON_CHUNK * motion.skeleton.n_joints * 3, longest[0]
+
+
+def test_motion_json_is_the_payload_s_json():
+    """The chunked encoding gives the bytes json.dumps gives of the whole payload."""
+    for n in (0, 1, JSON_CHUNK, JSON_CHUNK + 1, 3 * JSON_CHUNK - 5):
+        motion = make_motion(n) if n else make_motion(5).trim(0, 0)
+        whole = json.dumps(motion_payload(motion), separators=(",", ":")).encode()
+        assert encoded_motion(motion) == whole
+        named = json.dumps({**motion_payload(motion), "name": "x"}, separators=(",", ":"))
+        assert encoded_motion(motion, "x") == named.encode()
 
 
 # ---------------------------------------------------------------- evaluation API

@@ -54,7 +54,7 @@ from markovmotion.web.library import (
     UploadTooLargeError,
     markers_payload,
     max_upload_bytes,
-    motion_payload,
+    motion_json,
     read_upload,
     shown,
 )
@@ -282,7 +282,7 @@ def create_app(
             raise HTTPException(422, f"{shown(path)}: {problem}") from None
 
     @app.post("/api/upload")
-    async def upload(request: Request, name: str = "upload.bvh") -> JSONResponse:
+    async def upload(request: Request, name: str = "upload.bvh") -> Response:
         """A BVH (or .bvh.gz) as the form field ``file`` or as the raw body (``?name=``),
         streamed to disk with a running count: 413 past the upload limit, counted again
         after decompression; any problem reading it is a 422 with one line."""
@@ -321,7 +321,7 @@ def create_app(
         finally:
             if form is not None:
                 await form.close()
-        return JSONResponse(payload)
+        return Response(payload, media_type="application/json")
 
     @app.websocket("/ws/live")
     async def live_ws(ws: WebSocket) -> None:
@@ -456,9 +456,12 @@ def create_app(
     return app
 
 
-def _read_payload(name: str, fh: BinaryIO) -> dict:
-    """The JSON of an uploaded BVH (in a worker thread: reading may take a while)."""
+def _read_payload(name: str, fh: BinaryIO) -> bytes:
+    """The JSON of an uploaded BVH, encoded (in a worker thread: reading may take a while),
+    by :func:`~markovmotion.web.library.motion_json`: a JSONResponse had encoded it in the
+    event loop in one go (3 s for a 60 MB BVH, every live session stopped meanwhile)."""
     try:
-        return motion_payload(read_upload(name, fh))
+        motion = read_upload(name, fh)
     finally:
         fh.close()
+    return motion_json(motion)
