@@ -643,3 +643,31 @@ def test_walks_of_two_skeletons_are_one_line_naming_the_joints_that_differ(mocap
     assert "(36 joints, expected 27; expected joints" in message and "\n" not in message
     assert "are not in it, which has" in message
     assert err.value.reason.startswith("(36 joints, expected 27")
+
+
+def test_a_walk_of_one_frame_has_no_steps_not_a_traceback(mocap, tmp_path, capsys):
+    """A capture of one frame (a pose) listed among walks: ``gait steps`` lists it with no
+    step (np.gradient had raised on it, a traceback), and training leaves it out in its note."""
+    from markovmotion import write_motion
+    from markovmotion.features.gait import heel_strikes
+
+    walk = mocap.load_motion(mocap.query(label="normal", source="bandai")[0])
+    pose = walk.trim(0, 1)
+    assert {s: len(f) for s, f in heel_strikes(pose).items()} == {"L": 0, "R": 0}
+    write_motion(pose, tmp_path / "pose.bvh")
+    write_motion(walk, tmp_path / "walk.bvh")
+    main(
+        [
+            "gait",
+            "steps",
+            "--data",
+            str(tmp_path / "pose.bvh"),
+            "--data",
+            str(tmp_path / "walk.bvh"),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert "pose.bvh" in out and "walk.bvh" in out
+    main(["gait", "train", "--data", str(tmp_path / "pose.bvh"), "--data", str(tmp_path / "walk.bvh"),
+          "--n-iter", "1", "--out", str(tmp_path / "m.npz")])  # fmt: skip
+    assert "left out: pose.bvh" in capsys.readouterr().err

@@ -111,6 +111,9 @@ def heel_strikes(motion: Motion, positions: np.ndarray | None = None) -> dict[st
     pos = motion.positions() if positions is None else positions
     out = {}
     for side, (ankle, _) in foot_joints(motion).items():
+        if len(pos) < 2:  # a single frame (a pose): no speed, no strike
+            out[side] = np.zeros(0, dtype=int)
+            continue
         h = pos[:, ankle, 1]
         speed = np.linalg.norm(np.gradient(pos[:, ankle, GROUND], axis=0), axis=1) * motion.fps
         floor, top = np.percentile(h, [5, 95])
