@@ -17,6 +17,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.parse
@@ -285,6 +286,44 @@ def test_a_long_upload_is_encoded_a_few_frames_at_a_time(site, monkeypatch):
     assert status == 200 and len(payload["positions"]) == floats
     # a chunk's floats (about 7 characters each), not the take's
     assert longest[0] < 10 * JSON_CHUNK * motion.skeleton.n_joints * 3, longest[0]
+
+
+def test_uploads_beyond_those_being_read_are_a_429(site, monkeypatch):
+    """Each upload had been read at once, whatever the number (a 60 MB BVH takes about
+    300 MB while read: four at once took 1.6-1.9 GB, the server's 40 threads would take
+    12 GB); now MAX_READING at a time, another refused with a 429 saying to send it again."""
+    from markovmotion.web import library
+
+    release = threading.Event()
+    reading = threading.Semaphore(0)
+    read_bvh = library.read_bvh
+
+    def slow_read(path):
+        reading.release()
+        release.wait(30)
+        return read_bvh(path)
+
+    monkeypatch.setattr(library, "read_bvh", slow_read)
+    text = bvh_text(make_motion(12)).encode()
+    with running(create_app(site / "lib", admin_token=ADMIN)) as url:
+        done: list[int] = []
+        first = [
+            threading.Thread(target=lambda: done.append(upload(url, "mine.bvh", text)[0]))
+            for _ in range(library.MAX_READING)
+        ]
+        for t in first:
+            t.start()
+        for _ in first:
+            assert reading.acquire(timeout=30)
+        try:
+            status, body = upload(url, "third.bvh", text)
+        finally:
+            release.set()
+            for t in first:
+                t.join(30)
+        assert status == 429 and "third.bvh again" in body["detail"], body
+        assert done == [200] * library.MAX_READING
+        assert upload(url, "mine.bvh", text)[0] == 200  # once they are read
 
 
 def test_motion_json_is_the_payload_s_json():

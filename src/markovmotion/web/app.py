@@ -51,6 +51,7 @@ from markovmotion.web.camera import TrackerFactory, camera_session
 from markovmotion.web.library import (
     LibraryPathError,
     MotionLibrary,
+    UploadBusyError,
     UploadTooLargeError,
     markers_payload,
     max_upload_bytes,
@@ -316,6 +317,8 @@ def create_app(
             payload = await run_in_threadpool(_read_payload, name, fh)
         except UploadTooLargeError as exc:
             raise HTTPException(413, shown(str(exc), 300)) from None
+        except UploadBusyError as exc:
+            raise HTTPException(429, shown(str(exc), 300)) from None
         except MarkovMotionError as exc:
             raise HTTPException(422, shown(lib.public(str(exc)), 300)) from None
         finally:

@@ -60,6 +60,18 @@ class UploadTooLargeError(MotionFormatError):
     """An upload above :func:`max_upload_bytes` (before or after decompression)."""
 
 
+class UploadBusyError(MarkovMotionError):
+    """:data:`MAX_READING` uploads are being read already (HTTP 429)."""
+
+
+MAX_READING = 2
+"""Uploads one server process reads at once (``/api/upload`` and the live page's): reading
+a 60 MB BVH takes about 300 MB for a few seconds, and the reads share the interpreter
+lock with every live session; four at once had taken 1.6-1.9 GB, and 40 (the server's
+threads) would take 12 GB. Another upload meanwhile is refused, to be sent again."""
+_READING = threading.BoundedSemaphore(MAX_READING)
+
+
 def display_parents(skeleton: Skeleton | Sequence[str]) -> list[int]:
     """Parents of the bones to draw: none above the pelvis (Bandai's ground-level
     ``joint_Root`` would otherwise be linked to the hips by a long false bone). For marker
@@ -342,12 +354,24 @@ def read_upload(name: str, content: bytes | BinaryIO) -> Motion:
     The file is copied to a temporary folder in chunks, a ``.gz`` one decompressed
     on the way, and refused (:class:`UploadTooLargeError`) as soon as it passes
     :func:`max_upload_bytes`, so a gzip bomb never inflates past the limit. Any
-    failure to read it is a :class:`MotionFormatError` with one line.
+    failure to read it is a :class:`MotionFormatError` with one line; an upload while
+    :data:`MAX_READING` others are read, :class:`UploadBusyError`.
     """
     base = Path(name or "upload.bvh").name or "upload.bvh"
     label = shown(base)
     if base_suffix(base) != ".bvh":
         raise MotionFormatError(label, "only BVH files (.bvh, .bvh.gz) can be uploaded")
+    if not _READING.acquire(blocking=False):
+        raise UploadBusyError(
+            f"the server is reading {MAX_READING} uploads already: send {label} again in a moment"
+        )
+    try:
+        return _read_upload(label, base, content)
+    finally:
+        _READING.release()
+
+
+def _read_upload(label: str, base: str, content: bytes | BinaryIO) -> Motion:
     limit = max_upload_bytes()
     src: BinaryIO = io.BytesIO(content) if isinstance(content, bytes | bytearray) else content
     with tempfile.TemporaryDirectory(prefix="markovmotion-upload-") as tmp:
