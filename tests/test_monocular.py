@@ -579,3 +579,30 @@ def test_a_person_small_in_the_image_is_said():
     (line,) = small_person_note(90.0, "cam0")
     assert "90 px tall in cam0's image" in line
     assert small_person_note(SMALL_PERSON_PX, "cam0") == small_person_note(None, "cam0") == []
+
+
+def test_a_small_frame_is_shown_to_mediapipe_enlarged_and_answered_in_its_own_pixels(
+    real_video,
+):
+    """``frame_landmarks`` shows MediaPipe a frame whose longer side is under
+    ``MEDIAPIPE_SIDE`` enlarged to it (bicubic), and gives the landmarks in the frame's own
+    pixels: the real camera 0 (272x480) answers as that frame enlarged by hand to 544x960
+    does, its pixels halved (pixel centres at integers); a frame already that large is not
+    resized."""
+    import cv2
+
+    from markovmotion.video.monocular import MEDIAPIPE_SIDE, frame_landmarks, pose_estimator
+
+    rgb = next(iter(read_frames(real_video / "cam0.mp4")))
+    h, w = rgb.shape[:2]
+    assert max(h, w) * 2 == MEDIAPIPE_SIDE
+    big = cv2.resize(rgb, (2 * w, 2 * h), interpolation=cv2.INTER_CUBIC)
+    with pose_estimator(static=True) as est:
+        small_px, small_world, small_vis = frame_landmarks(est, rgb)
+    with pose_estimator(static=True) as est:
+        big_px, big_world, big_vis = frame_landmarks(est, big)
+    np.testing.assert_allclose(small_px, (big_px + 0.5) / 2 - 0.5, atol=1e-3)
+    np.testing.assert_allclose(small_world, big_world, atol=1e-3)
+    np.testing.assert_allclose(small_vis, big_vis, atol=1e-6)
+    # the person where MediaPipe saw him in the frame's own pixels: inside the frame
+    assert (small_px[small_vis > 0.5] >= 0).all() and (small_px[small_vis > 0.5, 0] < w).all()

@@ -235,15 +235,35 @@ class Landmarks:
     seconds: float = 0.0
 
 
+#: MediaPipe sees a smaller frame enlarged so that its longer side is this many pixels
+#: (:func:`frame_landmarks`). Chosen by leaving one kind of motion out among 320 (as they
+#: are), 480, 640, 960 and 1280 px on the 11 rendered held-out kinds (320x240, 3 views,
+#: ``track --method triangulate``): every fold chose 960, 58.9 mm against 61.3 as they are
+#: (1280: 59.9, 640: 60.7, 480: 60.5). On the real video (272x480) it also helps a little
+#: (triangulated 78.5 mm against 79.5; monocular 112.7 against 114.4 after alignment), and
+#: MediaPipe is faster, not slower, on the enlarged frames (about 12 ms a frame against 20
+#: on the real camera 0): on a small frame its tracking loses the person's box and runs its
+#: detector again more often. Our own measure; docs/video.md.
+MEDIAPIPE_SIDE = 960
+
+
 def frame_landmarks(
     estimator: QuietPose, rgb: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """One RGB frame through a :func:`pose_estimator`: (33, 2) pixels, (33, 3) world points
-    (mm, hip-centred, Y down as MediaPipe's) and (33,) visibility; None when no person."""
+    (mm, hip-centred, Y down as MediaPipe's) and (33,) visibility; None when no person.
+
+    A frame whose longer side is under :data:`MEDIAPIPE_SIDE` is shown to MediaPipe
+    enlarged to it (bicubic); its landmarks are MediaPipe's normalised image coordinates,
+    so they come back in the frame's own pixels."""
+    h, w = rgb.shape[:2]
+    scale = MEDIAPIPE_SIDE / max(h, w)
+    if scale > 1.0:
+        size = (round(w * scale), round(h * scale))
+        rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_CUBIC)
     res = estimator.process(np.ascontiguousarray(rgb))
     if res.pose_landmarks is None or res.pose_world_landmarks is None:
         return None
-    h, w = rgb.shape[:2]
     lm = res.pose_landmarks.landmark
     wl = res.pose_world_landmarks.landmark
     return (
