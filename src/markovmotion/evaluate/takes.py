@@ -27,7 +27,15 @@ import numpy as np
 
 from markovmotion.data.index import INDEX_NAME, Entry, MocapIndex, read_entry
 from markovmotion.errors import DataNotFoundError, MarkovMotionError
-from markovmotion.models.base import Model, file_sha256, motion_key, training_hashes, training_keys
+from markovmotion.models.base import (
+    Model,
+    file_sha256,
+    motion_content,
+    same_signature,
+    training_hashes,
+    training_keys,
+    training_signatures,
+)
 from markovmotion.progress import note
 
 T = TypeVar("T", Entry, tuple)
@@ -70,28 +78,36 @@ class TestTakes:
 
 def trained_on(model: Model, entry: Entry) -> bool:
     """Whether the file of ``entry`` has the content of one of the model's training files:
-    the same bytes, or the same take written another way (:func:`~markovmotion.models.base.
-    motion_key`: another file format's line endings, rotation order, units or axes)."""
+    the same bytes, the same take written another way (:func:`~markovmotion.models.base.
+    motion_key`: another file format's line endings, rotation order, units or axes), or the
+    same take at another frame rate (:func:`~markovmotion.models.base.motion_signature`)."""
     hashes = training_hashes(model)
     if not hashes or not entry.path.is_file():
         return False
     if file_sha256(entry.path) in hashes:
         return True
-    keys = training_keys(model)
-    return bool(keys) and _entry_key(entry) in keys
+    keys, signatures = training_keys(model), training_signatures(model)
+    if not keys and not signatures:
+        return False
+    content = _entry_content(entry)
+    if content is None:
+        return False
+    key, signature = content
+    return key in keys or any(same_signature(signature, s) for s in signatures)
 
 
-def _entry_key(entry: Entry) -> str | None:
-    """:func:`~markovmotion.models.base.motion_key` of the take ``entry`` (None if it cannot
-    be read: said where it is read), once per file and rate in a command."""
+def _entry_content(entry: Entry) -> tuple[str, list[float]] | None:
+    """:func:`~markovmotion.models.base.motion_key` and :func:`~markovmotion.models.base.
+    motion_signature` of the take ``entry`` (None if it cannot be read: said where it is
+    read), once per file and rate in a command."""
     st = entry.path.stat()
-    return _key_of(entry, st.st_mtime_ns, st.st_size)
+    return _content_of(entry, st.st_mtime_ns, st.st_size)
 
 
 @functools.lru_cache(maxsize=1024)
-def _key_of(entry: Entry, mtime_ns: int, size: int) -> str | None:
+def _content_of(entry: Entry, mtime_ns: int, size: int) -> tuple[str, list[float]] | None:
     try:
-        return motion_key(read_entry(entry))
+        return motion_content(read_entry(entry))
     except MarkovMotionError:
         return None
 

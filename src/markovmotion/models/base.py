@@ -416,18 +416,21 @@ def _kinds(kinds: tuple[type, ...]) -> str:
     return f"a {first}" + (f" (or {', '.join(rest)})" if rest else "")
 
 
-def file_record(motion: Motion | Markers) -> dict[str, str]:
+def file_record(motion: Motion | Markers) -> dict[str, Any]:
     """Name and content hash of what ``motion`` (or markers) was read from, and
-    :func:`motion_key`, what the take holds whatever file it is written in (``content``).
+    :func:`motion_key`, what the take holds whatever file it is written in (``content``),
+    and :func:`motion_signature`, what it holds at whatever frame rate (``signature``).
 
     The SHA-256 of the file's bytes when the motion came from a file (so the
     same take under another path or name is recognised), else of its arrays.
     """
+    key, signature = motion_content(motion)
     if motion.source and os.path.isfile(motion.source):
         return {
             "file": os.path.basename(motion.source),
             "sha256": file_sha256(motion.source),
-            "content": motion_key(motion),
+            "content": key,
+            "signature": signature,
         }
     digest = hashlib.sha256()
     arrays = (
@@ -440,24 +443,96 @@ def file_record(motion: Motion | Markers) -> dict[str, str]:
     return {
         "file": motion.name or "(in memory)",
         "sha256": digest.hexdigest(),
-        "content": motion_key(motion),
+        "content": key,
+        "signature": signature,
     }
 
 
-def motion_key(motion: Motion | Markers) -> str:
+def motion_content(motion: Motion | Markers) -> tuple[str, list[float]]:
+    """:func:`motion_key` and :func:`motion_signature` of a take, its points (joints by
+    forward kinematics, or markers) worked out once."""
+    points = np.asarray(
+        motion.positions if isinstance(motion, Markers) else motion.positions(), dtype=float
+    )
+    return motion_key(motion, points), motion_signature(motion, points)
+
+
+def _points(motion: Motion | Markers, points: np.ndarray | None) -> np.ndarray:
+    if points is not None:
+        return points
+    return np.asarray(
+        motion.positions if isinstance(motion, Markers) else motion.positions(), dtype=float
+    )
+
+
+def motion_key(motion: Motion | Markers, points: np.ndarray | None = None) -> str:
     """A take's content as read (mm, Y up), whatever file holds it: its frame count and the
     mean and spread of its points (joints by forward kinematics, or markers seen) along each
     axis, to 1 mm, hashed. The same take written again another way (line endings, rotation
     order, units, axes, marker labels or order) has the same key; a file's bytes
     (:func:`file_sha256`) differ, and a training take so re-saved had been evaluated as a
     test take. Our own: six rounded numbers, so a re-saving's rounding (1e-5 mm) changes the
-    key only for a number within that of a millimetre's edge."""
-    points = motion.positions if isinstance(motion, Markers) else motion.positions()
-    flat = np.asarray(points, dtype=float).reshape(-1, 3)
+    key only for a number within that of a millimetre's edge. ``points``: the take's
+    (:func:`motion_content`), if already worked out."""
+    flat = _points(motion, points).reshape(-1, 3)
     flat = flat[np.isfinite(flat).all(axis=1)]
     stats = np.r_[flat.mean(axis=0), flat.std(axis=0)] if len(flat) else np.zeros(6)
     text = f"{motion.n_frames}:" + ",".join(f"{v:.0f}" for v in np.round(stats) + 0.0)
     return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+#: Moments across a take at which :func:`motion_signature` samples it.
+SIGNATURE_MOMENTS = 32
+#: Two signatures are of one take when their spans differ by at most this (s) plus 1 %...
+SIGNATURE_SPAN_S = 0.05
+#: ... and their sampled means and spreads by at most this root mean square (mm).
+SIGNATURE_MM = 10.0
+
+
+def motion_signature(motion: Motion | Markers, points: np.ndarray | None = None) -> list[float]:
+    """A take's content at no particular frame rate: the time from its first frame to its
+    last (s), then, at :data:`SIGNATURE_MOMENTS` moments evenly across that time, the mean
+    and spread of its points (joints by forward kinematics, or markers seen) along each axis
+    (mm, Y up; linear between frames), to 0.1 mm. A copy at another rate (a 30 fps take
+    resampled to 120) has nearly the same numbers (:func:`same_signature`); its frame count,
+    and so :func:`motion_key`, differ, and such a training take had been evaluated as a
+    test take. Our own: no library compares takes across frame rates. ``points``: as for
+    :func:`motion_key`."""
+    points = _points(motion, points)
+    seen = np.isfinite(points).all(axis=-1, keepdims=True)
+    count = seen.sum(axis=1)  # (F, 1)
+    known = count[:, 0] > 0
+    span = (motion.n_frames - 1) / motion.fps
+    if not known.any():
+        return [round(span, 4)]
+    total = np.where(seen, points, 0.0).sum(axis=1)
+    mean = total[known] / count[known]
+    square = np.where(seen, points**2, 0.0).sum(axis=1)[known] / count[known]
+    spread = np.sqrt(np.maximum(square - mean**2, 0.0))
+    stats = np.c_[mean, spread]  # (frames known, 6)
+    times = np.flatnonzero(known) / motion.fps
+    moments = np.linspace(0.0, span, SIGNATURE_MOMENTS)
+    sampled = np.stack([np.interp(moments, times, column) for column in stats.T], axis=1)
+    return [round(span, 4), *np.round(sampled.ravel(), 1).tolist()]
+
+
+def same_signature(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether two :func:`motion_signature` are of one take (within :data:`SIGNATURE_SPAN_S`
+    plus 1 % and :data:`SIGNATURE_MM`); False for a malformed one (a model file's, tampered)."""
+    try:
+        x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    size = 1 + 6 * SIGNATURE_MOMENTS
+    if (
+        x.shape != (size,)
+        or y.shape != (size,)
+        or not (np.isfinite(x).all() and np.isfinite(y).all())
+    ):
+        return False
+    if abs(x[0] - y[0]) > SIGNATURE_SPAN_S + 0.01 * max(x[0], y[0]):
+        return False
+    return float(np.sqrt(np.mean((x[1:] - y[1:]) ** 2))) <= SIGNATURE_MM
 
 
 _HASHES: dict[tuple[str, int, int], str] = {}
@@ -479,6 +554,16 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
 def training_hashes(model: Model) -> set[str]:
     """The content hashes of the files ``model`` was trained on."""
     return {rec["sha256"] for rec in getattr(model, "train_files_", [])}
+
+
+def training_signatures(model: Model) -> list[Sequence[float]]:
+    """The :func:`motion_signature` of each take ``model`` was trained on (none for a model
+    saved before they were recorded)."""
+    return [
+        rec["signature"]
+        for rec in getattr(model, "train_files_", [])
+        if isinstance(rec, dict) and rec.get("signature")
+    ]
 
 
 def training_keys(model: Model) -> set[str]:
