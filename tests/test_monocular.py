@@ -385,6 +385,19 @@ def test_respond_triangulate_needs_every_camera(real_video, partner_models, tmp_
     assert "5 frames in 4 views, triangulated" in capsys.readouterr().err
 
 
+def test_respond_auto_says_how_respond_asks_for_the_filter(
+    real_video, partner_models, tmp_path, capsys
+):
+    """``respond --video`` without ``--method`` triangulates, and its note names how
+    ``respond`` asks for the particle filter (``--method apf``, ``--realtime``), not track's
+    ``.bvh --out``: respond's ``--out`` is the composite video."""
+    main(["dualhmm", "respond", "--model", str(partner_models["heading"]), "--video",
+          str(real_video), "--max-frames", "3", "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    err = capsys.readouterr().err
+    note = next(line for line in err.splitlines() if "--method auto chose" in line)
+    assert "chose triangulate" in note and "--realtime" in note and ".bvh" not in note
+
+
 def _frame_folders(real_video, folder, frames: int = 3):
     """The real cameras with each camera's video a folder of ``frames`` PNG frames
     (``camK/frame_N.png``, its cameras.json naming the folders), as a new user made them."""

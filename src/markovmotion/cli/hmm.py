@@ -383,7 +383,9 @@ def respond(
         raise typer.BadParameter("--method, --guide and --person are how A is tracked in --video")
     chose = None
     if video is not None:
-        method, chose = method_for(ctx, method, video, cameras, None, FILTER_OPTIONS, realtime)
+        method, chose = method_for(
+            ctx, method, video, cameras, None, FILTER_OPTIONS, realtime, "respond"
+        )
     if guide == "mediapipe" and (method != "apf" or realtime):
         raise typer.BadParameter(
             "guides the particle filter over the whole video: --method apf, no --realtime",

@@ -471,13 +471,14 @@ def method_for(
     views: int | None,
     filter_options: Sequence[str],
     asked: bool = False,
+    command: str = "track",
 ) -> tuple[str, str | None]:
     """``--method`` resolved (:func:`markovmotion.video.multiview.resolve_method`) for the
     views of ``--video`` tracked (one for a lone video, else the camera file's, at most
     ``views``), the particle filter's own options (``filter_options``, parameter names)
     given on the command line or otherwise ``asked`` for, and the note saying what ``auto``
     chose (for the summary's notes: printed after the work, so that a refusal before it
-    stays one line)."""
+    stays one line); ``command``: ``track`` or ``respond``, whose note it is."""
     from markovmotion.video.cameras import camera_file, load_cameras, lone_video
     from markovmotion.video.multiview import resolve_method
 
@@ -490,4 +491,5 @@ def method_for(
         for name in filter_options
         if getattr(ctx.get_parameter_source(name), "name", "DEFAULT") != "DEFAULT"
     ]
-    return resolve_method(method, min(n, views or n), given + (["asked"] if asked else []))
+    asked_for = given + (["asked"] if asked else [])
+    return resolve_method(method, min(n, views or n), asked_for, command)

@@ -403,11 +403,13 @@ METHODS = ("auto", "apf", "triangulate", "monocular")
 
 
 def resolve_method(
-    method: str, views: int, filter_asked: Sequence[str] = ()
+    method: str, views: int, filter_asked: Sequence[str] = (), command: str = "track"
 ) -> tuple[str, str | None]:
     """``--method`` resolved for the number of ``views`` tracked, with the note to print
     when ``auto`` chose; ``filter_asked`` names the particle filter's own options given on
-    the command line (``--out A.bvh``, ``--particles``, ``--guide``, ``--realtime``...).
+    the command line (``--out A.bvh``, ``--particles``, ``--guide``, ``--realtime``...);
+    ``command``: ``track`` or ``respond`` (``dualhmm respond --video``), whose note says how
+    that command asks for the filter (respond's ``--out`` is the composite, never a BVH).
 
     ``auto`` is the most accurate tracker measured for what is asked (docs/video.md): with
     MediaPipe installed (``scripts/install-camera``), ``triangulate`` for two views or more
@@ -427,9 +429,14 @@ def resolve_method(
         return "apf", None
     chosen = "triangulate" if views >= 2 else "monocular"
     views_said = f"{views} views" if views >= 2 else "one view"
-    return chosen, (
-        f"note: --method auto chose {chosen} (MediaPipe Pose, {views_said}); the particle "
-        "filter's skeleton: --method apf or a .bvh --out"
+    filter_said = (
+        "the particle filter: --method apf, or --realtime"
+        if command == "respond"
+        else "the particle filter's skeleton: --method apf or a .bvh --out"
+    )
+    return (
+        chosen,
+        f"note: --method auto chose {chosen} (MediaPipe Pose, {views_said}); {filter_said}",
     )
 
 
