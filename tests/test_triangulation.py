@@ -977,7 +977,9 @@ def test_track_by_default_triangulates_and_a_skeleton_asks_for_the_filter(
     assert "note: --method auto chose triangulate" in captured.err
     main([*base, "--particles", "10", "--layers", "1", "--out", str(tmp_path / "a.bvh")])
     captured = capsys.readouterr()
-    assert "confidence" in json.loads(captured.out) and (tmp_path / "a.bvh").is_file()
+    summary = json.loads(captured.out)
+    assert "confidence" in summary and (tmp_path / "a.bvh").is_file()
+    assert summary["method"] == "apf"  # the summary says which ran, whichever it was
     assert "auto chose" not in captured.err
     main([*base, "--layers", "1", "--particles", "10"])  # no --out: the filter's option
     assert "auto chose" not in capsys.readouterr().err

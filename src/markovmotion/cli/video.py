@@ -345,6 +345,7 @@ def track(
         person,
         size == "views",
     )
+    summary = {"method": "apf", **summary}  # which ran, as the MediaPipe methods' summaries say
     summary["notes"] = [*([note] if note else []), *summary["notes"]]
     for line in summary["background"]:
         err_console.print(line, highlight=False)
