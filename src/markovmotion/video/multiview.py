@@ -413,10 +413,10 @@ def resolve_method(
 
     ``auto`` is the most accurate tracker measured for what is asked (docs/video.md): with
     MediaPipe installed (``scripts/install-camera``), ``triangulate`` for two views or more
-    (the real 4-view video 79.5 mm from its reference against the guided particle filter's
-    112.8; 11 rendered kinds of motion 61.3 mm against 88.6; 20-23 frames/s against about 3)
-    and ``monocular`` for one (the particle filter is 438.6 mm on one view, mirrored poses;
-    MediaPipe alone 114). The particle filter (``apf``) is kept for what it alone gives:
+    (the real 4-view video 78.5 mm from its reference against the guided particle filter's
+    112.4; 11 rendered kinds of motion 58.9 mm against 88.6; about 15-25 frames/s against
+    about 3) and ``monocular`` for one (the particle filter is 438.6 mm on one view, mirrored
+    poses; MediaPipe alone 112.7 after rigid alignment). The particle filter (``apf``) is kept for what it alone gives:
     a skeleton on the body model (BVH), the live tracker of ``--realtime``, its own options,
     and video without MediaPipe installed (said by :func:`resolve_guide`'s note)."""
     from markovmotion.video.monocular import mediapipe_installed
