@@ -83,3 +83,7 @@ CHAIN_PRESETS: dict[str, dict[str, object]] = {
 #: subset of views (2^V): 200 synthetic frames took 6 s at 4 views, 25 s at 5 and 170 s at
 #: 6, and would take about an hour at 8 (``video.triangulation.views_sides``).
 MAX_CAMERAS = 6
+#: How ``track`` and ``dualhmm respond --video`` follow person A (``--method``; resolved in
+#: ``video.multiview.resolve_method``). Here, not in ``video.multiview``, so that the option's
+#: choices are known without importing the trackers (and with them scikit-learn and numba).
+TRACK_METHODS = ("auto", "apf", "triangulate", "monocular")

@@ -447,11 +447,11 @@ def with_preset(options: dict, presets: dict[str, dict[str, object]]) -> dict:
 def method_option(command: str) -> Any:
     """``--method``: how person A is followed in video (``track`` and ``dualhmm respond
     --video``; :func:`markovmotion.video.multiview.resolve_method`)."""
-    from markovmotion.video.multiview import METHODS
+    from markovmotion.defaults import TRACK_METHODS  # not video.multiview: --help stays light
 
     return typer.Option(
         "auto",
-        callback=choice(METHODS),
+        callback=choice(TRACK_METHODS),
         help=f"How A is tracked{' in --video' if command == 'respond' else ''}: triangulate "
         "(MediaPipe Pose in every camera, triangulated; the most accurate, docs/video.md), "
         "monocular (MediaPipe Pose in one camera, placed by PnP), apf (annealed particle "

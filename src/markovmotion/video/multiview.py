@@ -28,6 +28,7 @@ import numpy as np
 from markovmotion.core.motion import GROUND, Motion
 from markovmotion.data.index import MocapIndex, listed_entry, read_listed_motion
 from markovmotion.data.splits import held_out_pairs
+from markovmotion.defaults import TRACK_METHODS
 from markovmotion.errors import DataNotFoundError, MotionFormatError
 from markovmotion.features.body_points import BODY_POINTS, body_points
 from markovmotion.io.files import atomic_path
@@ -399,7 +400,7 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
 
 
 #: How ``track`` and ``dualhmm respond --video`` follow person A (``--method``).
-METHODS = ("auto", "apf", "triangulate", "monocular")
+METHODS = TRACK_METHODS
 
 
 def resolve_method(
