@@ -399,10 +399,6 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
     return True, None
 
 
-#: How ``track`` and ``dualhmm respond --video`` follow person A (``--method``).
-METHODS = TRACK_METHODS
-
-
 def resolve_method(
     method: str, views: int, filter_asked: Sequence[str] = (), command: str = "track"
 ) -> tuple[str, str | None]:
@@ -422,8 +418,8 @@ def resolve_method(
     and video without MediaPipe installed (said by :func:`resolve_guide`'s note)."""
     from markovmotion.video.monocular import mediapipe_installed
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method not in TRACK_METHODS:
+        raise ValueError(f"method must be one of {', '.join(TRACK_METHODS)}, got {method!r}")
     if method != "auto":
         return method, None
     if filter_asked or not mediapipe_installed():
