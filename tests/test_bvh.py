@@ -232,6 +232,6 @@ def test_a_zero_frame_time_is_read_when_the_true_rate_is_given(tmp_path, capsys)
         read_motion(path)
     with pytest.raises(SystemExit) as exc:
         main(["info", str(path)])
-    assert exc.value.code == 2 and "pass the true frame rate" in capsys.readouterr().err
+    assert exc.value.code == 2 and "give the true frame rate: --fps" in capsys.readouterr().err
     main(["info", str(path), "--fps", "25"])
     assert "25 fps" in capsys.readouterr().out

@@ -592,8 +592,8 @@ def read_bvh_stream(
     if fps is None and not frame_time > 0:  # the true rate given, the header's is not read
         raise MotionFormatError(
             path,
-            f"frame time must be positive, found {frame_time:g} (pass the true frame rate "
-            "with fps)",
+            f"frame time must be positive, found {frame_time:g} (give the true frame rate: "
+            "--fps, fps= in Python, or the fps column of the INDEX.csv listing the file)",
             motion_at + 3,
         )
     if fps is None:
