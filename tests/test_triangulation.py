@@ -953,7 +953,7 @@ def test_method_auto_picks_the_most_accurate_tracker_for_what_is_asked(monkeypat
     chosen, note = resolve_method("auto", 4)
     assert chosen == "triangulate" and "auto chose triangulate" in note and "4 views" in note
     assert resolve_method("auto", 1)[0] == "monocular"
-    assert resolve_method("auto", 3, ["particles"]) == ("apf", None)
+    assert resolve_method("auto", 3, filter_asked=True) == ("apf", None)
     for named in ("apf", "triangulate", "monocular"):
         assert resolve_method(named, 4) == (named, None)
     monkeypatch.setattr(monocular, "mediapipe_installed", lambda: False)

@@ -485,11 +485,8 @@ def method_for(
     if method != "auto":
         return method, None
     n = 1 if lone_video(video) else len(load_cameras(camera_file(video, cameras), paired=False)[0])
-
-    given = [  # by the source's name: Typer 0.2x carries a click of its own
-        name
+    given = any(  # by the source's name: Typer 0.2x carries a click of its own
+        getattr(ctx.get_parameter_source(name), "name", "DEFAULT") != "DEFAULT"
         for name in filter_options
-        if getattr(ctx.get_parameter_source(name), "name", "DEFAULT") != "DEFAULT"
-    ]
-    asked_for = given + (["asked"] if asked else [])
-    return resolve_method(method, min(n, views or n), asked_for, command)
+    )
+    return resolve_method(method, min(n, views or n), asked or given, command)

@@ -451,13 +451,13 @@ def file_record(motion: Motion | Markers) -> dict[str, Any]:
 def motion_content(motion: Motion | Markers) -> tuple[str, list[float]]:
     """:func:`motion_key` and :func:`motion_signature` of a take, its points (joints by
     forward kinematics, or markers) worked out once."""
-    points = np.asarray(
-        motion.positions if isinstance(motion, Markers) else motion.positions(), dtype=float
-    )
+    points = _points(motion)
     return motion_key(motion, points), motion_signature(motion, points)
 
 
-def _points(motion: Motion | Markers, points: np.ndarray | None) -> np.ndarray:
+def _points(motion: Motion | Markers, points: np.ndarray | None = None) -> np.ndarray:
+    """``points`` if given, else the take's points (F, P, 3): joints by forward kinematics,
+    or markers."""
     if points is not None:
         return points
     return np.asarray(

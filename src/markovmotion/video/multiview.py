@@ -400,11 +400,11 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
 
 
 def resolve_method(
-    method: str, views: int, filter_asked: Sequence[str] = (), command: str = "track"
+    method: str, views: int, filter_asked: bool = False, command: str = "track"
 ) -> tuple[str, str | None]:
     """``--method`` resolved for the number of ``views`` tracked, with the note to print
-    when ``auto`` chose; ``filter_asked`` names the particle filter's own options given on
-    the command line (``--out A.bvh``, ``--particles``, ``--guide``, ``--realtime``...);
+    when ``auto`` chose; ``filter_asked``: the particle filter was asked for, by what it
+    alone gives or reads (``--out A.bvh``, ``--particles``, ``--guide``, ``--realtime``...);
     ``command``: ``track`` or ``respond`` (``dualhmm respond --video``), whose note says how
     that command asks for the filter (respond's ``--out`` is the composite, never a BVH).
 
