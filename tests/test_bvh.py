@@ -235,3 +235,22 @@ def test_a_zero_frame_time_is_read_when_the_true_rate_is_given(tmp_path, capsys)
     assert exc.value.code == 2 and "give the true frame rate: --fps" in capsys.readouterr().err
     main(["info", str(path), "--fps", "25"])
     assert "25 fps" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("frame_time", ["1e9", "1e-300"])
+def test_an_unusable_frame_time_asks_for_the_rate_the_command_line_way(
+    tmp_path, capsys, frame_time
+):
+    """A header's Frame Time that gives no usable rate (far too large or too small) is one
+    line asking for the true rate as a user gives it (``--fps``, not the Python argument
+    alone), and the file is read at a rate given."""
+    from markovmotion.cli import main
+
+    path = tmp_path / "odd.bvh"
+    path.write_text(re.sub(r"Frame Time: .*", f"Frame Time: {frame_time}", _valid_text()))
+    with pytest.raises(SystemExit) as exc:
+        main(["info", str(path)])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and "not a usable frame rate (give the true frame rate: --fps" in err
+    assert len(err.splitlines()) == 1
+    assert read_motion(path, fps=30.0).fps == 30.0

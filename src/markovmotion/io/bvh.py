@@ -64,6 +64,10 @@ BODY_JOINTS = 15
 log = logging.getLogger(__name__)
 
 
+#: How a BVH header's unusable frame time is answered: with the true rate.
+GIVE_RATE = "give the true frame rate: --fps, fps= in Python, or the fps column of the INDEX.csv listing the file"
+
+
 def _unit_scale(length_unit: str) -> float:
     try:
         return UNIT_TO_MM[length_unit]
@@ -592,8 +596,7 @@ def read_bvh_stream(
     if fps is None and not frame_time > 0:  # the true rate given, the header's is not read
         raise MotionFormatError(
             path,
-            f"frame time must be positive, found {frame_time:g} (give the true frame rate: "
-            "--fps, fps= in Python, or the fps column of the INDEX.csv listing the file)",
+            f"frame time must be positive, found {frame_time:g} ({GIVE_RATE})",
             motion_at + 3,
         )
     if fps is None:
@@ -603,7 +606,7 @@ def read_bvh_stream(
             raise MotionFormatError(
                 path,
                 f"Frame Time {frame_time:g} s gives {1.0 / frame_time:g} fps: "
-                "not a usable frame rate (pass the true one with fps)",
+                f"not a usable frame rate ({GIVE_RATE})",
             ) from None
     motion = Motion(skeleton, quats, trans, fps, name=os.path.basename(str(path)))
     if broken.any():
