@@ -646,17 +646,18 @@ class Evaluation:
 # ------------------------------------------------------------------ ``gait evaluate``
 class Models(dict[str, dict[str, GaitSynthesizer]]):
     """Gait models by role and style (a plain dict of that shape will do), and the file each
-    was read from (``files``, by ``id`` of the model), by which notes name them."""
+    was read from (``files``, by role and style, as the models are held), by which notes
+    name them."""
 
     def __init__(self, *args: Any, **kwargs: Any):
         super().__init__(*args, **kwargs)
-        self.files: dict[int, str] = {}
+        self.files: dict[tuple[str, str], str] = {}
 
 
 def model_name(models: Mapping[str, Mapping[str, GaitSynthesizer]], model: GaitSynthesizer) -> str:
     """The file ``model`` was read from (:func:`load_models`), else "the <role> <style> model"."""
     files = getattr(models, "files", {})
-    return files.get(id(model), f"the {model.role_} {model.style_} model")
+    return files.get((model.role_, model.style_), f"the {model.role_} {model.style_} model")
 
 
 def load_models(path: str | os.PathLike[str]) -> Models:
@@ -671,7 +672,7 @@ def load_models(path: str | os.PathLike[str]) -> Models:
     if path.is_file():
         model = _load(path)
         found[model.role_][model.style_] = model
-        found.files[id(model)] = path.name
+        found.files[model.role_, model.style_] = path.name
         return found
     if not path.is_dir():
         raise DataNotFoundError(f"{path}: no such gait model or folder of models")
@@ -683,7 +684,7 @@ def load_models(path: str | os.PathLike[str]) -> Models:
         if header.get("kind") == KIND:
             model = _load(file)
             found[model.role_][model.style_] = model
-            found.files[id(model)] = file.name
+            found.files[model.role_, model.style_] = file.name
     if not any(found.values()):
         raise DataNotFoundError(f"{path}: no gait models (.npz) in this folder")
     return found

@@ -696,17 +696,22 @@ def _find(folders: Sequence[Path], name: str) -> Path | None:
 
 
 def _header_rates(folders: Sequence[Path], cameras: list[CalibratedCamera]) -> dict[str, float]:
-    """The own frame rate (0: unknown) of each camera's video file found (in ``folders``,
-    :func:`video_folders`), by the video's name (an image folder has none; a missing video
-    is left to :func:`camera_videos` to name)."""
+    """The own frame rate of each camera's video file found (in ``folders``,
+    :func:`video_folders`) whose header gives one, by the video's name (an image folder has
+    none; a missing video is left to :func:`camera_videos` to name)."""
     out = {}
     for c in cameras:
         video = _find(folders, c.video) if c.video else None
         if video is not None and video.is_file():
-            out[video.name] = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
-        elif video is not None:
-            out[video.name] = 0.0
+            own = _header_rate(str(video.resolve()), video.stat().st_mtime_ns)
+            if own > 0:
+                out[video.name] = own
     return out
+
+
+def _same_rate(a: float, b: float) -> bool:
+    """Whether two frame rates are one (within 1 % of ``b``)."""
+    return abs(a - b) <= 0.01 * b
 
 
 def _rate_notes(
@@ -728,17 +733,13 @@ def _rate_notes(
             odd videos, their rates and the others' rate, to resample them to; with
             ``paired`` False (a command that reads one camera's video) a note for each video
             off the file's rate instead."""
-    known = {name: own for name, own in _header_rates(folders, cameras).items() if own > 0}
-
-    def near(a: float, b: float) -> bool:
-        return abs(a - b) <= 0.01 * b
-
+    known = _header_rates(folders, cameras)
     rates = list(known.values())
-    if paired and any(not near(r, rates[0]) for r in rates):
+    if paired and any(not _same_rate(r, rates[0]) for r in rates):
         # the others' rate: the one most videos have (of as many, the file's)
-        groups = [[r for r in rates if near(r, q)] for q in rates]
-        usual = max(groups, key=lambda g: (len(g), near(g[0], fps)))[0]
-        odd = [f"{name} is {r:g} fps" for name, r in known.items() if not near(r, usual)]
+        groups = [[r for r in rates if _same_rate(r, q)] for q in rates]
+        usual = max(groups, key=lambda g: (len(g), _same_rate(g[0], fps)))[0]
+        odd = [f"{name} is {r:g} fps" for name, r in known.items() if not _same_rate(r, usual)]
         whose, it = ("its", "it") if len(odd) == 1 else ("their", "them")
         raise MotionFormatError(
             path,
@@ -749,7 +750,7 @@ def _rate_notes(
         f"note: {name} is {own:g} fps by its own header, the camera file says {fps:g}: "
         "the camera file's rate is used (set its fps if the video's is right)"
         for name, own in known.items()
-        if not near(own, fps)
+        if not _same_rate(own, fps)
     ]
 
 
@@ -762,14 +763,13 @@ def _rate_of_videos(
 
     Raises:
         MotionFormatError: no video gives a rate (image folders), or they disagree."""
-    rates = _header_rates(folders, cameras)
-    known = {name: r for name, r in rates.items() if r > 0}
+    known = _header_rates(folders, cameras)
     if not known:
         raise MotionFormatError(
             path, 'no "fps" (frames per second), and no video\'s header gives one: add "fps"'
         )
     first = next(iter(known.values()))
-    if any(abs(r - first) > 0.01 * first for r in known.values()):
+    if any(not _same_rate(r, first) for r in known.values()):
         listed = ", ".join(f"{name} {r:g}" for name, r in known.items())
         raise MotionFormatError(
             path,
