@@ -345,7 +345,6 @@ def track(
         person,
         size == "views",
     )
-    summary = {"method": "apf", **summary}  # which ran, as the MediaPipe methods' summaries say
     summary["notes"] = [*([note] if note else []), *summary["notes"]]
     for line in summary["background"]:
         err_console.print(line, highlight=False)
@@ -483,7 +482,6 @@ def _track_landmarks(
         from markovmotion.video.multiview import truth_errors
 
         summary.update(truth_errors(tr.points, tr.fps, truth, video, cameras))
-    summary["method"] = method
     if chose:
         summary["notes"] = [chose, *summary["notes"]]
     if out is not None:

@@ -507,6 +507,7 @@ def track_take(
     )  # fmt: skip
     motion = (result.body or body).motion(result.states, result.fps, name=Path(video).name)
     summary = {
+        "method": "apf",  # which tracker, as track_triangulated_video's summary says
         "frames": len(result.states),
         "fps": round(len(result.states) / max(result.seconds, 1e-9), 2),
         "fps_cpu": round(len(result.states) / max(result.cpu_seconds, 1e-9), 2),
