@@ -10,6 +10,8 @@ import pytest
 from markovmotion.data.index import data_root
 from markovmotion.video.background import (
     HELD_LIMIT,
+    BackgroundCheck,
+    background_note,
     check_background,
     learn_background,
     person_background,
@@ -49,6 +51,23 @@ def test_a_moving_person_leaves_the_median_empty():
     check = check_background(masks)
     assert not check.holds_person and check.unseen == 0.0
     assert "empty scene" in check.message("cam1")
+
+
+def test_the_backgrounds_of_every_camera_are_one_note_naming_them():
+    """The cameras without an empty-scene image are said in one line naming them (it had been
+    a line per camera); none without such cameras."""
+    held, empty = BackgroundCheck(0.81, 0.01, 100.0), BackgroundCheck(0.05, 0.0, 100.0)
+    lines = background_note([("cam0", held), ("cam2", empty), ("cam3", held)])
+    assert len(lines) == 1 and lines[0].startswith("note: cam0, cam2, cam3: no empty-scene image")
+    assert "still holds the person in cam0 (81% of their mean silhouette; 1% never " \
+        "uncovered), cam3 (81%; 1%): give an empty-scene image" in lines[0]  # fmt: skip
+    assert lines[0].endswith("the plain median is the empty scene in cam2 (holds 5%)")
+    plain = background_note([("cam0", None), ("cam1", None)], "MediaPipe not installed")
+    assert plain == [
+        "note: cam0, cam1: median background (no empty-scene image), not checked for the "
+        "person (MediaPipe not installed)"
+    ]
+    assert background_note([]) == []
 
 
 def test_person_mask_covers_the_landmarks_and_little_else():

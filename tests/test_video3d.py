@@ -281,6 +281,27 @@ def test_track_command_reports_error_against_truth(rendered, take, tmp_path, cap
     assert tracked.n_frames == 3 and body_points(tracked).shape == (3, 19, 3)
 
 
+def test_cameras_without_a_background_image_are_one_note(take, tmp_path, capsys):
+    """Two of three cameras without an empty-scene image: the note on their backgrounds is
+    one line naming them, printed once (it had been printed per camera), and the JSON's
+    ``background`` holds that line."""
+    folder = tmp_path / "take"
+    main(["video", "render", str(take[1]), "--out", str(folder), "--views", "3", "--seconds",
+          "0.1", "--fps", "30", "--width", "96", "--height", "72"])  # fmt: skip
+    doc = json.loads((folder / "cameras.json").read_text())
+    for cam in doc["cameras"][1:]:  # cam0 keeps its plate: someone is seen in the video
+        (folder / cam.pop("background")).unlink()
+    (folder / "cameras.json").write_text(json.dumps(doc))
+    capsys.readouterr()
+    main(["track", "--video", str(folder), "--json", "--body-model", "interaction",
+          "--particles", "10", "--layers", "1", "--max-frames", "2", "--background", "median",
+          "--out", str(tmp_path / "a.bvh")])  # fmt: skip
+    run = capsys.readouterr()
+    said = "note: cam1, cam2: median background (no empty-scene image), not checked for the person"
+    assert json.loads(run.out)["background"] == [said]
+    assert run.err.count("median background") == 1 and f"{said}\n" in run.err, run.err
+
+
 def test_seed_changes_the_draw_and_the_same_seed_repeats_it(rendered, tmp_path):
     """The tracker's random draws come from ``--seed``: two seeds give two tracks, one seed
     the same track twice (issue 24: seeds 0 and 1 once gave byte-identical files)."""

@@ -346,9 +346,7 @@ def track(
         size == "views",
     )
     summary["notes"] = [*([note] if note else []), *summary["notes"]]
-    for line in summary["background"]:
-        err_console.print(line, highlight=False)
-    print_notes(summary["notes"])
+    print_notes(summary["background"] + summary["notes"])
     if size == "views":
         summary["body_size"] = result.body_size
         err_console.print(

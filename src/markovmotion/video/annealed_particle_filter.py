@@ -60,6 +60,7 @@ from threadpoolctl import threadpool_limits
 
 from markovmotion.errors import MotionFormatError
 from markovmotion.progress import track
+from markovmotion.video.background import BackgroundCheck, background_note
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel
 from markovmotion.video.cameras import (
     CalibratedCamera,
@@ -756,6 +757,7 @@ class TrackResult:
     views: int
     recoveries: int
     cpu_seconds: float = 0.0
+    #: The video's note on its backgrounds (:attr:`MultiviewVideo.background_notes`).
     background_notes: list[str] = field(default_factory=list)
     #: One line when a camera's video ended before the others' (the track stops there).
     video_notes: list[str] = field(default_factory=list)
@@ -829,7 +831,8 @@ class MultiviewVideo:
     frames: Iterator[list[np.ndarray]]
     source: Path
     videos: list[Path]
-    #: One line per camera without an empty-scene image: what its background is.
+    #: The note on the cameras without an empty-scene image, what their backgrounds are
+    #: (one line naming them all, :func:`~markovmotion.video.background.background_note`).
     background_notes: list[str] = field(default_factory=list)
     #: The camera file's notes (:func:`~markovmotion.video.cameras.load_cameras`), and one
     #: line when a camera's video ended before the others' (filled as the frames are read).
@@ -867,7 +870,8 @@ def open_video(
     ``views`` keeps only the first cameras. A camera without an empty-scene image gets the
     median of frames spread over its video, or with ``learn_background`` (and MediaPipe
     installed) the median where the person is not, and a note saying whether the plain median
-    still holds the person (:mod:`markovmotion.video.background`).
+    still holds the person (:mod:`markovmotion.video.background`; one note for all such
+    cameras, :func:`~markovmotion.video.background.background_note`).
 
     Raises:
         MotionFormatError: a missing or malformed camera file, a missing video or
@@ -884,20 +888,22 @@ def open_video(
     if views is not None:
         cameras, videos = cameras[:views], videos[:views]
     images = camera_videos(cams_path, cameras, "background")
-    backgrounds, notes = [], []
+    backgrounds = []
+    checks: list[tuple[str, BackgroundCheck | None]] = []  # the cameras without an image
+    learn = learn_background and mediapipe_installed()
     for v, b, c in zip(videos, images, cameras, strict=True):
         if b is not None:
             backgrounds.append(read_image(b, c))
-        elif learn_background and mediapipe_installed():
-            from markovmotion.video.background import learn_background as learn
+        elif learn:
+            from markovmotion.video.background import learn_background as learnt_background
 
-            _, learnt, check = learn(v, BACKGROUND_FRAMES, c)
+            _, learnt, check = learnt_background(v, BACKGROUND_FRAMES, c)
             backgrounds.append(learnt)
-            notes.append(check.message(c.name) + "; using the median where the person is not")
+            checks.append((c.name, check))
         else:
             backgrounds.append(estimate_background(v, camera=c))
-            why = "" if not learn_background else " (MediaPipe not installed)"
-            notes.append(f"{c.name}: median background, not checked for the person{why}")
+            checks.append((c.name, None))
+    notes = background_note(checks, "MediaPipe not installed" if learn_background else "")
     short: list[str] = []
     frames = multiview_frames(videos, max_frames, cameras, ended, short)
     return MultiviewVideo(

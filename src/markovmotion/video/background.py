@@ -104,6 +104,40 @@ class BackgroundCheck:
         )
 
 
+def background_note(
+    cameras: Sequence[tuple[str, BackgroundCheck | None]], why: str = ""
+) -> list[str]:
+    """The note on the backgrounds of the cameras without an empty-scene image, as one line
+    naming them (none without such cameras; it had been a line per camera, four on the real
+    video): ``cameras`` holds each one's name and its :class:`BackgroundCheck` of the plain
+    median (its background then learnt where the person is not), or None for the plain
+    median, not checked (``why``: the reason said, such as MediaPipe not installed)."""
+    plain = [name for name, check in cameras if check is None]
+    learnt = [(name, check) for name, check in cameras if check is not None]
+    parts = []
+    if plain:
+        parts.append(
+            f"{', '.join(plain)}: median background (no empty-scene image), not checked for "
+            f"the person{f' ({why})' if why else ''}"
+        )
+    if learnt:
+        parts.append(
+            f"{', '.join(name for name, _ in learnt)}: no empty-scene image, so the background "
+            "is the median where MediaPipe finds no person"
+        )
+    if held := [(name, c) for name, c in learnt if c.holds_person]:
+        shares = [f"{n} ({c.held:.0%}; {c.unseen:.0%})" for n, c in held]  # the first in words
+        n, c = held[0]
+        shares[0] = f"{n} ({c.held:.0%} of their mean silhouette; {c.unseen:.0%} never uncovered)"
+        parts.append(
+            f"the plain median still holds the person in {', '.join(shares)}: give an "
+            "empty-scene image ('background' in cameras.json)"
+        )
+    if empty := [f"{n} (holds {c.held:.0%})" for n, c in learnt if not c.holds_person]:
+        parts.append(f"the plain median is the empty scene in {', '.join(empty)}")
+    return [f"note: {'; '.join(parts)}"] if parts else []
+
+
 def check_background(masks: np.ndarray) -> BackgroundCheck:
     """:class:`BackgroundCheck` of the person masks (F, H, W) of the frames a median is over."""
     area = float(masks.sum(axis=(1, 2)).mean())
