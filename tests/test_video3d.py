@@ -413,6 +413,40 @@ def test_respond_passes_the_person_named_to_the_tracker(
     assert exc.value.code == 2 and "--person" in capsys.readouterr().err
 
 
+def test_one_view_is_said_once_after_the_work(dual_model, tmp_path, monkeypatch, capsys):
+    """The particle filter on one view of real video: one note says what one view leaves it,
+    printed once (``--guide auto``'s note and track's own had both been printed, each offering
+    --method monocular), and after the work (``respond --video`` had printed it before)."""
+    import markovmotion.video.composite as composite
+    from markovmotion.data.index import data_root
+    from markovmotion.video.multiview import ONE_VIEW_NOTE
+
+    real = data_root().parent / "video" / "pose2sim_balancing"
+    small = ["--particles", "10", "--layers", "1", "--max-frames", "2"]
+    for video, extra in (
+        (real, ["--views", "1"]),
+        (real / "cam1.mp4", []),
+        (real / "cam1.mp4", ["--guide", "none"]),
+    ):
+        capsys.readouterr()
+        main(["track", "--video", str(video), *extra, *small, "--out", str(tmp_path / "a.bvh")])
+        err = capsys.readouterr().err
+        assert err.count("one view") == 1 and err.count("--method monocular") == 1, err
+        assert f"{ONE_VIEW_NOTE}\n" in err, err
+
+    track_take = composite.track_take
+
+    def after(*args, **kwargs):  # nothing said of one view before the tracking
+        assert "one view" not in capsys.readouterr().err
+        return track_take(*args, **kwargs)
+
+    monkeypatch.setattr(composite, "track_take", after)
+    main(["dualhmm", "respond", "--model", str(dual_model), "--video", str(real / "cam1.mp4"),
+          "--method", "apf", *small, "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert err.count("one view") == 1 and f"{ONE_VIEW_NOTE}\n" in err, err
+
+
 @pytest.mark.parametrize(
     "extra",
     [["--guide", "mediapipe", "--realtime"], ["--guide", "mediapipe", "--method", "monocular"]],

@@ -470,8 +470,6 @@ def _respond_video(
     if method == "apf" and not realtime:
         guided, note = guide_for(guide, doc, 1 if lone else len(cams))
     check_person(person, cams[:1] if lone else cams, guided or method == "triangulate")
-    if note:
-        err_console.print(note, highlight=False)
     world_frame_note(DualHMM.load(model), model, "this video's world")
     if method != "apf":
         summary = respond_mediapipe(
@@ -510,7 +508,8 @@ def _respond_video(
         model, video, out, default_body_model(data, body_model), cameras, view, particles, layers,
         max_frames, "standard" if standard else "windowed", guide=guided, person=person,
     )  # fmt: skip
-    print_notes(summary["background"] + summary["notes"])
+    # the guide's note after the work, with the others (it had been printed before it)
+    print_notes(summary["background"] + ([note] if note else []) + summary["notes"])
     err_console.print(
         f"tracked A over {summary['frames']} frames in {summary['views']} views "
         f"({summary['fps']:.2f} frames/s{', guided by MediaPipe' if guided else ''}), partner "

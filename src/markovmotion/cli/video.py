@@ -300,7 +300,7 @@ def track(
     from markovmotion.errors import MotionFormatError
     from markovmotion.io import check_motion_output, write_motion
     from markovmotion.io.files import check_writable
-    from markovmotion.video.multiview import default_body_model, track_take
+    from markovmotion.video.multiview import ONE_VIEW_NOTE, default_body_model, track_take
 
     if out is not None:
         check_motion_output(out)
@@ -355,11 +355,8 @@ def track(
             highlight=False,
         )
     later = []  # notes printed, and in the summary's
-    if summary["views"] == 1:
-        later.append(
-            "note: one view leaves the particle filter depth and mirror ambiguous (hundreds of mm "
-            "off, docs/video.md); for one camera, --method monocular"
-        )
+    if summary["views"] == 1 and ONE_VIEW_NOTE not in summary["notes"]:  # --guide auto's says it
+        later.append(ONE_VIEW_NOTE)
     if reference is not None:
         from markovmotion.features.body_points import body_points
         from markovmotion.video.monocular import reference_report

@@ -357,6 +357,15 @@ def truth_errors(
 GUIDES = ("auto", "none", "mediapipe")
 
 
+#: What one view leaves the particle filter, in one note: ``track``'s own note on one view
+#: and ``--guide auto``'s had both been printed, each offering ``--method monocular``.
+ONE_VIEW_NOTE = (
+    "note: one view: the particle filter follows the image alone (MediaPipe's guide "
+    "triangulates, which needs two views), its depth and mirror ambiguous (hundreds of mm off, "
+    "docs/video.md); for one camera, --method monocular"
+)
+
+
 def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | None]:
     """Whether MediaPipe guides the particle filter, for ``--guide``, a camera file's
     document ``doc`` and the number of ``views`` tracked; and a note to print when ``auto``
@@ -368,7 +377,8 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
     (:func:`~markovmotion.video.cameras.is_rendered`): its people are capsules, which MediaPipe
     misreads (a held-out pull 57.3 mm unguided, 154.1 guided). Without MediaPipe installed it
     tracks by the images and says so. The guide is MediaPipe's landmarks triangulated, so one
-    view gives it nothing: ``auto`` then says so, ``mediapipe`` is refused.
+    view gives it nothing: ``auto`` then says so (:data:`ONE_VIEW_NOTE`, which says the rest
+    one view leaves the filter), ``mediapipe`` is refused.
 
     Raises:
         ValueError: an unknown ``guide``, or ``mediapipe`` for one view."""
@@ -387,10 +397,7 @@ def resolve_guide(guide: str, doc: dict, views: int = 2) -> tuple[bool, str | No
     if is_rendered(doc):
         return False, None
     if views < 2:
-        return False, (
-            "note: one view: MediaPipe's guide triangulates, so the particle filter follows the "
-            "image alone (for one camera, --method monocular)"
-        )
+        return False, ONE_VIEW_NOTE
     if not mediapipe_installed():
         return False, (
             "note: MediaPipe is not installed (scripts/install-camera), so the particle filter "
