@@ -9,19 +9,21 @@ network): see ``pages/`` and ``static/``.
 from __future__ import annotations
 
 import json
+import math
 import os
 import secrets
 import tempfile
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, BinaryIO, Literal
+from typing import Annotated, Any, BinaryIO, Literal
 
 from fastapi import FastAPI, HTTPException, Request, WebSocket
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 from starlette.datastructures import UploadFile
@@ -91,14 +93,155 @@ Position = Annotated[int, PathParam(ge=0, le=1_000_000)]
 """An item's position in a test (bounded: SQLite integers are 64-bit)."""
 
 
+MAX_DIGITS = 20
+"""Longest integer, in digits, a JSON body may hold (no field takes a number; 64-bit
+integers have at most 19 digits, and Python refuses to convert more than 4300)."""
+
+_JSON_KINDS = {
+    type(None): "null",
+    bool: "true or false",
+    int: "a number",
+    float: "a number",
+    str: "a string",
+    list: "an array",
+    dict: "an object",
+}
+
+
+def _json_kind(value: object) -> str:
+    """What a parsed JSON ``value`` is, in JSON's words ("an array", "a string", ...)."""
+    return _JSON_KINDS.get(type(value), "bytes" if isinstance(value, bytes) else "a value")
+
+
+class _Refused:
+    """A value :func:`json_body` does not take, left in the parsed tree to be found with its
+    path (the JSON parser's hooks do not know where they are)."""
+
+    def __init__(self, problem: str):
+        self.problem = problem
+
+
+def _first_refused(value: dict) -> str:
+    """``path: problem`` of the first :class:`_Refused` in ``value`` (``comment``, ``a.0.b``):
+    depth first with an iterator per container, so nothing is copied."""
+    stack: list[tuple[str, Iterator[tuple[Any, Any]]]] = [("", iter(value.items()))]
+    while stack:
+        parent, items = stack[-1]
+        for key, v in items:
+            if isinstance(v, (_Refused, dict, list)):
+                path = f"{parent}.{key}" if parent else str(key)
+                if isinstance(v, _Refused):
+                    return f"{shown(path, 60)}: {v.problem}"
+                stack.append((path, iter(v.items()) if isinstance(v, dict) else enumerate(v)))
+                break
+        else:
+            stack.pop()
+    return "body: refused"  # not reached: called when a hook refused a value
+
+
+def json_body(body: bytes) -> Any:
+    """A request's JSON body, strictly (RFC 8259): UTF-8, a JSON object, no ``NaN`` or
+    ``Infinity``, finite numbers, integers of at most :data:`MAX_DIGITS` digits, no key given
+    twice, nested less deep than the interpreter's recursion limit. Any other body raises
+    :class:`json.JSONDecodeError` whose message is the one line to answer with, naming the
+    field (FastAPI turns it into a :class:`RequestValidationError`: see :func:`_one_line`)."""
+    refused: list[_Refused] = []  # the first refusal (the others as cheap as can be)
+
+    def refuse(problem: str) -> _Refused:
+        if not refused:
+            refused.append(_Refused(problem))
+        return refused[0]
+
+    def number(text: str) -> int | _Refused:
+        digits = len(text.lstrip("-"))
+        if digits > MAX_DIGITS:
+            return refuse(f"a number of {digits} digits (at most {MAX_DIGITS})")
+        return int(text)
+
+    def real(text: str) -> float | _Refused:
+        value = float(text)
+        return value if math.isfinite(value) else refuse(f"{text[:20]} is too large a number")
+
+    def constant(name: str) -> _Refused:
+        return refuse(f"{name} is not JSON (JSON numbers are finite)")
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in items:
+            out[key] = refuse("given twice") if key in out else value
+        return out
+
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise json.JSONDecodeError(
+            f"body: not UTF-8 text (byte {exc.start})", repr(body[:80]), 0
+        ) from None
+    try:
+        value = json.loads(
+            text, parse_int=number, parse_float=real, parse_constant=constant,
+            object_pairs_hook=pairs,
+        )  # fmt: skip
+    except json.JSONDecodeError as exc:
+        raise json.JSONDecodeError(f"body: not JSON ({exc})", text, exc.pos) from None
+    except RecursionError:
+        raise json.JSONDecodeError("body: JSON nested too deeply", text, 0) from None
+    if not isinstance(value, dict):
+        raise json.JSONDecodeError(
+            f"body: expected a JSON object, found {_json_kind(value)}", text, 0
+        )
+    if refused:
+        raise json.JSONDecodeError(_first_refused(value), text, 0)
+    return value
+
+
+class _JSONRequest(Request):
+    """A request whose JSON body is read by :func:`json_body`."""
+
+    async def json(self) -> Any:
+        if not hasattr(self, "_json"):
+            self._json = json_body(await self.body())
+        return self._json
+
+
+class _JSONRoute(APIRoute):
+    """Every route of the app: its JSON body read by :func:`json_body` (FastAPI's own reading
+    answers a body too deep or with a 5,000-digit number with a generic 400)."""
+
+    def get_route_handler(self) -> Callable:
+        handler = super().get_route_handler()
+
+        async def strict_json(request: Request) -> Response:
+            return await handler(_JSONRequest(request.scope, request.receive))
+
+        return strict_json
+
+
 def _one_line(exc: RequestValidationError) -> str:
-    """The first problem of a request that does not validate, as one line."""
+    """The first problem of a request that does not validate, as one line naming the field
+    (``comment``, ``query.study``, ``path.position``) or the body."""
     errors = exc.errors()
     if not errors:
         return "invalid request"
     first = errors[0]
-    where = ".".join(str(part) for part in first.get("loc", ()) if part != "body") or "request"
-    return shown(f"{where}: {first.get('msg', 'invalid')}", 200)
+    loc = tuple(first.get("loc", ()))
+    kind, msg = str(first.get("type", "")), str(first.get("msg", "invalid"))
+    if kind == "json_invalid":  # json_body's line, naming the field or the body already
+        return shown(str(first.get("ctx", {}).get("error", "body: not JSON")), 200)
+    where = shown(".".join(str(part) for part in loc if part != "body"), 60)
+    where = where or ("body" if loc[:1] == ("body",) else "request")
+    value = first.get("input")
+    if loc == ("body",) and kind == "missing":
+        msg = "missing (send a JSON object, Content-Type: application/json)"
+    elif loc == ("body",) and isinstance(value, bytes):  # not sent as JSON: FastAPI left it
+        msg = "not sent as JSON (send a JSON object, Content-Type: application/json)"
+    elif kind == "extra_forbidden":
+        msg = "not a field of this request"
+    elif kind == "string_unicode":
+        msg = "not Unicode text (a lone surrogate escape)"
+    elif loc[:1] == ("body",) and kind.endswith("_type"):
+        msg = f"{msg}, found {_json_kind(value)}"
+    return shown(f"{where}: {msg}", 200)
 
 
 async def _bounded(stream: AsyncIterator[bytes], limit: int) -> AsyncIterator[bytes]:
@@ -189,6 +332,7 @@ def create_app(
         store = EvaluationStore(db)
 
     app = FastAPI(title="markovmotion", docs_url=None, redoc_url=None)
+    app.router.route_class = _JSONRoute  # before any route is added
     app.state.admin_token = admin_token or secrets.token_urlsafe(18)
     app.state.store = store
     app.state.library = lib
