@@ -17,8 +17,9 @@ import urllib.parse
 import pytest
 from conftest import make_motion
 
-from markovmotion.evaluate.interaction import INTERACTION_MANIFEST
+from markovmotion.evaluate.interaction import INTERACTION, INTERACTION_MANIFEST
 from markovmotion.evaluate.stimuli import write_stimuli
+from markovmotion.evaluate.store import open_results
 from markovmotion.io import write_motion
 from markovmotion.web import create_app
 from markovmotion.web.app import MAX_DIGITS, json_body
@@ -195,3 +196,80 @@ def test_a_body_of_many_refused_values_is_answered_quickly():
     with pytest.raises(json.JSONDecodeError, match=r"answer\.0: NaN"):
         json_body(body)
     assert time.perf_counter() - t0 < 0.5
+
+
+# ---------------------------------------------------------------- strict answers
+
+
+@pytest.mark.parametrize(
+    ("fields", "start"),
+    [
+        ({"unusual": "1"}, "unusual: Input should be a valid boolean, found a string"),
+        ({"unusual": "true"}, "unusual: Input should be a valid boolean, found a string"),
+        ({"unusual": 1}, "unusual: Input should be a valid boolean, found a number"),
+        ({"unusual": 0.0}, "unusual: Input should be a valid boolean, found a number"),
+        ({"unusual": None}, "unusual: Input should be a valid boolean, found null"),
+        ({"comment": 5}, "comment: Input should be a valid string, found a number"),
+        ({"comment": ["x"]}, "comment: Input should be a valid string, found an array"),
+        ({"answer": 1}, "answer: Input should be a valid string, found a number"),
+        ({"answer": "salsa"}, "answer: 'salsa' is not a choice of the interaction test"),
+        ({"zzz": 1}, "zzz: not a field of this request"),
+        ({"position": 0}, "position: not a field of this request"),
+    ],
+)
+def test_an_interaction_answer_is_taken_only_of_the_exact_types(server, site, fields, start):
+    """Each of these had been stored (``"1"``, ``"true"``, ``1`` and ``0.0`` converted to a
+    boolean, the unknown fields ignored), or refused without the field's name."""
+    who = token(server, "interaction")
+    body = {"answer": "pull", "unusual": True, "comment": "odd"} | fields
+    status, reply = send(
+        server, f"/api/evaluation/{who}/{INTERACTION}/0", json.dumps(body).encode(), JSON
+    )
+    assert status == 422 and reply["detail"].startswith(start), reply
+    assert [i.answer for i in open_results(site / "results.sqlite").items(who)] == [None, None]
+
+
+def test_an_interaction_answer_as_the_page_sends_it_is_stored(server, site):
+    """The body ``static/interaction.js`` posts: the choice's value as given by the state, the
+    box's ``checked`` (a boolean) and the comment box's value (a string)."""
+    who = token(server, "interaction")
+    state = send_get(server, f"/api/evaluation/{who}")
+    choice = state["tests"][0]["choices"][-1][0]
+    for position, (unusual, comment) in enumerate(((True, "wobbly"), (False, ""))):
+        body = {"answer": choice, "unusual": unusual, "comment": comment}
+        target = f"/api/evaluation/{who}/{INTERACTION}/{position}"
+        assert send(server, target, json.dumps(body).encode(), JSON) == (200, {"ok": True})
+    items = open_results(site / "results.sqlite").items(who)
+    assert [(i.answer, i.unusual, i.comment) for i in items] == [
+        (choice, True, "wobbly"),
+        (choice, False, ""),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("fields", "start"),
+    [
+        ({"unusual": False}, "unusual: only the interaction study takes it"),
+        ({"comment": ""}, "comment: only the interaction study takes it"),
+        ({"answer": "natural"}, "answer: 'natural' is not a choice of the naturalness test"),
+        ({"answer": True}, "answer: Input should be a valid string, found true or false"),
+    ],
+)
+def test_a_walk_answer_is_its_choice_alone(server, site, fields, start):
+    """A walk's answer had taken (and dropped) the interaction study's fields."""
+    who = token(server, "gait")
+    body = json.dumps({"answer": "real"} | fields).encode()
+    status, reply = send(server, f"/api/evaluation/{who}/naturalness/0", body, JSON)
+    assert status == 422 and reply["detail"].startswith(start), reply
+    assert all(i.answer is None for i in open_results(site / "results.sqlite").items(who))
+
+
+def test_a_walk_answer_as_the_page_sends_it_is_stored(server, site):
+    """``static/evaluation.js`` posts ``{"answer": value}``, value a choice of the state."""
+    who = token(server, "gait")
+    for test in send_get(server, f"/api/evaluation/{who}")["tests"]:
+        body = json.dumps({"answer": test["choices"][0][0]}).encode()
+        target = f"/api/evaluation/{who}/{test['name']}/0"
+        assert send(server, target, body, JSON) == (200, {"ok": True}), test["name"]
+    answered = [i for i in open_results(site / "results.sqlite").items(who) if i.answer]
+    assert len(answered) == 3

@@ -25,7 +25,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 
@@ -43,6 +43,7 @@ from markovmotion.evaluate.perceptual import (
     TESTS,
     answers_csv,
     choice_labels,
+    choices,
     summarise,
 )
 from markovmotion.evaluate.stimuli import MANIFEST, read_manifest
@@ -74,6 +75,11 @@ QUESTIONS = {
 
 
 class Answer(BaseModel):
+    """An answer's JSON body, strictly: a string answer (one of the test's choices), and in
+    the interaction study a ``true``/``false`` ``unusual`` and a string ``comment``; no
+    other field, nothing converted (``"1"`` or ``1`` is not ``true``)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
     answer: str
     unusual: bool = False  # the interaction study: noticed something strange or unusual
     comment: str = Field("", max_length=MAX_COMMENT)
@@ -85,7 +91,7 @@ Study = Literal["gait", "interaction"]
 class StudyChoice(BaseModel):
     """``POST /api/evaluation``'s optional JSON body: the study, as the query's ``study``."""
 
-    model_config = {"extra": "forbid"}
+    model_config = ConfigDict(extra="forbid", strict=True)
     study: Study | None = None
 
 
@@ -568,10 +574,20 @@ def create_app(
 
     @app.post("/api/evaluation/{token}/{test}/{position}")
     def answer(token: str, test: str, position: Position, body: Answer) -> dict:
+        s = need_evaluator(token)
+        if test in TESTS:  # a walk's answer is its choice alone
+            given = sorted(body.model_fields_set - {"answer"})
+            if given:
+                raise HTTPException(422, f"{given[0]}: only the interaction study takes it")
+            offered = choices(test, s.styles)
+        else:
+            offered = s.interaction.choices() if test == INTERACTION and s.interaction else None
+        if offered is not None and body.answer not in offered:
+            value = shown(repr(body.answer), 60)
+            problem = f"{value} is not a choice of the {test} test ({', '.join(offered)})"
+            raise HTTPException(422, shown(f"answer: {problem}", 200))
         try:
-            need_evaluator(token).answer(
-                token, test, position, body.answer, body.unusual, body.comment
-            )
+            s.answer(token, test, position, body.answer, body.unusual, body.comment)
         except EvaluationError as exc:
             raise HTTPException(422, shown(lib.public(str(exc)), 300)) from None
         return {"ok": True}
