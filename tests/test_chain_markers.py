@@ -615,3 +615,34 @@ def test_evaluate_reports_each_pair_of_people(mocap, tmp_path, capsys):
     for key in ("multiple_hypotheses", "mean_shape", "single_hypothesis_paper"):
         pooled = sum(r[key] * r["frames"] for r in report["per_people"].values())
         assert pooled / report["frames"] == pytest.approx(report[key], rel=1e-9)
+
+
+def test_a_take_of_nothing_recorded_is_one_line_on_the_command_line(
+    marker_partner, mocap, tmp_path, capsys
+):
+    """A C3D file whose every sample is unseen (a tracker that never found the person) is
+    refused in one line, exit 2, by every family's respond: it had been a ValueError's
+    traceback (NothingRecordedError is still a ValueError for library callers)."""
+    from markovmotion.errors import NothingRecordedError
+    from markovmotion.io import read_c3d, write_c3d
+
+    a = read_c3d(mocap.pairs(label="handshake", kind="markers")[-1][0].path)
+    a.positions[:] = np.nan
+    blind = tmp_path / "blind.c3d"
+    write_c3d(a, blind)
+    model = tmp_path / "m.npz"
+    marker_partner.save(model)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as info:
+        main(["chain", "respond", "--model", str(model), "--input", str(blind),
+              "--out", str(tmp_path / "b.c3d")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "Traceback" not in err
+    assert err.strip().splitlines() == [
+        f"error: VirtualPartner.respond: blind.c3d holds NaN or infinite values in every one "
+        f"of its {a.n_frames} frames: nothing of it was recorded"
+    ]
+    assert not (tmp_path / "b.c3d").exists()
+    with pytest.raises(NothingRecordedError) as whole:
+        marker_partner.respond(read_c3d(blind))
+    assert isinstance(whole.value, ValueError)

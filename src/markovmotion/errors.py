@@ -65,3 +65,9 @@ class LimitError(MarkovMotionError, ValueError):
 class TooLittleDataError(MarkovMotionError, ValueError):
     """The training data are too few for the model asked for (fewer frames than
     prototypes or states). Also a :class:`ValueError`."""
+
+
+class NothingRecordedError(MarkovMotionError, ValueError):
+    """A take given to answer or score holds nothing: no frame, or NaN in every one (a
+    capture whose tracker never found the person). Also a :class:`ValueError`, as it was
+    before it had a class of its own."""

@@ -44,7 +44,7 @@ from sklearn.exceptions import NotFittedError
 
 from markovmotion.core.markers import Markers
 from markovmotion.core.motion import Motion
-from markovmotion.errors import ModelFormatError, TooLittleDataError
+from markovmotion.errors import ModelFormatError, NothingRecordedError, TooLittleDataError
 from markovmotion.persist import load_npz, save_npz
 from markovmotion.state import estimator_state, is_fitted, register, restore_estimator
 
@@ -235,16 +235,17 @@ def check_motion(motion: object, where: str, missing: bool = True) -> None:
     then, and every model that reads them fills their gaps); and unless something of it
     was recorded: a whole frame of a Motion, one finite value of Markers (a take of NaN
     alone was answered, and scored as certain, by the dual HMM; a take of markers never
-    seen failed deep inside the chain)."""
+    seen failed deep inside the chain). Those two are :class:`NothingRecordedError`, an
+    expected error (one line on the command line) that is also a ValueError."""
     if not isinstance(motion, (Motion, Markers)):
         raise TypeError(f"{where} takes a Motion (or Markers), not {type(motion).__name__}")
     if motion.n_frames == 0:
-        raise ValueError(f"{where}: {motion.name or 'the motion'} has no frame")
+        raise NothingRecordedError(f"{where}: {motion.name or 'the motion'} has no frame")
     finite = finite_frames(motion) if isinstance(motion, Motion) else None
     seen = finite.any() if finite is not None else np.isfinite(motion.positions).any()
     if not seen:
         n = motion.n_frames
-        raise ValueError(
+        raise NothingRecordedError(
             f"{where}: {motion.name or 'the motion'} holds NaN or infinite values in "
             f"{'every one of its ' + str(n) + ' frames' if n > 1 else 'its one frame'}: "
             "nothing of it was recorded"
