@@ -25,8 +25,11 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 DEFAULT_HOSTS = ("127.0.0.1", "localhost", "::1")
 """Host names every server answers to (plus the bound address and ``--allow-host``)."""
 STATE_CHANGING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
-MAX_BODY = 1024 * 1024
-"""Largest body of a request other than an upload (JSON answers are a few bytes)."""
+MAX_BODY = 64 * 1024
+"""Largest body of a request other than an upload: JSON answers are a few bytes (a comment
+of 2,000 astral characters, each escaped as two ``\\uXXXX``, 24 KB). Parsing and validating
+a JSON body happens on the event loop: a hostile 1 MiB body (100,000 unknown fields,
+350,000 empty arrays) held it 0.75 and 0.48 s, a 64 KiB one at most 14 ms."""
 UPLOAD_SLACK = 64 * 1024
 """Room for the multipart envelope around an uploaded file."""
 CSP = (
