@@ -646,3 +646,37 @@ def test_a_take_of_nothing_recorded_is_one_line_on_the_command_line(
     with pytest.raises(NothingRecordedError) as whole:
         marker_partner.respond(read_c3d(blind))
     assert isinstance(whole.value, ValueError)
+
+
+def test_evaluate_skips_a_take_with_a_marker_never_seen_and_answers_the_others(
+    marker_partner, mocap, tmp_path, capsys
+):
+    """One take of a user's capture whose tracker never saw a marker the model needs is
+    skipped with one line naming it, as a take that does not fit is: it had stopped the
+    whole evaluation ("marker R_HAND never seen") after the other takes were read."""
+    import csv
+
+    from markovmotion.data.index import COLUMNS
+    from markovmotion.evaluate.chain import evaluate_model
+    from markovmotion.io import read_c3d, write_c3d
+
+    a, b = mocap.pairs(label="handshake", kind="markers")[-1]
+    rows = []
+    for take in ("clean", "blind"):
+        for me, other, entry in (("a", "b", a), ("b", "a", b)):
+            markers = read_c3d(entry.path)
+            if take == "blind" and me == "a":
+                markers.positions[:, markers.names.index("R_HAND")] = np.nan
+            write_c3d(markers, tmp_path / f"{take}_{me}.c3d")
+            row = {c: getattr(entry, c) for c in COLUMNS}
+            rows.append({**row, "file": f"{take}_{me}.c3d", "trial": take,
+                         "partner_file": f"{take}_{other}.c3d"})  # fmt: skip
+    with open(tmp_path / "INDEX.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    report = evaluate_model(marker_partner, tmp_path / "INDEX.csv", n_hypotheses=4)
+    assert report["test_files"] == ["clean_a.c3d", "clean_b.c3d"]
+    err = capsys.readouterr().err
+    assert "skipped blind_a.c3d + blind_b.c3d: blind_a.c3d: marker R_HAND never seen" in err
+    assert np.isfinite(report["multiple_hypotheses"])

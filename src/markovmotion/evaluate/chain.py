@@ -162,15 +162,16 @@ def test_set(
     chosen = test_takes(model, index, candidates, "two-person take")
     pairs, takes = [], []
     for a, b in track(chosen.takes, "reading takes"):
-        try:
+        try:  # a marker the model sees never seen in one take: that take skipped, said
             motions = index.load_pair(a, b)
             for m in motions:
                 model.check_input(m)
+            take = model.two_people(*motions)
         except MarkovMotionError as exc:
             err_console.print(f"[yellow]skipped[/] {a.file} + {b.file}: {exc}", highlight=False)
             continue
         pairs.append((a, b))
-        takes.append(model.two_people(*motions))
+        takes.append(take)
     if not takes:
         raise DataNotFoundError(
             f"no two-person take of {index.root / 'INDEX.csv'} can be observed by the model"
