@@ -401,3 +401,55 @@ def test_markers_labelled_with_each_persons_subject_prefix_are_one_marker_set(
     code, err = _run(["chain", "train", "--label", LABEL, *small, *args], capsys)
     assert code == 0, err
     assert "marker sets" not in err and len(Model.load(out).train_files_) == 2 * len(pairs)
+
+
+def test_data_check_compares_a_pair_at_two_rates_by_time_and_names_markers_never_seen(
+    mocap, tmp_path, capsys
+):
+    """A user's pair captured at two rates (A at 60 fps, B at 30) is loaded with B brought
+    to A's rate: ``data check`` compares their lengths so (it had noted "553 frames, its
+    partner 277: the pair is cut to the shorter" for two takes of the same 9.2 s), and still
+    notes a pair that does differ. A C3D take whose person is never seen is an error, one
+    whose marker is never seen a note naming it."""
+    from markovmotion.data.index import MocapIndex
+    from markovmotion.io import read_c3d, write_c3d
+
+    a_entry, b_entry = mocap.pairs("handshake", kind="markers")[0]
+    a, b = read_c3d(a_entry.path), read_c3d(b_entry.path)
+    fast = a.resample(60.0)
+    write_c3d(fast, tmp_path / "a60.c3d")
+    write_c3d(b, tmp_path / "b30.c3d")
+    write_c3d(b.trim(0, b.n_frames - 10), tmp_path / "short30.c3d")
+    blind = a.copy()
+    blind.positions[:, a.names.index("R_HAND")] = np.nan
+    write_c3d(blind, tmp_path / "blind.c3d")
+    write_c3d(Markers(a.names, np.full_like(a.positions, np.nan), 30.0), tmp_path / "none.c3d")
+    header = "file,source,subject,trial,category,label,partner_file,fps,frames,description\n"
+    rows = [
+        f"a60.c3d,mine,p,1,interaction,handshake,b30.c3d,60,{fast.n_frames},",
+        f"b30.c3d,mine,p,1,interaction,handshake,a60.c3d,30,{b.n_frames},",
+        f"a60.c3d,mine,p,2,interaction,handshake,short30.c3d,60,{fast.n_frames},",
+        f"short30.c3d,mine,p,2,interaction,handshake,a60.c3d,30,{b.n_frames - 10},",
+        f"blind.c3d,mine,p,3,interaction,handshake,none.c3d,30,{a.n_frames},",
+        f"none.c3d,mine,p,3,interaction,handshake,blind.c3d,30,{a.n_frames},",
+    ]
+    (tmp_path / "INDEX.csv").write_text(header + "\n".join(rows[:2]) + "\n")
+    main(["data", "check", "--data", str(tmp_path), "--json"])
+    assert json.loads(capsys.readouterr().out)["findings"] == []
+    pair = MocapIndex.load(tmp_path).pairs()[0]
+    loaded = MocapIndex.load(tmp_path).load_pair(*pair)
+    assert loaded[0].n_frames == loaded[1].n_frames == fast.n_frames  # nothing cut
+    (tmp_path / "INDEX.csv").write_text(header + "\n".join(rows[2:]) + "\n")
+    with pytest.raises(SystemExit) as exit_:
+        main(["data", "check", "--data", str(tmp_path), "--json"])
+    assert exit_.value.code == 1
+    findings = json.loads(capsys.readouterr().out)["findings"]
+    found = {(f["file"], f["level"], f["problem"]) for f in findings}
+    brought = 2 * (b.n_frames - 10) - 1
+    assert found == {
+        ("a60.c3d", "note", f"{fast.n_frames} frames at 60 fps, its partner short30.c3d "
+         f"{b.n_frames - 10} at 30 ({brought} at 60): the pair is cut to the shorter"),
+        ("blind.c3d", "note", "marker R_HAND never seen: a model trained on this take leaves "
+         "it out; one that uses it cannot answer it"),
+        ("none.c3d", "error", "no marker is seen in any frame: nothing recorded"),
+    }  # fmt: skip

@@ -94,7 +94,7 @@ class Markers:
         fps = check_rate(fps, "resampling frame rate")
         if self.n_frames < 2 or np.isclose(fps, self.fps):
             return Markers(self.names, self.positions, float(fps), self.name, self.source)
-        n = max(1, int(np.floor((self.n_frames - 1) * fps / self.fps + 1e-9)) + 1)
+        n = resampled_frames(self.n_frames, self.fps, fps)
         src = np.arange(n) * self.fps / fps
         lo = np.clip(np.floor(src).astype(int), 0, self.n_frames - 1)
         hi = np.minimum(lo + 1, self.n_frames - 1)
@@ -165,3 +165,12 @@ def not_found(have: tuple[str, ...] | list[str], missing: list[str] | tuple[str,
     return (
         f"markers not found: {', '.join(missing)} (the take has {first_names(have, 8) or 'none'})"
     )
+
+
+def resampled_frames(n_frames: int, fps: float, to_fps: float) -> int:
+    """How many frames ``n_frames`` at ``fps`` give at ``to_fps`` (:meth:`Markers.resample`,
+    as :meth:`~markovmotion.core.motion.Motion.resample`: the same span, its last frame at
+    or before the input's)."""
+    if n_frames < 2 or np.isclose(fps, to_fps):
+        return n_frames
+    return max(1, int(np.floor((n_frames - 1) * to_fps / fps + 1e-9)) + 1)

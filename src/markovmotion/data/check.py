@@ -8,8 +8,12 @@ here, not in the tenth fold), and
 
 * its frame count is compared with ``frames`` (the file's own count, CMU's reference frame
   included; 0 or empty: not checked);
-* a two-person take's ``partner_file`` must be listed, name this take back, and hold as many
-  frames (a pair is cut to the shorter when loaded: said as a note);
+* a two-person take's ``partner_file`` must be listed, name this take back, and last as long
+  (a pair is cut to the shorter when loaded, the partner first brought to this take's
+  ``fps``: said as a note; two files at two rates are compared at one);
+* a marker take (C3D) whose person is never seen is an error (nothing to learn or answer),
+  one whose marker is never seen a note (a model trained on it leaves the marker out; one
+  that uses the marker cannot answer it);
 * a two-person take without ``subject`` cannot be held out by people (a note: cross-validation
   then leaves one take out at a time);
 * a file listed twice is an error;
@@ -29,6 +33,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
+from markovmotion.core.markers import Markers, resampled_frames
 from markovmotion.data.index import Entry, MocapIndex, rate_disagrees
 from markovmotion.errors import MarkovMotionError
 from markovmotion.io import base_suffix, read_motion
@@ -77,17 +84,44 @@ def file_frames(entry: Entry) -> tuple[int, float | None]:
     Raises:
         MarkovMotionError: the file cannot be read (named, with the problem).
     """
+    n, rate, _ = _read(entry)
+    return n, rate
+
+
+def _read(entry: Entry) -> tuple[int, float | None, list[Finding]]:
+    """:func:`file_frames`, and what a marker take's unseen samples say (:func:`_unseen`)."""
     suffix = base_suffix(entry.file)
     if suffix == ".c3d":
         markers = read_c3d(entry.path)
-        return markers.n_frames, markers.fps
+        return markers.n_frames, markers.fps, _unseen(entry, markers)
     if suffix == ".bvh":
         try:
             motion = read_motion(entry.path)  # the header's rate
-            return motion.n_frames, motion.fps
+            return motion.n_frames, motion.fps, []
         except MarkovMotionError:  # e.g. a Frame Time of 0: the index's rate is read
             pass
-    return read_motion(entry.path, fps=entry.fps).n_frames, None
+    return read_motion(entry.path, fps=entry.fps).n_frames, None, []
+
+
+def _unseen(entry: Entry, markers: Markers) -> list[Finding]:
+    """A C3D take whose every sample is unseen (an error: no model can learn or answer it),
+    or whose markers are each never seen (a note naming them)."""
+    seen = markers.visible()
+    if not seen.any():
+        return [Finding(entry.file, "error", "no marker is seen in any frame: nothing recorded")]
+    never = [markers.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
+    if not never:
+        return []
+    s = "s" if len(never) > 1 else ""
+    return [
+        Finding(
+            entry.file,
+            "note",
+            f"marker{s} {', '.join(never[:8])}{' ...' if len(never) > 8 else ''} never seen: "
+            f"a model trained on this take leaves {'them' if s else 'it'} out; one that uses "
+            f"{'them' if s else 'it'} cannot answer it",
+        )
+    ]
 
 
 def check_index(index: MocapIndex) -> list[Finding]:
@@ -105,9 +139,10 @@ def check_index(index: MocapIndex) -> list[Finding]:
             continue
         try:
             with _warnings_caught() as caught:  # what reading it warns of (a unit): a note
-                n, rate = file_frames(e)
+                n, rate, unseen = _read(e)
             frames[e.file] = n
             found += [Finding(e.file, "note", w.removeprefix(f"{e.path}: ")) for w in caught]
+            found += unseen
         except MarkovMotionError as exc:  # the problem and line: the row names the file
             line = getattr(exc, "line", None)
             what = getattr(exc, "problem", str(exc)) + (f" (line {line})" if line else "")
@@ -142,14 +177,26 @@ def _pair_findings(e: Entry, listed: dict[str, Entry], frames: dict[str, int]) -
             )
         )
     mine, theirs = frames.get(e.file), frames.get(other.file)
-    if mine is not None and theirs is not None and mine != theirs and e.file < other.file:
-        out.append(
-            Finding(
-                e.file,
-                "note",
-                f"{mine} frames, its partner {other.file} {theirs}: the pair is cut to the shorter",
+    if mine is not None and theirs is not None and e.file < other.file:
+        if e.fps == other.fps or not (e.fps and other.fps):
+            if mine != theirs:
+                out.append(
+                    Finding(
+                        e.file,
+                        "note",
+                        f"{mine} frames, its partner {other.file} {theirs}: the pair is cut "
+                        "to the shorter",
+                    )
+                )
+        elif (brought := resampled_frames(theirs, other.fps, e.fps)) != mine:
+            out.append(
+                Finding(
+                    e.file,
+                    "note",
+                    f"{mine} frames at {e.fps:g} fps, its partner {other.file} {theirs} at "
+                    f"{other.fps:g} ({brought} at {e.fps:g}): the pair is cut to the shorter",
+                )
             )
-        )
     if not e.subject:
         out.append(
             Finding(
