@@ -427,6 +427,26 @@ def test_one_cameras_video_at_another_rate_than_the_others_is_refused(real_copy,
         load_cameras(real_copy)
 
 
+def test_the_default_method_refuses_views_at_rates_of_their_own_in_one_line(real_copy, capsys):
+    """``--method auto`` (the default) of ``track`` and ``dualhmm respond --video`` on cam1
+    re-encoded at 30 fps among videos at 60: the one line of the tracker that reads every
+    view, as with ``--method triangulate`` (the method's choice had read the camera file and
+    said its note on cam1 first: two lines)."""
+    frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
+    _replace(real_copy / "cam1.mp4", frames, 30.0)
+    for args in (
+        ["track", "--video", str(real_copy)],
+        ["dualhmm", "respond", "--model", str(real_copy / "partner.npz"), "--video",
+         str(real_copy), "--out", str(real_copy / "composite.mp4")],
+    ):  # fmt: skip
+        new_command()
+        with pytest.raises(SystemExit) as exc:
+            main(args)
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and len(err.splitlines()) == 1, err
+        assert "cam1.mp4 is 30 fps by its own header, the other views 60" in err
+
+
 def test_a_track_cut_by_a_short_video_offers_no_reference_rate(real_copy, capsys):
     """cam2 cut to 3 frames stops the particle filter there (said); the reference's note had
     then guessed "if both span the same time, the reference is at 2e+03 fps", a rate that

@@ -302,6 +302,35 @@ def test_cameras_without_a_background_image_are_one_note(take, tmp_path, capsys)
     assert run.err.count("median background") == 1 and f"{said}\n" in run.err, run.err
 
 
+def test_the_camera_file_is_read_once_per_command(
+    rendered, take, body, dual_model, tmp_path, monkeypatch
+):
+    """``track`` (the method's choice, the filter, ``--truth`` before and after the tracking)
+    and ``dualhmm respond --video`` read and check the camera file once, and hand what they
+    read to every reader (it had been read five and two times); so does ``track_take`` given
+    the file's path."""
+    import markovmotion.video.cameras as cameras
+    from markovmotion.video.multiview import track_take
+
+    reads = []
+    read = cameras.read_cameras
+
+    def counted(path):
+        reads.append(path)
+        return read(path)
+
+    monkeypatch.setattr(cameras, "read_cameras", counted)
+    small = ["--body-model", "interaction", "--particles", "10", "--layers", "1"]
+    main(["track", "--video", str(rendered), "--truth", str(take[1]), *small,
+          "--out", str(tmp_path / "a.bvh")])  # fmt: skip
+    assert len(reads) == 1
+    main(["dualhmm", "respond", "--model", str(dual_model), "--video", str(rendered),
+          "--method", "apf", *small, "--out", str(tmp_path / "c.mp4")])  # fmt: skip
+    assert len(reads) == 2
+    summary = track_take(rendered, body, rendered / "cameras.json", take[1], 10, 1)[2]
+    assert len(reads) == 3 and "mpjpe_mm" in summary
+
+
 def test_seed_changes_the_draw_and_the_same_seed_repeats_it(rendered, tmp_path):
     """The tracker's random draws come from ``--seed``: two seeds give two tracks, one seed
     the same track twice (issue 24: seeds 0 and 1 once gave byte-identical files)."""

@@ -43,9 +43,10 @@ _SAID: set[tuple[str, str]] = set()
 
 def say(lines: Sequence[str], notes: list[str] | None = None, about: object = "") -> None:
     """Print each note (``"note: ..."``) not printed before in this command about the same
-    file (``about``), and add every one to ``notes`` if given: a command reads a camera
-    file more than once (the CLI, then the tracker, then ``--truth``), and a summary's
-    ``notes`` must hold them all the same."""
+    file (``about``), and add every one to ``notes`` if given: a command takes its camera
+    file more than once (the CLI, then the tracker, then ``--truth``; read once,
+    :func:`~markovmotion.video.cameras.read_camera_file`), and a summary's ``notes`` must
+    hold them all the same."""
     for line in lines:
         key = (str(about), line)
         if key not in _SAID:

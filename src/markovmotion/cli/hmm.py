@@ -383,6 +383,9 @@ def respond(
         raise typer.BadParameter("--method, --guide and --person are how A is tracked in --video")
     chose = None
     if video is not None:
+        from markovmotion.video.cameras import read_camera_file
+
+        cameras = read_camera_file(video, cameras)  # read once: every reader takes it so
         method, chose = method_for(
             ctx, method, video, cameras, None, FILTER_OPTIONS, realtime, "respond"
         )

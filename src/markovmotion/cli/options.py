@@ -478,13 +478,16 @@ def method_for(
     ``views``), the particle filter's own options (``filter_options``, parameter names)
     given on the command line or otherwise ``asked`` for, and the note saying what ``auto``
     chose (for the summary's notes: printed after the work, so that a refusal before it
-    stays one line); ``command``: ``track`` or ``respond``, whose note it is."""
-    from markovmotion.video.cameras import camera_file, load_cameras, lone_video
+    stays one line); ``command``: ``track`` or ``respond``, whose note it is. The camera
+    file's cameras are counted, its notes left to the reader that takes it (said here, they
+    had come before the refusal of a tracker that reads every view: two lines)."""
+    from markovmotion.video.cameras import lone_video, read_camera_file
     from markovmotion.video.multiview import resolve_method
 
     if method != "auto":
         return method, None
-    n = 1 if lone_video(video) else len(load_cameras(camera_file(video, cameras), paired=False)[0])
+    reading = read_camera_file(video, cameras).reading
+    n = 1 if lone_video(video) or reading is None else len(reading.cameras)
     given = any(  # by the source's name: Typer 0.2x carries a click of its own
         getattr(ctx.get_parameter_source(name), "name", "DEFAULT") != "DEFAULT"
         for name in filter_options

@@ -237,7 +237,9 @@ def track(
     filtering (write A as BVH); ``--method auto`` picks (:func:`~markovmotion.video.
     multiview.resolve_method`)."""
     from markovmotion.io.files import base_suffix
+    from markovmotion.video.cameras import read_camera_file
 
+    cameras = read_camera_file(video, cameras)  # read once: every reader below takes it so
     method, chose = method_for(
         ctx, method, video, cameras, views, FILTER_OPTIONS,
         asked=out is not None and base_suffix(out) != ".c3d",
@@ -259,19 +261,18 @@ def track(
         said = check_truth(truth, video, cameras)
         if said:
             err_console.print(said, highlight=False)
-    from markovmotion.video.cameras import camera_file, camera_videos, load_cameras, lone_video
+    from markovmotion.video.cameras import camera_videos, load_cameras, lone_video
 
     guided, note, cams, first_skip = False, None, [], 0
-    if method == "apf" or person is not None:  # a bad camera file, a missing video: first
-        where = camera_file(video, cameras)
-        cams, doc = load_cameras(where, paired=not lone_video(video))
+    if method == "apf" or person is not None:  # a missing video: first
+        cams, doc = load_cameras(cameras, paired=not lone_video(video))
         first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
         if not lone_video(video):
-            camera_videos(where, cams)
+            camera_videos(cameras, cams)
     if lone_video(video):  # one camera's video
         cams = [c for c in cams if Path(c.video).name == video.name][:1] or cams[:1]
-    if views is not None and not cams:
-        cams, _ = load_cameras(camera_file(video, cameras))
+    if views is not None and not cams:  # one camera's video read alone: others' rates noted
+        cams, _ = load_cameras(cameras, paired=method != "monocular")
     if views is not None and views > len(cams):  # it had run on fewer without a word
         print_notes([f"note: --views {views}: the camera file has {len(cams)}, all used"])
     if method == "apf":

@@ -29,6 +29,7 @@ file and the field.
 
 from __future__ import annotations
 
+import copy
 import difflib
 import functools
 import json
@@ -299,6 +300,9 @@ class CameraFile(type(Path())):  # type: ignore[misc]  # PosixPath or WindowsPat
 
     #: The folder ``--video`` named (None on a path made from this one: its parent, ...).
     videos: Path | None = None
+    #: The file as read once (:func:`read_camera_file`), which :func:`load_cameras` takes
+    #: rather than reading it again (None: read it).
+    reading: CameraReading | None = None
 
 
 def video_folders(path: str | os.PathLike[str]) -> list[Path]:
@@ -322,6 +326,8 @@ def camera_file(video: str | os.PathLike[str], cameras: str | os.PathLike[str] |
     video = Path(video)
     if not video.exists():
         raise MotionFormatError(video, "no such video file or folder")
+    if isinstance(cameras, CameraFile) and cameras.reading is not None:
+        return cameras  # read already (read_camera_file), with where its videos are
     if cameras is not None:
         if not video.is_dir() or lone_video(video):
             return Path(cameras)
@@ -367,22 +373,72 @@ def load_cameras(
 ) -> tuple[list[CalibratedCamera], dict]:
     """Cameras of ``cameras.json`` (or of the folder holding it) and the whole document,
     whose ``fps`` is the file's or, without one, the rate the videos' own headers agree on;
-    each camera's ``t`` in mm whatever the file's ``units``.
+    each camera's ``t`` in mm whatever the file's ``units`` (:func:`read_cameras`; a path
+    from :func:`read_camera_file` is not read again).
 
     What may be wrong with a file that reads (keys it does not know, a video's header giving
     another rate, no ``fps``, a principal point far from the image's middle, cameras
     placed as if in another unit or below the floor, R and t that look like the cameras'
-    poses) is said in notes, printed once per command (:func:`say`: a command reads its
+    poses) is said in notes, printed once per command (:func:`say`: a command may take its
     camera file more than once) and added to ``notes`` if given, for a summary's ``notes``.
+
+    Raises:
+        MotionFormatError: what :func:`read_cameras` raises; and with ``paired`` (a command
+            that reads the views together; one that reads one camera's video is told in a
+            note), videos at rates of their own.
+    """
+    reading = path.reading if isinstance(path, CameraFile) else None
+    reading = reading or read_cameras(path)
+    if paired and reading.unpaired:
+        raise MotionFormatError(reading.file, reading.unpaired)
+    say(reading.notes, notes, reading.file.resolve())
+    return list(reading.cameras), copy.deepcopy(reading.doc)
+
+
+@dataclass(frozen=True)
+class CameraReading:
+    """A camera file as :func:`read_cameras` read it: its cameras, its document (``fps``
+    filled in), the notes on it, and why its views cannot be read together (their videos'
+    own frame rates disagree; None: they can), which only a reader of every view refuses."""
+
+    file: Path
+    cameras: tuple[CalibratedCamera, ...]
+    doc: dict
+    notes: tuple[str, ...]
+    unpaired: str | None = None
+
+
+def read_camera_file(
+    video: str | os.PathLike[str], cameras: str | os.PathLike[str] | None = None
+) -> CameraFile:
+    """The camera file of ``video`` (:func:`camera_file`) read once, as a path to it that
+    carries what was read (:class:`CameraReading`): given to a reader as its camera file,
+    :func:`camera_file` and :func:`load_cameras` take that rather than reading and checking
+    the file again (a ``track`` command had read it up to four times: its method's choice,
+    the tracker, ``--truth``). Its notes are said when a reader takes it.
+
+    Raises:
+        MotionFormatError: ``video`` does not exist, or what :func:`read_cameras` raises."""
+    where = camera_file(video, cameras)
+    if isinstance(where, CameraFile) and where.reading is not None:
+        return where
+    out = CameraFile(where)
+    out.videos = getattr(where, "videos", None)
+    out.reading = read_cameras(where)
+    return out
+
+
+def read_cameras(path: str | os.PathLike[str]) -> CameraReading:
+    """Read and check the camera file ``path`` (or the folder holding it) once, for
+    :func:`load_cameras`: only the notes on keys it does not know are said here (before an
+    error they may explain); the others when a reader takes the file.
 
     Raises:
         MotionFormatError: no such file, not JSON (a calibration file given instead is
             named as one), another ``units`` than mm, cm or m, or a camera without valid
             size, intrinsics, an orthonormal rotation, a translation, or with distortion
             coefficients OpenCV does not take; no ``fps`` and no rate the videos agree
-            on; videos at rates of their own (``paired``, for a command that reads the
-            views together; one that reads one camera's video is told in a note); R and t
-            that are surely the cameras' poses.
+            on; R and t that are surely the cameras' poses.
     """
     folders = video_folders(path)
     path = Path(path)
@@ -399,7 +455,8 @@ def load_cameras(
         raise MotionFormatError(
             path, f"'cameras' must be a list of 1 to {MAX_CAMERAS} cameras{given}"
         )
-    say(unknown_key_notes(path, doc), notes, path.resolve())  # a typo'd key before its error
+    lines = unknown_key_notes(path, doc)
+    say(lines, None, path.resolve())  # a typo'd key before its error
     fps = doc.get("fps")
     if fps is not None and (
         isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (0 < fps <= 1000)
@@ -438,11 +495,13 @@ def load_cameras(
     problem, unambiguous = convention_problem(out)
     if problem and unambiguous:
         raise MotionFormatError(path, problem)
-    lines: list[str] = [f"note: {path.name}: {problem}"] if problem else []
+    lines += [f"note: {path.name}: {problem}"] if problem else []
+    unpaired = None
     if fps is None:
         fps = _rate_of_videos(path, folders, out, lines)
     else:
-        lines += _rate_notes(path, folders, out, float(fps), paired)
+        rated, unpaired = _rate_notes(folders, out, float(fps))
+        lines += rated
     doc["fps"] = float(fps)
     lines += centre_notes(out) + _numbering_gap_notes(folders, out)
     if not problem:  # cameras the wrong way round are placed anywhere
@@ -451,8 +510,7 @@ def load_cameras(
                                  "", "is its world Y up?")  # fmt: skip
         lines += [f"note: {path.name}: {line}" for line in placed] + _twin_notes(path, out)
     lines += _numbering_notes(path, out)
-    say(lines, notes, path.resolve())
-    return out, doc
+    return CameraReading(path, tuple(out), doc, tuple(lines), unpaired)
 
 
 #: The ``units`` a camera file's ``t`` may be in, and each one's millimetres.
@@ -715,43 +773,36 @@ def _same_rate(a: float, b: float) -> bool:
 
 
 def _rate_notes(
-    path: Path,
-    folders: Sequence[Path],
-    cameras: list[CalibratedCamera],
-    fps: float,
-    paired: bool = True,
-) -> list[str]:
+    folders: Sequence[Path], cameras: list[CalibratedCamera], fps: float
+) -> tuple[list[str], str | None]:
     """A note for each camera's video whose own frame rate is not the camera file's ``fps``,
-    which is the one used, when the videos agree with one another (within 1 %): a video
-    re-encoded at 30 fps under a file saying 60 was tracked at twice its speed, and paired
-    with a reference frame by frame, without a word.
-
-    Raises:
-        MotionFormatError: the videos' own rates disagree (one camera's video re-encoded at
-            30 fps among others at 60): the views are paired frame by frame, so no ``fps``
-            of the file is right for all of them (the note had advised setting it); the
-            odd videos, their rates and the others' rate, to resample them to; with
-            ``paired`` False (a command that reads one camera's video) a note for each video
-            off the file's rate instead."""
+    which is the one used: a video re-encoded at 30 fps under a file saying 60 was tracked at
+    twice its speed, and paired with a reference frame by frame, without a word. And, when
+    the videos' own rates disagree (one camera's video re-encoded at 30 fps among others at
+    60), why the views cannot be read together (None: they can): they are paired frame by
+    frame, so no ``fps`` of the file is right for all of them (the note had advised setting
+    it); the odd videos, their rates and the others' rate, to resample them to
+    (:func:`load_cameras` refuses it for a command that reads every view)."""
     known = _header_rates(folders, cameras)
     rates = list(known.values())
-    if paired and any(not _same_rate(r, rates[0]) for r in rates):
+    problem = None
+    if any(not _same_rate(r, rates[0]) for r in rates):
         # the others' rate: the one most videos have (of as many, the file's)
         groups = [[r for r in rates if _same_rate(r, q)] for q in rates]
         usual = max(groups, key=lambda g: (len(g), _same_rate(g[0], fps)))[0]
         odd = [f"{name} is {r:g} fps" for name, r in known.items() if not _same_rate(r, usual)]
         whose, it = ("its", "it") if len(odd) == 1 else ("their", "them")
-        raise MotionFormatError(
-            path,
+        problem = (
             f"{', '.join(odd)} by {whose} own header, the other views {usual:g}: resample "
-            f"{it} to {usual:g} (the views are paired frame by frame)",
+            f"{it} to {usual:g} (the views are paired frame by frame)"
         )
-    return [
+    notes = [
         f"note: {name} is {own:g} fps by its own header, the camera file says {fps:g}: "
         "the camera file's rate is used (set its fps if the video's is right)"
         for name, own in known.items()
         if not _same_rate(own, fps)
     ]
+    return notes, problem
 
 
 def _rate_of_videos(

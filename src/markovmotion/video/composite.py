@@ -34,11 +34,11 @@ from markovmotion.video.annealed_particle_filter import (
 from markovmotion.video.body_model import BODY_SHAPE, BodyModel, marker_shape
 from markovmotion.video.cameras import (
     CalibratedCamera,
-    camera_file,
     camera_of_video,
     camera_videos,
     load_cameras,
     lone_video,
+    read_camera_file,
 )
 from markovmotion.video.multiview import track_take
 from markovmotion.video.render import BodyShape, read_frames, write_video
@@ -184,7 +184,7 @@ def respond_in_video(
         return _respond_live(model, video, out, body, cameras, view, particles, layers, max_frames)
     dual = _load_partner_model(model)
     check_writable(out)  # before the tracking, not after
-    where = camera_file(video, cameras)
+    where = cameras = read_camera_file(video, cameras)  # once: the tracker takes it so
     single = lone_video(video)
     cams, _ = load_cameras(where, paired=not single)
     if single:  # one camera's video: that camera
@@ -246,7 +246,7 @@ def respond_mediapipe(
         raise ValueError(f"tracker must be monocular or triangulate, got {tracker!r}")
     dual = _load_partner_model(model)
     check_writable(out)  # before the tracking, not after
-    where = camera_file(video, cameras)
+    where = cameras = read_camera_file(video, cameras)  # once: the triangulation takes it so
     cams, doc = load_cameras(where, paired=tracker == "triangulate" and not lone_video(video))
     if lone_video(video):  # one camera's video
         if tracker == "triangulate":

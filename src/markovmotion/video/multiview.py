@@ -504,7 +504,9 @@ def track_take(
     segments measured from MediaPipe's landmarks of every view first (the summary's
     ``body_size``; the motion is on the skeleton so scaled).
     """
+    from markovmotion.video.cameras import read_camera_file
 
+    cameras = read_camera_file(video, cameras)  # once: the tracker and --truth take it so
     first = None
     if start is not None:  # the first frame's pose, on the body model's skeleton
         first = body.states_of(read_listed_motion(start).trim(0, 1))[0]
