@@ -581,6 +581,17 @@ def test_evaluation_table_lists_partners_not_parameters(capsys):
     assert "mean_shape" in out and "multiple_hypotheses_ml *" in out and "584" in out
     assert "sigma" not in out and "resync" not in out
     assert "jump p90" in out and "385.8" in out and "real partner" in out and "37.9" in out
+    # each row and measure is said under the table (a new user saw single_hypothesis_paper
+    # and body-centred without a word on what they were)
+    said = " ".join(out.split())
+    assert "mean_shape: the training people's mean shape" in said
+    assert "body-centred: each person about its own centroid" in said
+    assert "single_hypothesis:" not in said  # no row, no word on it
+    result["single_hypothesis_paper"] = 99.0
+    result["placement_mm"]["single_hypothesis_paper"] = 600.0
+    _print_errors(result, "virtual partner", "ml")
+    said = " ".join(capsys.readouterr().out.split())
+    assert "single_hypothesis_paper: one hypothesis never re-synchronised" in said
 
 
 def test_a_skeleton_is_matched_by_its_joint_names_not_their_count(pair_partner, mocap):

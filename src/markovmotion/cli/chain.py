@@ -580,10 +580,26 @@ def crossval(
             )
 
 
+#: What each partner of an evaluation table is (docs/chain.md), said under the table.
+ROWS_SAID = {
+    "mean_shape": "the training people's mean shape, placed as the chain places its partner",
+    "single_hypothesis": "one hypothesis that re-synchronises (--resync, ours)",
+    "single_hypothesis_paper": "one hypothesis never re-synchronised (the paper's 5.1)",
+}
+
+
 def _print_errors(result: dict, title: str, response: str) -> None:
-    """One table row per partner; ``*`` marks the response reported as multiple_hypotheses."""
-    table = Table(title=title, caption=f"* multiple_hypotheses ({response} response)")
+    """One table row per partner; ``*`` marks the response reported as multiple_hypotheses;
+    the caption says what each row is (:data:`ROWS_SAID`)."""
     placement = result.get("placement_mm")
+    said = [f"{k}: {v}" for k, v in ROWS_SAID.items() if k in result]
+    caption = "; ".join([f"* multiple_hypotheses ({response} response)", *said])
+    if placement:
+        caption += (
+            "; body-centred: each person about its own centroid, facing +Z; world: where the "
+            "partner stands as well"
+        )
+    table = Table(title=title, caption=caption)
     fmt = ".1f" if result.get("unit") == "mm" else ".4g"  # mm to 0.1, as every table; fractions
     ms = result.get("per_frame_ms")
     jumps = result.get("jump_p90_mm")
