@@ -447,6 +447,22 @@ def test_the_default_method_refuses_views_at_rates_of_their_own_in_one_line(real
         assert "cam1.mp4 is 30 fps by its own header, the other views 60" in err
 
 
+def test_one_view_of_the_particle_filter_notes_another_cameras_rate(real_copy, capsys):
+    """cam1 re-encoded at 30 fps among videos at 60: the particle filter on cam0's video
+    alone (a lone video, or --views 1) reads no other view, so cam1's rate is a note, as
+    for --method monocular (it had been the refusal, after that note: two lines)."""
+    frames = list(itertools.islice(read_frames(REAL / "cam1.mp4"), 3))
+    _replace(real_copy / "cam1.mp4", frames, 30.0)
+    small = ["--particles", "10", "--layers", "1", "--max-frames", "2", "--json"]
+    for video, extra in ((real_copy / "cam0.mp4", []), (real_copy, ["--views", "1"])):
+        new_command()
+        main(["track", "--video", str(video), *extra, *small, "--out",
+              str(real_copy / "a.bvh")])  # fmt: skip
+        run = capsys.readouterr()
+        said = "note: cam1.mp4 is 30 fps by its own header, the camera file says 60"
+        assert json.loads(run.out)["views"] == 1 and run.err.count(said) == 1, run.err
+
+
 def test_a_track_cut_by_a_short_video_offers_no_reference_rate(real_copy, capsys):
     """cam2 cut to 3 frames stops the particle filter there (said); the reference's note had
     then guessed "if both span the same time, the reference is at 2e+03 fps", a rate that

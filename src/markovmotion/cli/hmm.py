@@ -464,8 +464,9 @@ def _respond_video(
             f"--realtime tracks with the particle filter: no --method {method}"
         )
     where = camera_file(video, cameras)
-    cams, doc = load_cameras(where)
     lone = lone_video(video)  # one camera's video file or folder of frames
+    # one camera's video read alone: the other cameras' videos at rates of their own noted
+    cams, doc = load_cameras(where, paired=not lone and method != "monocular")
     if not lone:
         camera_videos(where, cams)  # a missing video: fail before the work
     # the whole video's filter only (--realtime tracks frame by frame, monocular has its own)

@@ -265,7 +265,7 @@ def track(
 
     guided, note, cams, first_skip = False, None, [], 0
     if method == "apf" or person is not None:  # a missing video: first
-        cams, doc = load_cameras(cameras, paired=not lone_video(video))
+        cams, doc = load_cameras(cameras, paired=not lone_video(video) and views != 1)
         first_skip = cams[0].skip  # the reference is numbered in the first camera's frames
         if not lone_video(video):
             camera_videos(cameras, cams)

@@ -879,7 +879,9 @@ def open_video(
     """
     cams_path = camera_file(video, cameras_file)
     ended: list[str] = []  # the camera file's notes, then a video that ended before the others
-    cameras, doc = load_cameras(cams_path, ended)
+    # one view read: the other cameras' videos at rates of their own are noted, not refused
+    one = lone_video(video) or views == 1
+    cameras, doc = load_cameras(cams_path, ended, paired=not one)
     if lone_video(video):
         k = camera_of_video(cameras, video, ended)  # one camera's video
         cameras, videos = [cameras[k]], [Path(video)]
