@@ -553,3 +553,59 @@ def test_unseen_markers_in_a_take_are_left_out_of_its_errors_not_a_crash(model, 
     np.testing.assert_allclose(res.pose_errors["mean_pose"][:5], clean.pose_errors["mean_pose"][:5])
     report = summarise([res, clean], model)["overall"]
     assert all(np.isfinite(report[k]) for k in ("windowed_mm", "mean_pose_mm", "observer_accuracy"))
+
+
+def test_respond_refuses_markers_it_cannot_answer_from_in_one_line(
+    model, marker_takes, tmp_path, capsys
+):
+    """A tracker that never saw one of the model's markers (or never all at once) gave a
+    take of frames each missing a marker: the dual HMM treats such a frame as missing, and
+    ``respond`` answered every frame from nothing (B 2.5 m from the real B on a Bütepage
+    handshake) under a warning. Now one line, exit 2, naming the marker; a take with some
+    frames whole is answered as before."""
+    path = tmp_path / "model.npz"
+    model.save(path)
+    a = marker_takes[2][0]
+    never, scattered, some = a.copy(), a.copy(), a.copy()
+    never.positions[:, 3] = np.nan
+    for t in range(a.n_frames):
+        scattered.positions[t, t % a.n_markers] = np.nan
+    some.positions[10:20] = np.nan
+    args = ["dualhmm", "respond", "--model", str(path), "--out", str(tmp_path / "b.c3d")]
+    for take, words in (
+        (never, f"{a.names[3]} never seen: the model answers from all {a.n_markers} of its"),
+        (scattered, f"no frame shows all {a.n_markers} of the model's markers"),
+    ):
+        write_c3d(take, tmp_path / "a.c3d")
+        with pytest.raises(SystemExit) as exc:
+            main([*args, "--input", str(tmp_path / "a.c3d")])
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and words in err and "\n" not in err, err
+        assert not (tmp_path / "b.c3d").exists()
+    write_c3d(some, tmp_path / "a.c3d")
+    main([*args, "--input", str(tmp_path / "a.c3d")])
+    assert np.isfinite(read_c3d(tmp_path / "b.c3d").positions).all()
+
+
+def test_evaluate_table_shows_the_body_centred_baselines_its_aims_cite(model, marker_takes, capsys):
+    """The aims line compares the body-centred error with nearest neighbour and GMR: their
+    numbers are in the table it follows (a new user's table showed standard, windowed and
+    mean pose alone, and the aims cited a 121.1 mm found nowhere), and the known-motion and
+    true-place columns are said what they are."""
+    from markovmotion.cli.hmm import _print_table
+    from markovmotion.evaluate.hmm import summarise
+
+    report = summarise([evaluate_pair(model, *marker_takes[2], "take", "handshake")], model)
+    _print_table(report)
+    out, err = capsys.readouterr()
+    head, overall = out.splitlines()[1].split(","), out.splitlines()[2].split(",")
+    body = report["overall"]["body_centred"]
+    column = next(i for i, h in enumerate(head) if h.startswith("body-centred"))
+    names = head[column].removeprefix("body-centred ").split("/")
+    keys = {"std": "standard_mm", "win": "windowed_mm", "mean": "mean_pose_mm",
+            "nn": "nearest_neighbour_mm", "gmr": "gmr_mm"}  # fmt: skip
+    assert names[:4] == ["std", "win", "mean", "nn"]
+    assert overall[column] == "/".join(f"{body[keys[n]]:.1f}" for n in names)
+    said = " ".join(err.split())
+    assert "known motion: the real B's motion moved onto the training people's mean" in said
+    assert "at true place: the world error with B moved onto the real B's centroid" in said

@@ -409,6 +409,7 @@ def respond(
     dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
+    _check_seen(dual, motion, input)
     if not np.isclose(motion.fps, dual.fps):
         err_console.print(f"resampling {input.name} from {motion.fps:g} to {dual.fps:g} fps")
         motion = _resample_stream(motion, broken, dual.fps)
@@ -540,6 +541,34 @@ def _check_combination(dual, input: Path, out: Path, as_c3d: bool) -> None:
         raise MotionFormatError(out, "the model was trained on markers: write B to a .c3d file")
 
 
+def _check_seen(dual, motion, input: Path) -> None:
+    """One line (exit 2) for markers of A the partner cannot answer from: a marker the model
+    sees never seen in the take, or no frame showing all of them (the dual HMM treats a
+    frame with a marker unseen as missing). Such a take had been answered from nothing, B
+    2.5 m from the real B, under a warning that every frame was treated as missing."""
+    from markovmotion.core.markers import Markers
+    from markovmotion.errors import MotionFormatError
+
+    if not isinstance(motion, Markers):
+        return
+    seen = dual.input_markers(motion)
+    visible = seen.visible()
+    never = [n for n, ok in zip(seen.names, visible.any(axis=0), strict=True) if not ok]
+    if never:
+        s = "s" if len(never) > 1 else ""
+        raise MotionFormatError(
+            input,
+            f"marker{s} {', '.join(never[:8])}{' ...' if len(never) > 8 else ''} never seen: "
+            f"the model answers from all {len(seen.names)} of its markers",
+        )
+    if not visible.all(axis=1).any():
+        raise MotionFormatError(
+            input,
+            f"no frame shows all {len(seen.names)} of the model's markers (each frame lacks "
+            "one): the model answers from whole frames",
+        )
+
+
 def _resample_stream(motion, broken: np.ndarray, fps: float):
     """Resample a stream whose broken frames are NaN; a new frame is broken if it touches one."""
     if not hasattr(motion, "rotations"):  # markers: a sample next to an unseen one is unseen
@@ -669,7 +698,9 @@ def _print_table(report: dict) -> None:
     }
     # the paper's trellis picks training frames: a model that regresses B has none to show
     paper = any(r["trellis"].get("paper") for r in rows.values())
-    heads = ("group", *cols, "body-centred std/win/mean", "known motion world/body")
+    # every world column body-centred too: the aims compare with nearest neighbour and GMR
+    body_head = "body-centred std/win/mean/nn" + ("/gmr" if "gmr_mm" in cols else "")
+    heads = ("group", *cols, body_head, "known motion world/body")
     heads = (*heads, "at true place win/mean", "paper trellis std/win", *jumps)
     heads = (*heads, "hand gap real/win", "observer", "latency median/p99 (µs)")
     for c in heads:
@@ -682,7 +713,7 @@ def _print_table(report: dict) -> None:
         cells = [
             name,
             *(f"{r[c]:.1f}" for c in cols),
-            "/".join(f"{body[k]:.1f}" for k in ("standard_mm", "windowed_mm", "mean_pose_mm")),
+            "/".join(f"{body[k]:.1f}" for k in cols),
             f"{r['known_motion_mm']:.1f}/{body['known_motion_mm']:.1f}",
             "/".join(f"{place[f'{k}_at_true_place_mm']:.1f}" for k in PLACED) if place else "-",
         ]
@@ -701,6 +732,13 @@ def _print_table(report: dict) -> None:
         "observer: a classifier's accuracy telling the partner from the real B given A, "
         "folds by pair of people, by take when one pair is tested (0.5: it cannot tell them "
         "apart; '-': one take)",
+        highlight=False,
+    )
+    err_console.print(
+        "known motion: the real B's motion moved onto the training people's mean posture "
+        "and place, a partner that knew B's every move but not B's posture or place "
+        "(docs/hmm.md); at true place: the world error with B moved onto the real B's "
+        "centroid (windowed/mean pose): what is left once B's place is right",
         highlight=False,
     )
     from markovmotion.evaluate.hmm import aims_line
