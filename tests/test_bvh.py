@@ -57,6 +57,32 @@ def test_frames_converted_in_runs_give_the_same_motion(mocap, monkeypatch):
     np.testing.assert_array_equal(in_runs.translations, whole.translations)
 
 
+def test_frame_lines_read_in_chunks_give_the_same_motion(mocap, monkeypatch):
+    """Frame lines are read LOADTXT_LINES at a time (one np.loadtxt call holds the
+    interpreter, and the web reads uploads in a worker thread); the chunks' seams change
+    nothing."""
+    import markovmotion.io.bvh as bvh
+
+    path = mocap.find("cmu/bvh/salsa_01.bvh.gz").path
+    whole = read_motion(path)
+    monkeypatch.setattr(bvh, "LOADTXT_LINES", 5)
+    in_chunks = read_motion(path)
+    np.testing.assert_array_equal(in_chunks.rotations, whole.rotations)
+    np.testing.assert_array_equal(in_chunks.translations, whole.translations)
+
+
+def test_a_blank_frame_line_is_an_error_naming_it(tmp_path):
+    """A blank line among the frames is a frame of no values, not skipped (the frames
+    after it would shift by one and the file would silently lose a frame)."""
+    lines = _valid_text().rstrip("\n").split("\n")
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    lines[first + 1] = ""
+    path = tmp_path / "blank.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(MotionFormatError, match=f"blank.bvh:{first + 2}: frame 1 has 0 values"):
+        read_motion(path)
+
+
 def test_header_fps_overridden_by_index(mocap):
     entry = mocap.query(label="salsa")[0]
     assert read_motion(entry.path).fps == pytest.approx(120, rel=1e-4)  # the header is wrong

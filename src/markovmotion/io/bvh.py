@@ -27,6 +27,7 @@ import io
 import logging
 import math
 import os
+import warnings
 from collections import defaultdict, deque
 from dataclasses import replace
 
@@ -372,9 +373,7 @@ def _parse_motion_block(
         )
     broken = np.zeros(n_frames, dtype=bool)
     try:
-        values = np.loadtxt(body, dtype=float, ndmin=2, comments=None)
-        if values.shape[1] != n_channels:
-            raise ValueError("wrong number of values")
+        values = _frame_rows(body, n_channels)
     except ValueError:
         if bad_frames != "missing":
             raise _locate_bad_row(path, body, n_channels, first_line + 2) from None
@@ -389,6 +388,32 @@ def _parse_motion_block(
         i = int(np.argmax(bad))
         raise MotionFormatError(path, f"NaN or infinite value in frame {i}", first_line + 2 + i)
     return values, frame_time, broken
+
+
+#: Frame lines read by one ``np.loadtxt`` call. One call is one C call that holds the
+#: interpreter: a 56 MB upload to the web page, parsed in a worker thread, held it for 363 ms
+#: (every live session stalled); 4,096 lines hold it for 20-40 ms, at the same total time.
+LOADTXT_LINES = 4096
+
+
+def _frame_rows(body: list[str], n_channels: int) -> np.ndarray:
+    """(F, n_channels) values of the frame lines, read :data:`LOADTXT_LINES` at a time.
+
+    Raises:
+        ValueError: a line is not ``n_channels`` numbers (a blank line too: ``loadtxt``
+            would skip it and the frames would shift by one).
+    """
+    values = np.empty((len(body), n_channels))
+    for start in range(0, len(body), LOADTXT_LINES):
+        with warnings.catch_warnings():  # blank lines only: "input contained no data"
+            warnings.simplefilter("ignore", UserWarning)
+            rows = np.loadtxt(
+                body[start : start + LOADTXT_LINES], dtype=float, ndmin=2, comments=None
+            )
+        if rows.shape != (min(LOADTXT_LINES, len(body) - start), n_channels):
+            raise ValueError("wrong number of lines or values")
+        values[start : start + len(rows)] = rows
+    return values
 
 
 def _rows_with_missing(body: list[str], n_channels: int) -> tuple[np.ndarray, np.ndarray]:
