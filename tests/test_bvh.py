@@ -280,3 +280,22 @@ def test_an_unusable_frame_time_asks_for_the_rate_the_command_line_way(
     assert exc.value.code == 2 and "not a usable frame rate (give the true frame rate: --fps" in err
     assert len(err.splitlines()) == 1
     assert read_motion(path, fps=30.0).fps == 30.0
+
+
+def test_an_end_site_written_with_a_name_is_read_as_end_site(tmp_path):
+    """Some exporters write ``End LeftToeBase_End`` for ``End Site`` (Mixamo characters
+    re-exported: such a file had been refused at its first end site, "expected 'Site'"):
+    it is the same motion; an end site is still named after its joint."""
+    m = make_motion(n_frames=4)
+    text = bvh_text(m)
+    path = tmp_path / "named.bvh"
+    for written in ("End spine_End", "END x"):
+        path.write_text(text.replace("End Site", written))
+        back = read_motion(path)
+        assert back.skeleton.names == m.skeleton.names
+        np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
+    # 'End' with nothing after it on its line, or two words, is still one error naming it
+    for broken, found in (("End\n", "'{'"), ("End a b", "'b'")):
+        path.write_text(text.replace("End Site", broken, 1))
+        with pytest.raises(MotionFormatError, match=f"expected .*, found {found}"):
+            read_motion(path)

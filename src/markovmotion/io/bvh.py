@@ -287,8 +287,17 @@ def _parse_hierarchy(tok: _Tokens, scale: float) -> Skeleton:
         if upper == "JOINT":
             stack.append(open_joint(index))
         elif upper == "END":
+            end_line = tok.line()
             tok.next("End Site")
-            tok.expect("Site")
+            # 'End Site', or 'End LeftToeBase_End' as some exporters write it (Mixamo
+            # characters re-exported: such a file had been refused at its first end site);
+            # the name, one word on End's line, is not kept: an end site is its joint's
+            after = tok.peek()
+            named = after is not None and after not in ("{", "}") and after.upper() != "SITE"
+            if named and tok.line() == end_line:
+                tok.next("end site name")
+            else:
+                tok.expect("Site")
             tok.expect("{")
             if f"{name}_end" in seen:
                 raise tok.error(f"joint name {name + '_end'!r} used twice")
