@@ -49,6 +49,10 @@ from markovmotion.models.hmm.dual import DualHMM
 from markovmotion.models.hmm.gaussian import GaussianHMM, safe_log
 
 N, DIMS, WINDOW = 64, 11, 10
+#: The windowed step's target, hmmlearn's ``decode`` per window over ours (docs/speed.md's
+#: table of issue 25's targets; this script had printed ">= 10x, median < 100 µs", the
+#: first version's, which the step has long met).
+STEP_TARGET = 150.0
 
 
 def random_model(seed: int = 0) -> GaussianHMM:
@@ -195,8 +199,9 @@ def main() -> None:
         table.add_row(name, f"{np.median(t):.1f}", f"{np.percentile(t, 99):.1f}", str(len(t)))
     console.print(table)
     speedup = np.median(w["hmmlearn"]) / np.median(w["ours"])
+    met = "met" if speedup >= STEP_TARGET else "not met"
     console.print(
-        f"median speed-up {speedup:.0f}x (target >= 10x, median < 100 µs); "
+        f"median speed-up {speedup:.0f}x (target >= {STEP_TARGET:.0f}x, docs/speed.md: {met}); "
         f"same decided states as hmmlearn: {w['agree']}"
     )
 

@@ -73,6 +73,20 @@ def test_benchmarks_import_what_exists(script: Path) -> None:
                 ), f"{script.name}: {node.module} has no {alias.name}"
 
 
+def test_the_windowed_steps_target_is_the_same_in_the_docs_and_its_benchmark() -> None:
+    """docs/speed.md's target for the windowed step against hmmlearn is the one
+    benchmarks/dualhmm_bench.py prints (it had printed ">= 10x" beside the docs' 150x)."""
+    script = ast.parse((ROOT / "benchmarks" / "dualhmm_bench.py").read_text(encoding="utf-8"))
+    target = next(
+        ast.literal_eval(node.value)
+        for node in script.body
+        if isinstance(node, ast.Assign) and ast.unparse(node.targets[0]) == "STEP_TARGET"
+    )
+    speed = (ROOT / "docs" / "speed.md").read_text(encoding="utf-8")
+    row = next(line for line in speed.splitlines() if line.startswith("| windowed step ("))
+    assert row.split(" | ")[4] == f">= {target:g}x", row
+
+
 def test_ci_runs_exactly_the_readme_test_command() -> None:
     """.ci/run is the README's test command (its browser step included), and the suite itself
     installs nothing: no package manager is called from the tests (issue 22)."""
