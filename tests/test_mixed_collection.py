@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from conftest import make_motion
 
+from markovmotion import read_motion
 from markovmotion.cli import main
 from markovmotion.core.markers import Markers
 from markovmotion.data.kinds import KIND_WORDS, choose_kind, counted, largest_group
@@ -453,3 +454,54 @@ def test_data_check_compares_a_pair_at_two_rates_by_time_and_names_markers_never
          "it out; one that uses it cannot answer it"),
         ("none.c3d", "error", "no marker is seen in any frame: nothing recorded"),
     }  # fmt: skip
+
+
+def _renamed(motion, prefix: str, seed: int):
+    """``motion``'s rig with every joint name given ``prefix`` (a namespace), and motion of
+    its own (``seed``)."""
+    m = make_motion(n_frames=motion.n_frames, seed=seed)
+    sk = replace(m.skeleton, names=tuple(prefix + n for n in m.skeleton.names))
+    return replace(m, skeleton=sk, name=f"{prefix or 'plain'}{seed}")
+
+
+def test_one_rig_under_another_namespace_is_the_same_skeleton(tmp_path: Path, capsys):
+    """A rig exported twice differs by a namespace alone (Mixamo's ``mixamorig:Hips``, a
+    character's ``Beta:Hips``, ``Hips``): the VLMM (and every model that needs the skeleton it
+    learnt) trains on them together and answers each, by name; it had called them another
+    skeleton. A rig whose names still differ is left out naming the joints that do."""
+    from markovmotion.io import write_motion
+
+    base = make_motion(n_frames=150)
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    takes = [("Beta:", 1), ("", 2), ("mixamorig:", 3), ("Beta:", 4)]
+    for i, (prefix, seed) in enumerate(takes):
+        write_motion(_renamed(base, prefix, seed), tmp_path / f"t{i}.bvh")
+        rows.append(f"t{i}.bvh,mine,,{i},dance,beta,,30,,")
+    (tmp_path / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    test = tmp_path / "test"
+    test.mkdir()
+    write_motion(_renamed(base, "mixamorig:", 5), test / "new.bvh")
+    other = _renamed(base, "", 6)
+    other = replace(other, skeleton=replace(other.skeleton, names=("hips", "lleg", "rleg",
+                                                                   "chest", "chest_end")))  # fmt: skip
+    write_motion(other, test / "other.bvh")
+    (test / "INDEX.csv").write_text(
+        rows[0] + "\nnew.bvh,mine,,1,dance,beta,,30,,\nother.bvh,mine,,2,dance,beta,,30,,\n"
+    )
+    model = tmp_path / "v.npz"
+    train = ["vlmm", "train", "--data", str(tmp_path), "--category", "dance"]
+    code, err = _run([*train, "--prototypes", "6", "--out", str(model)], capsys)
+    assert code == 0, err
+    assert not _notes(err)  # no take left out as another skeleton
+    assert Model.load(model).held_out_files_ == ["t3.bvh"]
+    for test_index, tested, other_skeleton in ((None, ["t3.bvh"], []),
+                                               (test, ["new.bvh"], ["other.bvh"])):  # fmt: skip
+        main(["vlmm", "evaluate", "--model", str(model), "--json"]
+             + (["--test", str(test_index)] if test_index else []))  # fmt: skip
+        report = json.loads(capsys.readouterr().out)
+        assert report["test_files"] == tested
+        assert report.get("left_out_other_skeleton", []) == other_skeleton
+    sk = read_motion(tmp_path / "t0.bvh").skeleton
+    assert sk.difference(read_motion(tmp_path / "t2.bvh").skeleton) is None
+    differs = sk.difference(read_motion(test / "other.bvh").skeleton, "the model's")
+    assert "the model's joint Beta:spine is not in it, which has chest instead" in differs

@@ -526,8 +526,9 @@ def test_markers_read_from_c3d_files_go_through_train_generate_predict_evaluate(
 def test_a_renamed_skeleton_says_which_joint_names_are_the_models(
     tmp_path, mocap, behaviour_model, capsys
 ):
-    """``vlmm predict`` of a take whose joints are renamed (as Mixamo's ``mixamorig:``): the
-    line said "(57 joints, expected 57; joints differ: abdomen, chest, ... and 99 more)",
+    """``vlmm predict`` of a take whose joints are renamed (as 3ds Max's ``Bip01 ``; a
+    namespace alone, Mixamo's ``mixamorig:``, is the same skeleton: test_mixed_collection):
+    the line said "(57 joints, expected 57; joints differ: abdomen, chest, ... and 99 more)",
     both sides' names mixed, end sites among them; now which are the model's, which the
     input's, in skeleton order, end sites (named after their joints) left out."""
     from dataclasses import replace
@@ -537,7 +538,7 @@ def test_a_renamed_skeleton_says_which_joint_names_are_the_models(
 
     dance = mocap.load_motion(mocap.find("cmu/bvh/indian_14.bvh.gz")).trim(0, 30)
     sk = dance.skeleton
-    renamed = replace(sk, names=tuple(f"mixamorig:{n}" for n in sk.names))
+    renamed = replace(sk, names=tuple(f"Bip01 {n}" for n in sk.names))
     take = tmp_path / "renamed.bvh"
     write_motion(replace(dance, skeleton=renamed), take)
     model = tmp_path / "m.npz"
@@ -550,7 +551,7 @@ def test_a_renamed_skeleton_says_which_joint_names_are_the_models(
     assert info.value.code == 2 and err == (
         f"error: {take}: the input's skeleton does not match (57 joints, the model's 57; the "
         f"model's joints {', '.join(joints[:5])} (and {len(joints) - 5} more) are not in the "
-        f"input, which has {', '.join('mixamorig:' + n for n in joints[:5])} "
+        f"input, which has {', '.join('Bip01 ' + n for n in joints[:5])} "
         f"(and {len(joints) - 5} more) instead)"
     )
     assert "_end" not in err

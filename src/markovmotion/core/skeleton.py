@@ -20,6 +20,12 @@ ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 VALID_CHANNELS = POSITION_CHANNELS + ROTATION_CHANNELS
 
 
+def bare_name(name: str) -> str:
+    """A joint's name as skeletons are compared: without a namespace (the text up to the
+    last ``:``)."""
+    return name.rsplit(":", 1)[-1]
+
+
 @dataclass(frozen=True, eq=False)
 class Skeleton:
     """A kinematic tree in depth-first order (every parent precedes its children).
@@ -101,7 +107,16 @@ class Skeleton:
         return np.linalg.norm(self.offsets, axis=1)
 
     def same_topology(self, other: Skeleton) -> bool:
-        return self.names == other.names and np.array_equal(self.parents, other.parents)
+        """Whether ``other`` has the same joints in the same tree: the same names, or names
+        that differ only by a namespace (Mixamo's ``mixamorig:Hips``, a character's
+        ``Beta:Hips``, ``Hips``: the same rig exported twice) where that still names each
+        joint apart, as marker labels' subject prefixes are matched."""
+        if not np.array_equal(self.parents, other.parents):
+            return False
+        if self.names == other.names:
+            return True
+        ours = tuple(map(bare_name, self.names))
+        return ours == tuple(map(bare_name, other.names)) and len(set(ours)) == len(ours)
 
     def difference(self, other: Skeleton, ours: str = "expected", theirs: str = "it") -> str | None:
         """What tells ``other`` from this skeleton, in a few words, each side named: ``ours``
@@ -114,9 +129,11 @@ class Skeleton:
             return None
 
         def only(a: Skeleton, b: Skeleton, end_sites: bool) -> list[str]:
-            there = set(b.names)
+            there = set(map(bare_name, b.names))  # a namespace is no difference
             return [
-                n for j, n in enumerate(a.names) if n not in there and a.end_site[j] == end_sites
+                n
+                for j, n in enumerate(a.names)
+                if bare_name(n) not in there and a.end_site[j] == end_sites
             ]
 
         missing, extra = only(self, other, False), only(other, self, False)
