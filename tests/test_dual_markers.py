@@ -573,7 +573,7 @@ def test_respond_refuses_markers_it_cannot_answer_from_in_one_line(
     some.positions[10:20] = np.nan
     args = ["dualhmm", "respond", "--model", str(path), "--out", str(tmp_path / "b.c3d")]
     for take, words in (
-        (never, f"{a.names[3]} never seen: the model answers from all {a.n_markers} of its"),
+        (never, f"{a.names[3]} never seen"),
         (scattered, f"no frame shows all {a.n_markers} of the model's markers"),
     ):
         write_c3d(take, tmp_path / "a.c3d")
@@ -609,3 +609,35 @@ def test_evaluate_table_shows_the_body_centred_baselines_its_aims_cite(model, ma
     said = " ".join(err.split())
     assert "known motion: the real B's motion moved onto the training people's mean" in said
     assert "at true place: the world error with B moved onto the real B's centroid" in said
+
+
+def test_a_marker_never_seen_is_refused_by_the_model_and_left_out_of_evaluate(
+    model, marker_takes, tmp_path, capsys
+):
+    """A take whose person A never shows one of the model's markers cannot be answered (each
+    frame is a missing observation): ``DualHMM.respond`` refuses it naming the marker, and
+    ``dualhmm evaluate`` leaves it out, listed with why, and scores the others (a new user's
+    evaluation had scored such a take at 2.5 m and pulled the overall to 1.3 m)."""
+    from markovmotion.errors import SkeletonMismatchError
+
+    a, b = marker_takes[2]
+    never = a.copy()
+    never.positions[:, 3] = np.nan
+    with pytest.raises(SkeletonMismatchError, match=f"{a.names[3]} never seen"):
+        model.respond(never, "windowed")
+    data = tmp_path / "data"
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for k, take in ((1, a), (2, never)):
+        write_c3d(take, data / f"a{k}.c3d")
+        write_c3d(b, data / f"b{k}.c3d")
+        rows += [f"a{k}.c3d,test,p{k},{k},interaction,handshake,b{k}.c3d,120,{a.n_frames},"]
+        rows += [f"b{k}.c3d,test,p{k},{k},interaction,handshake,a{k}.c3d,120,{a.n_frames},"]
+    (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    path = tmp_path / "m.npz"
+    model.save(path)
+    main(["dualhmm", "evaluate", "--model", str(path), "--test", str(data / "INDEX.csv")]
+         + ["--json"])  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    assert f"a2.c3d (marker {a.names[3]} never seen)" in report["left_out_other_skeleton"]
+    assert report["test_files"] and all("a2.c3d" not in f for f in report["test_files"])
+    assert report["overall"]["windowed_mm"] < 1000

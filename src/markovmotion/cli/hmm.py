@@ -409,7 +409,6 @@ def respond(
     dual.trellis = trellis or dual.trellis
     motion, broken = read_stream(input, fps)
     dual.check_input(motion, input)
-    _check_seen(dual, motion, input)
     if not np.isclose(motion.fps, dual.fps):
         err_console.print(f"resampling {input.name} from {motion.fps:g} to {dual.fps:g} fps")
         motion = _resample_stream(motion, broken, dual.fps)
@@ -539,34 +538,6 @@ def _check_combination(dual, input: Path, out: Path, as_c3d: bool) -> None:
         )
     if dual.uses_markers and not as_c3d:
         raise MotionFormatError(out, "the model was trained on markers: write B to a .c3d file")
-
-
-def _check_seen(dual, motion, input: Path) -> None:
-    """One line (exit 2) for markers of A the partner cannot answer from: a marker the model
-    sees never seen in the take, or no frame showing all of them (the dual HMM treats a
-    frame with a marker unseen as missing). Such a take had been answered from nothing, B
-    2.5 m from the real B, under a warning that every frame was treated as missing."""
-    from markovmotion.core.markers import Markers
-    from markovmotion.errors import MotionFormatError
-
-    if not isinstance(motion, Markers):
-        return
-    seen = dual.input_markers(motion)
-    visible = seen.visible()
-    never = [n for n, ok in zip(seen.names, visible.any(axis=0), strict=True) if not ok]
-    if never:
-        s = "s" if len(never) > 1 else ""
-        raise MotionFormatError(
-            input,
-            f"marker{s} {', '.join(never[:8])}{' ...' if len(never) > 8 else ''} never seen: "
-            f"the model answers from all {len(seen.names)} of its markers",
-        )
-    if not visible.all(axis=1).any():
-        raise MotionFormatError(
-            input,
-            f"no frame shows all {len(seen.names)} of the model's markers (each frame lacks "
-            "one): the model answers from whole frames",
-        )
 
 
 def _resample_stream(motion, broken: np.ndarray, fps: float):

@@ -937,7 +937,17 @@ class DualHMM(Model):
                 f"{where}: markers, but the model was trained on skeletons (give a BVH file)"
             )
         try:
-            self.pipeline_a_.steps[0].select(self.as_markers(x))
+            picked = self.pipeline_a_.steps[0].select(self.as_markers(x))
+            seen = picked.visible()
+            if not seen.any(axis=0).all():  # a frame with a marker unseen is missing: all are
+                never = [picked.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
+                s = "s" if len(never) > 1 else ""
+                raise SkeletonMismatchError(f"marker{s} {', '.join(never[:8])} never seen")
+            if len(seen) and not seen.all(axis=1).any():
+                raise SkeletonMismatchError(
+                    f"no frame shows all {seen.shape[1]} of the model's markers (a frame "
+                    "with one unseen is a missing observation)"
+                )
         except (ValueError, SkeletonMismatchError) as exc:
             raise SkeletonMismatchError(
                 f"{where}: person A's markers do not fit the model ({exc})",
