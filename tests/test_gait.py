@@ -671,3 +671,15 @@ def test_a_walk_of_one_frame_has_no_steps_not_a_traceback(mocap, tmp_path, capsy
     main(["gait", "train", "--data", str(tmp_path / "pose.bvh"), "--data", str(tmp_path / "walk.bvh"),
           "--n-iter", "1", "--out", str(tmp_path / "m.npz")])  # fmt: skip
     assert "left out: pose.bvh" in capsys.readouterr().err
+
+
+def test_components_chosen_for_few_steps_stay_within_each_folds_steps():
+    """``n_components="auto"`` on 12 steps of 9 statistics: a fold trains on fewer steps than
+    ``min(steps, statistics)``; the components tried stop at the smallest fold's (an outside
+    collection of nine walks had asked a fold of 14 steps for 15 components: a traceback)."""
+    from markovmotion.evaluate.gait import StyleClassifier
+
+    rng = np.random.default_rng(2)
+    walks = [w for c in (np.zeros(9), np.full(9, 0.3)) for w in fake_walks(rng, c, 3, n_steps=2)]
+    clf = StyleClassifier(target=1.01).fit(walks, ["a"] * 3 + ["b"] * 3)  # never reached
+    assert max(clf.cv_rates_) <= 9 and clf.n_components_ is None

@@ -207,7 +207,10 @@ class StyleClassifier(BaseEstimator):
         folds = walk_folds(min(self.n_folds, len(walks)), y, groups) if k == "auto" else None
         if k == "auto":
             k = None  # all, also when no fold trains on two styles (one of two styles one walk)
-            for n in range(1, min(x.shape) + 1) if folds is not None else ():
+            # at most as many components as the smallest fold trains on steps (a collection of
+            # 18 steps had asked a fold of 14 for 15: a traceback from scikit-learn)
+            top = min(x.shape[1], *(len(t) for t, _ in folds.split(x, y, groups))) if folds else 0
+            for n in range(1, top + 1):
                 guess = cross_val_predict(self._pipeline(n), x, y, groups=groups, cv=folds)
                 self.cv_rates_[n] = float(np.mean(guess == y))
                 if self.cv_rates_[n] >= self.target:
