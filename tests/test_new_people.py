@@ -295,6 +295,58 @@ def test_smooth_place_with_a_memory_is_the_mean_over_the_frames_before_and_after
     np.testing.assert_allclose(same[0], smooth_place(origin, yaw, 4, 4)[0])
 
 
+def test_smooth_place_averages_the_frames_where_a_was_seen_alone():
+    """A missing frame's place is A's last one held, not where A was: only the frames seen
+    count, and a frame with none seen around it keeps its own (a new user's 20-frame gap in
+    a wave had moved B by 30 mm to the end of the take through a 300-frame memory)."""
+    from markovmotion.models.hmm.trellis import smooth_place
+
+    rng = np.random.default_rng(6)
+    origin, yaw = rng.normal(size=(60, 3)) * 100, rng.normal(size=60) * 0.3
+    seen = np.ones(60, dtype=bool)
+    seen[20:32] = False
+    got_o, got_y = smooth_place(origin, yaw, 2, 5, seen)
+    for t in (0, 18, 25, 29, 40, 59):  # brute force: frames t - 5 .. t + 2 seen
+        near = [k for k in range(max(t - 5, 0), min(t + 3, 60)) if seen[k]]
+        if not near:  # 25, 26, 27 ... 29: none seen near: the frame's own
+            np.testing.assert_allclose(got_o[t], origin[t])
+            np.testing.assert_allclose(got_y[t], yaw[t])
+            continue
+        np.testing.assert_allclose(got_o[t], origin[near].mean(0), atol=1e-9)
+        c, s = np.cos(yaw[near]).mean(), np.sin(yaw[near]).mean()
+        np.testing.assert_allclose(got_y[t], np.arctan2(s, c), atol=1e-9)
+    every = smooth_place(origin, yaw, 2, 5, np.ones(60, dtype=bool))
+    np.testing.assert_allclose(every[0], smooth_place(origin, yaw, 2, 5)[0])
+
+
+@pytest.mark.parametrize("output", ["frames", "regression"])
+def test_a_gap_in_a_is_forgotten_by_the_place_memory_whole_and_online(people, output, caplog):
+    """A gap of A's frames in the middle of a take: B's place after it is averaged over
+    A's frames seen alone (not the gap's, which hold A's last frame), and the partner
+    streams what windowed ``respond`` gives."""
+    pairs = [(a, b) for _, a, b in people]
+    model = DualHMM(n_states=4, n_iter=5, place_memory=300, output=output).fit(pairs)
+    a = model._rate(people[-1][1]).copy()
+    gap = a.copy()
+    gap.positions[30:50] = np.nan
+    partner = model.partner()
+    shown = [partner.step(gap.trim(t, t + 1)) for t in range(gap.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    whole = model.respond(gap, "windowed")
+    np.testing.assert_allclose(
+        np.concatenate([s.positions for s in shown]), whole.positions, atol=1e-9
+    )
+    origin, yaw = model.placing(model.filled(gap), seen=np.isfinite(gap.positions).all((1, 2)))
+    clean_o, clean_y = model.place(a)
+    half = min(model.placement_window // 2, model.window - 1)
+    for t in (60, a.n_frames - 1):  # brute force: the mean over the frames seen near t
+        near = [k for k in range(max(t - 300, 0), min(t + half + 1, a.n_frames))]
+        near = [k for k in near if not 30 <= k < 50]
+        np.testing.assert_allclose(origin[t], clean_o[near].mean(0), atol=1e-6)
+        c, s = np.cos(clean_y[near]).mean(), np.sin(clean_y[near]).mean()
+        np.testing.assert_allclose(yaw[t], np.arctan2(s, c), atol=1e-9)
+
+
 @pytest.mark.parametrize("output", ["frames", "regression"])
 def test_a_model_with_a_place_memory_streams_what_windowed_respond_gives(people, output):
     pairs = [(a, b) for _, a, b in people]

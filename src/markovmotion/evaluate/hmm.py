@@ -279,8 +279,9 @@ def evaluate_pair(
     # the baselines see A as the partner does (a skeleton lifted to a sensor model's height,
     # DualHMM.a_in) and are placed as the windowed partner is, brought down by the same lift
     seen, lift = model.a_in(a)
-    origin, yaw = model.placing(model.filled(seen), lift=lift)  # A unseen: as respond places B
-    xa, _ = model.features_a(seen)
+    xa, missing = model.features_a(seen)
+    # A unseen: as respond places B
+    origin, yaw = model.placing(model.filled(seen), lift=lift, seen=~missing)
     generated = {"nearest_neighbour": baselines.nearest(xa, origin, yaw)}
     if baselines.gmr is not None:
         generated["gmr"] = baselines.regression(xa, origin, yaw)

@@ -973,27 +973,36 @@ class DualHMM(Model):
         return _fill_missing(motion, ~finite_frames(motion))
 
     def placing(
-        self, x: Motion | Markers, method: str = "windowed", lift: np.ndarray | None = None
+        self,
+        x: Motion | Markers,
+        method: str = "windowed",
+        lift: np.ndarray | None = None,
+        seen: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A's ground frame as B is placed through it by :meth:`respond` (``method``): per
-        frame :meth:`place`, brought down by ``lift`` (A lifted by :meth:`a_in`: B goes down
-        as much), averaged by :meth:`smoothed`."""
+        frame :meth:`place` of ``x`` (A's missing frames filled, :meth:`filled`), brought
+        down by ``lift`` (A lifted by :meth:`a_in`: B goes down as much), averaged by
+        :meth:`smoothed` over the frames ``seen`` (F,) (None: all)."""
         origin, yaw = self.place(x)
         if lift is not None:
             origin[:, 1] -= lift
-        return self.smoothed(origin, yaw, method)
+        return self.smoothed(origin, yaw, method, seen)
 
     def smoothed(
-        self, origin: np.ndarray, yaw: np.ndarray, method: str = "windowed"
+        self,
+        origin: np.ndarray,
+        yaw: np.ndarray,
+        method: str = "windowed",
+        seen: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """A's ground frame (origin (F, 3), yaw (F,)) averaged over ``place_memory`` frames
         before (at least ``placement_window // 2``) and ``placement_window // 2`` after each
-        frame (online, ``method="windowed"``, at most the decoder's lag after):
-        :func:`~markovmotion.models.hmm.trellis.smooth_place`."""
+        frame (online, ``method="windowed"``, at most the decoder's lag after), those where
+        A was ``seen`` alone: :func:`~markovmotion.models.hmm.trellis.smooth_place`."""
         half = self.placement_window // 2
         if method != "standard":
             half = min(half, self.window - 1)
-        return smooth_place(origin, yaw, half, max(half, int(self.place_memory)))
+        return smooth_place(origin, yaw, half, max(half, int(self.place_memory)), seen)
 
     def ground(
         self, motion: Motion, positions: np.ndarray | None = None
@@ -1102,7 +1111,7 @@ class DualHMM(Model):
         filled = _fill_missing(motion_a, missing)
         lag = self.window - 1 if method == "windowed" else 0
         root = self.scaled_root(root, self.place_scales(motion_a, missing, lag))
-        placed = self.placing(filled, method, lift)
+        placed = self.placing(filled, method, lift, ~missing)
         out = self.frames_to_motion(idx, *placed, root, rot)
         contact = self.contact
         if contact is None:

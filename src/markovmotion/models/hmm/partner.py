@@ -102,6 +102,7 @@ class Partner:
         # a ring of place_rows (origin (3), cos yaw, sin yaw) and of the yaws themselves
         self._places = np.zeros((window + self._before, 5))
         self._yaws = np.zeros(window + self._before)
+        self._seen_at = np.zeros(window + self._before)  # 1: A seen in the frame, 0: held
         self._places_in = 0
         self._seen_a = False  # whether A has been seen (a place of A's own has come in)
         self._shown_count = 0
@@ -161,6 +162,7 @@ class Partner:
         row = self._places[i]  # place_rows's layout, by hand: the live step's hot path
         row[:3], row[3], row[4] = place[0], math.cos(place[1]), math.sin(place[1])
         self._yaws[i] = place[1]
+        self._seen_at[i] = 1.0 if seen else 0.0
         if self._contact is not None:  # A's points unseen until _see_points says otherwise
             self._a_points[self._places_in % len(self._places)] = np.nan
         self._places_in += 1
@@ -392,17 +394,18 @@ class Partner:
 
     def _place_of(self, frame: int) -> tuple[np.ndarray, float]:
         """A's place for B's frame ``frame`` of the stream, averaged over the frames around it
-        that have arrived (the one frame of
+        that have arrived and show A (the one frame of
         :func:`~markovmotion.models.hmm.trellis.smooth_place`, as :meth:`DualHMM.respond`
-        does)."""
+        does); none: the frame's own (A's last place held)."""
         ring = len(self._places)
         lo = max(frame - self._before, self._places_in - ring, 0)
         hi = min(frame + self._half, self._places_in - 1)
-        if hi == lo:
+        near = np.arange(lo, hi + 1) % ring
+        weight = self._seen_at[near]
+        total = weight.sum()
+        if hi == lo or total == 0:
             return self._places[frame % ring, :3].copy(), float(self._yaws[frame % ring])
-        origin, yaw = mean_place(
-            self._places[np.arange(lo, hi + 1) % ring].sum(axis=0) / (hi - lo + 1)
-        )
+        origin, yaw = mean_place(weight @ self._places[near] / total)
         return origin, float(yaw)
 
     def _motion(self, shown: tuple[int, np.ndarray, np.ndarray] | None) -> Motion | Markers | None:

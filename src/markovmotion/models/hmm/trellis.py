@@ -221,7 +221,11 @@ def _window_mean(
 
 
 def smooth_place(
-    origin: np.ndarray, yaw: np.ndarray, half: int, before: int | None = None
+    origin: np.ndarray,
+    yaw: np.ndarray,
+    half: int,
+    before: int | None = None,
+    seen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A's ground frame (origin (F, 3), yaw (F,)) averaged over frames t - before .. t + half
     (those that exist; ``before`` defaults to ``half``): origins by their mean, headings by
@@ -229,11 +233,22 @@ def smooth_place(
     which wobbles from frame to frame with the hips, does not swing B around A (B stands a
     metre away: 3 degrees are 50 mm). A longer ``before`` (``DualHMM(place_memory=...)``)
     remembers where A has stood and faced: people who wave or shake hands turn their
-    shoulders, not their feet."""
+    shoulders, not their feet.
+
+    ``seen`` (F,) bool: only the frames where A was seen count (a missing frame's place is
+    A's last one held, not where A was: with ``place_memory`` 300, 20 held frames of a wave
+    had moved B by 30 mm to the end of the take); a frame with none seen around it keeps its
+    own (held) place."""
     before = half if before is None else before
     if (half <= 0 and before <= 0) or len(yaw) < 2:
         return origin, yaw
-    return mean_place(_window_mean(place_rows(origin, yaw), np.arange(len(yaw)), half, before))
+    rows, t = place_rows(origin, yaw), np.arange(len(yaw))
+    if seen is None or seen.all():
+        return mean_place(_window_mean(rows, t, half, before))
+    weight = np.asarray(seen, dtype=float)[:, None]
+    total = _window_mean(weight, t, half, before)
+    mean = _window_mean(rows * weight, t, half, before) / np.maximum(total, 1e-12)
+    return mean_place(np.where(total > 0, mean, rows))
 
 
 def successors(lengths: Sequence[int]) -> np.ndarray:
