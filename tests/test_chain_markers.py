@@ -328,6 +328,10 @@ def test_train_holds_out_the_test_trials_or_none(mocap, tmp_path, capsys):
     # alone, it replaces the collection's split: every other pair's take is learnt (the
     # split had held out other people's last takes too, and evaluate answered them as new)
     assert learnt("--test-people", last) == kept
+    # the notes count the takes learnt, and the summary names the people held out
+    main([*argv, "--test-people", last])
+    said = " ".join(capsys.readouterr().err.split())
+    assert f"using the {kept} two-person takes" in said and f"(held out: {last})" in said
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--test-people", "nobody"])
     assert exc.value.code == 2 and "'nobody'" in capsys.readouterr().err

@@ -158,13 +158,13 @@ def _training_takes(
         held = [t.strip() for t in (test_trials or "").split(",") if t.strip() not in ("", "none")]
         # select_pairs refuses a mistyped trial, which would otherwise leak into training
         listed = select_pairs(index, labels, held or None, held_out=False)
-        pairs, _ = choose_kind(listed, kind, "two-person takes", lambda p: p[0], KINDS)
         people = [p.strip() for p in (test_people or "").split(",") if p.strip()]
+        away = people_out(index, listed, people)  # before the kind's note counts the takes
+        listed = [p for p in listed if p not in away]
+        pairs, _ = choose_kind(listed, kind, "two-person takes", lambda p: p[0], KINDS)
         # held-out people replace the collection's split, as dualhmm train --test-people does
         # (both had held out other people's last takes too, and evaluate mixed them in)
         train = held_out_pairs(pairs)[0] if test_trials is None and not people else pairs
-        away = people_out(index, train, people)
-        train = [p for p in train if p not in away]
         if not train:
             raise DataNotFoundError(
                 f"no two-person takes labelled {label!r} to train on in {index.root / 'INDEX.csv'}"
@@ -279,6 +279,8 @@ def train(
     ch = model.chain_
     seconds = sum(t[3].duration if isinstance(t, tuple) else t.n_frames / t.fps for t in takes)
     both = " in both roles" if extras.get("roles") == "both" else ""
+    if test_people:
+        both += f" (held out: {test_people})"
     err_console.print(
         f"wrote {out}: {len(takes)} take{'s' * (len(takes) != 1)}{both}, {seconds:.0f} s at "
         f"{model.fps_:g} fps, "
