@@ -179,3 +179,20 @@ def test_samples_at_the_origin_are_gaps(tmp_path, capsys):
     assert np.isnan(markers.positions[3:6, 1]).all() and np.isnan(markers.positions[10, 2]).all()
     assert markers.visible().sum() == lab.shape[0] * lab.shape[1] - 4
     assert "3 samples at exactly (0, 0, 0) read as unseen" in capsys.readouterr().err
+
+
+def test_a_body_in_another_unit_than_its_file_says_is_noted(tmp_path, capsys):
+    """A file whose values are metres but whose POINT:UNITS says mm is a body 2 mm across:
+    read as the file says, with a note naming the unit that would make a person of it; a
+    person in the unit the file gives is not noted, in any unit."""
+    lab = _standing()
+    write_c3d(tmp_path / "ok.c3d", lab, units="m   ", screen=("+X", "+Y"))
+    read_c3d(tmp_path / "ok.c3d")
+    assert "POINT:UNITS" not in capsys.readouterr().err
+    # the metres' numbers, but the file says mm: stored as lab / 1000 "mm"
+    write_c3d(tmp_path / "wrong.c3d", lab / 1000.0, units="mm  ", screen=("+X", "+Y"))
+    markers = read_c3d(tmp_path / "wrong.c3d")
+    np.testing.assert_allclose(markers.positions, lab / 1000.0, atol=1e-5)  # as it says
+    said = " ".join(capsys.readouterr().err.split())
+    assert "wrong.c3d: its markers span 1.68 mm read in mm (POINT:UNITS)" in said
+    assert "in m they would span 1676 mm: is its POINT:UNITS wrong?" in said

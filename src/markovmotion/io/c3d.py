@@ -152,6 +152,7 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     notes = []
     if gaps.any():
         notes.append(f"{int(gaps.sum())} samples at exactly (0, 0, 0) read as unseen (a gap)")
+    notes += _unit_notes(lab, unit)
     if not any(given) and not _head_above(lab, names, screen) >= HEAD_ABOVE_MM:
         if _head_above(lab, names, YUP_SCREEN) >= HEAD_ABOVE_MM:
             screen = YUP_SCREEN
@@ -164,6 +165,42 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
     if notes:
         say([f"note: {os.path.basename(path)}: {n}" for n in notes], about=path)
     return Markers(names, positions, float(rate), name=os.path.basename(path), source=path)
+
+
+#: A take's markers whose extent (mm; the median over frames of the largest extent along an
+#: axis) lies outside this when read in the file's ``POINT:UNITS`` are noted, if another
+#: unit makes them :data:`PERSON_SPAN_MM`: a file in metres labelled mm is a body 0.9 mm
+#: across, which every family would answer as if it were a person (a new user's trial).
+#: Wide, as a marker set may be a hand alone or a room with a person walking in it.
+MARKER_SPAN_MM = (10.0, 20_000.0)
+#: The extent (mm) of a person's markers, from a hand's alone to a body with arms out.
+PERSON_SPAN_MM = (100.0, 3_000.0)
+
+
+def _unit_notes(lab: np.ndarray, unit: str) -> list[str]:
+    """A note when the markers ``lab`` (F, M, 3; mm as read in ``unit``) are no person's
+    size and would be in another unit (:data:`MARKER_SPAN_MM`): the file's ``POINT:UNITS``
+    is surely wrong. A note, not a refusal: the data are read as the file says."""
+    seen = np.isfinite(lab).all(axis=-1)
+    enough = seen.sum(axis=1) >= 3
+    if not enough.any():
+        return []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        extent = np.nanmax(lab[enough], axis=1) - np.nanmin(lab[enough], axis=1)
+    span = float(np.median(extent.max(axis=1)))
+    if MARKER_SPAN_MM[0] <= span <= MARKER_SPAN_MM[1] or not span > 0:
+        return []
+    raw = span / UNIT_TO_MM[unit]
+    low, high = PERSON_SPAN_MM
+    fits = [u for u, mm in UNIT_TO_MM.items() if low <= raw * mm <= high]
+    if not fits:
+        return []
+    u = fits[0]
+    return [
+        f"its markers span {span:.3g} mm read in {unit} (POINT:UNITS), no person's size; in "
+        f"{u} they would span {raw * UNIT_TO_MM[u]:.0f} mm: is its POINT:UNITS wrong?"
+    ]
 
 
 #: The screen axes of a Y-up lab (X right, Y up), as :func:`write_c3d` writes them.
