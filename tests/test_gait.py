@@ -683,3 +683,40 @@ def test_components_chosen_for_few_steps_stay_within_each_folds_steps():
     walks = [w for c in (np.zeros(9), np.full(9, 0.3)) for w in fake_walks(rng, c, 3, n_steps=2)]
     clf = StyleClassifier(target=1.01).fit(walks, ["a"] * 3 + ["b"] * 3)  # never reached
     assert max(clf.cv_rates_) <= 9 and clf.n_components_ is None
+
+
+def test_evaluate_takes_the_walks_of_the_index_the_models_learnt(mocap, tmp_path, capsys):
+    """Models trained on a user's index record it (``data_index``): ``gait evaluate`` without
+    ``--data`` evaluates them on its held-out walks (it had taken the shared collection's, on
+    another skeleton, into the style classifier: a NumPy traceback); ``--data`` naming an
+    index of another skeleton is one line."""
+    import json
+    from dataclasses import replace
+
+    from markovmotion.io import write_motion
+
+    mine = tmp_path / "mine"
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for style, category in (("normal", "walk"), ("elderly", "style_walk")):
+        for k, e in enumerate(gait_entries(mocap, style)[:4]):
+            walk = mocap.load_motion(e)  # the rig as another lab names it
+            sk = replace(walk.skeleton, names=tuple(f"lab_{n}" for n in walk.skeleton.names))
+            write_motion(replace(walk, skeleton=sk), mine / f"{style}_{k}.bvh")
+            rows.append(f"{style}_{k}.bvh,lab,,{k},{category},{style},,{e.fps},,")
+    (mine / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    models = tmp_path / "models"
+    main(["gait", "train", "--data", str(mine), "--n-iter", "2",
+          "--out", str(models / "average.npz")])  # fmt: skip
+    main(["gait", "adapt", "--data", str(mine), "--model", str(models / "average.npz"),
+          "--label", "elderly", "--steps", "6", "--out", str(models / "adapted-elderly.npz")])  # fmt: skip
+    capsys.readouterr()
+    main(["gait", "evaluate", "--models", str(models), "--walks", "2", "--bootstrap", "100",
+          "--json"])  # fmt: skip
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    assert json.loads(out.out)["test_files"] == ["elderly_3.bvh", "normal_3.bvh"]
+    with pytest.raises(SystemExit) as exc:
+        main(["gait", "evaluate", "--models", str(models), "--data", str(mocap.root)])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and len(err.splitlines()) == 1
+    assert "held-out walks of" in err and "is on the models' skeleton (" in err

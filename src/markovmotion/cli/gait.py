@@ -11,7 +11,7 @@ from rich.table import Table
 from markovmotion.cli.options import ranged
 from markovmotion.cli.tables import print_json, print_table
 from markovmotion.data.kinds import counted
-from markovmotion.data.walks import SPLITS, load_walks
+from markovmotion.data.walks import SPLITS, load_walks, walks_index
 from markovmotion.io import write_motion
 from markovmotion.persist import check_model_output
 from markovmotion.progress import err_console
@@ -30,6 +30,15 @@ def _split(value: str) -> str:
 
 
 SPLIT = typer.Option("train", callback=_split, help="Takes from an index: train, test or all.")
+
+
+def _index_extras(paths: list[Path] | None) -> dict:
+    """``data_index`` for a model file: the index its walks were read from, which ``gait
+    evaluate`` then takes its walks from by default; none for walks given as files."""
+    from markovmotion.evaluate.takes import index_record
+
+    index = walks_index(paths)
+    return {} if index is None else {"data_index": index_record(index)}
 
 
 @app.command()
@@ -71,7 +80,7 @@ def train(
     )
     with joblib.parallel_config(n_jobs=jobs or -1):
         model.fit(motions, style=label, units=folders)
-    model.save(out)
+    model.save(out, **_index_extras(data))
     h = model.hsmm_
     err_console.print(
         f"wrote {out}: {counted(len(motions), 'walks')}, {counted(model.n_steps_, 'steps')}, "
@@ -135,7 +144,7 @@ def adapt(
             tau_map=tau_map,
             map_step=not no_map,
         )
-    result.save(out)
+    result.save(out, **_index_extras(style_data))
     err_console.print(
         f"wrote {out}: {result.role_} {label} model from {counted(result.n_steps_, 'steps')} "
         f"of {counted(len(result.own_files), 'walks')}: " + ", ".join(result.own_files),
@@ -268,7 +277,7 @@ def evaluate(
     data: Path = typer.Option(
         None,
         help="INDEX.csv (or its folder) whose training takes teach the style classifier "
-        "(default: the shared collection).",
+        "(default: the one the models were trained on, else the shared collection).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
     sweep: str = typer.Option(

@@ -50,6 +50,15 @@ def _is_index(paths: Sequence[Path]) -> bool:
     return len(paths) == 1 and (paths[0].is_dir() or paths[0].name.lower().endswith(".csv"))
 
 
+def walks_index(paths: Sequence[str | os.PathLike[str]] | None) -> MocapIndex | None:
+    """The index :func:`load_walks` reads ``paths`` from (the default collection for none),
+    or None when they are motion files."""
+    given = [Path(p) for p in paths or []]
+    if given and not _is_index(given):
+        return None
+    return MocapIndex.load(given[0] if given else None)
+
+
 def load_walks(
     paths: Sequence[str | os.PathLike[str]] | None,
     labels: Sequence[str] | str | None,

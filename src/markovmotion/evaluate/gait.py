@@ -68,6 +68,7 @@ from sklearn.preprocessing import StandardScaler
 from markovmotion.algorithms.dtw import dtw_distance, dtw_path
 from markovmotion.algorithms.mlpg import global_variance
 from markovmotion.core.motion import Motion
+from markovmotion.core.skeleton import Skeleton
 from markovmotion.data.index import Entry, MocapIndex
 from markovmotion.data.kinds import counted
 from markovmotion.data.splits import TEST_EVERY, held_out_every
@@ -713,6 +714,55 @@ def _trained_on_any(models: Models) -> Model:
     return union
 
 
+def _skeleton(models: Models) -> Skeleton:
+    """The skeleton the models learnt (their walks')."""
+    return _all(models)[0].pipeline_.steps[-1].skeleton_
+
+
+def trained_index(models: Models) -> str | None:
+    """The folder of the index the models were trained on (``data_index``, recorded by
+    ``gait train`` and ``gait adapt``), when every model that recorded one names the same
+    and it is there; else None."""
+    roots = set()
+    for m in _all(models):
+        record = getattr(m, "data_index_", None)
+        if isinstance(record, dict) and isinstance(record.get("root"), str):
+            roots.add(record["root"])
+    if len(roots) == 1 and Path(root := roots.pop()).is_dir():
+        return root
+    return None
+
+
+def _on_skeleton(
+    walks: list[tuple[Entry, Motion]], skeleton: Skeleton, what: str
+) -> list[tuple[Entry, Motion]]:
+    """The (entry, walk) pairs whose walk is on the models' ``skeleton``; the others left out
+    in a note naming them and how the first differs (they had reached the style classifier
+    and the models' features: a traceback from NumPy). None kept: one error line instead.
+
+    Raises:
+        DataNotFoundError: no walk is on the models' skeleton.
+    """
+    kept, other = [], []
+    for e, m in walks:
+        (kept if skeleton.difference(m.skeleton) is None else other).append((e, m))
+    if other:
+        e, m = other[0]
+        differs = skeleton.difference(m.skeleton, "the models'", Path(e.file).name)
+        if not kept:
+            raise DataNotFoundError(
+                f"none of the {counted(len(other), what)} of {e.root / 'INDEX.csv'} is on the "
+                f"models' skeleton {differs}: give the index they were trained on (--data)"
+            )
+        files = [x.file for x, _ in other]
+        more = f" and {len(files) - 5} more" if len(files) > 5 else ""
+        note(
+            f"{counted(len(other), what)} on another skeleton than the models' left out: "
+            f"{', '.join(files[:5])}{more} {differs}"
+        )
+    return kept
+
+
 def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Motion]]:
     """The walks of ``index`` that fit the models, read, without those any model trained on.
 
@@ -724,7 +774,7 @@ def walks_to_test(models: Models, index: MocapIndex) -> tuple[TestTakes, list[Mo
         DataNotFoundError: no walk fits, or every one that does is a training take.
     """
     styles = sorted({m.style_ for m in _all(models)})
-    skeleton = _all(models)[0].pipeline_.steps[-1].skeleton_
+    skeleton = _skeleton(models)
     rows = sorted(index.query(category=list(WALK_CATEGORIES), label=styles), key=lambda e: e.file)
     chosen = test_takes(_trained_on_any(models), index, rows, what=f"{'/'.join(styles)} walk")
     kept: list[Entry] = []
@@ -801,8 +851,10 @@ def evaluate_models(
 
     The style classifier (and the sweep's adaptation) learns from the
     training takes (:func:`~markovmotion.data.splits.held_out_every`) of the
-    walks of ``data`` (an INDEX.csv or its folder; default the shared
-    collection) whose file starts with ``subset`` (None: :func:`~markovmotion.data.walks.default_subset`).
+    walks of ``data`` (an INDEX.csv or its folder; default the one the models were
+    trained on, :func:`trained_index`, else the shared collection) whose file starts with
+    ``subset`` (None: :func:`~markovmotion.data.walks.default_subset`), those on the
+    models' skeleton (the others are named in a note).
     Without ``test``, the models are evaluated on the held-out takes of that
     index, which they must not have trained on. With ``test`` (another
     INDEX.csv), on its walks that fit the models (:func:`walks_to_test`),
@@ -821,7 +873,8 @@ def evaluate_models(
     ks = list(sweep)
     if ks and not models["average"]:
         raise DataNotFoundError("the sweep needs an average model")
-    index = MocapIndex.load(data)
+    index = MocapIndex.load(data if data is not None else trained_index(models))
+    skeleton = _skeleton(models)
     train, held_out = held_out_every(gait_entries(index, None, subset))
     by_classifier: list[str] = []
     train_motions: dict[str, list[Motion]] = {}
@@ -835,7 +888,7 @@ def evaluate_models(
                 "train them on the training split, or evaluate with a test index"
             )
         read = [(e, index.load_motion(e)) for e in track(held_out, "reading test walks")]
-        read = _with_steps(read, "held-out walks")
+        read = _with_steps(_on_skeleton(read, skeleton, "held-out walks"), "held-out walks")
         takes = TestTakes([e for e, _ in read])
         for e, m in read:
             test_motions.setdefault(e.label, []).append(m)
@@ -859,6 +912,7 @@ def evaluate_models(
         for e, m in kept:
             test_motions.setdefault(e.label, []).append(m)
     read = [(e, index.load_motion(e)) for e in track(train, "reading training walks")]
+    read = _on_skeleton(read, skeleton, "training walks")
     for e, m in _with_steps(read, "training walks"):
         train_motions.setdefault(e.label, []).append(m)
     missing = sorted(set(test_motions) - set(train_motions))
@@ -891,9 +945,15 @@ def evaluate_models(
                 why = _why_not_evaluated(model, style, ev.styles, average, test, index, subset)
                 note(f"{model_name(models, model)}: {why}: not evaluated")
     if not ks and not any(chosen.values()):
+        which = "test" if test else "held-out"
+        if not test_motions:  # it had said "the held-out walks are of  only"
+            raise DataNotFoundError(
+                f"no model left to evaluate: {index.root / 'INDEX.csv'} holds no held-out walk "
+                f"(every {TEST_EVERY}th take of a style is held out): give walks to test "
+                "on with --test"
+            )
         raise DataNotFoundError(
-            f"no model left to evaluate: the {'test' if test else 'held-out'} walks are of "
-            f"{', '.join(ev.styles)} only"
+            f"no model left to evaluate: the {which} walks are of {', '.join(ev.styles)} only"
         )
     work = sum(map(len, chosen.values())) + 3 * len(ks) * len(targets)
 
