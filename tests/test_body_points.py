@@ -160,3 +160,67 @@ def test_bone_lengths_are_restored_along_each_segments_direction():
     got = bone_lengths(noisy)
     assert np.isnan(got[0])
     np.testing.assert_allclose(got[1:], true_len[1:], rtol=0.1)
+
+
+def _flat(names: tuple[str, ...]) -> Skeleton:
+    """A skeleton of ``names`` (a ``*_end`` name an end site), every joint under the first:
+    body points are found by name alone."""
+    n = len(names)
+    return Skeleton(names, [-1] + [0] * (n - 1), np.zeros((n, 3)),
+                    [() if x.endswith("_end") else ("Xrotation",) for x in names],
+                    np.array([x.endswith("_end") for x in names]))  # fmt: skip
+
+
+#: Rigs of outside files, each with its body points (pelvis, spine, chest, neck, head, left
+#: shoulder, elbow, wrist, hip, knee, ankle, toe): none had all of them found.
+OUTSIDE_RIGS = {
+    # the Biovision specification's example, as many tools still write it
+    "biovision": (
+        "Hips Chest Neck Head LeftCollar LeftUpArm LeftLowArm LeftHand RightCollar RightUpArm "
+        "RightLowArm RightHand LeftUpLeg LeftLowLeg LeftFoot LeftFoot_end RightUpLeg "
+        "RightLowLeg RightFoot RightFoot_end",
+        "Hips Chest Chest Neck Head LeftUpArm LeftLowArm LeftHand LeftUpLeg LeftLowLeg "
+        "LeftFoot LeftFoot_end",
+    ),
+    # a mocap-bank BVH (19 joints): the legs end at the ankle, two chest joints
+    "mocapbank": (
+        "Hips Chest Chest2 LeftCollar LeftShoulder LeftElbow LeftWrist RightCollar "
+        "RightShoulder RightElbow RightWrist Neck Head LeftHip LeftKnee LeftAnkle "
+        "LeftAnkle_end RightHip RightKnee RightAnkle RightAnkle_end",
+        "Hips Chest Chest2 Neck Head LeftShoulder LeftElbow LeftWrist LeftHip LeftKnee "
+        "LeftAnkle LeftAnkle_end",
+    ),
+    # video2bvh's CMU-like skeleton from 3-D keypoints: the neck ends at Neck1, the nose
+    "video2bvh": (
+        "Hips LeftHipJoint LeftUpLeg LeftLeg LeftFoot LeftFoot_end LowerBack Spine Spine1 "
+        "LeftShoulder LeftArm LeftForeArm LeftHand Neck Neck1 Neck1_end RightShoulder "
+        "RightArm RightForeArm RightHand RightHipJoint RightUpLeg RightLeg RightFoot "
+        "RightFoot_end",
+        "Hips Spine Spine1 Neck Neck1 LeftArm LeftForeArm LeftHand LeftUpLeg LeftLeg "
+        "LeftFoot LeftFoot_end",
+    ),
+    # PyMO's demo walker: one spine joint under the head
+    "pymo": (
+        "Hips Spine Head LeftShoulder LeftArm LeftForeArm LeftHand RightShoulder RightArm "
+        "RightForeArm RightHand LeftUpLeg LeftLeg LeftFoot LeftToeBase RightUpLeg RightLeg "
+        "RightFoot RightToeBase",
+        "Hips Spine Spine Head Head LeftArm LeftForeArm LeftHand LeftUpLeg LeftLeg LeftFoot "
+        "LeftToeBase",
+    ),
+}
+
+
+@pytest.mark.parametrize("rig", sorted(OUTSIDE_RIGS))
+def test_every_body_point_is_found_on_the_rigs_of_outside_files(rig):
+    """The classic Biovision names (``LeftUpArm``, ``LeftLowArm``, ``LeftLowLeg``), a leg
+    ending at the ankle (its end site is the toe), a trunk without a spine joint below the
+    chest or without chest and neck (the nearest trunk joint stands for them), video2bvh's
+    head at ``Neck1``: every body point is found, so the dual HMM, the chain's markers and
+    the VLMM's take these skeletons (they had been left out, naming the points missing)."""
+    names, wanted = OUTSIDE_RIGS[rig]
+    sk = _flat(tuple(names.split()))
+    left = [p for p in BODY_POINTS if not p.startswith("right")]
+    assert [sk.names[i] for i in body_point_index(sk, left)] == wanted.split()
+    right = body_point_index(sk, ("right_shoulder", "right_elbow", "right_knee", "right_toe"))
+    assert all(sk.names[i].startswith("Right") for i in right)
+    assert len(body_point_index(sk)) == len(BODY_POINTS)

@@ -37,20 +37,21 @@ from markovmotion.errors import SkeletonMismatchError
 #: Parts of the body found on either side, with their names in the skeletons we know,
 #: most specific first.
 _SIDED: dict[str, tuple[str, ...]] = {
-    "shoulder": ("arm", "upperarm", "humerus", "shldr", "shoulder"),
-    "elbow": ("forearm", "lowerarm", "radius", "elbow"),
+    "shoulder": ("arm", "upperarm", "uparm", "humerus", "shldr", "shoulder"),
+    "elbow": ("forearm", "lowerarm", "lowarm", "radius", "elbow"),
     "wrist": ("wrist", "hand"),
     "hip": ("upleg", "upperleg", "thigh", "femur", "hip"),
-    "knee": ("leg", "lowerleg", "shin", "tibia", "knee", "calf"),
+    "knee": ("leg", "lowerleg", "lowleg", "shin", "tibia", "knee", "calf"),
     "ankle": ("foot", "ankle"),
-    "toe": ("toebase", "toes", "toe", "toe0", "footend", "toeend"),
+    # a leg ending at the ankle: its end site (``LeftFoot_end``, ``LeftAnkle_end``)
+    "toe": ("toebase", "toes", "toe", "toe0", "footend", "toeend", "ankleend"),
 }
 
 #: Points on the body's midline and their names.
 _MIDDLE: dict[str, tuple[str, ...]] = {
     "pelvis": ("hips", "hip", "pelvis", "root"),
     "spine": ("spine", "abdomen", "lowerback", "spine1", "torso"),  # a Kinect's mid-trunk
-    "chest": ("chest", "thorax", "spine2", "spine1", "upperback", "chest2"),
+    "chest": ("chest2", "chest", "thorax", "spine2", "spine1", "upperback"),
     "neck": ("neck", "lowerneck", "neck1"),
     "head": ("head",),
 }
@@ -60,6 +61,21 @@ def _sided(side: str, parts: tuple[str, ...]) -> tuple[str, ...]:
     words = ("left", "l") if side == "left" else ("right", "r")
     return tuple(f for p in parts for w in words for f in (w + p, p + w))
 
+
+#: Where a skeleton has no joint of a point's own, the joint that stands for it in the
+#: models' points (:func:`body_point_index`): the classic BVH trunk of one joint (Hips,
+#: Chest, Neck) or two (Chest, Chest2) has no spine below its chest, a trunk of one spine
+#: joint under the head (PyMO's demo walker: Hips, Spine, Head) no chest and no neck (the
+#: head joint sits where the neck ends).
+_STANDS_FOR: dict[str, tuple[str, ...]] = {
+    "spine": ("chest",),
+    "chest": ("spine",),
+    "neck": ("head",),
+}
+#: As :data:`_STANDS_FOR`, a joint that ends its chain (no child but end sites): video2bvh's
+#: CMU-like skeleton (from 3-D keypoints) ends its neck at Neck1, the nose, where CMU's goes
+#: on to the head (a head renamed there is still missing, not taken to be Neck1).
+_TIP_STANDS_FOR: dict[str, tuple[str, ...]] = {"head": ("neck1",)}
 
 #: Per body point, the normalised joint names it is found by, in order of preference.
 SYNONYMS: dict[str, tuple[str, ...]] = {
@@ -205,7 +221,17 @@ def body_point_index(
         names.setdefault(normalise(n), j)
     found, missing = [], []
     for p in points:
-        j = next((names[s] for s in SYNONYMS[p] if s in names), None)
+        j = next((names[s] for s in SYNONYMS[p] + _STANDS_FOR.get(p, ()) if s in names), None)
+        if j is None:
+            j = next(
+                (
+                    names[s]
+                    for s in _TIP_STANDS_FOR.get(p, ())
+                    if s in names
+                    and not np.any((skeleton.parents == names[s]) & ~skeleton.end_site)
+                ),
+                None,
+            )
         (missing.append(p) if j is None else found.append(j))
     if missing:
         detail = "; ".join(f"{p} (looked for {', '.join(SYNONYMS[p][:4])} ...)" for p in missing)
