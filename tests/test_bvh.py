@@ -299,3 +299,34 @@ def test_an_end_site_written_with_a_name_is_read_as_end_site(tmp_path):
         path.write_text(text.replace("End Site", broken, 1))
         with pytest.raises(MotionFormatError, match=f"expected .*, found {found}"):
             read_motion(path)
+
+
+def test_a_body_of_no_unit_is_noted_and_read_in_the_millimetres_given(
+    mocap, tmp_path, caplog, monkeypatch
+):
+    """A take written in a unit of no name (CMU's ASF unit, 56.44 mm: Xia's style walks as
+    deep-motion-editing gives them are a person 25 cm tall read in cm) is a person's size in
+    none of mm, cm, m, inch: a warning says its lengths are off (it was read without a word);
+    ``MARKOVMOTION_BVH_UNIT`` (or ``length_unit``) as the millimetres of one unit reads it."""
+    from markovmotion.io.bvh import UNIT_ENV, read_bvh, write_bvh
+
+    take = next(e for e in mocap.query(source="cmu") if e.file.endswith(".bvh.gz"))
+    motion = read_bvh(take.path, length_unit="cm")
+    path = tmp_path / "asf_units.bvh"
+    write_bvh(motion, path, length_unit="56.44")
+    monkeypatch.delenv(UNIT_ENV, raising=False)
+    with caplog.at_level("WARNING", logger="markovmotion"):
+        read_bvh(path)
+        read_bvh(path, length_unit="auto")  # no unit to choose: read in cm, said
+    assert caplog.text.count("in none of mm, cm, m, inch is it a person's size") == 2
+    caplog.clear()
+    monkeypatch.setenv(UNIT_ENV, "56.44")
+    with caplog.at_level("WARNING", logger="markovmotion"):
+        back = read_bvh(path)
+    assert not caplog.text
+    assert np.allclose(back.positions(), motion.positions(), atol=1e-2)
+    assert np.allclose(read_bvh(path, length_unit="56.44").positions(), back.positions())
+    for bad in ("0", "-3", "nan", "furlong"):
+        monkeypatch.setenv(UNIT_ENV, bad)
+        with pytest.raises(ValueError, match=f"{UNIT_ENV}='{bad}' is not a length unit; use"):
+            read_bvh(path)

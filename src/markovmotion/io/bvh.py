@@ -52,7 +52,8 @@ from markovmotion.limits import (
 )
 
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "inch": 25.4}
-#: The environment's BVH length unit (a key of :data:`UNIT_TO_MM` or ``auto``), when none is given.
+#: The environment's BVH length unit (a key of :data:`UNIT_TO_MM`, ``auto``, or the millimetres
+#: of one file unit as a number: ``56.44``, CMU's ASF unit), when none is given.
 UNIT_ENV = "MARKOVMOTION_BVH_UNIT"
 #: A person's rest pose spans this much (mm, its largest extent): a child of about a metre
 #: to a tall adult with the arms out. Wider than any take of the collection (about 1,500-1,900).
@@ -69,13 +70,27 @@ log = logging.getLogger(__name__)
 GIVE_RATE = "give the true frame rate: --fps, fps= in Python, or the fps column of the INDEX.csv listing the file"
 
 
+#: What a length unit may be, for messages.
+UNITS_ALLOWED = f"use one of {', '.join([*UNIT_TO_MM, 'auto'])} or the millimetres of one unit"
+
+
 def _unit_scale(length_unit: str) -> float:
-    try:
+    """Millimetres of one ``length_unit``: a key of :data:`UNIT_TO_MM`, or a number of mm
+    (a unit of no name: CMU's ASF unit, 1/0.45 inch, is ``"56.44"``)."""
+    if length_unit in UNIT_TO_MM:
         return UNIT_TO_MM[length_unit]
-    except KeyError:
-        raise ValueError(
-            f"unknown length unit {length_unit!r}; use one of {[*UNIT_TO_MM, 'auto']}"
-        ) from None
+    try:
+        mm = float(length_unit)
+    except (TypeError, ValueError):
+        mm = math.nan
+    if not (math.isfinite(mm) and 0 < mm <= 1e6):
+        raise ValueError(f"unknown length unit {length_unit!r}; {UNITS_ALLOWED}")
+    return mm
+
+
+def _unit_words(length_unit: str) -> str:
+    """A length unit as a message says it: ``cm``, or ``units of 56.44 mm``."""
+    return length_unit if length_unit in UNIT_TO_MM else f"units of {length_unit} mm"
 
 
 def _given_unit(length_unit: str | None) -> str:
@@ -85,10 +100,11 @@ def _given_unit(length_unit: str | None) -> str:
             _unit_scale(length_unit)
         return length_unit
     unit = os.environ.get(UNIT_ENV, "").strip() or "cm"
-    if unit != "auto" and unit not in UNIT_TO_MM:
-        raise LimitError(
-            f"{UNIT_ENV}={unit!r} is not a length unit; use one of {[*UNIT_TO_MM, 'auto']}"
-        )
+    if unit != "auto":
+        try:
+            _unit_scale(unit)
+        except ValueError:
+            raise LimitError(f"{UNIT_ENV}={unit!r} is not a length unit; {UNITS_ALLOWED}") from None
     return unit
 
 
@@ -116,7 +132,7 @@ def likely_unit(skeleton: Skeleton, length_unit: str) -> str | None:
     span = rest_span(skeleton)
     if skeleton.n_joints < BODY_JOINTS or not np.isfinite(span) or low <= span <= high:
         return None
-    raw = span / UNIT_TO_MM[length_unit]
+    raw = span / _unit_scale(length_unit)
     fits = [u for u, mm in UNIT_TO_MM.items() if low <= raw * mm <= high]
     return min(fits, key=lambda u: abs(math.log(raw * UNIT_TO_MM[u] / 1700.0)), default=None)
 
@@ -127,16 +143,27 @@ def _in_unit(skeleton: Skeleton, length_unit: str, where: str) -> tuple[Skeleton
     given, that one, with a logged warning when another would make a person of it."""
     read_in = "cm" if length_unit == "auto" else length_unit
     better = likely_unit(skeleton, read_in)
+    span = rest_span(skeleton)
+    low, high = BODY_SPAN_MM
     if better is None:
+        if skeleton.n_joints >= BODY_JOINTS and np.isfinite(span) and not low <= span <= high:
+            # a person's size in no unit (Xia's style walks as deep-motion-editing gives them,
+            # 25 cm tall in cm): its lengths in mm are off, which every model would learn
+            log.warning(
+                "%s: its skeleton spans %.0f mm read in %s, and in none of %s is it a "
+                "person's size: its lengths in mm are off; if you know its unit, set %s to "
+                "the millimetres of one (or read it with length_unit='<mm>')",
+                where, span, _unit_words(read_in), ", ".join(UNIT_TO_MM), UNIT_ENV,
+            )  # fmt: skip
         return skeleton, read_in
-    factor = UNIT_TO_MM[better] / UNIT_TO_MM[read_in]
+    factor = UNIT_TO_MM[better] / _unit_scale(read_in)
     if length_unit == "auto":
         return replace(skeleton, offsets=skeleton.offsets * factor), better
-    span = rest_span(skeleton)
     log.warning(
         "%s: its skeleton spans %.0f mm read in %s, not a person's size; in %s it spans %.0f "
         "mm: if the file is in %s, set %s=%s (or auto), or read it with length_unit=%r",
-        where, span, read_in, better, span * factor, better, UNIT_ENV, better, better,
+        where, span, _unit_words(read_in), better, span * factor, better, UNIT_ENV, better,
+        better,
     )  # fmt: skip
     return skeleton, read_in
 
