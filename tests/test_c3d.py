@@ -196,3 +196,36 @@ def test_a_body_in_another_unit_than_its_file_says_is_noted(tmp_path, capsys):
     said = " ".join(capsys.readouterr().err.split())
     assert "wrong.c3d: its markers span 1.68 mm read in mm (POINT:UNITS)" in said
     assert "in m they would span 1676 mm: is its POINT:UNITS wrong?" in said
+
+
+def _two_dimensional_trial_fields(data: bytes) -> bytes:
+    """``data`` (a C3D file) with TRIAL:ACTUAL_START_FIELD and ACTUAL_END_FIELD given two
+    dimensions (2, 1) instead of one (2), as ezc3d's example files give them: each
+    parameter record grows by a dimension byte, taken from the parameter section's
+    padding so that the data stay where the header says."""
+    import struct
+
+    out = bytearray(data)
+    data_start = (struct.unpack_from("<H", out, 16)[0] - 1) * 512
+    for name in (b"ACTUAL_START_FIELD", b"ACTUAL_END_FIELD"):
+        at = out.index(name) + len(name)  # the offset to the next parameter, then the type
+        assert out[at + 3] == 1 and out[at + 4] == 2  # one dimension, of 2
+        out[at + 3] = 2
+        out.insert(at + 5, 1)
+        struct.pack_into("<h", out, at, struct.unpack_from("<h", out, at)[0] + 1)
+        assert out[data_start] == 0  # padding
+        del out[data_start]
+    return bytes(out)
+
+
+def test_trial_fields_of_two_dimensions_are_read(tmp_path):
+    """A C3D whose TRIAL:ACTUAL_*_FIELD have two dimensions (ezc3d's C3DRotationExample.c3d)
+    had the c3d package fail on its frame count: "not a readable C3D file (TypeError: only
+    0-dimensional arrays can be converted to Python scalars)". It reads as the file with one."""
+    write_c3d(tmp_path / "plain.c3d", lab_positions())
+    patched = tmp_path / "trial2d.c3d"
+    patched.write_bytes(_two_dimensional_trial_fields((tmp_path / "plain.c3d").read_bytes()))
+    assert patched.stat().st_size == (tmp_path / "plain.c3d").stat().st_size
+    plain, read = read_c3d(tmp_path / "plain.c3d"), read_c3d(patched)
+    assert read.names == plain.names and read.fps == plain.fps
+    np.testing.assert_array_equal(read.positions, plain.positions)

@@ -108,6 +108,7 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
             raise MotionFormatError(path, f"the file is {exceeded(MAX_BYTES)}")
         try:
             reader = c3d.Reader(handle)
+            _flat_trial_fields(reader)
             # Python numbers: the header's are NumPy uint16, whose products wrap (60,000
             # frames x 200 points passed the limit) or raise (a file of 100,000 frames)
             n_points, expected = int(reader.point_used), int(reader.frame_count)
@@ -201,6 +202,17 @@ def _unit_notes(lab: np.ndarray, unit: str) -> list[str]:
         f"its markers span {span:.3g} mm read in {unit} (POINT:UNITS), no person's size; in "
         f"{u} they would span {raw * UNIT_TO_MM[u]:.0f} mm: is its POINT:UNITS wrong?"
     ]
+
+
+def _flat_trial_fields(reader) -> None:
+    """``TRIAL:ACTUAL_START_FIELD`` and ``ACTUAL_END_FIELD`` are two 16-bit words; a writer
+    that gives them two dimensions (2, 1), as ezc3d's example files do, had the c3d package
+    fail on every frame count ("not a readable C3D file (TypeError: only 0-dimensional
+    arrays ...)"): they are read flat."""
+    for name in ("TRIAL:ACTUAL_START_FIELD", "TRIAL:ACTUAL_END_FIELD"):
+        param = reader.get(name)
+        if param is not None and len(param.dimensions) > 1 and np.prod(param.dimensions) == 2:
+            param.dimensions = [2]
 
 
 #: The screen axes of a Y-up lab (X right, Y up), as :func:`write_c3d` writes them.
