@@ -147,6 +147,14 @@ def needs_mediapipe() -> None:
         pytest.fail("the camera tests need MediaPipe: run scripts/install-camera", pytrace=False)
 
 
+def streamed(partner, a) -> np.ndarray:
+    """The positions a dual HMM's ``partner`` streams fed ``a`` frame by frame, the frames
+    still owed at the end included: what windowed ``respond`` gives, for the tests to say."""
+    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
+    shown = [s for s in shown if s is not None] + partner.finish()
+    return np.concatenate([s.positions for s in shown])
+
+
 def assert_seen_streams_as_stepped(model, a) -> None:
     """A dual HMM's partner fed ``a`` seen at once (:meth:`Partner.see`, the live page's
     path) gives, frame by frame, what stepping it frame by frame gives."""

@@ -44,31 +44,20 @@ def test_round_trip_real_files(mocap, tmp_path):
         np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-6)
 
 
-def test_frames_converted_in_runs_give_the_same_motion(mocap, monkeypatch):
+@pytest.mark.parametrize("runs", [("CONVERT_FRAMES", 7), ("LOADTXT_LINES", 5)])
+def test_frames_read_and_converted_in_runs_give_the_same_motion(mocap, monkeypatch, runs):
     """Euler angles are converted to quaternions in runs of frames (bounded memory: reading
-    took 9-12 times a file's size); the runs' seams change nothing."""
+    took 9-12 times a file's size), and frame lines are read in runs (one np.loadtxt call
+    holds the interpreter, and the web reads uploads in a worker thread); the runs' seams
+    change nothing."""
     import markovmotion.io.bvh as bvh
 
     path = mocap.find("cmu/bvh/salsa_01.bvh.gz").path
     whole = read_motion(path)
-    monkeypatch.setattr(bvh, "CONVERT_FRAMES", 7)
+    monkeypatch.setattr(bvh, *runs)
     in_runs = read_motion(path)
     np.testing.assert_array_equal(in_runs.rotations, whole.rotations)
     np.testing.assert_array_equal(in_runs.translations, whole.translations)
-
-
-def test_frame_lines_read_in_chunks_give_the_same_motion(mocap, monkeypatch):
-    """Frame lines are read LOADTXT_LINES at a time (one np.loadtxt call holds the
-    interpreter, and the web reads uploads in a worker thread); the chunks' seams change
-    nothing."""
-    import markovmotion.io.bvh as bvh
-
-    path = mocap.find("cmu/bvh/salsa_01.bvh.gz").path
-    whole = read_motion(path)
-    monkeypatch.setattr(bvh, "LOADTXT_LINES", 5)
-    in_chunks = read_motion(path)
-    np.testing.assert_array_equal(in_chunks.rotations, whole.rotations)
-    np.testing.assert_array_equal(in_chunks.translations, whole.translations)
 
 
 def test_a_blank_frame_line_is_an_error_naming_it(tmp_path):

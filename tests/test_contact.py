@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import streamed as stream
 
 from markovmotion import persist
 from markovmotion.errors import ModelFormatError
@@ -120,12 +121,9 @@ def test_a_contact_model_streams_what_windowed_respond_gives(held_out, capsys):
     a = model._rate(held_out[1][0][0]).copy()  # the fixture's take stays whole
     a.positions[40:43, 2] = np.nan  # a marker unseen: no contact evidence there
     partner = model.partner()
-    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
+    shown = stream(partner, a)
     whole = model.respond(a, "windowed")
-    np.testing.assert_allclose(
-        np.concatenate([s.positions for s in shown]), whole.positions, atol=1e-6
-    )
+    np.testing.assert_allclose(shown, whole.positions, atol=1e-6)
     assert not np.allclose(whole.positions, held_out[0][0.0].respond(a, "windowed").positions)
     capsys.readouterr()
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import streamed as stream
 
 from markovmotion.core.markers import Markers
 from markovmotion.evaluate import choose
@@ -94,9 +95,7 @@ def test_a_normalised_model_streams_what_windowed_respond_gives(normalised, peop
     a.positions[40:43, 2] = np.nan  # a marker unseen for three frames
     partner = normalised.partner()
     with caplog.at_level("WARNING", logger="markovmotion"):
-        shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
-    streamed = np.concatenate([s.positions for s in shown])
+        streamed = stream(partner, a)
     np.testing.assert_allclose(streamed, normalised.respond(a, "windowed").positions, atol=1e-9)
     assert "frame 40 of A is missing" in caplog.text
 
@@ -230,9 +229,7 @@ def regression(people) -> DualHMM:
 def test_regression_output_streams_what_windowed_respond_gives(regression, people, tmp_path):
     a = regression._rate(people[-1][1])
     partner = regression.partner()
-    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
-    streamed = np.concatenate([s.positions for s in shown])
+    streamed = stream(partner, a)
     whole = regression.respond(a, "windowed")
     np.testing.assert_allclose(streamed, whole.positions, atol=1e-9)
     assert whole.n_frames == a.n_frames and np.isfinite(whole.positions).all()
@@ -330,12 +327,9 @@ def test_a_gap_in_a_is_forgotten_by_the_place_memory_whole_and_online(people, ou
     gap = a.copy()
     gap.positions[30:50] = np.nan
     partner = model.partner()
-    shown = [partner.step(gap.trim(t, t + 1)) for t in range(gap.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
+    shown = stream(partner, gap)
     whole = model.respond(gap, "windowed")
-    np.testing.assert_allclose(
-        np.concatenate([s.positions for s in shown]), whole.positions, atol=1e-9
-    )
+    np.testing.assert_allclose(shown, whole.positions, atol=1e-9)
     origin, yaw = model.placing(model.filled(gap), seen=np.isfinite(gap.positions).all((1, 2)))
     clean_o, clean_y = model.place(a)
     half = min(model.placement_window // 2, model.window - 1)
@@ -353,9 +347,7 @@ def test_a_model_with_a_place_memory_streams_what_windowed_respond_gives(people,
     model = DualHMM(n_states=4, n_iter=5, place_memory=40, output=output).fit(pairs)
     a = model._rate(people[-1][1])
     partner = model.partner()
-    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
-    streamed = np.concatenate([s.positions for s in shown])
+    streamed = stream(partner, a)
     np.testing.assert_allclose(streamed, model.respond(a, "windowed").positions, atol=1e-9)
     # A turning on the spot while B stands still: the memory keeps B where A faced
     short = DualHMM(n_states=4, n_iter=5, output=output).fit(pairs)
@@ -878,9 +870,7 @@ def test_heights_lifted_places_b_by_as_height_whatever_the_vertical_origin(peopl
         )
     up = lifted._rate(up)  # frame by frame online, the same frames
     partner = lifted.partner()
-    shown = [partner.step(up.trim(t, t + 1)) for t in range(up.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
-    streamed = np.concatenate([s.positions for s in shown])
+    streamed = stream(partner, up)
     np.testing.assert_allclose(streamed, lifted.respond(up, "windowed").positions, atol=1e-6)
     capsys.readouterr()
     capture = DualHMM(n_states=3, n_iter=3).fit(pairs[:-1])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import streamed as stream
 
 from markovmotion import persist
 from markovmotion.core.markers import Markers
@@ -111,12 +112,9 @@ def test_a_size_scaled_partner_streams_what_windowed_respond_gives(models, capsy
     a.positions[40:43, 2] = np.nan  # a marker unseen: no size taken in there
     partner = model.partner()
     assert partner.see(a) is None  # the running size is kept across loops: step it
-    shown = [partner.step(a.trim(t, t + 1)) for t in range(a.n_frames)]
-    shown = [s for s in shown if s is not None] + partner.finish()
+    shown = stream(partner, a)
     whole = model.respond(a, "windowed")
-    np.testing.assert_allclose(
-        np.concatenate([s.positions for s in shown]), whole.positions, atol=1e-6
-    )
+    np.testing.assert_allclose(shown, whole.positions, atol=1e-6)
     capsys.readouterr()
 
 
