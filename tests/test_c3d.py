@@ -23,6 +23,7 @@ def write_c3d(
     screen: tuple[str, str] | None = None,
     occluded: tuple[int, int] | None = None,
     rate: float = 100.0,
+    labels: list[str] | None = None,
 ) -> None:
     """A C3D of lab positions (F, M, 3) given in mm, stored in ``units``."""
     per_mm = {"mm": 1.0, "cm": 0.1, "m": 0.001}.get(units.strip(), 1.0)
@@ -33,7 +34,7 @@ def write_c3d(
         if occluded is not None and f == occluded[0]:
             points[occluded[1], 3] = -1
         writer.add_frames((points, np.zeros((0, 0))))
-    writer.set_point_labels(LABELS[: positions_mm.shape[1]])
+    writer.set_point_labels(labels or LABELS[: positions_mm.shape[1]])
     if screen is not None:
         writer.set_screen_axis(*screen)
     with warnings.catch_warnings():
@@ -229,3 +230,28 @@ def test_trial_fields_of_two_dimensions_are_read(tmp_path):
     plain, read = read_c3d(tmp_path / "plain.c3d"), read_c3d(patched)
     assert read.names == plain.names and read.fps == plain.fps
     np.testing.assert_array_equal(read.positions, plain.positions)
+
+
+def test_screen_axes_that_put_the_head_below_the_body_are_read_upright(tmp_path, capsys):
+    """Qualisys writes ``POINT:X_SCREEN -X``, ``Y_SCREEN -Z`` for a Z-up lab (the screen's Y
+    running down, as image rows do): read as stated every person stood on their head,
+    silently (ezc3d's Qualisys.c3d). When the head markers (``L_HDF``...) stand below the
+    body and the screen's Y taken downwards puts them above, that is how it is read, said
+    in a note; a file whose stated axes put the head up, or that states a positive screen Y
+    (ours, ``+Y``), is read as stated."""
+    body = np.array([[0, 0, 1700], [0, 50, 1650], [0, 0, 1000], [0, 0, 80]], float)  # Z up
+    pos = np.repeat(body[None], 20, axis=0) + np.arange(20)[:, None, None] * [5.0, 0, 0]
+    labels = ["L_HDF", "R_HDB", "SACR", "L_FCC"]
+    write_c3d(tmp_path / "q.c3d", pos, screen=("-X", "-Z"), labels=labels)
+    write_c3d(tmp_path / "v.c3d", pos, screen=("+X", "+Z"), labels=labels)
+    read = read_c3d(tmp_path / "q.c3d")
+    assert "POINT:Y_SCREEN -Z puts the head below the body: read with +Z up" in (
+        capsys.readouterr().err
+    )
+    np.testing.assert_allclose(read.positions[..., 1], pos[..., 2], atol=1e-3)  # height
+    stated = read_c3d(tmp_path / "v.c3d")
+    assert "note" not in capsys.readouterr().err
+    np.testing.assert_allclose(stated.positions[..., 1], pos[..., 2], atol=1e-3)
+    write_c3d(tmp_path / "down.c3d", pos, screen=("+X", "-Z"), labels=labels[::-1])  # feet up
+    assert read_c3d(tmp_path / "down.c3d").positions[0, 0, 1] < 0  # a head stated up: as is
+    assert "note" not in capsys.readouterr().err

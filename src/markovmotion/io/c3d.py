@@ -12,7 +12,9 @@ the lab is taken as Z up with X to the right (``+X``, ``+Z``), so a lab point
 A file without ``POINT:X_SCREEN``/``Y_SCREEN`` whose head markers (labels naming the head)
 are not above the body read Z up but are read Y up is read with Y up (``+X``, ``+Y``),
 said in a note: a Y-up lab that left the screen axes out had otherwise put every person
-on their back, silently.
+on their back, silently. A negative ``POINT:Y_SCREEN`` that puts the head below the body
+runs down the screen (as image rows do; Qualisys writes ``-X``/``-Z`` for a Z-up lab): that
+axis is read up, said in a note.
 
 Samples the file marks invalid (negative residual, or NaN coordinates) are NaN, and so are
 samples at exactly (0, 0, 0), how some software writes a gap (counted in a note).
@@ -161,6 +163,16 @@ def read_c3d(path: str | os.PathLike[str]) -> Markers:
                 "no POINT:X_SCREEN/Y_SCREEN, and the head is not above the body with Z up "
                 "but is with Y up: read with Y up"
             )
+    elif screen[1].strip().startswith("-") and _head_above(lab, names, screen) <= -HEAD_ABOVE_MM:
+        # a negative screen Y whose up is the head's down: the screen's Y runs down, as image
+        # rows do (Qualisys writes -X / -Z for a Z-up lab); every person had been read upside
+        # down, silently. A positive one (ours, +X / +Y) is read as stated.
+        down = "+" + screen[1].strip()[1:]
+        notes.append(
+            f"POINT:Y_SCREEN {screen[1]} puts the head below the body: read with {down} up "
+            "(the screen's Y taken downwards)"
+        )
+        screen = (screen[0], down)
     with np.errstate(all="ignore"):
         positions = lab @ lab_to_y_up(path, *screen).T
     if notes:
@@ -226,10 +238,13 @@ HEAD_ABOVE_MM = 100.0
 
 def _head_above(lab: np.ndarray, names: tuple[str, ...], screen: tuple[str, str]) -> float:
     """The median over frames of how far (mm) the markers labelled as the head (``HEAD``,
-    Plug-in Gait's ``LFHD``/``RBHD``...) stand above the markers' centroid, read with
+    Plug-in Gait's ``LFHD``/``RBHD``, Qualisys' ``L_HDF``/``R_HDB``...) stand above the
+    markers' centroid, read with
     ``screen``; NaN without such markers."""
     bare = [n.rsplit(":", 1)[-1].casefold() for n in names]
-    head = [i for i, n in enumerate(bare) if "head" in n or n.endswith(("fhd", "bhd"))]
+    head = [
+        i for i, n in enumerate(bare) if "head" in n or n.endswith(("fhd", "bhd", "hdf", "hdb"))
+    ]
     if not head or len(head) == len(names):
         return float("nan")
     with np.errstate(all="ignore"), warnings.catch_warnings():
