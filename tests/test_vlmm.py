@@ -709,3 +709,28 @@ def test_generate_takes_any_length_within_the_limit_in_linear_memory(behaviour_m
     at = np.linspace(times[0] - 1, times[-1] + 1, 200)
     two = hermite_sample(knots[None], tangents[None], times[None], at[None])[0]  # all pairs
     np.testing.assert_allclose(hermite_sample(knots, tangents, times, at), two, atol=1e-12)
+
+
+def test_a_skeleton_without_a_body_point_is_one_balanced_line(mocap, tmp_path, capsys):
+    """``vlmm predict`` of a markers model on a skeleton lacking a body point: the line
+    names the point and closes every bracket it opens (it had cut the reason's own closing
+    bracket: "does not match (its skeleton: ... head (looked for head ...)")."""
+    from dataclasses import replace
+
+    from markovmotion.cli import main
+    from markovmotion.io import write_motion
+
+    dances = [mocap.load_motion(e).trim(0, 240) for e in mocap.query(label="indian_dance")[:2]]
+    model = tmp_path / "m.npz"
+    BehaviourModel(n_prototypes=8, max_memory=2, fps=15.0, configuration="markers").fit(
+        dances
+    ).save(model)
+    walk = mocap.load_motion(mocap.query(source="bandai")[0]).trim(0, 60)
+    names = tuple("noggin" if n.lower() == "head" else n for n in walk.skeleton.names)
+    write_motion(replace(walk, skeleton=replace(walk.skeleton, names=names)), tmp_path / "w.bvh")
+    with pytest.raises(SystemExit) as info:
+        main(["vlmm", "predict", "--model", str(model), "--input", str(tmp_path / "w.bvh"),
+              "--out", str(tmp_path / "p.c3d")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert info.value.code == 2 and len(err.splitlines()) == 1
+    assert "head (looked for head" in err and err.count("(") == err.count(")")

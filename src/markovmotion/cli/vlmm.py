@@ -313,7 +313,9 @@ def predict(
             )
         motion = read_listed_motion(input, fps=fps)
         if not behaviour.fits(motion):  # its skeleton, or (markers) its body points by name
-            why = behaviour.why_not(motion, "the input").removeprefix("(").removesuffix(")")
+            why = behaviour.why_not(motion, "the input")
+            if why.startswith("(") and why.endswith(")"):  # a difference, already in brackets
+                why = why[1:-1]  # (not a reason ending "(looked for head ...)": one left open)
             raise SkeletonMismatchError(f"{input}: the input's skeleton does not match ({why})")
     result = behaviour.predict(motion, horizon, np.random.default_rng(seed), stochastic=stochastic)
     _write(result, out)
