@@ -119,7 +119,7 @@ def _apart(b: np.ndarray, a: np.ndarray, n: int) -> np.ndarray:
 def test_a_contact_model_streams_what_windowed_respond_gives(held_out, capsys):
     model = held_out[0][1.0]
     a = model._rate(held_out[1][0][0]).copy()  # the fixture's take stays whole
-    a.positions[40:43, 2] = np.nan  # a marker unseen: no contact evidence there
+    a.positions[40:43, 2] = np.nan  # a marker unseen for three frames: held
     partner = model.partner()
     shown = stream(partner, a)
     whole = model.respond(a, "windowed")

@@ -92,12 +92,13 @@ def normalised(people) -> DualHMM:
 def test_a_normalised_model_streams_what_windowed_respond_gives(normalised, people, caplog):
     """Missing frames too: the online running mean never sees them, nor may respond's."""
     a = normalised._rate(people[-1][1]).copy()  # the fixture's take stays whole
-    a.positions[40:43, 2] = np.nan  # a marker unseen for three frames
+    k = normalised.held().frames  # a marker unseen: held for k frames, then missing frames
+    a.positions[40 : 40 + k + 3, 2] = np.nan
     partner = normalised.partner()
     with caplog.at_level("WARNING", logger="markovmotion"):
         streamed = stream(partner, a)
     np.testing.assert_allclose(streamed, normalised.respond(a, "windowed").positions, atol=1e-9)
-    assert "frame 40 of A is missing" in caplog.text
+    assert f"frame {40 + k} of A is missing" in caplog.text
 
 
 def test_a_normalised_model_saves_and_loads(normalised, people, tmp_path):

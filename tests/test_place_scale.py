@@ -109,7 +109,7 @@ def test_a_bigger_or_smaller_person_is_answered_from_their_distance(models):
 def test_a_size_scaled_partner_streams_what_windowed_respond_gives(models, capsys):
     model = models["size"]
     a, _ = _pair(1.2, seed=11)
-    a.positions[40:43, 2] = np.nan  # a marker unseen: no size taken in there
+    a.positions[40:43, 2] = np.nan  # a marker unseen for three frames: held
     partner = model.partner()
     assert partner.see(a) is None  # the running size is kept across loops: step it
     shown = stream(partner, a)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import warnings
 import weakref
+from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -293,6 +294,68 @@ class Lift:
             self._count += 1
             self._last = self.height - self._total / self._count
         return _moved_up(markers, np.array([self._last])), self._last
+
+
+#: How long (s) a marker of A unseen is held (:class:`HeldMarkers`) before its frame counts
+#: as missing: a frame with one marker unseen is otherwise a missing observation to the dual
+#: HMM, and a lab's occlusions (a marker or two of dozens) would leave most frames unseen.
+HOLD_SECONDS = 0.5
+
+
+class HeldMarkers:
+    """Markers unseen for at most ``frames`` frames placed where they last were, moved as
+    the markers seen both then and now have moved on average (a translation: over half a
+    second a body turns little), causally: :meth:`__call__` on a whole take and
+    :meth:`step` frame by frame give the same frames. A frame with no marker seen, or a
+    marker unseen for longer, keeps its NaN (a missing frame, as before).
+
+    Ours, not the papers': the dual HMM observes whole frames (its features are the PCA of
+    every marker), and a lab's C3D loses a marker of dozens in many frames; training takes
+    fill their gaps by interpolation over time (:func:`fill_gaps`), which a live partner
+    cannot, as it does not know the frames to come."""
+
+    def __init__(self, frames: int):
+        self.frames = max(int(frames), 0)
+        self._recent: deque = deque(maxlen=self.frames)  # the last frames, as given
+
+    def __call__(self, markers: Markers) -> Markers:
+        """``markers`` (a whole take) with their short gaps held."""
+        pos = markers.positions
+        unseen = np.flatnonzero(~np.isfinite(pos).all(axis=(1, 2)))
+        if not len(unseen) or not self.frames:
+            return markers
+        out = markers.copy()
+        for t in unseen:
+            out.positions[t] = held(pos[t], pos[max(t - self.frames, 0) : t][::-1])
+        return out
+
+    def step(self, markers: Markers) -> Markers:
+        """One frame's markers with their short gaps held, the frame kept for those after."""
+        pos = markers.positions[0]
+        if not self.frames or np.isfinite(pos).all():  # the live step's usual frame
+            self._recent.append(pos)
+            return markers
+        out = held(pos, list(reversed(self._recent)))
+        self._recent.append(pos)
+        return Markers(markers.names, out[None], markers.fps, markers.name, markers.source)
+
+
+def held(now: np.ndarray, earlier: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+    """``now`` (M, 3) with each unseen marker at its position in the latest of ``earlier``
+    (frames (M, 3), latest first) that shows it, moved by the mean move since then of the
+    markers seen in both (:class:`HeldMarkers`); unseen where none does."""
+    out = now.copy()
+    seen = np.isfinite(now).all(axis=1)
+    if not seen.any():
+        return out
+    for m in np.flatnonzero(~seen):
+        for old in earlier:
+            if np.isfinite(old[m]).all():
+                both = seen & np.isfinite(old).all(axis=1)
+                if both.any():
+                    out[m] = old[m] + (now[both] - old[both]).mean(axis=0)
+                break
+    return out
 
 
 def _centre_heights(markers: Markers) -> np.ndarray:

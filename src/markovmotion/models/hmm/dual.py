@@ -48,9 +48,11 @@ over ``placement_window`` and B's shape about it over ``blend_window``,
 placed through A's ground frame: ``respond`` returns Markers. A model learnt
 from C3D markers that name body points (``TORSO``, ``R_HAND``...) answers a skeleton too
 (:func:`~markovmotion.features.markers.named_body_points`), lifted to the training people's
-height (:class:`~markovmotion.features.markers.Lift`). A frame of A
-with a marker unseen (NaN) is a missing observation; gaps in training takes
-are filled by interpolation (:func:`~markovmotion.features.markers.fill_gaps`).
+height (:class:`~markovmotion.features.markers.Lift`). A marker of A unseen (NaN) for a
+moment is held where the others say it is
+(:class:`~markovmotion.features.markers.HeldMarkers`), and a frame still with a marker
+unseen is a missing observation; gaps in training takes are filled by interpolation
+(:func:`~markovmotion.features.markers.fill_gaps`).
 """
 
 from __future__ import annotations
@@ -81,6 +83,8 @@ from markovmotion.features import PCA, BodyMotion, ExpMaps, FeaturePipeline, Joi
 from markovmotion.features.body_motion import ground_frame
 from markovmotion.features.body_points import BODY_POINTS, body_point_index, body_points
 from markovmotion.features.markers import (
+    HOLD_SECONDS,
+    HeldMarkers,
     Lift,
     MarkerFeatures,
     fill_gaps,
@@ -801,11 +805,18 @@ class DualHMM(Model):
         goes down again."""
         lifting = self.lifts(x)
         if self.uses_markers:
-            x = self.input_markers(x)
-        x = self._rate(x)
+            x = self.held()(self._rate(self.input_markers(x)))
+        else:
+            x = self._rate(x)
         if not lifting:
             return x, None
         return self.lift()(x)
+
+    def held(self) -> HeldMarkers:
+        """:class:`~markovmotion.features.markers.HeldMarkers` for A's markers: one unseen
+        for at most :data:`~markovmotion.features.markers.HOLD_SECONDS` is held where the
+        others say it is, so that its frame is not a missing observation."""
+        return HeldMarkers(round(HOLD_SECONDS * float(self.fps)))
 
     def check_state(self) -> None:
         """The learnt parts a model file must hold, and that they fit each other: both
@@ -944,10 +955,13 @@ class DualHMM(Model):
                 s = "s" if len(never) > 1 else ""
                 raise SkeletonMismatchError(f"marker{s} {', '.join(never[:8])} never seen")
             if len(seen) and not seen.all(axis=1).any():
-                raise SkeletonMismatchError(
-                    f"no frame shows all {seen.shape[1]} of the model's markers (a frame "
-                    "with one unseen is a missing observation)"
-                )
+                hold = HeldMarkers(round(HOLD_SECONDS * picked.fps))  # as a_in holds them
+                if not hold(picked).visible().all(axis=1).any():
+                    raise SkeletonMismatchError(
+                        f"no frame shows all {seen.shape[1]} of the model's markers, even "
+                        f"with those unseen for at most {HOLD_SECONDS:g} s held (a frame "
+                        "with one unseen is a missing observation)"
+                    )
         except (ValueError, SkeletonMismatchError) as exc:
             raise SkeletonMismatchError(
                 f"{where}: person A's markers do not fit the model ({exc})",

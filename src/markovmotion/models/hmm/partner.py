@@ -116,6 +116,7 @@ class Partner:
         self._place = (np.zeros(3), 0.0)
         self._checked = CheckedOnce(model.check_input)  # A against the model, once a kind
         self._lift: Lift | None = None  # a skeleton's points lifted to the model's markers
+        self._held = model.held() if model.uses_markers else None  # A's markers' short gaps
         self._lifted = 0.0  # the last frame's lift (mm)
         self._last: tuple | None = None  # A's last finite frame (pose, origin, yaw), for its motion
         self._centre: OnlineCentre | None = None  # A's running mean (normalise="person")
@@ -270,7 +271,7 @@ class Partner:
             self._checked(frame)
         if frame is not None and self.model.uses_markers:
             lifting = self.model.lifts(frame)
-            frame = self.model.input_markers(frame)
+            frame = self._held.step(self.model.input_markers(frame))
             if lifting:  # a skeleton's body points to a model of sensor markers: DualHMM.a_in
                 self._lift = self._lift or self.model.lift()
                 frame, self._lifted = self._lift.step(frame)
