@@ -694,3 +694,27 @@ def test_short_occlusions_of_a_marker_are_held_not_answered_from_nothing(
     dropped = model.respond(occluded, "windowed").positions
     far = [np.linalg.norm(x - clean, axis=-1).mean() for x in (held, dropped)]
     assert far[0] < 0.5 * far[1], far
+
+
+def test_evaluate_without_a_test_set_of_a_model_that_held_none_out_says_so(
+    marker_takes, tmp_path, capsys
+):
+    """``dualhmm train`` learns every take unless told: its ``evaluate`` without ``--test``
+    says in one line that nothing was held out and what to give (it had listed every
+    training take of the index as the reason)."""
+    data = tmp_path / "data"
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for k, (a, b) in enumerate(marker_takes, start=1):
+        for who, m, partner in (("a", a, "b"), ("b", b, "a")):
+            write_c3d(m, data / f"{who}{k}.c3d")
+            rows.append(f"{who}{k}.c3d,test,,{k},interaction,meet,{partner}{k}.c3d,120,,")
+    (data / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    path = tmp_path / "m.npz"
+    main(["dualhmm", "train", "--data", str(data), "--out", str(path)]
+         + ["--states", "3", "--n-iter", "2"])  # fmt: skip
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(["dualhmm", "evaluate", "--model", str(path)])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2 and "\n" not in err
+    assert "the model held no take out at training" in err and "give --test INDEX" in err

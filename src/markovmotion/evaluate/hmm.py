@@ -766,6 +766,12 @@ def evaluation_pairs(
         if not pairs and wanted:
             raise unlabelled(f"{', '.join(wanted)} (the model's labels)")
         held = getattr(model, "held_out_files_", None)
+        if test is None and held is not None and not held:  # recorded: none held out
+            raise DataNotFoundError(
+                "the model held no take out at training (dualhmm train learns every take "
+                "unless given --test-people or --test-trials): give --test INDEX (or a "
+                "folder) to answer other takes"
+            )
         if test is None and held:
             kept = [p for p in pairs if p[0].file in held]
             if not kept:
