@@ -106,6 +106,14 @@ class Markers:
         """(F, M) whether each marker was seen in each frame."""
         return ~np.isnan(self.positions).any(axis=2)
 
+    def never_seen(self) -> str | None:
+        """``marker R_HAND never seen`` (``markers A, B and 3 more``) for the markers unseen
+        in every frame, the wording of every message that names them; None if each is seen."""
+        never = [self.names[m] for m in np.flatnonzero(~self.visible().any(axis=0))]
+        if not never:
+            return None
+        return f"marker{'s' if len(never) > 1 else ''} {first_names(never, 8)} never seen"
+
     def summary(self) -> str:
         """A few lines for ``markovmotion info``: frames, rate, markers, occlusion, extent."""
         seen = self.visible()

@@ -33,8 +33,6 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
 from markovmotion.core.markers import Markers, resampled_frames
 from markovmotion.data.index import Entry, MocapIndex, rate_disagrees
 from markovmotion.errors import MarkovMotionError
@@ -106,20 +104,18 @@ def _read(entry: Entry) -> tuple[int, float | None, list[Finding]]:
 def _unseen(entry: Entry, markers: Markers) -> list[Finding]:
     """A C3D take whose every sample is unseen (an error: no model can learn or answer it),
     or whose markers are each never seen (a note naming them)."""
-    seen = markers.visible()
-    if not seen.any():
+    if not markers.visible().any():
         return [Finding(entry.file, "error", "no marker is seen in any frame: nothing recorded")]
-    never = [markers.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
-    if not never:
+    never = markers.never_seen()
+    if never is None:
         return []
-    s = "s" if len(never) > 1 else ""
+    them = "them" if never.startswith("markers") else "it"
     return [
         Finding(
             entry.file,
             "note",
-            f"marker{s} {', '.join(never[:8])}{' ...' if len(never) > 8 else ''} never seen: "
-            f"a model trained on this take leaves {'them' if s else 'it'} out; one that uses "
-            f"{'them' if s else 'it'} cannot answer it",
+            f"{never}: a model trained on this take leaves {them} out; one that uses {them} "
+            "cannot answer it",
         )
     ]
 
@@ -178,25 +174,16 @@ def _pair_findings(e: Entry, listed: dict[str, Entry], frames: dict[str, int]) -
         )
     mine, theirs = frames.get(e.file), frames.get(other.file)
     if mine is not None and theirs is not None and e.file < other.file:
-        if e.fps == other.fps or not (e.fps and other.fps):
-            if mine != theirs:
-                out.append(
-                    Finding(
-                        e.file,
-                        "note",
-                        f"{mine} frames, its partner {other.file} {theirs}: the pair is cut "
-                        "to the shorter",
-                    )
-                )
-        elif (brought := resampled_frames(theirs, other.fps, e.fps)) != mine:
-            out.append(
-                Finding(
-                    e.file,
-                    "note",
-                    f"{mine} frames at {e.fps:g} fps, its partner {other.file} {theirs} at "
-                    f"{other.fps:g} ({brought} at {e.fps:g}): the pair is cut to the shorter",
-                )
+        one_rate = e.fps == other.fps or not (e.fps and other.fps)
+        brought = theirs if one_rate else resampled_frames(theirs, other.fps, e.fps)
+        if brought != mine:  # the partner at this take's rate, as loading brings it
+            said = (
+                f"{mine} frames, its partner {other.file} {theirs}"
+                if one_rate
+                else f"{mine} frames at {e.fps:g} fps, its partner {other.file} {theirs} at "
+                f"{other.fps:g} ({brought} at {e.fps:g})"
             )
+            out.append(Finding(e.file, "note", f"{said}: the pair is cut to the shorter"))
     if not e.subject:
         out.append(
             Finding(

@@ -451,12 +451,8 @@ def fill_gaps(markers: Markers) -> Markers:
     seen = markers.visible()
     if seen.all():
         return markers
-    never = [markers.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
-    if never:
-        raise MotionFormatError(
-            markers.name or "markers",
-            f"marker{'s' if len(never) > 1 else ''} {', '.join(never[:8])} never seen",
-        )
+    if never := markers.never_seen():
+        raise MotionFormatError(markers.name or "markers", never)
     out = markers.copy()
     t = np.arange(markers.n_frames)
     for m in np.flatnonzero(~seen.all(axis=0)):

@@ -949,11 +949,9 @@ class DualHMM(Model):
             )
         try:
             picked = self.pipeline_a_.steps[0].select(self.as_markers(x))
+            if never := picked.never_seen():  # a frame with one unseen is missing: all are
+                raise SkeletonMismatchError(never)
             seen = picked.visible()
-            if not seen.any(axis=0).all():  # a frame with a marker unseen is missing: all are
-                never = [picked.names[m] for m in np.flatnonzero(~seen.any(axis=0))]
-                s = "s" if len(never) > 1 else ""
-                raise SkeletonMismatchError(f"marker{s} {', '.join(never[:8])} never seen")
             if len(seen) and not seen.all(axis=1).any():
                 hold = HeldMarkers(round(HOLD_SECONDS * picked.fps))  # as a_in holds them
                 if not hold(picked).visible().all(axis=1).any():
