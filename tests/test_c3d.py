@@ -255,3 +255,22 @@ def test_screen_axes_that_put_the_head_below_the_body_are_read_upright(tmp_path,
     write_c3d(tmp_path / "down.c3d", pos, screen=("+X", "-Z"), labels=labels[::-1])  # feet up
     assert read_c3d(tmp_path / "down.c3d").positions[0, 0, 1] < 0  # a head stated up: as is
     assert "note" not in capsys.readouterr().err
+
+
+def test_data_check_lists_what_reading_a_c3d_notes_as_findings(tmp_path, capsys):
+    """``data check`` lists a C3D's notes (its axes read Y up) among its findings, one per
+    file, and counts them, rather than printing them beside its table as notes it then
+    counted as none."""
+    from markovmotion.cli import main
+
+    lab = _standing()
+    rows = ["file,source,subject,trial,category,label,partner_file,fps,frames,description"]
+    for me, partner in (("a", "b"), ("b", "a")):
+        write_c3d(tmp_path / f"{me}.c3d", lab)  # no screen axes: read Y up, with a note
+        rows.append(f"{me}.c3d,lab,p,1,interaction,meet,{partner}.c3d,100,,")
+    (tmp_path / "INDEX.csv").write_text("\n".join(rows) + "\n")
+    main(["data", "check", "--data", str(tmp_path)])
+    out, err = capsys.readouterr()
+    found = [line for line in out.splitlines() if "read with Y up" in line]
+    assert [line.split(",")[:2] for line in found] == [["a.c3d", "note"], ["b.c3d", "note"]]
+    assert "read with Y up" not in err and "2 notes" in err

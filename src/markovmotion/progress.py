@@ -10,6 +10,8 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import TypeVar
 
 from rich.console import Console
@@ -33,8 +35,29 @@ err_console = Console(stderr=True, soft_wrap=True)
 
 def note(message: str) -> None:
     """One line to stderr about a choice the library made for the user (takes left out,
-    a kind chosen): where commands and the demo show it, off stdout's JSON."""
+    a kind chosen): where commands and the demo show it, off stdout's JSON; inside
+    :func:`notes_caught`, kept instead."""
+    caught = _CAUGHT.get()
+    if caught is not None:
+        caught.append(message)
+        return
     err_console.print(f"[yellow]note:[/] {escape(message)}", highlight=False)
+
+
+#: Where :func:`note` keeps its lines inside :func:`notes_caught` (None: it prints them).
+_CAUGHT: ContextVar[list[str] | None] = ContextVar("notes_caught", default=None)
+
+
+@contextmanager
+def notes_caught() -> Iterator[list[str]]:
+    """The notes (:func:`note`, :func:`say`) made inside, kept rather than printed, for a
+    caller that reports them its own way (``data check`` lists them as findings)."""
+    caught: list[str] = []
+    token = _CAUGHT.set(caught)
+    try:
+        yield caught
+    finally:
+        _CAUGHT.reset(token)
 
 
 #: The notes printed in this command (:func:`say`), with the file each is about.

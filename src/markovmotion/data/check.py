@@ -38,7 +38,7 @@ from markovmotion.data.index import Entry, MocapIndex, rate_disagrees
 from markovmotion.errors import MarkovMotionError
 from markovmotion.io import base_suffix, read_motion
 from markovmotion.io.c3d import read_c3d
-from markovmotion.progress import track
+from markovmotion.progress import notes_caught, track
 
 #: How bad a finding is: an ``error`` stops a command that reads the take, a ``note`` does not.
 LEVELS = ("error", "note")
@@ -134,10 +134,12 @@ def check_index(index: MocapIndex) -> list[Finding]:
             found.append(Finding(e.file, "error", problem))
             continue
         try:
-            with _warnings_caught() as caught:  # what reading it warns of (a unit): a note
+            # what reading it warns of (a unit) or notes (a C3D's axes): a finding, not printed
+            with _warnings_caught() as caught, notes_caught() as noted:
                 n, rate, unseen = _read(e)
             frames[e.file] = n
             found += [Finding(e.file, "note", w.removeprefix(f"{e.path}: ")) for w in caught]
+            found += [Finding(e.file, "note", w.removeprefix(f"{e.path.name}: ")) for w in noted]
             found += unseen
         except MarkovMotionError as exc:  # the problem and line: the row names the file
             line = getattr(exc, "line", None)
