@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markovmotion.core.words import first_names
+from markovmotion.core.words import bare_name, first_names
 
 
 @dataclass(eq=False, repr=False)
@@ -137,7 +137,7 @@ class Markers:
 def bare_label(name: str) -> str:
     """A marker label without a subject's prefix (Vicon's ``Subject:Marker``), whatever its
     case: ``P1:R_Hand`` and ``r_hand`` are ``r_hand``."""
-    return name.rsplit(":", 1)[-1].strip().casefold()
+    return bare_name(name).strip().casefold()
 
 
 def find_markers(have: tuple[str, ...], wanted: tuple[str, ...] | list[str]) -> tuple[list, list]:

@@ -13,17 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from markovmotion.core.words import bare_name
 from markovmotion.errors import SkeletonMismatchError
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 VALID_CHANNELS = POSITION_CHANNELS + ROTATION_CHANNELS
-
-
-def bare_name(name: str) -> str:
-    """A joint's name as skeletons are compared: without a namespace (the text up to the
-    last ``:``)."""
-    return name.rsplit(":", 1)[-1]
 
 
 @dataclass(frozen=True, eq=False)

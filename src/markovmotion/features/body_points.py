@@ -32,6 +32,7 @@ import numpy as np
 
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
+from markovmotion.core.words import bare_name
 from markovmotion.errors import SkeletonMismatchError
 
 #: Parts of the body found on either side, with their names in the skeletons we know,
@@ -194,7 +195,7 @@ _CACHE: weakref.WeakKeyDictionary[Skeleton, dict[tuple[str, ...], np.ndarray]] =
 def normalise(name: str) -> str:
     """A joint name as compared with :data:`SYNONYMS`: lower case, no namespace (Mixamo's
     ``mixamorig:``, 3ds Max Biped's ``Bip01 ``/``Bip001_``), no separators."""
-    name = name.rsplit(":", 1)[-1].lower()
+    name = bare_name(name).lower()
     name = re.sub(r"^bip\d+(?=[^a-z0-9])", "", name)
     return re.sub(r"[^a-z0-9]", "", name)
 

@@ -45,7 +45,7 @@ import numpy as np
 from markovmotion.core.markers import Markers, find_markers
 from markovmotion.core.motion import Motion
 from markovmotion.core.skeleton import Skeleton
-from markovmotion.core.words import first_names
+from markovmotion.core.words import bare_name, first_names
 from markovmotion.errors import SkeletonMismatchError
 from markovmotion.features.augmented import AugmentedConfiguration
 from markovmotion.features.base import FeaturePipeline, FeatureStep
@@ -203,7 +203,7 @@ def shape_joints(skeleton: Skeleton, joints: Sequence[str] | None = None) -> lis
     if missing:  # each name again, a learnt namespace ('mixamorig:Hips') dropped if need be
         idx, missing = [], []
         for n in names:
-            hit = find_markers(have, [n])[0] or find_markers(have, [n.rsplit(":", 1)[-1]])[0]
+            hit = find_markers(have, [n])[0] or find_markers(have, [bare_name(n)])[0]
             idx += hit
             missing += [] if hit else [n]
     if missing:

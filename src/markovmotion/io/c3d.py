@@ -33,7 +33,7 @@ import warnings
 
 import numpy as np
 
-from markovmotion.core.markers import Markers
+from markovmotion.core.markers import Markers, bare_label
 from markovmotion.errors import MotionFormatError
 from markovmotion.io.files import atomic_write, base_suffix, open_regular
 from markovmotion.limits import (
@@ -241,7 +241,7 @@ def _head_above(lab: np.ndarray, names: tuple[str, ...], screen: tuple[str, str]
     Plug-in Gait's ``LFHD``/``RBHD``, Qualisys' ``L_HDF``/``R_HDB``...) stand above the
     markers' centroid, read with
     ``screen``; NaN without such markers."""
-    bare = [n.rsplit(":", 1)[-1].casefold() for n in names]
+    bare = [bare_label(n) for n in names]
     head = [
         i for i, n in enumerate(bare) if "head" in n or n.endswith(("fhd", "bhd", "hdf", "hdb"))
     ]
